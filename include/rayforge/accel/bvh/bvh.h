@@ -1,0 +1,35 @@
+// The canonical binary BVH: every BVH builder produces it, every traversal
+// layout is converted from it, every quality metric is computed on it.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "rayforge/math/box.h"
+
+namespace rf {
+
+// 32 bytes. Inner node: count == 0, children at first_child and first_child + 1
+// (siblings adjacent). Leaf: count > 0 primitives at prim_indices[first .. first+count).
+struct BvhNode {
+    Box3f bounds;
+    uint32_t first = 0;   // first child (inner) or first primitive slot (leaf)
+    uint32_t count = 0;   // primitives in the leaf; 0 for inner nodes
+    RF_HDI bool is_leaf() const { return count != 0; }
+};
+static_assert(sizeof(BvhNode) == 32, "BvhNode must stay 32 bytes");
+
+struct Bvh {
+    std::vector<BvhNode> nodes;          // nodes[0] is the root
+    std::vector<uint32_t> prim_indices;  // leaf slots -> triangle index
+
+    [[nodiscard]] size_t leaf_count() const;
+    [[nodiscard]] size_t memory_bytes() const {
+        return nodes.size() * sizeof(BvhNode) + prim_indices.size() * sizeof(uint32_t);
+    }
+    // SAH cost with C_trav = C_int = 1, normalised by the root's area
+    // (sum over inner nodes of A/A_root + sum over leaves of A/A_root * count).
+    [[nodiscard]] double sah_cost(float traversal_cost = 1.0f, float intersection_cost = 1.0f) const;
+};
+
+}  // namespace rf

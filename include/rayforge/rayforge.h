@@ -1,0 +1,17 @@
+// Umbrella header: the public C++ API of rayforge.
+#pragma once
+
+#include "rayforge/accel/accel.h"
+#include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/core/error.h"
+#include "rayforge/io/image_io.h"
+#include "rayforge/io/scene_io.h"
+#include "rayforge/math/affine.h"
+#include "rayforge/math/box.h"
+#include "rayforge/math/ray.h"
+#include "rayforge/math/vec.h"
+#include "rayforge/render/image.h"
+#include "rayforge/render/render.h"
+#include "rayforge/scene/camera.h"
+#include "rayforge/scene/scene.h"
+#include "rayforge/scene/scene_geometry.h"

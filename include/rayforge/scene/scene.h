@@ -1,0 +1,52 @@
+// The one in-memory scene representation shared by every loader and backend.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "rayforge/math/affine.h"
+#include "rayforge/scene/camera.h"
+#include "rayforge/scene/light.h"
+#include "rayforge/scene/material.h"
+#include "rayforge/scene/mesh.h"
+#include "rayforge/scene/texture.h"
+
+namespace rf {
+
+struct Instance {
+    uint32_t mesh = 0;                        // index into Scene::meshes
+    Affine3f transform = Affine3f::identity(); // object to world
+};
+
+// Settings a scene file may carry; command-line options override them.
+struct RenderSettings {
+    std::optional<int> width, height, spp, max_depth;
+    std::optional<std::string> integrator;
+    std::optional<float> ao_radius;
+};
+
+struct Scene {
+    std::string source;                // file path or builtin name it came from
+    std::vector<Mesh> meshes;
+    std::vector<Instance> instances;   // what is rendered: every mesh appears through instances
+    std::vector<Material> materials;   // Mesh::material_ids index this; never empty after loading
+    std::vector<Texture> textures;
+    std::vector<Light> lights;
+    Environment environment;
+    std::optional<Camera> camera;      // from the file; default_camera() otherwise
+    RenderSettings render_settings;
+
+    [[nodiscard]] size_t triangle_count() const;  // over instances
+    [[nodiscard]] size_t vertex_count() const;    // over instances
+    [[nodiscard]] Box3f bounds() const;           // world space, over instances
+    [[nodiscard]] size_t memory_bytes() const;    // meshes + textures
+    // A camera looking at the whole scene from the +z side when the file has none.
+    [[nodiscard]] Camera camera_or_default() const;
+    // Adds a default material when there is none, instances each mesh once when
+    // there are no instances, and validates every mesh and index; throws rf::Error.
+    void finalize();
+};
+
+}  // namespace rf

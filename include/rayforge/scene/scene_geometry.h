@@ -1,0 +1,55 @@
+// SceneGeometry: the scene flattened to world space, the form every
+// acceleration structure is built over and every integrator shades from.
+// Triangle i of the flat array is triangle `local_triangle[i]` of mesh
+// `instance_mesh[triangle_instance[i]]`; Hit::prim indexes this array.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "rayforge/math/affine.h"
+#include "rayforge/math/box.h"
+#include "rayforge/math/ray.h"
+#include "rayforge/scene/scene.h"
+
+namespace rf {
+
+struct Triangle {
+    Vec3f v0, v1, v2;
+    RF_HDI Box3f bounds() const { Box3f b; b.extend(v0); b.extend(v1); b.extend(v2); return b; }
+    RF_HDI Vec3f centroid() const { return (v0 + v1 + v2) * (1.0f / 3.0f); }
+    RF_HDI Vec3f geometric_normal() const { return cross(v1 - v0, v2 - v0); }  // not normalised
+    RF_HDI float area() const { return 0.5f * length(geometric_normal()); }
+};
+
+struct SceneGeometry {
+    std::vector<Triangle> triangles;          // world space
+    std::vector<uint32_t> triangle_instance;  // per triangle: index into Scene::instances
+    std::vector<uint32_t> local_triangle;     // per triangle: index within its mesh
+    std::vector<uint32_t> material;           // per triangle: index into Scene::materials
+    std::vector<uint32_t> emissive_triangles; // triangles whose material emits (area lights)
+    std::vector<Affine3f> normal_matrices;    // per instance
+    Box3f bounds;
+
+    // Flattens every instance; throws rf::Error on non-finite coordinates or
+    // more than 2^32-1 triangles. Degenerate (zero-area) triangles are kept:
+    // they never produce hits.
+    static SceneGeometry build(const Scene& scene);
+    [[nodiscard]] size_t size() const { return triangles.size(); }
+    [[nodiscard]] size_t memory_bytes() const;
+};
+
+// Shading attributes at a hit, interpolated from the mesh.
+struct SurfaceHit {
+    Vec3f position;
+    Vec3f geometric_normal;  // unit, world space, as wound (not flipped to face the ray)
+    Vec3f shading_normal;    // unit, interpolated vertex normal (or geometric)
+    Vec2f uv;
+    uint32_t material = 0;
+};
+
+// Interpolates the hit's attributes; `hit` must be found().
+SurfaceHit surface_at(const Scene& scene, const SceneGeometry& geometry, const Ray& ray, const Hit& hit);
+
+}  // namespace rf
