@@ -15,7 +15,7 @@ struct Vec2f {
 
 struct Vec3f {
     float x = 0, y = 0, z = 0;
-    RF_HDI Vec3f() = default;
+    Vec3f() = default;
     RF_HDI constexpr Vec3f(float x_, float y_, float z_) : x(x_), y(y_), z(z_) {}
     RF_HDI explicit constexpr Vec3f(float s) : x(s), y(s), z(s) {}
     RF_HDI float operator[](int i) const { return i == 0 ? x : (i == 1 ? y : z); }

@@ -19,6 +19,10 @@ struct BvhNode {
 };
 static_assert(sizeof(BvhNode) == 32, "BvhNode must stay 32 bytes");
 
+// No root-to-leaf path has more inner nodes than this (every builder
+// guarantees it), so traversals can use a fixed-size stack.
+inline constexpr int kBvhMaxDepth = 64;
+
 struct Bvh {
     std::vector<BvhNode> nodes;          // nodes[0] is the root
     std::vector<uint32_t> prim_indices;  // leaf slots -> triangle index

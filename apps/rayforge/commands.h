@@ -1,0 +1,45 @@
+// The rayforge verbs. Each registers its options on a CLI11 subcommand and
+// runs from the parsed values; errors propagate as rf::Error to main().
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <string>
+
+namespace rf::cli {
+
+inline constexpr const char* kVersion = "0.1.0";  // keep in step with project(VERSION) in CMakeLists.txt
+
+struct InfoArgs {
+    std::string scene = "builtin:cornell";
+    bool verbose = false;
+};
+CLI::App* add_info_command(CLI::App& app, InfoArgs& args);
+int run_info(const InfoArgs& args);
+
+struct RenderArgs {
+    std::string scene = "builtin:cornell";
+    std::string output;
+    std::string resolution;   // "WxH"
+    int spp = 1;
+    std::string integrator;
+    std::string camera;       // "ex,ey,ez,tx,ty,tz,ux,uy,uz,fov"
+    int threads = 0;
+    int max_depth = 5;
+    float ao_radius = 0.0f;
+    int ao_samples = 16;
+    float exposure = 1.0f;
+    unsigned seed = 0;
+    std::string accel = "bvh";
+    bool quiet = false;
+    // Which options were given, so that they override the scene's settings.
+    CLI::Option* resolution_opt = nullptr;
+    CLI::Option* spp_opt = nullptr;
+    CLI::Option* integrator_opt = nullptr;
+    CLI::Option* max_depth_opt = nullptr;
+    CLI::Option* ao_radius_opt = nullptr;
+};
+CLI::App* add_render_command(CLI::App& app, RenderArgs& args);
+int run_render(const RenderArgs& args);
+
+}  // namespace rf::cli

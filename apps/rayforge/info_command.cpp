@@ -1,0 +1,82 @@
+// `rayforge info SCENE`: what a scene holds and what it costs in memory.
+#include <cstdio>
+#include <string>
+
+#include "commands.h"
+#include "rayforge/io/scene_io.h"
+#include "rayforge/scene/scene_geometry.h"
+
+namespace rf::cli {
+namespace {
+
+double mib(size_t bytes) { return double(bytes) / (1024.0 * 1024.0); }
+
+std::string format_vec(Vec3f v) {
+    char buf[96];
+    std::snprintf(buf, sizeof(buf), "(%g, %g, %g)", double(v.x), double(v.y), double(v.z));
+    return buf;
+}
+
+}  // namespace
+
+CLI::App* add_info_command(CLI::App& app, InfoArgs& args) {
+    CLI::App* cmd = app.add_subcommand("info", "Print the contents and memory footprint of a scene");
+    cmd->add_option("scene", args.scene, "Scene file (.obj, .gltf, .glb, .ply, .json) or builtin:NAME")
+        ->required();
+    cmd->add_flag("-v,--verbose", args.verbose, "Also list every material and texture");
+    return cmd;
+}
+
+int run_info(const InfoArgs& args) {
+    Scene scene = load_scene(args.scene);
+    SceneGeometry geometry = SceneGeometry::build(scene);
+
+    std::printf("scene:      %s\n", args.scene.c_str());
+    std::printf("triangles:  %zu\n", scene.triangle_count());
+    std::printf("vertices:   %zu\n", scene.vertex_count());
+    std::printf("meshes:     %zu\n", scene.meshes.size());
+    std::printf("instances:  %zu\n", scene.instances.size());
+    Box3f b = scene.bounds();
+    if (b.is_empty()) std::printf("bounds:     empty\n");
+    else std::printf("bounds:     %s - %s\n", format_vec(b.lo).c_str(), format_vec(b.hi).c_str());
+
+    std::printf("materials:  %zu\n", scene.materials.size());
+    if (args.verbose) {
+        for (size_t i = 0; i < scene.materials.size(); ++i) {
+            const Material& m = scene.materials[i];
+            std::printf("  [%zu] %-24s base %s metallic %g roughness %g", i,
+                        m.name.empty() ? "(unnamed)" : m.name.c_str(), format_vec(m.base_color).c_str(),
+                        double(m.metallic), double(m.roughness));
+            if (m.transmission > 0.0f) std::printf(" transmission %g ior %g", double(m.transmission), double(m.ior));
+            if (m.is_emissive()) std::printf(" emission %s", format_vec(m.emitted_radiance()).c_str());
+            if (m.base_color_texture >= 0) std::printf(" texture %d", m.base_color_texture);
+            std::printf("\n");
+        }
+    }
+
+    size_t texture_bytes = 0;
+    for (const Texture& t : scene.textures) texture_bytes += t.memory_bytes();
+    std::printf("textures:   %zu (%.2f MiB)\n", scene.textures.size(), mib(texture_bytes));
+    if (args.verbose) {
+        for (size_t i = 0; i < scene.textures.size(); ++i) {
+            const Texture& t = scene.textures[i];
+            std::printf("  [%zu] %dx%d x%d %s\n", i, t.width, t.height, t.channels, t.name.c_str());
+        }
+    }
+
+    size_t by_type[3] = {0, 0, 0};
+    for (const Light& l : scene.lights) ++by_type[size_t(l.type)];
+    std::printf("lights:     %zu point, %zu spot, %zu directional; %zu emissive triangles\n",
+                by_type[size_t(LightType::Point)], by_type[size_t(LightType::Spot)],
+                by_type[size_t(LightType::Directional)], geometry.emissive_triangles.size());
+
+    Camera camera = scene.camera_or_default();
+    std::printf("camera:     eye %s target %s up %s fov %g%s\n", format_vec(camera.eye).c_str(),
+                format_vec(camera.target).c_str(), format_vec(camera.up).c_str(), double(camera.vfov_degrees),
+                scene.camera ? "" : " (default)");
+    std::printf("memory:     %.2f MiB scene (meshes + textures), %.2f MiB flattened geometry\n",
+                mib(scene.memory_bytes()), mib(geometry.memory_bytes()));
+    return 0;
+}
+
+}  // namespace rf::cli

@@ -1,0 +1,53 @@
+// rayforge: command-line front end. Exit codes: 0 success, 1 a runtime error
+// (reported as one line "rayforge: error: <message>" on stderr), 2 a usage error.
+#include <CLI/CLI.hpp>
+
+#include <exception>
+#include <iostream>
+#include <string>
+
+#include "commands.h"
+
+namespace {
+
+// Messages must stay on one line even when a library's text has newlines.
+std::string one_line(std::string message) {
+    for (char& c : message)
+        if (c == '\n' || c == '\r') c = ' ';
+    return message;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    CLI::App app{"rayforge: a ray tracing engine for large scenes", "rayforge"};
+    app.set_version_flag("--version", std::string("rayforge ") + rf::cli::kVersion);
+    app.require_subcommand(1);
+
+    rf::cli::InfoArgs info_args;
+    rf::cli::RenderArgs render_args;
+    CLI::App* info = rf::cli::add_info_command(app, info_args);
+    CLI::App* render = rf::cli::add_render_command(app, render_args);
+
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::CallForHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForAllHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForVersion& e) {
+        return app.exit(e);
+    } catch (const CLI::ParseError& e) {
+        app.exit(e);  // prints the usage error
+        return 2;
+    }
+
+    try {
+        if (info->parsed()) return rf::cli::run_info(info_args);
+        if (render->parsed()) return rf::cli::run_render(render_args);
+    } catch (const std::exception& e) {
+        std::cerr << "rayforge: error: " << one_line(e.what()) << '\n';
+        return 1;
+    }
+    return 2;
+}

@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Installs rayforge's build and test dependencies from Debian 12 packages.
+# Idempotent: installs only what is missing and refreshes the package lists
+# only when something must be installed. Needs root (or sudo).
+set -euo pipefail
+
+packages=(
+  build-essential cmake pkg-config git python3
+  libtbb-dev                     # task-parallel builds and rendering
+  libtinyobjloader-dev           # OBJ + MTL
+  libtinygltf-dev                # glTF 2.0 / GLB
+  libstb-dev                     # PNG/JPEG/TGA/HDR decoding, PNG writing
+  libtinyexr-dev                 # EXR
+  nlohmann-json3-dev             # JSON scene files
+  libcli11-dev                   # command line
+  libgtest-dev libgmock-dev      # tests
+  libbenchmark-dev               # micro-benchmarks
+  libembree-dev                  # optional benchmark peer (Embree 3)
+  libzstd-dev                    # compressed geometry pages (later issues)
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "setup-deps: all ${#packages[@]} packages already installed"
+  exit 0
+fi
+
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+echo "setup-deps: installing ${missing[*]}"
+$SUDO apt-get update -qq
+DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+echo "setup-deps: done"

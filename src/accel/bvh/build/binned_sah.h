@@ -1,0 +1,20 @@
+// Binned SAH builder (Wald 2007, "On fast Construction of SAH-based Bounding
+// Volume Hierarchies"), producing the canonical rf::Bvh.
+#pragma once
+
+#include <span>
+
+#include "rayforge/accel/accel.h"
+#include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/scene/scene_geometry.h"
+
+namespace rf {
+
+// Builds over `triangles` with options.bin_count, max_leaf_size, traversal_cost,
+// intersection_cost and threads (assumed validated, see build_accel). The result
+// is the same for every thread count: nodes in depth-first order, siblings
+// adjacent, every root-to-leaf path at most kBvhMaxDepth (64) inner nodes. No
+// triangles give an empty Bvh (no nodes).
+Bvh build_binned_sah(std::span<const Triangle> triangles, const BuildOptions& options);
+
+}  // namespace rf

@@ -1,0 +1,34 @@
+// rf::Accel over the canonical BVH, traversed by trace/bvh_traversal.h.
+#pragma once
+
+#include "rayforge/accel/accel.h"
+#include "rayforge/accel/bvh/bvh.h"
+#include "trace/bvh_traversal.h"
+
+namespace rf {
+
+class BvhAccel final : public Accel {
+public:
+    // Builds with the builder named in `options` (validated by build_accel);
+    // `geometry` must outlive this object.
+    BvhAccel(const SceneGeometry& geometry, const BuildOptions& options);
+
+    [[nodiscard]] Hit intersect(const Ray& ray) const override { return bvh_intersect(view(), ray); }
+    [[nodiscard]] bool occluded(const Ray& ray) const override { return bvh_occluded(view(), ray); }
+    using Accel::intersect;
+    using Accel::occluded;
+    [[nodiscard]] AccelStats stats() const override;
+
+    [[nodiscard]] const Bvh& bvh() const { return bvh_; }
+    [[nodiscard]] BvhView view() const {
+        return {bvh_.nodes.data(), bvh_.prim_indices.data(), geometry_.triangles.data(),
+                static_cast<uint32_t>(bvh_.nodes.size())};
+    }
+
+private:
+    const SceneGeometry& geometry_;
+    Bvh bvh_;
+    double build_ms_ = 0.0;
+};
+
+}  // namespace rf

@@ -1,0 +1,684 @@
+// glTF 2.0 loader (.gltf with external or data-URI buffers, and .glb), on
+// top of tinygltf for the JSON and buffer plumbing. Everything tinygltf does
+// not check (accessor and buffer-view ranges, index ranges, node cycles,
+// finite coordinates) is validated here before any element is read.
+//
+// Mapping: each mesh primitive becomes one rf::Mesh, each node that
+// references a mesh one rf::Instance per primitive with the node's world
+// transform; the first camera node gives Scene::camera; KHR_lights_punctual
+// nodes give Scene::lights. Images are kept encoded by tinygltf and decoded
+// here, so the sRGB/linear choice follows the texture's use.
+#include <tiny_gltf.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <map>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "rayforge/core/error.h"
+#include "rayforge/io/image_io.h"
+#include "rayforge/io/scene_io.h"
+
+namespace rf {
+namespace {
+
+constexpr float kPi = 3.14159265358979f;
+
+// tinygltf's messages are multi-line and may carry nlohmann-json's
+// "[json.exception.parse_error.101] " tags; rf::Error messages are one line.
+std::string one_line(std::string text) {
+    for (size_t at; (at = text.find("[json.exception.")) != std::string::npos;) {
+        size_t close = text.find("] ", at);
+        if (close == std::string::npos) break;
+        text.erase(at, close + 2 - at);
+    }
+    while (!text.empty() && (text.back() == '\n' || text.back() == '\r' || text.back() == ' '))
+        text.pop_back();
+    std::string out;
+    out.reserve(text.size());
+    for (char c : text) {
+        if (c == '\n') out += "; ";
+        else if (c != '\r') out += c;
+    }
+    return out;
+}
+
+void warn(const std::string& path, const std::string& message) {
+    std::fprintf(stderr, "rayforge: warning: %s: %s\n", path.c_str(), message.c_str());
+}
+
+std::string lowercase_extension(const std::string& path) {
+    std::string ext = std::filesystem::path(path).extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return ext;
+}
+
+// --- Images -----------------------------------------------------------------
+
+// tinygltf hands every image's encoded bytes to this callback. We keep them
+// as they are (decoded later with the right encoding), after checking that a
+// bufferView-backed image lies inside its buffer: tinygltf itself passes a
+// pointer computed from unchecked offsets.
+struct ImageLoaderContext {
+    const tinygltf::Model* model = nullptr;
+};
+
+bool keep_encoded_image(tinygltf::Image* image, const int image_index, std::string* err,
+                        std::string*, int, int, const unsigned char* bytes, int size,
+                        void* user_data) {
+    const auto* context = static_cast<const ImageLoaderContext*>(user_data);
+    if (image->bufferView >= 0) {
+        const tinygltf::Model& model = *context->model;
+        const auto& view = model.bufferViews[size_t(image->bufferView)];  // index checked by tinygltf
+        const auto& buffer = model.buffers[size_t(view.buffer)];
+        if (view.byteOffset > buffer.data.size() ||
+            view.byteLength > buffer.data.size() - view.byteOffset) {
+            if (err)
+                *err += "image " + std::to_string(image_index) +
+                        ": bufferView lies outside its buffer\n";
+            return false;
+        }
+    }
+    if (size < 0) size = 0;
+    image->image.assign(bytes, bytes + size);
+    image->width = image->height = 0;  // marks "encoded, not decoded"
+    return true;
+}
+
+// --- Accessors --------------------------------------------------------------
+
+size_t component_size(int component_type) {
+    switch (component_type) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return 1;
+    case TINYGLTF_COMPONENT_TYPE_SHORT:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: return 2;
+    case TINYGLTF_COMPONENT_TYPE_INT:
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
+    case TINYGLTF_COMPONENT_TYPE_FLOAT: return 4;
+    case TINYGLTF_COMPONENT_TYPE_DOUBLE: return 8;
+    default: return 0;
+    }
+}
+
+int component_count(int type) {
+    switch (type) {
+    case TINYGLTF_TYPE_SCALAR: return 1;
+    case TINYGLTF_TYPE_VEC2: return 2;
+    case TINYGLTF_TYPE_VEC3: return 3;
+    case TINYGLTF_TYPE_VEC4: return 4;
+    case TINYGLTF_TYPE_MAT2: return 4;
+    case TINYGLTF_TYPE_MAT3: return 9;
+    case TINYGLTF_TYPE_MAT4: return 16;
+    default: return 0;
+    }
+}
+
+// Reads one component as float, applying glTF's normalisation rules.
+float read_component(const unsigned char* p, int component_type, bool normalized) {
+    switch (component_type) {
+    case TINYGLTF_COMPONENT_TYPE_FLOAT: { float v; std::memcpy(&v, p, 4); return v; }
+    case TINYGLTF_COMPONENT_TYPE_DOUBLE: { double v; std::memcpy(&v, p, 8); return float(v); }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: {
+        float v = float(p[0]);
+        return normalized ? v / 255.0f : v;
+    }
+    case TINYGLTF_COMPONENT_TYPE_BYTE: {
+        float v = float(static_cast<int8_t>(p[0]));
+        return normalized ? std::max(v / 127.0f, -1.0f) : v;
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+        uint16_t v; std::memcpy(&v, p, 2);
+        return normalized ? float(v) / 65535.0f : float(v);
+    }
+    case TINYGLTF_COMPONENT_TYPE_SHORT: {
+        int16_t v; std::memcpy(&v, p, 2);
+        return normalized ? std::max(float(v) / 32767.0f, -1.0f) : float(v);
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
+        uint32_t v; std::memcpy(&v, p, 4);
+        return normalized ? float(double(v) / 4294967295.0) : float(v);
+    }
+    case TINYGLTF_COMPONENT_TYPE_INT: {
+        int32_t v; std::memcpy(&v, p, 4);
+        return float(v);
+    }
+    default: return 0.0f;
+    }
+}
+
+uint32_t read_index(const unsigned char* p, int component_type) {
+    switch (component_type) {
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return p[0];
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t v; std::memcpy(&v, p, 2); return v; }
+    default: { uint32_t v; std::memcpy(&v, p, 4); return v; }
+    }
+}
+
+class GltfReader {
+public:
+    GltfReader(const std::string& path, const tinygltf::Model& model, const LoadOptions& options)
+        : path_(path), model_(model), options_(options) {}
+
+    Scene read();
+
+private:
+    [[noreturn]] void fail(const std::string& reason) const { throw file_error(path_, 0, reason); }
+
+    // A validated view of an accessor's elements: element i starts at
+    // data + i * stride. `data` is null for an accessor without a bufferView
+    // (all zeros, per the spec).
+    struct ElementView {
+        const unsigned char* data = nullptr;
+        size_t stride = 0;
+        size_t count = 0;
+        int component_type = 0;
+        int components = 0;
+        bool normalized = false;
+    };
+    ElementView element_view(int accessor_index, const char* what) const;
+    std::vector<float> read_floats(int accessor_index, const char* what,
+                                   std::initializer_list<int> allowed_types, int& components) const;
+    std::vector<uint32_t> read_indices(int accessor_index) const;
+
+    Affine3f local_transform(const tinygltf::Node& node, int node_index) const;
+    void visit_node(int node_index, const Affine3f& parent, Scene& scene);
+    const std::vector<uint32_t>& mesh_primitives(int mesh_index, Scene& scene);
+    bool convert_primitive(const tinygltf::Primitive& primitive, const std::string& name,
+                           Scene& scene, Mesh& mesh);
+    uint32_t material_index(int gltf_material, Scene& scene);
+    void convert_materials(Scene& scene);
+    int32_t texture_index(int gltf_texture, TextureEncoding encoding, Scene& scene);
+    void add_light(int light_index, const Affine3f& world, Scene& scene) const;
+    void set_camera(int camera_index, const Affine3f& world, Scene& scene);
+
+    const std::string& path_;
+    const tinygltf::Model& model_;
+    const LoadOptions& options_;
+    std::map<int, std::vector<uint32_t>> mesh_cache_;  // glTF mesh -> rf meshes (one per primitive)
+    std::map<std::tuple<int, TextureEncoding>, int32_t> texture_cache_;
+    std::vector<char> on_path_;      // nodes on the current root-to-node path (cycle check)
+    int default_material_ = -1;      // appended for primitives without a material
+    bool warned_non_triangles_ = false;
+};
+
+GltfReader::ElementView GltfReader::element_view(int accessor_index, const char* what) const {
+    if (accessor_index < 0 || size_t(accessor_index) >= model_.accessors.size())
+        fail(std::string(what) + ": accessor " + std::to_string(accessor_index) + " does not exist");
+    const tinygltf::Accessor& accessor = model_.accessors[size_t(accessor_index)];
+    const std::string where = std::string(what) + " accessor " + std::to_string(accessor_index);
+    if (accessor.sparse.isSparse) fail(where + ": sparse accessors are not supported");
+
+    ElementView view;
+    view.count = accessor.count;
+    view.component_type = accessor.componentType;
+    view.components = component_count(accessor.type);
+    view.normalized = accessor.normalized;
+    const size_t csize = component_size(accessor.componentType);
+    if (csize == 0 || view.components == 0) fail(where + ": invalid componentType or type");
+    if (view.count > size_t(std::numeric_limits<uint32_t>::max()))
+        fail(where + ": " + std::to_string(view.count) + " elements exceed the 2^32-1 limit");
+    const size_t element_size = csize * size_t(view.components);
+    if (accessor.bufferView < 0) return view;  // zeros
+
+    if (size_t(accessor.bufferView) >= model_.bufferViews.size())
+        fail(where + ": bufferView " + std::to_string(accessor.bufferView) + " does not exist");
+    const tinygltf::BufferView& buffer_view = model_.bufferViews[size_t(accessor.bufferView)];
+    if (buffer_view.buffer < 0 || size_t(buffer_view.buffer) >= model_.buffers.size())
+        fail(where + ": buffer " + std::to_string(buffer_view.buffer) + " does not exist");
+    const tinygltf::Buffer& buffer = model_.buffers[size_t(buffer_view.buffer)];
+    if (buffer_view.byteOffset > buffer.data.size() ||
+        buffer_view.byteLength > buffer.data.size() - buffer_view.byteOffset)
+        fail(where + ": bufferView " + std::to_string(accessor.bufferView) + " (offset " +
+             std::to_string(buffer_view.byteOffset) + ", length " +
+             std::to_string(buffer_view.byteLength) + ") lies outside its buffer of " +
+             std::to_string(buffer.data.size()) + " bytes");
+
+    view.stride = buffer_view.byteStride != 0 ? buffer_view.byteStride : element_size;
+    if (view.stride < element_size)
+        fail(where + ": byteStride " + std::to_string(view.stride) + " is smaller than the element (" +
+             std::to_string(element_size) + " bytes)");
+    if (view.count > 0) {
+        // offset + (count-1)*stride + element_size <= byteLength, without overflow.
+        const size_t length = buffer_view.byteLength;
+        const size_t offset = accessor.byteOffset;
+        bool fits = offset <= length && element_size <= length - offset &&
+                    (view.count - 1) <= (length - offset - element_size) / view.stride;
+        if (!fits)
+            fail(where + ": " + std::to_string(view.count) + " elements at offset " +
+                 std::to_string(offset) + " (stride " + std::to_string(view.stride) +
+                 ") exceed its bufferView of " + std::to_string(length) + " bytes");
+    }
+    view.data = buffer.data.data() + buffer_view.byteOffset + accessor.byteOffset;
+    return view;
+}
+
+std::vector<float> GltfReader::read_floats(int accessor_index, const char* what,
+                                           std::initializer_list<int> allowed_types,
+                                           int& components) const {
+    ElementView view = element_view(accessor_index, what);
+    if (std::find(allowed_types.begin(), allowed_types.end(),
+                  model_.accessors[size_t(accessor_index)].type) == allowed_types.end())
+        fail(std::string(what) + " accessor " + std::to_string(accessor_index) +
+             ": unexpected element type");
+    components = view.components;
+    std::vector<float> out(view.count * size_t(view.components), 0.0f);
+    if (!view.data) return out;
+    const size_t csize = component_size(view.component_type);
+    for (size_t i = 0; i < view.count; ++i) {
+        const unsigned char* element = view.data + i * view.stride;
+        for (int c = 0; c < view.components; ++c)
+            out[i * size_t(view.components) + size_t(c)] =
+                read_component(element + size_t(c) * csize, view.component_type, view.normalized);
+    }
+    return out;
+}
+
+std::vector<uint32_t> GltfReader::read_indices(int accessor_index) const {
+    ElementView view = element_view(accessor_index, "indices");
+    const auto& accessor = model_.accessors[size_t(accessor_index)];
+    if (accessor.type != TINYGLTF_TYPE_SCALAR ||
+        (view.component_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+         view.component_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+         view.component_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT))
+        fail("indices accessor " + std::to_string(accessor_index) +
+             ": indices must be unsigned byte, short or int scalars");
+    std::vector<uint32_t> out(view.count, 0);
+    if (!view.data) return out;
+    for (size_t i = 0; i < view.count; ++i)
+        out[i] = read_index(view.data + i * view.stride, view.component_type);
+    return out;
+}
+
+// --- Materials and textures -------------------------------------------------
+
+TextureWrap wrap_mode(int gl_wrap) {
+    switch (gl_wrap) {
+    case TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE: return TextureWrap::ClampToEdge;
+    case TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT: return TextureWrap::MirroredRepeat;
+    default: return TextureWrap::Repeat;
+    }
+}
+
+int32_t GltfReader::texture_index(int gltf_texture, TextureEncoding encoding, Scene& scene) {
+    if (gltf_texture < 0 || !options_.load_textures) return kNoTexture;
+    if (size_t(gltf_texture) >= model_.textures.size())
+        fail("texture " + std::to_string(gltf_texture) + " does not exist");
+    auto key = std::make_tuple(gltf_texture, encoding);
+    if (auto it = texture_cache_.find(key); it != texture_cache_.end()) return it->second;
+
+    const tinygltf::Texture& gltf = model_.textures[size_t(gltf_texture)];
+    if (gltf.source < 0 || size_t(gltf.source) >= model_.images.size())
+        fail("texture " + std::to_string(gltf_texture) + ": image " + std::to_string(gltf.source) +
+             " does not exist");
+    const tinygltf::Image& image = model_.images[size_t(gltf.source)];
+    std::string name;
+    if (!image.uri.empty()) {
+        name = (std::filesystem::path(path_).parent_path() / image.uri).string();
+    } else {
+        name = path_ + "#image" + std::to_string(gltf.source);
+    }
+    if (image.image.empty()) fail("image '" + (image.uri.empty() ? name : image.uri) + "' could not be read");
+
+    Texture texture = load_texture_from_memory(image.image.data(), image.image.size(), name, encoding);
+    if (gltf.sampler >= 0) {
+        if (size_t(gltf.sampler) >= model_.samplers.size())
+            fail("texture " + std::to_string(gltf_texture) + ": sampler " +
+                 std::to_string(gltf.sampler) + " does not exist");
+        const tinygltf::Sampler& sampler = model_.samplers[size_t(gltf.sampler)];
+        texture.wrap_s = wrap_mode(sampler.wrapS);
+        texture.wrap_t = wrap_mode(sampler.wrapT);
+    }
+    const auto index = int32_t(scene.textures.size());
+    scene.textures.push_back(std::move(texture));
+    texture_cache_[key] = index;
+    return index;
+}
+
+float extension_number(const tinygltf::ExtensionMap& extensions, const char* extension,
+                       const char* key, float fallback) {
+    auto it = extensions.find(extension);
+    if (it == extensions.end() || !it->second.IsObject() || !it->second.Has(key)) return fallback;
+    const tinygltf::Value& value = it->second.Get(key);
+    return value.IsNumber() ? float(value.GetNumberAsDouble()) : fallback;
+}
+
+Vec3f vec3_or(const std::vector<double>& v, Vec3f fallback) {
+    return v.size() >= 3 ? Vec3f(float(v[0]), float(v[1]), float(v[2])) : fallback;
+}
+
+void GltfReader::convert_materials(Scene& scene) {
+    for (size_t i = 0; i < model_.materials.size(); ++i) {
+        const tinygltf::Material& gltf = model_.materials[i];
+        const auto& pbr = gltf.pbrMetallicRoughness;
+        Material m;
+        m.name = gltf.name.empty() ? "material" + std::to_string(i) : gltf.name;
+        m.base_color = vec3_or(pbr.baseColorFactor, Vec3f(1.0f));
+        m.alpha = pbr.baseColorFactor.size() >= 4 ? float(pbr.baseColorFactor[3]) : 1.0f;
+        m.base_color_texture = texture_index(pbr.baseColorTexture.index, TextureEncoding::Srgb8, scene);
+        m.metallic = float(pbr.metallicFactor);
+        m.roughness = float(pbr.roughnessFactor);
+        m.metallic_roughness_texture =
+            texture_index(pbr.metallicRoughnessTexture.index, TextureEncoding::Linear8, scene);
+        m.normal_texture = texture_index(gltf.normalTexture.index, TextureEncoding::Linear8, scene);
+        m.normal_scale = float(gltf.normalTexture.scale);
+        m.emission = vec3_or(gltf.emissiveFactor, Vec3f(0.0f));
+        m.emission_texture = texture_index(gltf.emissiveTexture.index, TextureEncoding::Srgb8, scene);
+        // A texture multiplies the factor, so a texture with a zero factor emits nothing.
+        m.emission_strength = extension_number(gltf.extensions, "KHR_materials_emissive_strength",
+                                               "emissiveStrength", 1.0f);
+        m.transmission = extension_number(gltf.extensions, "KHR_materials_transmission",
+                                          "transmissionFactor", 0.0f);
+        m.ior = extension_number(gltf.extensions, "KHR_materials_ior", "ior", 1.5f);
+        if (gltf.alphaMode == "MASK") m.alpha_mode = AlphaMode::Mask;
+        else if (gltf.alphaMode == "BLEND") m.alpha_mode = AlphaMode::Blend;
+        else m.alpha_mode = AlphaMode::Opaque;
+        m.alpha_cutoff = float(gltf.alphaCutoff);
+        m.double_sided = gltf.doubleSided;
+        scene.materials.push_back(std::move(m));
+    }
+}
+
+uint32_t GltfReader::material_index(int gltf_material, Scene& scene) {
+    if (gltf_material >= 0) {
+        if (size_t(gltf_material) >= model_.materials.size())
+            fail("material " + std::to_string(gltf_material) + " does not exist");
+        return uint32_t(gltf_material);  // materials are converted in glTF order
+    }
+    if (default_material_ < 0) {
+        // glTF's default material: white, fully rough dielectric.
+        Material m;
+        m.name = "gltf-default";
+        m.base_color = Vec3f(1.0f);
+        m.double_sided = false;
+        default_material_ = int(scene.materials.size());
+        scene.materials.push_back(m);
+    }
+    return uint32_t(default_material_);
+}
+
+// --- Meshes -----------------------------------------------------------------
+
+bool GltfReader::convert_primitive(const tinygltf::Primitive& primitive, const std::string& name,
+                                   Scene& scene, Mesh& mesh) {
+    const int mode = primitive.mode < 0 ? TINYGLTF_MODE_TRIANGLES : primitive.mode;
+    if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP &&
+        mode != TINYGLTF_MODE_TRIANGLE_FAN) {
+        if (!warned_non_triangles_) warn(path_, "skipping point and line primitives (" + name + ")");
+        warned_non_triangles_ = true;
+        return false;
+    }
+    auto position_it = primitive.attributes.find("POSITION");
+    if (position_it == primitive.attributes.end()) fail(name + ": primitive has no POSITION");
+
+    mesh.name = name;
+    int components = 0;
+    std::vector<float> positions =
+        read_floats(position_it->second, "POSITION", {TINYGLTF_TYPE_VEC3}, components);
+    const size_t vertex_count = positions.size() / 3;
+    mesh.positions.resize(vertex_count);
+    for (size_t i = 0; i < vertex_count; ++i) {
+        Vec3f p(positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]);
+        if (!is_finite(p))
+            fail(name + ": POSITION " + std::to_string(i) + " is not finite (NaN or infinity)");
+        mesh.positions[i] = p;
+    }
+
+    if (auto it = primitive.attributes.find("NORMAL"); it != primitive.attributes.end()) {
+        std::vector<float> normals = read_floats(it->second, "NORMAL", {TINYGLTF_TYPE_VEC3}, components);
+        if (normals.size() != positions.size()) fail(name + ": NORMAL count differs from POSITION count");
+        mesh.normals.resize(vertex_count);
+        for (size_t i = 0; i < vertex_count; ++i) {
+            Vec3f n(normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]);
+            if (!is_finite(n)) fail(name + ": NORMAL " + std::to_string(i) + " is not finite");
+            mesh.normals[i] = n;
+        }
+    }
+    if (auto it = primitive.attributes.find("TEXCOORD_0"); it != primitive.attributes.end()) {
+        std::vector<float> uvs = read_floats(it->second, "TEXCOORD_0", {TINYGLTF_TYPE_VEC2}, components);
+        if (uvs.size() != vertex_count * 2) fail(name + ": TEXCOORD_0 count differs from POSITION count");
+        mesh.uvs.resize(vertex_count);
+        for (size_t i = 0; i < vertex_count; ++i) {
+            if (!std::isfinite(uvs[2 * i]) || !std::isfinite(uvs[2 * i + 1]))
+                fail(name + ": TEXCOORD_0 " + std::to_string(i) + " is not finite");
+            mesh.uvs[i] = Vec2f{uvs[2 * i], uvs[2 * i + 1]};
+        }
+    }
+    if (auto it = primitive.attributes.find("TANGENT"); it != primitive.attributes.end()) {
+        std::vector<float> tangents = read_floats(it->second, "TANGENT", {TINYGLTF_TYPE_VEC4}, components);
+        if (tangents.size() != vertex_count * 4) fail(name + ": TANGENT count differs from POSITION count");
+        mesh.tangents.resize(vertex_count);
+        for (size_t i = 0; i < vertex_count; ++i) {
+            const float* t = &tangents[4 * i];
+            if (!std::isfinite(t[0]) || !std::isfinite(t[1]) || !std::isfinite(t[2]) || !std::isfinite(t[3]))
+                fail(name + ": TANGENT " + std::to_string(i) + " is not finite");
+            mesh.tangents[i] = Vec4f{t[0], t[1], t[2], t[3]};
+        }
+    }
+
+    // Vertex order: the index list, or 0..n-1 for non-indexed primitives.
+    std::vector<uint32_t> order;
+    if (primitive.indices >= 0) {
+        order = read_indices(primitive.indices);
+        for (size_t i = 0; i < order.size(); ++i)
+            if (order[i] >= vertex_count)
+                fail(name + ": index " + std::to_string(i) + " = " + std::to_string(order[i]) +
+                     " is out of range (" + std::to_string(vertex_count) + " vertices)");
+    } else {
+        order.resize(vertex_count);
+        for (size_t i = 0; i < vertex_count; ++i) order[i] = uint32_t(i);
+    }
+
+    if (mode == TINYGLTF_MODE_TRIANGLES) {
+        if (order.size() % 3 != 0) fail(name + ": triangle list length " + std::to_string(order.size()) +
+                                        " is not a multiple of 3");
+        mesh.indices = std::move(order);
+    } else if (order.size() >= 3) {
+        mesh.indices.reserve((order.size() - 2) * 3);
+        for (size_t i = 2; i < order.size(); ++i) {
+            if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
+                // Every other triangle of a strip is flipped to keep the winding.
+                if (i % 2 == 0) mesh.indices.insert(mesh.indices.end(), {order[i - 2], order[i - 1], order[i]});
+                else mesh.indices.insert(mesh.indices.end(), {order[i - 1], order[i - 2], order[i]});
+            } else {
+                mesh.indices.insert(mesh.indices.end(), {order[0], order[i - 1], order[i]});
+            }
+        }
+    }
+    if (mesh.indices.empty()) return false;
+
+    mesh.material_ids.assign(mesh.triangle_count(), material_index(primitive.material, scene));
+    if (mesh.normals.empty() && options_.compute_missing_normals) mesh.compute_vertex_normals();
+    return true;
+}
+
+const std::vector<uint32_t>& GltfReader::mesh_primitives(int mesh_index, Scene& scene) {
+    if (auto it = mesh_cache_.find(mesh_index); it != mesh_cache_.end()) return it->second;
+    if (mesh_index < 0 || size_t(mesh_index) >= model_.meshes.size())
+        fail("mesh " + std::to_string(mesh_index) + " does not exist");
+    const tinygltf::Mesh& gltf = model_.meshes[size_t(mesh_index)];
+    std::vector<uint32_t> ids;
+    for (size_t p = 0; p < gltf.primitives.size(); ++p) {
+        std::string name = (gltf.name.empty() ? "mesh" + std::to_string(mesh_index) : gltf.name);
+        if (gltf.primitives.size() > 1) name += "#" + std::to_string(p);
+        Mesh mesh;
+        if (!convert_primitive(gltf.primitives[p], name, scene, mesh)) continue;
+        ids.push_back(uint32_t(scene.meshes.size()));
+        scene.meshes.push_back(std::move(mesh));
+    }
+    return mesh_cache_[mesh_index] = std::move(ids);
+}
+
+// --- Nodes, cameras, lights -------------------------------------------------
+
+// Rotation matrix of a unit quaternion (x, y, z, w).
+Affine3f quaternion_rotation(double x, double y, double z, double w) {
+    double n = std::sqrt(x * x + y * y + z * z + w * w);
+    if (n > 0) { x /= n; y /= n; z /= n; w /= n; }
+    Affine3f r;
+    r.m[0][0] = float(1 - 2 * (y * y + z * z));
+    r.m[0][1] = float(2 * (x * y - z * w));
+    r.m[0][2] = float(2 * (x * z + y * w));
+    r.m[1][0] = float(2 * (x * y + z * w));
+    r.m[1][1] = float(1 - 2 * (x * x + z * z));
+    r.m[1][2] = float(2 * (y * z - x * w));
+    r.m[2][0] = float(2 * (x * z - y * w));
+    r.m[2][1] = float(2 * (y * z + x * w));
+    r.m[2][2] = float(1 - 2 * (x * x + y * y));
+    return r;
+}
+
+Affine3f GltfReader::local_transform(const tinygltf::Node& node, int node_index) const {
+    auto finite = [](const std::vector<double>& v) {
+        return std::all_of(v.begin(), v.end(), [](double x) { return std::isfinite(x); });
+    };
+    const std::string where = "node " + std::to_string(node_index);
+    if (!node.matrix.empty()) {
+        if (node.matrix.size() != 16 || !finite(node.matrix)) fail(where + ": invalid matrix");
+        return Affine3f::from_column_major(node.matrix.data());
+    }
+    Affine3f t, r, s;
+    if (!node.translation.empty()) {
+        if (node.translation.size() != 3 || !finite(node.translation)) fail(where + ": invalid translation");
+        t = Affine3f::translation(vec3_or(node.translation, Vec3f(0.0f)));
+    }
+    if (!node.rotation.empty()) {
+        if (node.rotation.size() != 4 || !finite(node.rotation)) fail(where + ": invalid rotation");
+        r = quaternion_rotation(node.rotation[0], node.rotation[1], node.rotation[2], node.rotation[3]);
+    }
+    if (!node.scale.empty()) {
+        if (node.scale.size() != 3 || !finite(node.scale)) fail(where + ": invalid scale");
+        s = Affine3f::scale(vec3_or(node.scale, Vec3f(1.0f)));
+    }
+    return t * r * s;
+}
+
+void GltfReader::add_light(int light_index, const Affine3f& world, Scene& scene) const {
+    if (light_index < 0 || size_t(light_index) >= model_.lights.size())
+        fail("KHR_lights_punctual light " + std::to_string(light_index) + " does not exist");
+    const tinygltf::Light& gltf = model_.lights[size_t(light_index)];
+    Light light;
+    if (gltf.type == "point") light.type = LightType::Point;
+    else if (gltf.type == "spot") light.type = LightType::Spot;
+    else if (gltf.type == "directional") light.type = LightType::Directional;
+    else fail("light " + std::to_string(light_index) + ": unknown type '" + gltf.type + "'");
+    light.position = world.transform_point(Vec3f(0.0f));
+    Vec3f direction = world.transform_vector(Vec3f(0, 0, -1));  // lights shine down their -Z
+    if (length(direction) > 0) light.direction = normalize(direction);
+    light.color = vec3_or(gltf.color, Vec3f(1.0f));
+    light.intensity = float(gltf.intensity);
+    light.inner_cone_radians = float(gltf.spot.innerConeAngle);
+    light.outer_cone_radians = float(gltf.spot.outerConeAngle);
+    scene.lights.push_back(light);
+}
+
+void GltfReader::set_camera(int camera_index, const Affine3f& world, Scene& scene) {
+    if (camera_index < 0 || size_t(camera_index) >= model_.cameras.size())
+        fail("camera " + std::to_string(camera_index) + " does not exist");
+    const tinygltf::Camera& gltf = model_.cameras[size_t(camera_index)];
+    if (gltf.type != "perspective") {
+        warn(path_, "ignoring " + gltf.type + " camera " + std::to_string(camera_index));
+        return;
+    }
+    Vec3f forward = world.transform_vector(Vec3f(0, 0, -1));
+    Vec3f up = world.transform_vector(Vec3f(0, 1, 0));
+    if (!(length(forward) > 0) || !(length(up) > 0)) fail("camera node has a degenerate transform");
+    Camera camera;
+    camera.eye = world.transform_point(Vec3f(0.0f));
+    camera.target = camera.eye + normalize(forward);
+    camera.up = normalize(up);
+    camera.vfov_degrees = float(gltf.perspective.yfov) * 180.0f / kPi;
+    if (!(camera.vfov_degrees > 0.0f && camera.vfov_degrees < 180.0f))
+        fail("camera " + std::to_string(camera_index) + ": yfov out of range");
+    scene.camera = camera;
+}
+
+void GltfReader::visit_node(int node_index, const Affine3f& parent, Scene& scene) {
+    if (node_index < 0 || size_t(node_index) >= model_.nodes.size())
+        fail("node " + std::to_string(node_index) + " does not exist");
+    if (on_path_[size_t(node_index)])
+        fail("node " + std::to_string(node_index) + " is its own ancestor (cycle in the node tree)");
+    const tinygltf::Node& node = model_.nodes[size_t(node_index)];
+    const Affine3f world = parent * local_transform(node, node_index);
+
+    if (node.mesh >= 0) {
+        for (uint32_t mesh : mesh_primitives(node.mesh, scene)) scene.instances.push_back({mesh, world});
+    }
+    if (node.camera >= 0 && !scene.camera) set_camera(node.camera, world, scene);
+    if (auto it = node.extensions.find("KHR_lights_punctual"); it != node.extensions.end()) {
+        if (it->second.Has("light") && it->second.Get("light").IsNumber())
+            add_light(int(it->second.Get("light").GetNumberAsDouble()), world, scene);
+    }
+
+    on_path_[size_t(node_index)] = 1;
+    for (int child : node.children) visit_node(child, world, scene);
+    on_path_[size_t(node_index)] = 0;
+}
+
+Scene GltfReader::read() {
+    Scene scene;
+    scene.source = path_;
+    convert_materials(scene);
+    on_path_.assign(model_.nodes.size(), 0);
+
+    // The default scene, else scene 0, else every root node.
+    std::vector<int> roots;
+    if (!model_.scenes.empty()) {
+        int index = model_.defaultScene;
+        if (index < 0 || size_t(index) >= model_.scenes.size()) index = 0;
+        roots = model_.scenes[size_t(index)].nodes;
+    } else {
+        std::vector<char> is_child(model_.nodes.size(), 0);
+        for (const auto& node : model_.nodes)
+            for (int child : node.children)
+                if (child >= 0 && size_t(child) < is_child.size()) is_child[size_t(child)] = 1;
+        for (size_t i = 0; i < model_.nodes.size(); ++i)
+            if (!is_child[i]) roots.push_back(int(i));
+    }
+    for (int root : roots) visit_node(root, Affine3f::identity(), scene);
+    return scene;
+}
+
+}  // namespace
+
+Scene load_gltf(const std::string& path, const LoadOptions& options) {
+    if (!std::filesystem::is_regular_file(path)) throw file_error(path, 0, "cannot open file");
+    tinygltf::Model model;
+    tinygltf::TinyGLTF loader;
+    ImageLoaderContext image_context{&model};
+    loader.SetImageLoader(&keep_encoded_image, &image_context);
+
+    std::string err, warnings;
+    // A .glb starts with the magic "glTF"; decide by content so a misnamed
+    // file still loads.
+    bool binary = lowercase_extension(path) == ".glb";
+    if (std::FILE* f = std::fopen(path.c_str(), "rb")) {
+        char magic[4] = {};
+        binary = std::fread(magic, 1, 4, f) == 4 && std::memcmp(magic, "glTF", 4) == 0;
+        std::fclose(f);
+    }
+    bool ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warnings, path)
+                     : loader.LoadASCIIFromFile(&model, &err, &warnings, path);
+    if (!ok) {
+        std::string reason = one_line(err.empty() ? warnings : err + "\n" + warnings);
+        throw file_error(path, 0, reason.empty() ? "invalid glTF file" : reason);
+    }
+    if (!warnings.empty()) warn(path, one_line(warnings));
+
+    Scene scene = GltfReader(path, model, options).read();
+    try {
+        scene.finalize();
+    } catch (const Error& e) {
+        throw file_error(path, 0, e.what());
+    }
+    return scene;
+}
+
+}  // namespace rf

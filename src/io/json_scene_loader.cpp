@@ -1,0 +1,491 @@
+// The JSON scene format (docs/scene-format.md): a list of mesh files or
+// built-in scenes, each placed by a transform and optionally given a named
+// material, plus materials, camera, lights, environment and render settings.
+// Referenced files are loaded with rf::load_scene and merged (meshes,
+// materials and textures re-indexed, instances composed with the transform).
+// The reader is strict: an unknown key or a value of the wrong type is an
+// error naming its JSON path, so typos do not silently change a scene.
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <initializer_list>
+#include <map>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "rayforge/core/error.h"
+#include "rayforge/io/image_io.h"
+#include "rayforge/io/scene_io.h"
+
+namespace rf {
+namespace {
+
+using Json = nlohmann::json;
+namespace fs = std::filesystem;
+
+constexpr float kPi = 3.14159265358979f;
+constexpr int kMaxNesting = 8;
+
+float radians(float degrees) { return degrees * kPi / 180.0f; }
+
+// Scene files may include scene files: the files being read, outermost
+// first, to report a file that includes itself.
+thread_local std::vector<std::string> g_open_scene_files;
+
+class JsonSceneReader {
+public:
+    JsonSceneReader(const std::string& path, const LoadOptions& options)
+        : path_(path), dir_(fs::path(path).parent_path()), options_(options) {}
+
+    Scene read(const Json& root);
+
+private:
+    [[noreturn]] void fail(const std::string& where, const std::string& reason) const {
+        throw file_error(path_, 0, where + ": " + reason);
+    }
+
+    // Type-checked access; `where` is the JSON path used in errors.
+    void expect_keys(const Json& object, const std::string& where,
+                     std::initializer_list<const char*> allowed) const;
+    const Json& expect_object(const Json& value, const std::string& where) const;
+    float number(const Json& value, const std::string& where) const;
+    int integer(const Json& value, const std::string& where, int min_value) const;
+    std::string string(const Json& value, const std::string& where) const;
+    Vec3f vec3(const Json& value, const std::string& where) const;
+
+    std::string resolve(const std::string& relative) const;
+    int32_t load_texture_file(const Json& value, const std::string& where, TextureEncoding encoding,
+                              Scene& scene) const;
+
+    Affine3f transform(const Json& value, const std::string& where) const;
+    Material material(const std::string& name, const Json& value, const std::string& where,
+                      Scene& scene) const;
+    void read_materials(const Json& value, Scene& scene);
+    void read_mesh_entry(const Json& value, const std::string& where, Scene& scene);
+    Camera camera(const Json& value, const std::string& where) const;
+    Light light(const Json& value, const std::string& where) const;
+    void read_environment(const Json& value, const std::string& where, Scene& scene) const;
+    RenderSettings render_settings(const Json& value, const std::string& where) const;
+
+    // A loaded file, kept so that repeated references add instances only.
+    struct LoadedPart {
+        uint32_t first_mesh = 0;
+        std::vector<Instance> instances;  // of the part, with mesh indices already offset
+        std::vector<Light> lights;
+        std::optional<Camera> camera;
+    };
+
+    const std::string path_;
+    const fs::path dir_;
+    const LoadOptions& options_;
+    std::map<std::string, uint32_t> named_materials_;           // name -> Scene::materials index
+    std::map<std::pair<std::string, std::string>, LoadedPart> parts_;  // (file, material) -> part
+};
+
+std::string type_name(const Json& value) { return value.type_name(); }
+
+void JsonSceneReader::expect_keys(const Json& object, const std::string& where,
+                                  std::initializer_list<const char*> allowed) const {
+    for (const auto& item : object.items()) {
+        bool known = false;
+        for (const char* key : allowed) known = known || item.key() == key;
+        if (!known) {
+            std::string list;
+            for (const char* key : allowed) list += (list.empty() ? "" : ", ") + std::string(key);
+            fail(where.empty() ? item.key() : where + "." + item.key(),
+                 "unknown key (expected one of: " + list + ")");
+        }
+    }
+}
+
+const Json& JsonSceneReader::expect_object(const Json& value, const std::string& where) const {
+    if (!value.is_object()) fail(where, "expected an object, got " + type_name(value));
+    return value;
+}
+
+float JsonSceneReader::number(const Json& value, const std::string& where) const {
+    if (!value.is_number()) fail(where, "expected a number, got " + type_name(value));
+    const double v = value.get<double>();
+    if (!std::isfinite(v) || std::fabs(v) > 3.0e38) fail(where, "number out of range");
+    return float(v);
+}
+
+int JsonSceneReader::integer(const Json& value, const std::string& where, int min_value) const {
+    if (!value.is_number_integer()) fail(where, "expected an integer, got " + type_name(value));
+    const auto v = value.get<long long>();
+    if (v < min_value || v > 1000000000LL)
+        fail(where, "expected an integer in [" + std::to_string(min_value) + ", 1000000000]");
+    return int(v);
+}
+
+std::string JsonSceneReader::string(const Json& value, const std::string& where) const {
+    if (!value.is_string()) fail(where, "expected a string, got " + type_name(value));
+    return value.get<std::string>();
+}
+
+Vec3f JsonSceneReader::vec3(const Json& value, const std::string& where) const {
+    if (!value.is_array() || value.size() != 3) fail(where, "expected an array of 3 numbers");
+    Vec3f v;
+    for (int i = 0; i < 3; ++i) v[i] = number(value[size_t(i)], where + "[" + std::to_string(i) + "]");
+    return v;
+}
+
+std::string JsonSceneReader::resolve(const std::string& relative) const {
+    fs::path p(relative);
+    return p.is_absolute() ? p.string() : (dir_ / p).string();
+}
+
+int32_t JsonSceneReader::load_texture_file(const Json& value, const std::string& where,
+                                           TextureEncoding encoding, Scene& scene) const {
+    const std::string file = resolve(string(value, where));
+    if (!options_.load_textures) return kNoTexture;
+    if (!fs::is_regular_file(file)) fail(where, "texture file '" + file + "' not found");
+    try {
+        scene.textures.push_back(load_texture(file, encoding));
+    } catch (const Error& e) {
+        fail(where, e.what());
+    }
+    return int32_t(scene.textures.size() - 1);
+}
+
+// {"translate": [x,y,z], "rotate": {"axis": [x,y,z], "degrees": d}, "scale": s or [x,y,z]}
+// applied as scale, then rotate, then translate; or {"matrix": [16 numbers, column-major]}.
+Affine3f JsonSceneReader::transform(const Json& value, const std::string& where) const {
+    expect_object(value, where);
+    expect_keys(value, where, {"translate", "rotate", "scale", "matrix"});
+    if (value.contains("matrix")) {
+        if (value.size() != 1) fail(where, "\"matrix\" cannot be combined with translate, rotate or scale");
+        const Json& m = value["matrix"];
+        if (!m.is_array() || m.size() != 16) fail(where + ".matrix", "expected an array of 16 numbers");
+        double column_major[16];
+        for (size_t i = 0; i < 16; ++i)
+            column_major[i] = number(m[i], where + ".matrix[" + std::to_string(i) + "]");
+        return Affine3f::from_column_major(column_major);
+    }
+    Affine3f t, r, s;
+    if (value.contains("translate")) t = Affine3f::translation(vec3(value["translate"], where + ".translate"));
+    if (value.contains("rotate")) {
+        const std::string w = where + ".rotate";
+        const Json& rotate = expect_object(value["rotate"], w);
+        expect_keys(rotate, w, {"axis", "degrees"});
+        if (!rotate.contains("axis") || !rotate.contains("degrees"))
+            fail(w, "expected {\"axis\": [x, y, z], \"degrees\": number}");
+        Vec3f axis = vec3(rotate["axis"], w + ".axis");
+        if (!(length(axis) > 0.0f)) fail(w + ".axis", "axis must not be zero");
+        r = Affine3f::rotation(normalize(axis), radians(number(rotate["degrees"], w + ".degrees")));
+    }
+    if (value.contains("scale")) {
+        const Json& scale = value["scale"];
+        const std::string w = where + ".scale";
+        Vec3f v;
+        if (scale.is_number()) v = Vec3f(number(scale, w));
+        else if (scale.is_array() && scale.size() == 3 &&
+                 scale[0].is_number() && scale[1].is_number() && scale[2].is_number())
+            v = vec3(scale, w);
+        else fail(w, "expected a number or an array of 3 numbers");
+        if (v.x == 0.0f || v.y == 0.0f || v.z == 0.0f) fail(w, "scale must not be zero");
+        s = Affine3f::scale(v);
+    }
+    return t * r * s;
+}
+
+Material JsonSceneReader::material(const std::string& name, const Json& value, const std::string& where,
+                                   Scene& scene) const {
+    expect_object(value, where);
+    expect_keys(value, where,
+                {"base_color", "alpha", "metallic", "roughness", "emission", "emission_strength",
+                 "transmission", "ior", "double_sided", "alpha_mode", "alpha_cutoff", "normal_scale",
+                 "base_color_texture", "metallic_roughness_texture", "normal_texture",
+                 "emission_texture"});
+    Material m;
+    m.name = name;
+    auto unit = [&](const char* key, float& out) {
+        if (!value.contains(key)) return;
+        out = number(value[key], where + "." + key);
+        if (out < 0.0f || out > 1.0f) fail(where + "." + key, "expected a number in [0, 1]");
+    };
+    if (value.contains("base_color")) m.base_color = vec3(value["base_color"], where + ".base_color");
+    unit("alpha", m.alpha);
+    unit("metallic", m.metallic);
+    unit("roughness", m.roughness);
+    unit("transmission", m.transmission);
+    unit("alpha_cutoff", m.alpha_cutoff);
+    if (value.contains("emission")) m.emission = vec3(value["emission"], where + ".emission");
+    if (value.contains("emission_strength")) {
+        m.emission_strength = number(value["emission_strength"], where + ".emission_strength");
+        if (m.emission_strength < 0.0f) fail(where + ".emission_strength", "must not be negative");
+    }
+    if (value.contains("ior")) {
+        m.ior = number(value["ior"], where + ".ior");
+        if (m.ior < 1.0f) fail(where + ".ior", "expected a number >= 1");
+    }
+    if (value.contains("normal_scale")) m.normal_scale = number(value["normal_scale"], where + ".normal_scale");
+    if (value.contains("double_sided")) {
+        if (!value["double_sided"].is_boolean()) fail(where + ".double_sided", "expected true or false");
+        m.double_sided = value["double_sided"].get<bool>();
+    }
+    if (value.contains("alpha_mode")) {
+        const std::string mode = string(value["alpha_mode"], where + ".alpha_mode");
+        if (mode == "opaque") m.alpha_mode = AlphaMode::Opaque;
+        else if (mode == "mask") m.alpha_mode = AlphaMode::Mask;
+        else if (mode == "blend") m.alpha_mode = AlphaMode::Blend;
+        else fail(where + ".alpha_mode", "expected \"opaque\", \"mask\" or \"blend\"");
+    }
+    auto texture = [&](const char* key, TextureEncoding encoding, int32_t& out) {
+        if (value.contains(key)) out = load_texture_file(value[key], where + "." + key, encoding, scene);
+    };
+    texture("base_color_texture", TextureEncoding::Srgb8, m.base_color_texture);
+    texture("metallic_roughness_texture", TextureEncoding::Linear8, m.metallic_roughness_texture);
+    texture("normal_texture", TextureEncoding::Linear8, m.normal_texture);
+    texture("emission_texture", TextureEncoding::Srgb8, m.emission_texture);
+    return m;
+}
+
+void JsonSceneReader::read_materials(const Json& value, Scene& scene) {
+    expect_object(value, "materials");
+    for (const auto& item : value.items()) {
+        const std::string where = "materials." + item.key();
+        named_materials_[item.key()] = uint32_t(scene.materials.size());
+        Material m = material(item.key(), item.value(), where, scene);
+        scene.materials.push_back(std::move(m));
+    }
+}
+
+// Appends `part`'s meshes, materials and textures to `scene`, re-indexed.
+// With `override_material` >= 0 every triangle gets that material instead.
+void merge_into(Scene& scene, Scene&& part, int64_t override_material) {
+    const auto material_offset = uint32_t(scene.materials.size());
+    const auto texture_offset = int32_t(scene.textures.size());
+    if (override_material < 0) {
+        for (Material& m : part.materials) {
+            for (int32_t* t : {&m.base_color_texture, &m.metallic_roughness_texture, &m.normal_texture,
+                               &m.emission_texture})
+                if (*t != kNoTexture) *t += texture_offset;
+            scene.materials.push_back(std::move(m));
+        }
+        for (Texture& t : part.textures) scene.textures.push_back(std::move(t));
+    }
+    for (Mesh& mesh : part.meshes) {
+        for (uint32_t& id : mesh.material_ids)
+            id = override_material >= 0 ? uint32_t(override_material) : id + material_offset;
+        scene.meshes.push_back(std::move(mesh));
+    }
+}
+
+void JsonSceneReader::read_mesh_entry(const Json& value, const std::string& where, Scene& scene) {
+    expect_object(value, where);
+    expect_keys(value, where, {"file", "transform", "material"});
+    if (!value.contains("file")) fail(where, "missing \"file\"");
+    const std::string file_value = string(value["file"], where + ".file");
+    const bool builtin = file_value.rfind("builtin:", 0) == 0;
+    const std::string file = builtin ? file_value : resolve(file_value);
+    const Affine3f placement = value.contains("transform") ? transform(value["transform"], where + ".transform")
+                                                           : Affine3f::identity();
+    std::string material_name;
+    int64_t override_material = -1;
+    if (value.contains("material")) {
+        material_name = string(value["material"], where + ".material");
+        auto it = named_materials_.find(material_name);
+        if (it == named_materials_.end())
+            fail(where + ".material", "no material named '" + material_name + "' in \"materials\"");
+        override_material = it->second;
+    }
+
+    auto key = std::make_pair(file, material_name);
+    auto it = parts_.find(key);
+    if (it == parts_.end()) {
+        if (!builtin && !fs::is_regular_file(file)) fail(where + ".file", "'" + file + "' not found");
+        Scene part;
+        try {
+            part = load_scene(file, options_);
+        } catch (const Error& e) {
+            fail(where + ".file", e.what());
+        }
+        LoadedPart loaded;
+        loaded.first_mesh = uint32_t(scene.meshes.size());
+        loaded.instances = part.instances;
+        for (Instance& instance : loaded.instances) instance.mesh += loaded.first_mesh;
+        loaded.lights = part.lights;
+        loaded.camera = part.camera;
+        merge_into(scene, std::move(part), override_material);
+        it = parts_.emplace(key, std::move(loaded)).first;
+    }
+    const LoadedPart& part = it->second;
+    for (const Instance& instance : part.instances)
+        scene.instances.push_back({instance.mesh, placement * instance.transform});
+    for (Light light : part.lights) {
+        light.position = placement.transform_point(light.position);
+        Vec3f d = placement.transform_vector(light.direction);
+        if (length(d) > 0.0f) light.direction = normalize(d);
+        scene.lights.push_back(light);
+    }
+    // A camera in a referenced file is used only when the JSON file has none.
+    if (part.camera && !scene.camera) {
+        Camera c = *part.camera;
+        c.eye = placement.transform_point(c.eye);
+        c.target = placement.transform_point(c.target);
+        c.up = normalize(placement.transform_vector(c.up));
+        scene.camera = c;
+    }
+}
+
+Camera JsonSceneReader::camera(const Json& value, const std::string& where) const {
+    expect_object(value, where);
+    expect_keys(value, where, {"eye", "target", "up", "fov", "aperture", "focus_distance"});
+    Camera c;
+    if (value.contains("eye")) c.eye = vec3(value["eye"], where + ".eye");
+    if (value.contains("target")) c.target = vec3(value["target"], where + ".target");
+    if (value.contains("up")) c.up = vec3(value["up"], where + ".up");
+    if (value.contains("fov")) {
+        c.vfov_degrees = number(value["fov"], where + ".fov");
+        if (!(c.vfov_degrees > 0.0f && c.vfov_degrees < 180.0f))
+            fail(where + ".fov", "expected degrees in (0, 180)");
+    }
+    if (value.contains("aperture")) {
+        c.aperture_radius = number(value["aperture"], where + ".aperture");
+        if (c.aperture_radius < 0.0f) fail(where + ".aperture", "must not be negative");
+    }
+    if (value.contains("focus_distance")) {
+        c.focus_distance = number(value["focus_distance"], where + ".focus_distance");
+        if (c.focus_distance < 0.0f) fail(where + ".focus_distance", "must not be negative");
+    }
+    if (length(c.target - c.eye) == 0.0f) fail(where, "eye and target are the same point");
+    return c;
+}
+
+Light JsonSceneReader::light(const Json& value, const std::string& where) const {
+    expect_object(value, where);
+    expect_keys(value, where, {"type", "position", "direction", "color", "intensity", "inner_cone_deg",
+                               "outer_cone_deg"});
+    if (!value.contains("type")) fail(where, "missing \"type\" (point, spot or directional)");
+    const std::string type = string(value["type"], where + ".type");
+    Light light;
+    if (type == "point") light.type = LightType::Point;
+    else if (type == "spot") light.type = LightType::Spot;
+    else if (type == "directional") light.type = LightType::Directional;
+    else fail(where + ".type", "expected \"point\", \"spot\" or \"directional\", got \"" + type + "\"");
+    if (value.contains("position")) light.position = vec3(value["position"], where + ".position");
+    if (value.contains("direction")) {
+        Vec3f d = vec3(value["direction"], where + ".direction");
+        if (!(length(d) > 0.0f)) fail(where + ".direction", "must not be zero");
+        light.direction = normalize(d);
+    }
+    if (value.contains("color")) light.color = vec3(value["color"], where + ".color");
+    if (value.contains("intensity")) {
+        light.intensity = number(value["intensity"], where + ".intensity");
+        if (light.intensity < 0.0f) fail(where + ".intensity", "must not be negative");
+    }
+    if (value.contains("inner_cone_deg"))
+        light.inner_cone_radians = radians(number(value["inner_cone_deg"], where + ".inner_cone_deg"));
+    if (value.contains("outer_cone_deg"))
+        light.outer_cone_radians = radians(number(value["outer_cone_deg"], where + ".outer_cone_deg"));
+    if (light.inner_cone_radians < 0.0f || light.inner_cone_radians > light.outer_cone_radians ||
+        light.outer_cone_radians > kPi * 0.5f)
+        fail(where, "expected 0 <= inner_cone_deg <= outer_cone_deg <= 90");
+    return light;
+}
+
+void JsonSceneReader::read_environment(const Json& value, const std::string& where, Scene& scene) const {
+    expect_object(value, where);
+    expect_keys(value, where, {"color", "map", "strength", "rotation_deg"});
+    Environment& env = scene.environment;
+    if (value.contains("color")) env.color = vec3(value["color"], where + ".color");
+    if (value.contains("strength")) {
+        env.strength = number(value["strength"], where + ".strength");
+        if (env.strength < 0.0f) fail(where + ".strength", "must not be negative");
+    }
+    if (value.contains("rotation_deg")) env.rotation_radians = radians(number(value["rotation_deg"], where + ".rotation_deg"));
+    if (value.contains("map")) env.texture = load_texture_file(value["map"], where + ".map", TextureEncoding::Srgb8, scene);
+}
+
+RenderSettings JsonSceneReader::render_settings(const Json& value, const std::string& where) const {
+    expect_object(value, where);
+    expect_keys(value, where, {"width", "height", "spp", "integrator", "max_depth", "ao_radius"});
+    RenderSettings r;
+    if (value.contains("width")) r.width = integer(value["width"], where + ".width", 1);
+    if (value.contains("height")) r.height = integer(value["height"], where + ".height", 1);
+    if (value.contains("spp")) r.spp = integer(value["spp"], where + ".spp", 1);
+    if (value.contains("max_depth")) r.max_depth = integer(value["max_depth"], where + ".max_depth", 0);
+    if (value.contains("integrator")) r.integrator = string(value["integrator"], where + ".integrator");
+    if (value.contains("ao_radius")) {
+        r.ao_radius = number(value["ao_radius"], where + ".ao_radius");
+        if (!(*r.ao_radius > 0.0f)) fail(where + ".ao_radius", "must be positive");
+    }
+    return r;
+}
+
+Scene JsonSceneReader::read(const Json& root) {
+    if (!root.is_object()) throw file_error(path_, 0, "expected a JSON object at the top level");
+    expect_keys(root, "", {"description", "meshes", "materials", "camera", "lights", "environment", "render"});
+    Scene scene;
+    scene.source = path_;
+    if (root.contains("description")) string(root["description"], "description");
+    // Materials first: mesh entries refer to them by name.
+    if (root.contains("materials")) read_materials(root["materials"], scene);
+    if (root.contains("camera")) scene.camera = camera(root["camera"], "camera");
+    if (root.contains("meshes")) {
+        const Json& meshes = root["meshes"];
+        if (!meshes.is_array()) fail("meshes", "expected an array, got " + type_name(meshes));
+        for (size_t i = 0; i < meshes.size(); ++i)
+            read_mesh_entry(meshes[i], "meshes[" + std::to_string(i) + "]", scene);
+    }
+    if (root.contains("lights")) {
+        const Json& lights = root["lights"];
+        if (!lights.is_array()) fail("lights", "expected an array, got " + type_name(lights));
+        for (size_t i = 0; i < lights.size(); ++i)
+            scene.lights.push_back(light(lights[i], "lights[" + std::to_string(i) + "]"));
+    }
+    if (root.contains("environment")) read_environment(root["environment"], "environment", scene);
+    if (root.contains("render")) scene.render_settings = render_settings(root["render"], "render");
+    return scene;
+}
+
+// "[json.exception.parse_error.101] parse error at line 2, column 3: ..." -> "parse error at line 2, ..."
+std::string parse_error_reason(const std::string& what) {
+    std::string reason = what;
+    if (!reason.empty() && reason.front() == '[') {
+        size_t close = reason.find("] ");
+        if (close != std::string::npos) reason = reason.substr(close + 2);
+    }
+    for (char& c : reason)
+        if (c == '\n' || c == '\r') c = ' ';
+    return reason;
+}
+
+}  // namespace
+
+Scene load_json_scene(const std::string& path, const LoadOptions& options) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw file_error(path, 0, "cannot open file");
+    Json root;
+    try {
+        root = Json::parse(in);
+    } catch (const Json::parse_error& e) {
+        throw file_byte_error(path, e.byte, parse_error_reason(e.what()));
+    }
+    std::error_code ec;
+    std::string canonical = fs::weakly_canonical(path, ec).string();
+    if (ec) canonical = path;
+    for (const std::string& open : g_open_scene_files)
+        if (open == canonical) throw file_error(path, 0, "the file includes itself");
+    if (g_open_scene_files.size() >= size_t(kMaxNesting))
+        throw file_error(path, 0, "scene files nest more than " + std::to_string(kMaxNesting) + " levels deep");
+    struct OpenFileGuard {
+        explicit OpenFileGuard(const std::string& file) { g_open_scene_files.push_back(file); }
+        ~OpenFileGuard() { g_open_scene_files.pop_back(); }
+    } guard(canonical);
+    Scene scene = JsonSceneReader(path, options).read(root);
+    try {
+        scene.finalize();
+    } catch (const Error& e) {
+        throw file_error(path, 0, e.what());
+    }
+    return scene;
+}
+
+}  // namespace rf

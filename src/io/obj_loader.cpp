@@ -1,0 +1,596 @@
+// Wavefront OBJ + MTL loader.
+//
+// The OBJ geometry is parsed here (whole file in memory, std::from_chars):
+// tinyobjloader's parser takes several seconds on million-triangle files.
+// MTL files are parsed by tinyobj::LoadMtl and mapped onto the glTF-style
+// rf::Material (see material_from_mtl for the heuristics).
+//
+// OBJ indexes positions, texture coordinates and normals separately; the
+// mesh gets one vertex per distinct (v, vt, vn) triple. The whole file
+// becomes one rf::Mesh with a material per triangle.
+#include <tbb/parallel_for.h>
+#include <tiny_obj_loader.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <iostream>
+#include <map>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <unordered_map>
+#include <vector>
+
+#include "io/file_reader.h"
+#include "io/path_utils.h"
+#include "rayforge/core/error.h"
+#include "rayforge/io/image_io.h"
+#include "rayforge/io/scene_io.h"
+
+namespace rf {
+
+namespace {
+
+constexpr uint32_t kAbsent = 0xFFFFFFFFu;
+
+void warn(const std::string& message) { std::cerr << "rayforge: warning: " << message << '\n'; }
+
+// ---------------------------------------------------------------------------
+// Geometry
+
+struct ObjCorner {
+    uint32_t v = 0, vt = kAbsent, vn = kAbsent;  // 0-based indices into the attribute arrays
+};
+
+struct ObjGeometry {
+    std::vector<Vec3f> positions;
+    std::vector<Vec2f> uvs;
+    std::vector<Vec3f> normals;
+    std::vector<ObjCorner> corners;           // 3 per triangle
+    std::vector<uint32_t> triangle_material;  // per triangle: index into used_materials, or kAbsent
+    std::vector<std::string> used_materials;  // usemtl names, in order of first use
+    std::vector<std::string> libraries;       // mtllib arguments
+    size_t skipped_faces = 0;                 // faces with fewer than 3 corners
+};
+
+// The largest positive index seen for one attribute and where, so that
+// references to vertices defined later in the file are checked at the end.
+struct ForwardReference {
+    uint64_t max_index = 0;
+    long line = 0;
+    void note(uint64_t index, long at) {
+        if (index > max_index) {
+            max_index = index;
+            line = at;
+        }
+    }
+};
+
+class ObjParser {
+public:
+    ObjParser(const std::string& path, std::string_view text) : path_(path), text_(text) {}
+
+    ObjGeometry parse() {
+        std::unordered_map<std::string, uint32_t> material_ids;
+        uint32_t current_material = kAbsent;
+        size_t pos = 0;
+        while (pos < text_.size()) {
+            size_t eol = text_.find('\n', pos);
+            if (eol == std::string_view::npos) eol = text_.size();
+            ++line_;
+            line_text_ = text_.substr(pos, eol - pos);
+            pos = eol + 1;
+            p_ = line_text_.data();
+            end_ = p_ + line_text_.size();
+            skip_space();
+            if (p_ == end_) continue;
+
+            if (keyword("v")) {
+                out_.positions.push_back(read_vec3("vertex position"));
+            } else if (keyword("vt")) {
+                float u = read_float("texture coordinate");
+                float v = at_end() ? 0.0f : read_float("texture coordinate");
+                // OBJ's v points up; ours has v = 0 at the top row of the image.
+                out_.uvs.push_back({u, 1.0f - v});
+            } else if (keyword("vn")) {
+                out_.normals.push_back(read_vec3("normal"));
+            } else if (keyword("f")) {
+                read_face(current_material);
+            } else if (keyword("usemtl")) {
+                std::string name(rest_of_line());
+                auto [it, inserted] = material_ids.try_emplace(name, uint32_t(out_.used_materials.size()));
+                if (inserted) out_.used_materials.push_back(name);
+                current_material = it->second;
+            } else if (keyword("mtllib")) {
+                std::string_view names = rest_of_line();
+                if (!names.empty()) out_.libraries.emplace_back(names);
+            }
+            // Everything else (o, g, s, l, p, comments, curves) does not affect triangles.
+        }
+        check_forward_references();
+        return std::move(out_);
+    }
+
+private:
+    [[nodiscard]] Error error(const std::string& reason) const { return file_error(path_, line_, reason); }
+
+    void skip_space() {
+        while (p_ < end_ && (*p_ == ' ' || *p_ == '\t' || *p_ == '\r')) ++p_;
+    }
+    bool at_end() {
+        skip_space();
+        return p_ == end_ || *p_ == '#';
+    }
+    // Consumes `word` when the line starts with it followed by whitespace.
+    bool keyword(std::string_view word) {
+        size_t left = size_t(end_ - p_);
+        if (left < word.size() || std::string_view(p_, word.size()) != word) return false;
+        if (left > word.size() && p_[word.size()] != ' ' && p_[word.size()] != '\t') return false;
+        p_ += word.size();
+        return true;
+    }
+    std::string_view rest_of_line() {
+        skip_space();
+        std::string_view rest(p_, size_t(end_ - p_));
+        while (!rest.empty() && (rest.back() == ' ' || rest.back() == '\t' || rest.back() == '\r'))
+            rest.remove_suffix(1);
+        return rest;
+    }
+
+    float read_float(const char* what) {
+        skip_space();
+        const char* start = p_;
+        if (p_ < end_ && *p_ == '+') ++p_;  // from_chars rejects a leading '+'
+        float value = 0.0f;
+        auto [ptr, ec] = std::from_chars(p_, end_, value);
+        if (ec == std::errc::result_out_of_range) throw error(std::string("out-of-range number in ") + what);
+        if (ec != std::errc() || (ptr < end_ && *ptr != ' ' && *ptr != '\t' && *ptr != '\r'))
+            throw error(std::string("bad number '") + std::string(start, std::min<size_t>(end_ - start, 24)) +
+                        "' in " + what);
+        if (!std::isfinite(value)) throw error(std::string("non-finite number in ") + what);
+        p_ = ptr;
+        return value;
+    }
+    Vec3f read_vec3(const char* what) {
+        float x = read_float(what);
+        float y = read_float(what);
+        float z = read_float(what);
+        return {x, y, z};
+    }
+
+    // One index of a face corner: 1-based, or negative relative to the end so far.
+    uint32_t resolve_index(size_t count_so_far, ForwardReference& forward, const char* what) {
+        long long index = 0;
+        auto [ptr, ec] = std::from_chars(p_, end_, index);
+        if (ec != std::errc()) throw error(std::string("bad ") + what + " index in face");
+        p_ = ptr;
+        if (index == 0) throw error(std::string(what) + " index 0 in face (OBJ indices start at 1)");
+        if (index < 0) {
+            if (uint64_t(-index) > count_so_far)
+                throw error(std::string(what) + " index " + std::to_string(index) + " out of range (" +
+                            std::to_string(count_so_far) + " defined so far)");
+            return uint32_t(count_so_far - uint64_t(-index));
+        }
+        if (uint64_t(index) > 0xFFFFFFFEull) throw error(std::string(what) + " index out of range");
+        forward.note(uint64_t(index), line_);
+        return uint32_t(index - 1);
+    }
+
+    void read_face(uint32_t material) {
+        face_.clear();
+        while (!at_end()) {
+            ObjCorner c;
+            c.v = resolve_index(out_.positions.size(), forward_v_, "vertex");
+            if (p_ < end_ && *p_ == '/') {
+                ++p_;
+                if (p_ < end_ && *p_ != '/') c.vt = resolve_index(out_.uvs.size(), forward_vt_, "texture coordinate");
+                if (p_ < end_ && *p_ == '/') {
+                    ++p_;
+                    c.vn = resolve_index(out_.normals.size(), forward_vn_, "normal");
+                }
+            }
+            if (p_ < end_ && *p_ != ' ' && *p_ != '\t' && *p_ != '\r') throw error("malformed face corner");
+            face_.push_back(c);
+        }
+        if (face_.size() < 3) {
+            ++out_.skipped_faces;
+            return;
+        }
+        // Fan triangulation, as most exporters write convex polygons.
+        for (size_t k = 2; k < face_.size(); ++k) {
+            out_.corners.push_back(face_[0]);
+            out_.corners.push_back(face_[k - 1]);
+            out_.corners.push_back(face_[k]);
+            out_.triangle_material.push_back(material);
+        }
+    }
+
+    void check_forward_references() const {
+        auto check = [&](const ForwardReference& f, size_t count, const char* what) {
+            if (f.max_index > count)
+                throw file_error(path_, f.line, std::string(what) + " index " + std::to_string(f.max_index) +
+                                                    " out of range (" + std::to_string(count) + " in file)");
+        };
+        check(forward_v_, out_.positions.size(), "vertex");
+        check(forward_vt_, out_.uvs.size(), "texture coordinate");
+        check(forward_vn_, out_.normals.size(), "normal");
+    }
+
+    const std::string& path_;
+    std::string_view text_;
+    std::string_view line_text_;
+    const char* p_ = nullptr;
+    const char* end_ = nullptr;
+    long line_ = 0;
+    std::vector<ObjCorner> face_;
+    ForwardReference forward_v_, forward_vt_, forward_vn_;
+    ObjGeometry out_;
+};
+
+// One mesh vertex per distinct (v, vt, vn). Variants of a position are chained
+// from first_variant[v]: a hash map whose hash is the position index itself.
+Mesh build_mesh(const ObjGeometry& geo, const std::vector<uint32_t>& triangle_material, bool compute_normals) {
+    const bool any_uv = std::any_of(geo.corners.begin(), geo.corners.end(), [](const ObjCorner& c) { return c.vt != kAbsent; });
+    const bool any_normal = std::any_of(geo.corners.begin(), geo.corners.end(), [](const ObjCorner& c) { return c.vn != kAbsent; });
+
+    std::vector<uint32_t> first_variant(geo.positions.size(), kAbsent);
+    std::vector<uint32_t> next_variant;
+    std::vector<ObjCorner> vertex_key;
+    next_variant.reserve(geo.positions.size());
+    vertex_key.reserve(geo.positions.size());
+
+    Mesh mesh;
+    mesh.indices.resize(geo.corners.size());
+    for (size_t i = 0; i < geo.corners.size(); ++i) {
+        const ObjCorner& c = geo.corners[i];
+        uint32_t found = first_variant[c.v];
+        while (found != kAbsent && (vertex_key[found].vt != c.vt || vertex_key[found].vn != c.vn))
+            found = next_variant[found];
+        if (found == kAbsent) {
+            found = uint32_t(vertex_key.size());
+            vertex_key.push_back(c);
+            next_variant.push_back(first_variant[c.v]);
+            first_variant[c.v] = found;
+        }
+        mesh.indices[i] = found;
+    }
+
+    const size_t n = vertex_key.size();
+    mesh.positions.resize(n);
+    for (size_t i = 0; i < n; ++i) mesh.positions[i] = geo.positions[vertex_key[i].v];
+    if (any_uv) {
+        mesh.uvs.resize(n);
+        for (size_t i = 0; i < n; ++i)
+            if (vertex_key[i].vt != kAbsent) mesh.uvs[i] = geo.uvs[vertex_key[i].vt];
+    }
+    mesh.material_ids = triangle_material;
+
+    const bool all_normals = std::all_of(vertex_key.begin(), vertex_key.end(), [](const ObjCorner& c) { return c.vn != kAbsent; });
+    if (any_normal && all_normals) {
+        mesh.normals.resize(n);
+        for (size_t i = 0; i < n; ++i) mesh.normals[i] = geo.normals[vertex_key[i].vn];
+    } else if (compute_normals) {
+        // Vertices without a normal get the computed one; the file's normals are kept.
+        mesh.compute_vertex_normals();
+        for (size_t i = 0; i < n; ++i)
+            if (vertex_key[i].vn != kAbsent) mesh.normals[i] = geo.normals[vertex_key[i].vn];
+    }
+    return mesh;
+}
+
+// ---------------------------------------------------------------------------
+// Materials
+
+struct MaterialLibrary {
+    std::string path;  // the .mtl file, for resolving texture names
+    std::vector<tinyobj::material_t> materials;
+    std::map<std::string, int> by_name;
+};
+
+std::vector<MaterialLibrary> load_material_libraries(const std::string& obj_path,
+                                                     const std::vector<std::string>& arguments) {
+    std::vector<MaterialLibrary> libraries;
+    std::set<std::string> seen;
+    for (const std::string& argument : arguments) {
+        // Usually one file per mtllib line, but several may be listed; names with spaces exist too.
+        std::vector<std::string> names{argument};
+        if (!io::find_file_case_insensitive(io::resolve_relative(obj_path, argument))) {
+            std::istringstream words(argument);
+            names.clear();
+            for (std::string w; words >> w;) names.push_back(w);
+        }
+        for (const std::string& name : names) {
+            std::string resolved = io::resolve_relative(obj_path, name);
+            std::optional<std::string> found = io::find_file_case_insensitive(resolved);
+            if (!found) {
+                warn(obj_path + ": material library '" + name + "' not found");
+                continue;
+            }
+            if (!seen.insert(*found).second) continue;
+            MaterialLibrary library;
+            library.path = *found;
+            std::istringstream stream(io::read_file(*found));
+            std::string warnings, errors;
+            tinyobj::LoadMtl(&library.by_name, &library.materials, &stream, &warnings, &errors);
+            if (!errors.empty()) warn(*found + ": " + errors.substr(0, errors.find('\n')));
+            libraries.push_back(std::move(library));
+        }
+    }
+    return libraries;
+}
+
+// Heuristic mapping of the Phong-era MTL parameters onto metallic-roughness:
+// - Kd is the base color; Ks == 0 means no highlight was intended (roughness 1),
+//   otherwise roughness = sqrt(2 / (Ns + 2)) (Blinn-Phong exponent to width).
+// - illum 3/5 with a strong Ks is a mirror: metallic, colored by Ks.
+// - illum 4/6/7 is glass: full transmission with ior Ni and a white base.
+// - d < 1 otherwise is opacity (alpha blend); map_d becomes an alpha mask.
+Material material_from_mtl(const tinyobj::material_t& m) {
+    Material out;
+    out.name = m.name;
+    const Vec3f kd{m.diffuse[0], m.diffuse[1], m.diffuse[2]};
+    const Vec3f ks{m.specular[0], m.specular[1], m.specular[2]};
+    out.base_color = kd;
+    const float ns = std::max(0.0f, float(m.shininess));
+    out.roughness = max_component(ks) < 0.01f ? 1.0f : std::clamp(std::sqrt(2.0f / (ns + 2.0f)), 0.0f, 1.0f);
+    out.emission = Vec3f{m.emission[0], m.emission[1], m.emission[2]};
+    if (m.ior >= 1.01f) out.ior = m.ior;
+
+    const bool mirror_illum = m.illum == 3 || m.illum == 5;
+    const bool glass_illum = m.illum == 4 || m.illum == 6 || m.illum == 7;
+    if (mirror_illum && max_component(ks) >= 0.5f && max_component(ks) >= max_component(kd)) {
+        out.metallic = 1.0f;
+        out.base_color = ks;
+    }
+    if (glass_illum) {
+        out.transmission = 1.0f;
+        out.base_color = Vec3f{1.0f, 1.0f, 1.0f};
+    } else if (m.dissolve < 1.0f) {
+        out.alpha = std::clamp(float(m.dissolve), 0.0f, 1.0f);
+        out.alpha_mode = AlphaMode::Blend;
+    }
+    return out;
+}
+
+// The textures one material asks for, as resolved file paths ("" = none).
+struct MaterialTextures {
+    std::string base_color, mask, emission, normal;
+    bool normal_is_bump = false;  // from map_bump/bump: used only if it looks like a normal map
+};
+
+// Decoded texture files (each decoded once) and the scene textures made from them.
+class TextureTable {
+public:
+    TextureTable(const std::string& obj_path, bool enabled) : obj_path_(obj_path), enabled_(enabled) {}
+
+    // Resolves an MTL texture name; "" when absent (warned once per name).
+    std::string request(const MaterialLibrary& library, const std::string& name) {
+        if (!enabled_ || name.empty()) return {};
+        std::string resolved = io::resolve_relative(library.path, name);
+        std::optional<std::string> found = io::find_file_case_insensitive(resolved);
+        if (!found) {
+            if (missing_.insert(resolved).second)
+                warn(library.path + ": texture '" + name + "' not found; using the material's factor");
+            return {};
+        }
+        if (!slot_.count(*found)) {
+            slot_[*found] = paths_.size();
+            paths_.push_back(*found);
+        }
+        return *found;
+    }
+
+    // Decodes every requested file, in parallel; failures become warnings.
+    void decode_all() {
+        decoded_.resize(paths_.size());
+        std::vector<std::string> failures(paths_.size());  // one slot per task: no sharing
+        tbb::parallel_for(size_t(0), paths_.size(), [&](size_t i) {
+            try {
+                decoded_[i] = load_texture(paths_[i], TextureEncoding::Srgb8);
+            } catch (const Error& e) {
+                failures[i] = e.what();
+            }
+        });
+        for (const std::string& failure : failures)
+            if (!failure.empty()) warn(failure + "; using the material's factor");
+    }
+
+    const Texture* decoded(const std::string& path) const {
+        auto it = slot_.find(path);
+        if (it == slot_.end() || !decoded_[it->second]) return nullptr;
+        return &*decoded_[it->second];
+    }
+
+    // The scene texture for (path, encoding), added on first use.
+    int32_t scene_texture(Scene& scene, const std::string& path, TextureEncoding encoding) {
+        const Texture* source = decoded(path);
+        if (!source) return kNoTexture;
+        auto key = std::make_pair(path, encoding);
+        auto it = scene_index_.find(key);
+        if (it != scene_index_.end()) return it->second;
+        Texture texture = *source;
+        if (texture.encoding != TextureEncoding::LinearFloat) texture.encoding = encoding;
+        scene.textures.push_back(std::move(texture));
+        return scene_index_[key] = int32_t(scene.textures.size() - 1);
+    }
+
+    // The base color texture with the map_d mask in its alpha channel.
+    int32_t masked_texture(Scene& scene, const std::string& base_path, const std::string& mask_path) {
+        const Texture* mask = decoded(mask_path);
+        if (!mask) return base_path.empty() ? kNoTexture : scene_texture(scene, base_path, TextureEncoding::Srgb8);
+        auto key = std::make_pair(base_path + "\n" + mask_path, TextureEncoding::Srgb8);
+        auto it = scene_index_.find(key);
+        if (it != scene_index_.end()) return it->second;
+        scene.textures.push_back(merge_mask(decoded(base_path), *mask));
+        return scene_index_[key] = int32_t(scene.textures.size() - 1);
+    }
+
+private:
+    // RGBA8: color from `base` (white when absent), alpha from the mask,
+    // sampled nearest-neighbour when the sizes differ.
+    static Texture merge_mask(const Texture* base, const Texture& mask) {
+        Texture out;
+        const bool have_base = base && base->encoding != TextureEncoding::LinearFloat;
+        out.name = (have_base ? base->name : std::string("white")) + "+" + mask.name;
+        out.width = have_base ? base->width : mask.width;
+        out.height = have_base ? base->height : mask.height;
+        out.channels = 4;
+        out.encoding = TextureEncoding::Srgb8;
+        out.texels8.resize(size_t(out.width) * out.height * 4);
+        const int mask_channel = (mask.channels == 2 || mask.channels == 4) ? mask.channels - 1 : 0;
+        for (int y = 0; y < out.height; ++y) {
+            const int my = int(int64_t(y) * mask.height / out.height);
+            for (int x = 0; x < out.width; ++x) {
+                const int mx = int(int64_t(x) * mask.width / out.width);
+                uint8_t* dst = &out.texels8[(size_t(y) * out.width + x) * 4];
+                if (have_base) {
+                    const uint8_t* src = &base->texels8[(size_t(y) * base->width + x) * base->channels];
+                    for (int c = 0; c < 3; ++c) dst[c] = src[base->channels >= 3 ? c : 0];
+                } else {
+                    dst[0] = dst[1] = dst[2] = 255;
+                }
+                const size_t m = (size_t(my) * mask.width + mx) * mask.channels + mask_channel;
+                dst[3] = mask.encoding == TextureEncoding::LinearFloat
+                             ? uint8_t(std::clamp(mask.texels_f[m], 0.0f, 1.0f) * 255.0f + 0.5f)
+                             : mask.texels8[m];
+            }
+        }
+        return out;
+    }
+
+    std::string obj_path_;
+    bool enabled_;
+    std::vector<std::string> paths_;
+    std::map<std::string, size_t> slot_;
+    std::vector<std::optional<Texture>> decoded_;
+    std::set<std::string> missing_;
+    std::map<std::pair<std::string, TextureEncoding>, int32_t> scene_index_;
+};
+
+// A bump map is used as a normal map only when it looks like one: tangent-space
+// normal maps are bluish (z up) around (0.5, 0.5, 1); height maps are gray.
+bool looks_like_normal_map(const Texture& t) {
+    if (t.channels < 3 || t.encoding == TextureEncoding::LinearFloat || t.texels8.empty()) return false;
+    const size_t texels = size_t(t.width) * t.height;
+    const size_t step = std::max<size_t>(1, texels / 4096);
+    double sum[3] = {0, 0, 0};
+    size_t n = 0;
+    for (size_t i = 0; i < texels; i += step, ++n)
+        for (int c = 0; c < 3; ++c) sum[c] += t.texels8[i * t.channels + c];
+    const double r = sum[0] / (255.0 * n), g = sum[1] / (255.0 * n), b = sum[2] / (255.0 * n);
+    return b > 0.6 && b > r + 0.15 && b > g + 0.15 && std::abs(r - 0.5) < 0.2 && std::abs(g - 0.5) < 0.2;
+}
+
+// Adds the used materials (in order of first use) and returns, for each
+// usemtl name, its index in scene.materials.
+std::vector<uint32_t> add_materials(Scene& scene, const std::string& obj_path, const ObjGeometry& geo,
+                                    const std::vector<MaterialLibrary>& libraries, bool load_textures) {
+    TextureTable textures(obj_path, load_textures);
+    std::vector<MaterialTextures> wanted(geo.used_materials.size());
+    std::vector<uint32_t> scene_index(geo.used_materials.size());
+
+    for (size_t i = 0; i < geo.used_materials.size(); ++i) {
+        const std::string& name = geo.used_materials[i];
+        const tinyobj::material_t* source = nullptr;
+        const MaterialLibrary* library = nullptr;
+        for (const MaterialLibrary& lib : libraries) {
+            auto it = lib.by_name.find(name);
+            if (it != lib.by_name.end()) {
+                source = &lib.materials[size_t(it->second)];
+                library = &lib;
+                break;
+            }
+        }
+        scene_index[i] = uint32_t(scene.materials.size());
+        if (!source) {
+            if (!libraries.empty()) warn(obj_path + ": material '" + name + "' is not defined; using a default");
+            Material fallback;
+            fallback.name = name;
+            scene.materials.push_back(fallback);
+            continue;
+        }
+        scene.materials.push_back(material_from_mtl(*source));
+        MaterialTextures& t = wanted[i];
+        t.base_color = textures.request(*library, source->diffuse_texname);
+        t.mask = textures.request(*library, source->alpha_texname);
+        t.emission = textures.request(*library, source->emissive_texname);
+        if (!source->normal_texname.empty()) {
+            t.normal = textures.request(*library, source->normal_texname);
+        } else if (!source->bump_texname.empty()) {
+            t.normal = textures.request(*library, source->bump_texname);
+            t.normal_is_bump = true;
+        }
+    }
+
+    textures.decode_all();
+    for (size_t i = 0; i < wanted.size(); ++i) {
+        Material& m = scene.materials[scene_index[i]];
+        const MaterialTextures& t = wanted[i];
+        if (!t.mask.empty() && textures.decoded(t.mask)) {
+            m.base_color_texture = textures.masked_texture(scene, t.base_color, t.mask);
+            m.alpha_mode = AlphaMode::Mask;
+        } else if (!t.base_color.empty()) {
+            m.base_color_texture = textures.scene_texture(scene, t.base_color, TextureEncoding::Srgb8);
+        }
+        // A texture replaces the color (MTL multiplies by Kd, but exporters write Kd = 0.588 gray).
+        if (m.base_color_texture != kNoTexture && m.metallic == 0.0f && m.transmission == 0.0f)
+            m.base_color = Vec3f{1.0f, 1.0f, 1.0f};
+        if (!t.emission.empty()) {
+            m.emission_texture = textures.scene_texture(scene, t.emission, TextureEncoding::Srgb8);
+            if (m.emission_texture != kNoTexture && max_component(m.emission) <= 0.0f) m.emission = Vec3f{1, 1, 1};
+        }
+        if (!t.normal.empty()) {
+            const Texture* decoded = textures.decoded(t.normal);
+            if (decoded && (!t.normal_is_bump || looks_like_normal_map(*decoded)))
+                m.normal_texture = textures.scene_texture(scene, t.normal, TextureEncoding::Linear8);
+        }
+    }
+    return scene_index;
+}
+
+}  // namespace
+
+Scene load_obj(const std::string& path, const LoadOptions& options) {
+    const std::string text = io::read_file(path);
+    ObjGeometry geo = ObjParser(path, text).parse();
+    if (geo.corners.empty()) throw file_error(path, 0, "no faces");
+    if (geo.skipped_faces > 0)
+        warn(path + ": skipped " + std::to_string(geo.skipped_faces) + " faces with fewer than 3 vertices");
+    if (geo.corners.size() / 3 > 0xFFFFFFFFull) throw file_error(path, 0, "more than 2^32-1 triangles");
+
+    Scene scene;
+    scene.source = path;
+    std::vector<MaterialLibrary> libraries = load_material_libraries(path, geo.libraries);
+    std::vector<uint32_t> material_index = add_materials(scene, path, geo, libraries, options.load_textures);
+
+    // Triangles before any usemtl get a default material.
+    std::vector<uint32_t> triangle_material(geo.triangle_material.size());
+    uint32_t default_material = kAbsent;
+    for (size_t t = 0; t < triangle_material.size(); ++t) {
+        uint32_t used = geo.triangle_material[t];
+        if (used == kAbsent) {
+            if (default_material == kAbsent) {
+                default_material = uint32_t(scene.materials.size());
+                scene.materials.push_back(Material{.name = "default"});
+            }
+            triangle_material[t] = default_material;
+        } else {
+            triangle_material[t] = material_index[used];
+        }
+    }
+    geo.triangle_material.clear();
+    geo.triangle_material.shrink_to_fit();
+
+    Mesh mesh = build_mesh(geo, triangle_material, options.compute_missing_normals);
+    mesh.name = std::filesystem::path(path).stem().string();
+    scene.meshes.push_back(std::move(mesh));
+    scene.finalize();
+    return scene;
+}
+
+}  // namespace rf

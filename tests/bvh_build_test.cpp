@@ -1,0 +1,247 @@
+// Binned SAH builder: structural invariants of the canonical BVH over
+// several scenes, thread counts, leaf sizes and bin counts; determinism; the
+// SAH metric; empty, single and degenerate inputs.
+#include "accel/bvh/build/binned_sah.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "accel_test_scenes.h"
+#include "rayforge/accel/accel.h"
+#include "rayforge/core/error.h"
+
+namespace rf {
+namespace {
+
+bool same_box(const Box3f& a, const Box3f& b) { return a.lo == b.lo && a.hi == b.hi; }
+
+struct TreeShape {
+    int max_depth = 0;  // inner nodes on the longest root-to-leaf path
+    size_t leaves = 0;
+};
+
+// Checks every invariant of a canonical BVH built over `triangles`; returns its shape.
+TreeShape check_bvh(const Bvh& bvh, std::span<const Triangle> triangles, int max_leaf_size) {
+    TreeShape shape;
+    EXPECT_EQ(bvh.prim_indices.size(), triangles.size());
+    if (triangles.empty()) {
+        EXPECT_TRUE(bvh.nodes.empty());
+        return shape;
+    }
+    std::vector<int> slot_seen(bvh.prim_indices.size(), 0);
+    std::vector<int> prim_seen(triangles.size(), 0);
+    // Walks the subtree of node `index` whose children pair (if any) must sit at
+    // `base`; returns the first index after its descendants (depth-first layout).
+    auto walk = [&](auto&& self, uint32_t index, uint32_t base, int depth) -> uint32_t {
+        const BvhNode& node = bvh.nodes[index];
+        if (node.is_leaf()) {
+            shape.max_depth = std::max(shape.max_depth, depth);
+            ++shape.leaves;
+            EXPECT_LE(node.count, static_cast<uint32_t>(max_leaf_size));
+            EXPECT_LE(size_t{node.first} + node.count, bvh.prim_indices.size());
+            Box3f prims;
+            for (uint32_t slot = node.first; slot < node.first + node.count && slot < slot_seen.size(); ++slot) {
+                ++slot_seen[slot];
+                const uint32_t prim = bvh.prim_indices[slot];
+                if (prim >= triangles.size()) {
+                    ADD_FAILURE() << "prim index out of range: " << prim;
+                    continue;
+                }
+                ++prim_seen[prim];
+                prims.extend(triangles[prim].bounds());
+            }
+            EXPECT_TRUE(same_box(node.bounds, prims)) << "leaf " << index << " box is not its triangles' box";
+            return base;
+        }
+        EXPECT_EQ(node.first, base) << "children of node " << index << " are not in depth-first order";
+        if (node.first != base || size_t{base} + 2 > bvh.nodes.size()) return base;
+        const BvhNode& left = bvh.nodes[base];
+        const BvhNode& right = bvh.nodes[base + 1];
+        EXPECT_TRUE(node.bounds.contains(left.bounds));
+        EXPECT_TRUE(node.bounds.contains(right.bounds));
+        EXPECT_TRUE(same_box(node.bounds, merge(left.bounds, right.bounds)));
+        const uint32_t after_left = self(self, base, base + 2, depth + 1);
+        return self(self, base + 1, after_left, depth + 1);
+    };
+    const uint32_t end = walk(walk, 0, 1, 0);
+    EXPECT_EQ(end, bvh.nodes.size()) << "unreachable nodes";
+    EXPECT_TRUE(std::all_of(slot_seen.begin(), slot_seen.end(), [](int n) { return n == 1; }))
+        << "a leaf slot is used twice or never";
+    EXPECT_TRUE(std::all_of(prim_seen.begin(), prim_seen.end(), [](int n) { return n == 1; }))
+        << "a triangle is in no leaf or in two";
+    EXPECT_LE(shape.max_depth, kBvhMaxDepth);
+    EXPECT_EQ(shape.leaves, bvh.leaf_count());
+    EXPECT_EQ(bvh.nodes.size(), 2 * shape.leaves - 1);
+    return shape;
+}
+
+bool identical(const Bvh& a, const Bvh& b) {
+    return a.nodes.size() == b.nodes.size() && a.prim_indices == b.prim_indices &&
+           std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(BvhNode)) == 0;
+}
+
+// Triangles at x = 1.1^i: the SAH peels off a few at a time, which would make
+// a chain far deeper than 64 without the depth limit.
+SceneGeometry make_geometric_row(int count) {
+    SceneGeometry g;
+    float x = 1.0f;
+    for (int i = 0; i < count; ++i, x *= 1.1f) {
+        test::append(g, {Vec3f(x, 0, 0), Vec3f(x, 1, 0), Vec3f(x, 0, 1)});
+    }
+    return g;
+}
+
+struct NamedScene {
+    std::string name;
+    SceneGeometry geometry;
+};
+
+std::vector<NamedScene> test_scenes() {
+    std::vector<NamedScene> scenes;
+    scenes.push_back({"soup", test::make_triangle_soup(3000, 1, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f)});
+    scenes.push_back({"sphere", test::to_geometry(test::make_icosphere(4))});
+    scenes.push_back({"nasty", test::make_nasty_geometry(2)});
+    scenes.push_back({"far", test::make_triangle_soup(2000, 3, {Vec3f(1e6f), Vec3f(1e6f + 100.0f)}, 1.0f)});
+    scenes.push_back({"geometric", make_geometric_row(400)});
+    SceneGeometry same;
+    for (int i = 0; i < 100; ++i) test::append(same, {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)});
+    scenes.push_back({"identical", std::move(same)});
+    return scenes;
+}
+
+TEST(BvhBuild, InvariantsHoldForScenesLeafSizesBinsAndThreads) {
+    for (const NamedScene& scene : test_scenes()) {
+        for (int leaf_size : {1, 4, 16}) {
+            for (int bins : {2, 16, 256}) {
+                for (int threads : {1, 2}) {
+                    SCOPED_TRACE(scene.name + " leaf " + std::to_string(leaf_size) + " bins " +
+                                 std::to_string(bins) + " threads " + std::to_string(threads));
+                    const BuildOptions options{.bin_count = bins, .max_leaf_size = leaf_size, .threads = threads};
+                    const Bvh bvh = build_binned_sah(scene.geometry.triangles, options);
+                    check_bvh(bvh, scene.geometry.triangles, leaf_size);
+                }
+            }
+        }
+    }
+}
+
+TEST(BvhBuild, DepthStaysWithinLimitOnPathologicalInput) {
+    const SceneGeometry row = make_geometric_row(400);
+    const Bvh bvh = build_binned_sah(row.triangles, BuildOptions{.max_leaf_size = 1});
+    const TreeShape shape = check_bvh(bvh, row.triangles, 1);
+    EXPECT_LE(shape.max_depth, kBvhMaxDepth);
+    EXPECT_GT(shape.max_depth, 20);  // the input really is lopsided
+}
+
+TEST(BvhBuild, SameTreeForEveryThreadCount) {
+    // Large enough for parallel binning (> 64K primitives per node) and subtree tasks.
+    const SceneGeometry soup = test::make_triangle_soup(150000, 5, {Vec3f(-100.0f), Vec3f(100.0f)}, 1.0f);
+    const Bvh one = build_binned_sah(soup.triangles, BuildOptions{.threads = 1});
+    const Bvh two = build_binned_sah(soup.triangles, BuildOptions{.threads = 2});
+    const Bvh all = build_binned_sah(soup.triangles, BuildOptions{.threads = 0});
+    EXPECT_TRUE(identical(one, two));
+    EXPECT_TRUE(identical(one, all));
+    check_bvh(one, soup.triangles, 4);
+}
+
+TEST(BvhBuild, LeafSizeOneGivesOneTrianglePerLeaf) {
+    const SceneGeometry sphere = test::to_geometry(test::make_icosphere(2));
+    const Bvh bvh = build_binned_sah(sphere.triangles, BuildOptions{.max_leaf_size = 1});
+    EXPECT_EQ(bvh.leaf_count(), sphere.triangles.size());
+    EXPECT_EQ(bvh.nodes.size(), 2 * sphere.triangles.size() - 1);
+}
+
+TEST(BvhBuild, SahCostOfHandBuiltTree) {
+    Bvh bvh;
+    bvh.nodes.resize(3);
+    bvh.nodes[0].bounds = {Vec3f(0, 0, 0), Vec3f(2, 1, 1)};  // area 2 * (2 + 1 + 2) = 10
+    bvh.nodes[0].first = 1;
+    bvh.nodes[1].bounds = {Vec3f(0, 0, 0), Vec3f(1, 1, 1)};  // area 6
+    bvh.nodes[1].count = 2;
+    bvh.nodes[2].bounds = {Vec3f(1, 0, 0), Vec3f(2, 1, 0.5f)};  // area 2 * (1 + 0.5 + 0.5) = 4
+    bvh.nodes[2].first = 2;
+    bvh.nodes[2].count = 3;
+    bvh.prim_indices = {0, 1, 2, 3, 4};
+    EXPECT_DOUBLE_EQ(bvh.sah_cost(), 1.0 + 0.6 * 2 + 0.4 * 3);
+    EXPECT_DOUBLE_EQ(bvh.sah_cost(2.0f, 0.5f), 2.0 + 0.5 * (0.6 * 2 + 0.4 * 3));
+    EXPECT_EQ(bvh.leaf_count(), 2u);
+    EXPECT_EQ(bvh.memory_bytes(), 3 * 32u + 5 * 4u);
+}
+
+TEST(BvhBuild, SahPrefersSplittingSeparatedClusters) {
+    // Two far-apart clusters: the root must split them, and the SAH cost must
+    // be far below that of one big leaf (1 * 8 triangles).
+    SceneGeometry g;
+    for (int i = 0; i < 4; ++i) {
+        const float d = 0.1f * i;
+        test::append(g, {Vec3f(d, 0, 0), Vec3f(d + 0.1f, 0, 0), Vec3f(d, 0.1f, 0)});
+        test::append(g, {Vec3f(100 + d, 0, 0), Vec3f(100 + d + 0.1f, 0, 0), Vec3f(100 + d, 0.1f, 0)});
+    }
+    const Bvh bvh = build_binned_sah(g.triangles, BuildOptions{.max_leaf_size = 8});
+    check_bvh(bvh, g.triangles, 8);
+    ASSERT_GT(bvh.nodes.size(), 1u);
+    EXPECT_LT(bvh.nodes[1].bounds.hi.x, 1.0f);
+    EXPECT_GT(bvh.nodes[2].bounds.lo.x, 99.0f);
+    EXPECT_LT(bvh.sah_cost(), 2.0);
+}
+
+TEST(BvhBuild, EmptyAndSingleTriangle) {
+    const Bvh empty = build_binned_sah({}, BuildOptions{});
+    EXPECT_TRUE(empty.nodes.empty());
+    EXPECT_TRUE(empty.prim_indices.empty());
+    EXPECT_EQ(empty.leaf_count(), 0u);
+    EXPECT_EQ(empty.sah_cost(), 0.0);
+
+    const Triangle tri{Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)};
+    const Bvh one = build_binned_sah(std::span<const Triangle>(&tri, 1), BuildOptions{});
+    ASSERT_EQ(one.nodes.size(), 1u);
+    EXPECT_EQ(one.nodes[0].count, 1u);
+    EXPECT_TRUE(same_box(one.nodes[0].bounds, tri.bounds()));
+    EXPECT_DOUBLE_EQ(one.sah_cost(), 1.0);
+}
+
+TEST(BvhBuild, AllPointTrianglesAtOnePlace) {
+    SceneGeometry g;
+    for (int i = 0; i < 50; ++i) test::append(g, {Vec3f(3.0f), Vec3f(3.0f), Vec3f(3.0f)});
+    const Bvh bvh = build_binned_sah(g.triangles, BuildOptions{.max_leaf_size = 4});
+    check_bvh(bvh, g.triangles, 4);
+    EXPECT_TRUE(std::isfinite(bvh.sah_cost()));
+}
+
+TEST(BvhBuild, AccelStatsDescribeTheTree) {
+    const SceneGeometry sphere = test::to_geometry(test::make_icosphere(3));
+    const auto accel = build_accel(sphere);
+    const AccelStats stats = accel->stats();
+    EXPECT_EQ(stats.name, "bvh/binned");
+    EXPECT_GT(stats.node_count, 1u);
+    EXPECT_EQ(stats.node_count, 2 * stats.leaf_count - 1);
+    EXPECT_EQ(stats.bytes, stats.node_count * 32 + sphere.triangles.size() * 4);
+    EXPECT_GT(stats.sah_cost, 1.0);
+    EXPECT_GE(stats.build_ms, 0.0);
+}
+
+TEST(BvhBuild, InvalidOptionsAndNamesThrow) {
+    const SceneGeometry g = test::to_geometry(test::make_icosphere(0));
+    EXPECT_THROW((void)build_accel(g, BuildOptions{.bin_count = 1}), Error);
+    EXPECT_THROW((void)build_accel(g, BuildOptions{.bin_count = 257}), Error);
+    EXPECT_THROW((void)build_accel(g, BuildOptions{.max_leaf_size = 0}), Error);
+    EXPECT_THROW((void)build_accel(g, BuildOptions{.max_leaf_size = 65}), Error);
+    EXPECT_THROW((void)build_accel(g, BuildOptions{.traversal_cost = 0.0f}), Error);
+    EXPECT_THROW((void)build_accel(g, BuildOptions{.intersection_cost = -1.0f}), Error);
+    EXPECT_THROW((void)build_accel(g, BuildOptions{.intersection_cost = NAN}), Error);
+    EXPECT_THROW((void)build_accel(g, BuildOptions{.threads = -1}), Error);
+    EXPECT_NO_THROW((void)build_accel(g, BuildOptions{.bin_count = 2, .max_leaf_size = 64}));
+    EXPECT_EQ(parse_structure("bvh"), Structure::Bvh);
+    EXPECT_EQ(parse_structure("brute"), Structure::BruteForce);
+    EXPECT_EQ(parse_builder("binned"), Builder::BinnedSah);
+    EXPECT_THROW((void)parse_structure("kdtree?"), Error);
+    EXPECT_THROW((void)parse_builder(""), Error);
+}
+
+}  // namespace
+}  // namespace rf

@@ -1,0 +1,89 @@
+// GPU traversal of the reference BVH must answer exactly like the CPU: same
+// code (trace/*.h), same rays. Skips with a message when no device is present.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "accel/bvh/build/binned_sah.h"
+#include "rayforge/backend/cuda.h"
+#include "rayforge/core/error.h"
+#include "rayforge/io/scene_io.h"
+#include "trace/bvh_traversal.h"
+
+namespace rf {
+namespace {
+
+bool have_device() { return !cuda::list_devices().empty(); }
+
+#define RF_REQUIRE_DEVICE()                                                                 \
+    if (!have_device()) GTEST_SKIP() << "no CUDA device: " << cuda::device_unavailable_reason()
+
+std::vector<Ray> random_rays(const Box3f& bounds, size_t count, uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    const Vec3f e = bounds.extent();
+    std::vector<Ray> rays(count);
+    for (Ray& r : rays) {
+        r.org = bounds.lo + Vec3f{u(rng) * e.x, u(rng) * e.y, u(rng) * e.z};
+        Vec3f target = bounds.lo + Vec3f{u(rng) * e.x, u(rng) * e.y, u(rng) * e.z};
+        r.dir = normalize(target - r.org + Vec3f{1e-3f, 0, 0});
+        r.tmin = 0.0f;
+        r.tmax = (count & 1) ? kInfinity : 0.5f * length(e);
+    }
+    return rays;
+}
+
+TEST(GpuBvhTracer, ListsDevicesWithoutThrowing) {
+    auto devices = cuda::list_devices();
+    if (devices.empty()) {
+        EXPECT_FALSE(cuda::device_unavailable_reason().empty());
+        GTEST_SKIP() << "no CUDA device: " << cuda::device_unavailable_reason();
+    }
+    EXPECT_FALSE(devices[0].name.empty());
+    EXPECT_GT(devices[0].total_memory, 0u);
+}
+
+TEST(GpuBvhTracer, ClosestAndAnyHitMatchCpu) {
+    RF_REQUIRE_DEVICE();
+    Scene scene = make_builtin_scene("spheres");
+    SceneGeometry geometry = SceneGeometry::build(scene);
+    Bvh bvh = build_binned_sah(geometry.triangles, BuildOptions{});
+    BvhView cpu_view{bvh.nodes.data(), bvh.prim_indices.data(), geometry.triangles.data(), uint32_t(bvh.nodes.size())};
+
+    std::vector<Ray> rays = random_rays(geometry.bounds, 200000, 7);
+    cuda::BvhTracer tracer(bvh, geometry.triangles);
+    std::vector<Hit> gpu_hits(rays.size());
+    std::vector<uint8_t> gpu_occluded(rays.size());
+    tracer.intersect(rays, gpu_hits);
+    tracer.occluded(rays, gpu_occluded);
+
+    size_t mismatches = 0, hits = 0;
+    for (size_t i = 0; i < rays.size(); ++i) {
+        Hit cpu = bvh_intersect(cpu_view, rays[i]);
+        hits += cpu.found();
+        if (cpu.found() != gpu_hits[i].found()) { ++mismatches; continue; }
+        if (cpu.found()) {
+            // Same code, same inputs; only FMA contraction may differ between compilers.
+            if (cpu.prim != gpu_hits[i].prim && std::fabs(cpu.t - gpu_hits[i].t) > 1e-5f * cpu.t) ++mismatches;
+            else EXPECT_NEAR(cpu.t, gpu_hits[i].t, 1e-5f * cpu.t);
+        }
+        EXPECT_EQ(bool(gpu_occluded[i]), cpu.found()) << "ray " << i;
+    }
+    EXPECT_GT(hits, rays.size() / 10);
+    EXPECT_EQ(mismatches, 0u);
+}
+
+TEST(GpuBvhTracer, RejectsMismatchedSpans) {
+    RF_REQUIRE_DEVICE();
+    Scene scene = make_builtin_scene("cornell");
+    SceneGeometry geometry = SceneGeometry::build(scene);
+    Bvh bvh = build_binned_sah(geometry.triangles, BuildOptions{});
+    cuda::BvhTracer tracer(bvh, geometry.triangles);
+    std::vector<Ray> rays(4);
+    std::vector<Hit> hits(3);
+    EXPECT_THROW(tracer.intersect(rays, hits), Error);
+}
+
+}  // namespace
+}  // namespace rf
