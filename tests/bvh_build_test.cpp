@@ -85,12 +85,13 @@ bool identical(const Bvh& a, const Bvh& b) {
            std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(BvhNode)) == 0;
 }
 
-// Triangles at x = 1.1^i: the SAH peels off a few at a time, which would make
-// a chain far deeper than 64 without the depth limit.
+// Unit triangles at x = 1.09^i: with two bins every split halves the extent
+// and peels off only the ~8 farthest triangles, which would make a chain over
+// 100 levels deep without the depth limit.
 SceneGeometry make_geometric_row(int count) {
     SceneGeometry g;
     float x = 1.0f;
-    for (int i = 0; i < count; ++i, x *= 1.1f) {
+    for (int i = 0; i < count; ++i, x *= 1.09f) {
         test::append(g, {Vec3f(x, 0, 0), Vec3f(x, 1, 0), Vec3f(x, 0, 1)});
     }
     return g;
@@ -107,7 +108,7 @@ std::vector<NamedScene> test_scenes() {
     scenes.push_back({"sphere", test::to_geometry(test::make_icosphere(4))});
     scenes.push_back({"nasty", test::make_nasty_geometry(2)});
     scenes.push_back({"far", test::make_triangle_soup(2000, 3, {Vec3f(1e6f), Vec3f(1e6f + 100.0f)}, 1.0f)});
-    scenes.push_back({"geometric", make_geometric_row(400)});
+    scenes.push_back({"geometric", make_geometric_row(900)});
     SceneGeometry same;
     for (int i = 0; i < 100; ++i) test::append(same, {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)});
     scenes.push_back({"identical", std::move(same)});
@@ -131,11 +132,13 @@ TEST(BvhBuild, InvariantsHoldForScenesLeafSizesBinsAndThreads) {
 }
 
 TEST(BvhBuild, DepthStaysWithinLimitOnPathologicalInput) {
-    const SceneGeometry row = make_geometric_row(400);
-    const Bvh bvh = build_binned_sah(row.triangles, BuildOptions{.max_leaf_size = 1});
-    const TreeShape shape = check_bvh(bvh, row.triangles, 1);
-    EXPECT_LE(shape.max_depth, kBvhMaxDepth);
-    EXPECT_GT(shape.max_depth, 20);  // the input really is lopsided
+    const SceneGeometry row = make_geometric_row(900);
+    for (int leaf_size : {1, 4}) {
+        const Bvh bvh = build_binned_sah(row.triangles, BuildOptions{.bin_count = 2, .max_leaf_size = leaf_size});
+        const TreeShape shape = check_bvh(bvh, row.triangles, leaf_size);
+        EXPECT_LE(shape.max_depth, kBvhMaxDepth);
+        EXPECT_GT(shape.max_depth, 50);  // the input really is lopsided
+    }
 }
 
 TEST(BvhBuild, SameTreeForEveryThreadCount) {

@@ -6,6 +6,8 @@
 
 #include <cctype>
 #include <cmath>
+#include <fstream>
+#include <iterator>
 #include <string>
 
 #include "rayforge/core/error.h"
@@ -216,6 +218,25 @@ INSTANTIATE_TEST_SUITE_P(
             if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
         return name;
     });
+
+// Every prefix of a .glb fails cleanly (an rf::Error naming the file) or loads.
+TEST(GltfLoader, TruncatedGlbNeverCrashes) {
+    std::ifstream in(gltf("cube.glb"), std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    ASSERT_GT(bytes.size(), 100u);
+    const std::string path = test::temp_dir("gltf_truncated") + "/cut.glb";
+    int failures = 0;
+    for (size_t length = 0; length < bytes.size(); length += 17) {
+        std::ofstream(path, std::ios::binary | std::ios::trunc).write(bytes.data(), std::streamsize(length));
+        const std::string message = load_error(path);
+        if (!message.empty()) {
+            ++failures;
+            EXPECT_EQ(message.rfind(path, 0), 0u) << message;
+            EXPECT_EQ(message.find('\n'), std::string::npos) << message;
+        }
+    }
+    EXPECT_EQ(failures, int((bytes.size() + 16) / 17));  // no prefix is a valid file
+}
 
 // The real sample scenes, when ../shared is present. Triangle counts are
 // those measured in /work/shared/scenes/MANIFEST.md.

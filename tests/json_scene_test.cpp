@@ -128,7 +128,7 @@ TEST(JsonScene, CameraLightsEnvironmentAndRenderSettings) {
     EXPECT_EQ(scene.render_settings.height, 240);
     EXPECT_EQ(scene.render_settings.spp, 16);
     EXPECT_EQ(scene.render_settings.max_depth, 6);
-    EXPECT_EQ(scene.render_settings.integrator, std::string("path"));
+    EXPECT_EQ(scene.render_settings.integrator, std::string("whitted"));
     ASSERT_TRUE(scene.render_settings.ao_radius.has_value());
     EXPECT_FLOAT_EQ(*scene.render_settings.ao_radius, 0.5f);
 }

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <random>
 
 #include "accel/brute_force.h"
@@ -51,7 +52,12 @@ TEST(TriangleIntersect, MissesOutsideBehindAndParallel) {
 TEST(TriangleIntersect, RespectsClosedDistanceInterval) {
     TriangleHit hit{};
     const Vec3f org(0.2f, 0.2f, 3.0f), dir(0, 0, -1);
-    EXPECT_TRUE(hit_triangle(Ray{org, 3.0f, dir, 3.0f}, kUnitTriangle, hit));  // tmin == tmax == t
+    ASSERT_TRUE(hit_triangle(Ray{org, 0.0f, dir, kInfinity}, kUnitTriangle, hit));
+    const float t = hit.t;
+    EXPECT_NEAR(t, 3.0f, 1e-6f);
+    EXPECT_TRUE(hit_triangle(Ray{org, t, dir, t}, kUnitTriangle, hit));  // closed: tmin == tmax == t
+    EXPECT_FALSE(hit_triangle(Ray{org, std::nextafter(t, 10.0f), dir, kInfinity}, kUnitTriangle, hit));
+    EXPECT_FALSE(hit_triangle(Ray{org, 0.0f, dir, std::nextafter(t, 0.0f)}, kUnitTriangle, hit));
     EXPECT_FALSE(hit_triangle(Ray{org, 3.5f, dir, kInfinity}, kUnitTriangle, hit));
     EXPECT_FALSE(hit_triangle(Ray{org, 0.0f, dir, 2.5f}, kUnitTriangle, hit));
     EXPECT_TRUE(hit_triangle(Ray{org, 2.5f, dir, 3.5f}, kUnitTriangle, hit));
@@ -95,6 +101,7 @@ TEST(TriangleIntersect, DegenerateTrianglesNeverHit) {
         {a, b, a},                    // repeated vertex
         {a, b, (a + b) * 0.5f},       // collinear
         {a, b, a + (b - a) * 2.0f},   // collinear, beyond
+        {b, a, a + (a - b) * 0.25f},  // collinear, other order
     };
     std::mt19937 rng(3);
     const Box3f around{Vec3f(-5.0f), Vec3f(5.0f)};

@@ -1,34 +1,73 @@
 #include "io/file_reader.h"
 
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
-#include <filesystem>
 #include <memory>
-#include <system_error>
 
 #include "rayforge/core/error.h"
 
 namespace rf::io {
 
+namespace {
+
+// Opens `path` for reading and returns its size; throws the loaders' one-line errors.
+int open_regular_file(const std::string& path, size_t& size) {
+    int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) {
+        if (errno == ENOENT) throw file_error(path, 0, "file not found");
+        throw file_error(path, 0, std::string("cannot open: ") + std::strerror(errno));
+    }
+    struct stat st {};
+    if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+        ::close(fd);
+        throw file_error(path, 0, "not a regular file");
+    }
+    size = size_t(st.st_size);
+    return fd;
+}
+
+}  // namespace
+
 std::string read_file(const std::string& path) {
-    std::error_code ec;
-    auto status = std::filesystem::status(path, ec);
-    if (ec || !std::filesystem::exists(status)) throw file_error(path, 0, "file not found");
-    if (!std::filesystem::is_regular_file(status)) throw file_error(path, 0, "not a regular file");
-
-    std::unique_ptr<FILE, int (*)(FILE*)> file(std::fopen(path.c_str(), "rb"), &std::fclose);
-    if (!file) throw file_error(path, 0, std::string("cannot open: ") + std::strerror(errno));
-    // The size comes from the open file, so a file that changes underneath is caught by the read.
-    if (std::fseek(file.get(), 0, SEEK_END) != 0) throw file_error(path, 0, "cannot seek");
-    long size = std::ftell(file.get());
-    if (size < 0) throw file_error(path, 0, "cannot tell size");
-    std::rewind(file.get());
-
-    std::string bytes(size_t(size), '\0');
-    if (size > 0 && std::fread(bytes.data(), 1, bytes.size(), file.get()) != bytes.size())
-        throw file_error(path, 0, "read failed");
+    size_t size = 0;
+    int fd = open_regular_file(path, size);
+    std::string bytes(size, '\0');
+    size_t done = 0;
+    while (done < size) {
+        ssize_t n = ::read(fd, bytes.data() + done, size - done);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) {
+            ::close(fd);
+            throw file_error(path, 0, "read failed");
+        }
+        done += size_t(n);
+    }
+    ::close(fd);
     return bytes;
+}
+
+MappedFile::MappedFile(const std::string& path) {
+    int fd = open_regular_file(path, size_);
+    if (size_ > 0) {
+        void* map = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE | MAP_POPULATE, fd, 0);
+        if (map != MAP_FAILED) data_ = static_cast<const char*>(map);
+    }
+    ::close(fd);
+    if (size_ > 0 && data_ == nullptr) {
+        fallback_ = read_file(path);
+        data_ = fallback_.data();
+        size_ = fallback_.size();
+    }
+}
+
+MappedFile::~MappedFile() {
+    if (data_ != nullptr && fallback_.empty()) ::munmap(const_cast<char*>(data_), size_);
 }
 
 }  // namespace rf::io

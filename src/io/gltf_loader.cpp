@@ -173,8 +173,7 @@ private:
     [[noreturn]] void fail(const std::string& reason) const { throw file_error(path_, 0, reason); }
 
     // A validated view of an accessor's elements: element i starts at
-    // data + i * stride. `data` is null for an accessor without a bufferView
-    // (all zeros, per the spec).
+    // data + i * stride.
     struct ElementView {
         const unsigned char* data = nullptr;
         size_t stride = 0;
@@ -226,7 +225,9 @@ GltfReader::ElementView GltfReader::element_view(int accessor_index, const char*
     if (view.count > size_t(std::numeric_limits<uint32_t>::max()))
         fail(where + ": " + std::to_string(view.count) + " elements exceed the 2^32-1 limit");
     const size_t element_size = csize * size_t(view.components);
-    if (accessor.bufferView < 0) return view;  // zeros
+    // Without a bufferView an accessor is all zeros (meant for sparse
+    // accessors); its count is backed by no data and could be anything.
+    if (accessor.bufferView < 0) fail(where + ": accessors without a bufferView are not supported");
 
     if (size_t(accessor.bufferView) >= model_.bufferViews.size())
         fail(where + ": bufferView " + std::to_string(accessor.bufferView) + " does not exist");
@@ -270,7 +271,6 @@ std::vector<float> GltfReader::read_floats(int accessor_index, const char* what,
              ": unexpected element type");
     components = view.components;
     std::vector<float> out(view.count * size_t(view.components), 0.0f);
-    if (!view.data) return out;
     const size_t csize = component_size(view.component_type);
     for (size_t i = 0; i < view.count; ++i) {
         const unsigned char* element = view.data + i * view.stride;
@@ -291,7 +291,6 @@ std::vector<uint32_t> GltfReader::read_indices(int accessor_index) const {
         fail("indices accessor " + std::to_string(accessor_index) +
              ": indices must be unsigned byte, short or int scalars");
     std::vector<uint32_t> out(view.count, 0);
-    if (!view.data) return out;
     for (size_t i = 0; i < view.count; ++i)
         out[i] = read_index(view.data + i * view.stride, view.component_type);
     return out;

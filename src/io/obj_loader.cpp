@@ -1,6 +1,6 @@
 // Wavefront OBJ + MTL loader.
 //
-// The OBJ geometry is parsed here (whole file in memory, std::from_chars):
+// The OBJ geometry is parsed here (file memory-mapped, io/number_parsing.h):
 // tinyobjloader's parser takes several seconds on million-triangle files.
 // MTL files are parsed by tinyobj::LoadMtl and mapped onto the glTF-style
 // rf::Material (see material_from_mtl for the heuristics).
@@ -12,7 +12,6 @@
 #include <tiny_obj_loader.h>
 
 #include <algorithm>
-#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
@@ -27,6 +26,7 @@
 #include <vector>
 
 #include "io/file_reader.h"
+#include "io/number_parsing.h"
 #include "io/path_utils.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/image_io.h"
@@ -144,16 +144,13 @@ private:
 
     float read_float(const char* what) {
         skip_space();
-        const char* start = p_;
-        if (p_ < end_ && *p_ == '+') ++p_;  // from_chars rejects a leading '+'
         float value = 0.0f;
-        auto [ptr, ec] = std::from_chars(p_, end_, value);
-        if (ec == std::errc::result_out_of_range) throw error(std::string("out-of-range number in ") + what);
-        if (ec != std::errc() || (ptr < end_ && *ptr != ' ' && *ptr != '\t' && *ptr != '\r'))
-            throw error(std::string("bad number '") + std::string(start, std::min<size_t>(end_ - start, 24)) +
-                        "' in " + what);
+        const char* after = io::parse_float(p_, end_, value);
+        if (after == nullptr || (after < end_ && *after != ' ' && *after != '\t' && *after != '\r'))
+            throw error(std::string("bad number '") + std::string(p_, std::min<size_t>(end_ - p_, 24)) + "' in " +
+                        what);
         if (!std::isfinite(value)) throw error(std::string("non-finite number in ") + what);
-        p_ = ptr;
+        p_ = after;
         return value;
     }
     Vec3f read_vec3(const char* what) {
@@ -165,10 +162,10 @@ private:
 
     // One index of a face corner: 1-based, or negative relative to the end so far.
     uint32_t resolve_index(size_t count_so_far, ForwardReference& forward, const char* what) {
-        long long index = 0;
-        auto [ptr, ec] = std::from_chars(p_, end_, index);
-        if (ec != std::errc()) throw error(std::string("bad ") + what + " index in face");
-        p_ = ptr;
+        int64_t index = 0;
+        const char* after = io::parse_int(p_, end_, index);
+        if (after == nullptr) throw error(std::string("bad ") + what + " index in face");
+        p_ = after;
         if (index == 0) throw error(std::string(what) + " index 0 in face (OBJ indices start at 1)");
         if (index < 0) {
             if (uint64_t(-index) > count_so_far)
@@ -473,7 +470,7 @@ private:
 };
 
 // A bump map is used as a normal map only when it looks like one: tangent-space
-// normal maps are bluish (z up) around (0.5, 0.5, 1); height maps are gray.
+// normal maps are bluish (z up) with red close to green; height maps are gray.
 bool looks_like_normal_map(const Texture& t) {
     if (t.channels < 3 || t.encoding == TextureEncoding::LinearFloat || t.texels8.empty()) return false;
     const size_t texels = size_t(t.width) * t.height;
@@ -483,7 +480,7 @@ bool looks_like_normal_map(const Texture& t) {
     for (size_t i = 0; i < texels; i += step, ++n)
         for (int c = 0; c < 3; ++c) sum[c] += t.texels8[i * t.channels + c];
     const double r = sum[0] / (255.0 * n), g = sum[1] / (255.0 * n), b = sum[2] / (255.0 * n);
-    return b > 0.6 && b > r + 0.15 && b > g + 0.15 && std::abs(r - 0.5) < 0.2 && std::abs(g - 0.5) < 0.2;
+    return b > 0.5 && b > std::max(r, g) + 0.15 && std::abs(r - g) < 0.1;
 }
 
 // Adds the used materials (in order of first use) and returns, for each
@@ -556,8 +553,7 @@ std::vector<uint32_t> add_materials(Scene& scene, const std::string& obj_path, c
 }  // namespace
 
 Scene load_obj(const std::string& path, const LoadOptions& options) {
-    const std::string text = io::read_file(path);
-    ObjGeometry geo = ObjParser(path, text).parse();
+    ObjGeometry geo = ObjParser(path, io::MappedFile(path).bytes()).parse();
     if (geo.corners.empty()) throw file_error(path, 0, "no faces");
     if (geo.skipped_faces > 0)
         warn(path + ": skipped " + std::to_string(geo.skipped_faces) + " faces with fewer than 3 vertices");

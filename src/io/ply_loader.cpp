@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "io/file_reader.h"
+#include "io/number_parsing.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
 
@@ -278,33 +279,30 @@ public:
 
     double number(PlyType type) {
         std::string_view token = next();
-        if (!token.empty() && token[0] == '+') token.remove_prefix(1);  // from_chars rejects '+'
         const char* first = token.data();
         const char* last = first + token.size();
-        std::from_chars_result result;
+        const char* after = nullptr;
         double value = 0.0;
         if (type == PlyType::Float32) {
             float f = 0.0f;  // parsed as float so the value matches a binary file exactly
-            result = std::from_chars(first, last, f);
+            after = io::parse_float(first, last, f);
             value = f;
         } else if (type == PlyType::Float64) {
-            result = std::from_chars(first, last, value);
+            if (first < last && *first == '+') ++first;  // from_chars rejects '+'
+            auto [ptr, ec] = std::from_chars(first, last, value);
+            after = ec == std::errc() ? ptr : nullptr;
         } else {
             int64_t i = 0;
-            result = std::from_chars(first, last, i);
+            after = io::parse_int(first, last, i);
             value = double(i);
         }
-        if (result.ec != std::errc() || result.ptr != last)
-            throw file_error(path_, line_, "bad number '" + std::string(token.substr(0, 32)) + "'");
+        if (after != last) throw file_error(path_, line_, "bad number '" + std::string(token.substr(0, 32)) + "'");
         return value;
     }
-    int64_t integer(PlyType type) {
-        (void)type;
+    int64_t integer(PlyType) {
         std::string_view token = next();
-        if (!token.empty() && token[0] == '+') token.remove_prefix(1);
         int64_t value = 0;
-        auto [ptr, ec] = std::from_chars(token.data(), token.data() + token.size(), value);
-        if (ec != std::errc() || ptr != token.data() + token.size())
+        if (io::parse_int(token.data(), token.data() + token.size(), value) != token.data() + token.size())
             throw file_error(path_, line_, "bad integer '" + std::string(token.substr(0, 32)) + "'");
         return value;
     }
@@ -472,8 +470,8 @@ void read_body(Reader& reader, const PlyHeader& header, Mesh& mesh) {
 }  // namespace
 
 Scene load_ply(const std::string& path, const LoadOptions& options) {
-    const std::string bytes = io::read_file(path);
-    const std::string_view data(bytes);
+    const io::MappedFile file(path);
+    const std::string_view data = file.bytes();
     PlyHeader header = parse_header(path, data);
 
     const PlyElement* vertices = nullptr;

@@ -6,6 +6,9 @@
 // distances are computed as (plane - origin) * (1 / dir) and the far distance
 // is enlarged by 1 + 2 * gamma(3) so that rounding never culls a box the ray
 // really enters (which would break the watertight triangle test's promise).
+// The ray's own tmax gets the same slack: a triangle lying in a box face has
+// the face's distance up to rounding, and must not be culled by its own box
+// once a hit at (almost) the same distance shrank tmax.
 // Zero direction components give infinite reciprocals; the min/max below are
 // written so that the resulting NaN (0 * inf, for an origin exactly on a slab
 // plane) leaves the interval unchanged instead of poisoning it.
@@ -71,7 +74,7 @@ RF_HDI bool slab_test(const SlabRay& r, const Box3f& box, float tmin, float tmax
     const float tz1 = ((r.neg_z ? box.lo.z : box.hi.z) - r.org.z) * r.inv_dir.z;
     const float t_near = max_keep(tz0, max_keep(ty0, max_keep(tx0, tmin)));
     const float slab_far = min_keep(tz1, min_keep(ty1, min_keep(tx1, kInfinity)));
-    const float t_far = min_keep(slab_far * kSlabFarScale, tmax);
+    const float t_far = min_keep(slab_far * kSlabFarScale, tmax * kSlabFarScale);
     entry = t_near;
     return t_near <= t_far;
 }
@@ -137,7 +140,7 @@ RF_HDI Hit traverse(const BvhView& bvh, const Ray& ray, TraversalCounters* count
         for (;;) {
             if (stack_size == 0) return hit;
             const StackEntry next = stack[--stack_size];
-            if (next.entry <= tmax) {
+            if (next.entry <= tmax * kSlabFarScale) {
                 current = next.node;
                 break;
             }

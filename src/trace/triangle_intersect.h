@@ -75,6 +75,16 @@ RF_HDI float difference_of_products(float a, float b, float c, float d) {
 #endif
 }
 
+// a*b + c*d + e*f, evaluated the same way wherever it is inlined (so that a
+// triangle's t never depends on which traversal called the test).
+RF_HDI float sum_of_products(float a, float b, float c, float d, float e, float f) {
+#if defined(__CUDA_ARCH__) || defined(__FMA__)
+    return fmaf(a, b, fmaf(c, d, e * f));
+#else
+    return a * b + c * d + e * f;
+#endif
+}
+
 }  // namespace detail
 
 // Result of one ray/triangle test.
@@ -83,7 +93,7 @@ struct TriangleHit {
 };
 
 // Tests one triangle; true and `hit` filled when tmin <= t <= tmax. Both
-// facings hit; degenerate (zero-area in projection) triangles never hit.
+// facings hit; degenerate (zero-area) triangles never hit.
 RF_HDI bool intersect_triangle(const WatertightRay& ray, const Triangle& tri, float tmin, float tmax,
                                TriangleHit& hit) {
     const Vec3f a = tri.v0 - ray.org;
@@ -114,10 +124,16 @@ RF_HDI bool intersect_triangle(const WatertightRay& ray, const Triangle& tri, fl
     const float az = ray.sz * a[ray.kz];
     const float bz = ray.sz * b[ray.kz];
     const float cz = ray.sz * c[ray.kz];
-    const float scaled_t = u * az + v * bz + w * cz;
+    const float scaled_t = detail::sum_of_products(u, az, v, bz, w, cz);
     const float inv_det = 1.0f / det;
     const float t = scaled_t * inv_det;
     if (!(t >= tmin && t <= tmax)) return false;  // also rejects NaN
+    // A zero-area triangle (collinear vertices) can survive the test above,
+    // because the shear rounds its vertices off their common line; it has no
+    // normal to shade with, so it never counts as hit. Checked only for
+    // accepted candidates, so it costs nothing on the many misses.
+    const Vec3f normal = cross(tri.v1 - tri.v0, tri.v2 - tri.v0);
+    if (normal.x == 0.0f && normal.y == 0.0f && normal.z == 0.0f) return false;
     hit.t = t;
     hit.u = v * inv_det;
     hit.v = w * inv_det;

@@ -57,7 +57,14 @@ RF_HDI Vec3f max(Vec3f a, Vec3f b) { return {fmaxf(a.x, b.x), fmaxf(a.y, b.y), f
 RF_HDI Vec3f abs(Vec3f a) { return {fabsf(a.x), fabsf(a.y), fabsf(a.z)}; }
 RF_HDI float min_component(Vec3f a) { return fminf(a.x, fminf(a.y, a.z)); }
 RF_HDI float max_component(Vec3f a) { return fmaxf(a.x, fmaxf(a.y, a.z)); }
-RF_HDI bool is_finite(Vec3f a) { return isfinite(a.x) && isfinite(a.y) && isfinite(a.z); }
+RF_HDI bool is_finite(float a) {
+#if defined(__CUDA_ARCH__)
+    return isfinite(a);
+#else
+    return std::isfinite(a);
+#endif
+}
+RF_HDI bool is_finite(Vec3f a) { return is_finite(a.x) && is_finite(a.y) && is_finite(a.z); }
 RF_HDI Vec3f lerp(Vec3f a, Vec3f b, float t) { return a * (1.0f - t) + b * t; }
 // Reflection of the incoming direction d about the normal n.
 RF_HDI Vec3f reflect(Vec3f d, Vec3f n) { return d - n * (2.0f * dot(d, n)); }

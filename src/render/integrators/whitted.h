@@ -113,8 +113,10 @@ RF_HD Vec3f direct_lighting(const Tracer& tracer, const View& view, const Surfac
     const EmitterTable& emitters = view.emitters();
     if (emitters.count > 0 && settings.area_light_samples > 0) {
         Vec3f area_sum(0.0f);
+        const float inv_samples = 1.0f / float(settings.area_light_samples);
         for (int s = 0; s < settings.area_light_samples; ++s) {
-            float u_select = rng.next();
+            // Stratified choice of the emitter: equal-power lights get equal shares.
+            float u_select = fminf((float(s) + rng.next()) * inv_samples, 0.99999994f);
             Vec2f u_point = rng.next2();
             AreaLightSample ls = sample_area_light(emitters, view.triangles(), u_select, u_point);
             if (!(ls.pdf_area > 0.0f)) continue;
@@ -139,7 +141,7 @@ RF_HD Vec3f direct_lighting(const Tracer& tracer, const View& view, const Surfac
             Vec3f emitted = evaluate_material(view, lm, light_surface.uv).emission;
             area_sum += emitted * (cos_theta * cos_light / (d2 * ls.pdf_area));
         }
-        sum += area_sum / float(settings.area_light_samples);
+        sum += area_sum * inv_samples;
     }
     return sum;
 }

@@ -49,17 +49,31 @@ struct PrimRef {
     [[nodiscard]] Vec3f centroid() const { return (lo + hi) * 0.5f; }
 };
 
+// Box growth with std::min/max, which compile to single instructions (the
+// NaN-aware fminf/fmaxf behind Box3f::extend are library calls); inputs are finite.
+inline Vec3f vmin(const Vec3f& a, const Vec3f& b) {
+    return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)};
+}
+inline Vec3f vmax(const Vec3f& a, const Vec3f& b) {
+    return {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)};
+}
+inline void grow(Box3f& box, const Vec3f& lo, const Vec3f& hi) {
+    box.lo = vmin(box.lo, lo);
+    box.hi = vmax(box.hi, hi);
+}
+
 // Bounds of a set of primitives and of their centroids.
 struct RangeBounds {
     Box3f bounds;
     Box3f centroids;
     void add(const PrimRef& p) {
-        bounds.extend(p.bounds());
-        centroids.extend(p.centroid());
+        grow(bounds, p.lo, p.hi);
+        const Vec3f c = p.centroid();
+        grow(centroids, c, c);
     }
     void add(const RangeBounds& o) {
-        bounds.extend(o.bounds);
-        centroids.extend(o.centroids);
+        grow(bounds, o.bounds.lo, o.bounds.hi);
+        grow(centroids, o.centroids.lo, o.centroids.hi);
     }
 };
 
@@ -187,8 +201,8 @@ private:
             tbb::blocked_range<uint32_t>(0, static_cast<uint32_t>(refs_.size()), kGrainSize), RangeBounds{},
             [&](const tbb::blocked_range<uint32_t>& r, RangeBounds acc) {
                 for (uint32_t i = r.begin(); i != r.end(); ++i) {
-                    const Box3f b = triangles_[i].bounds();
-                    refs_[i] = PrimRef{b.lo, i, b.hi, 0};
+                    const Triangle& t = triangles_[i];
+                    refs_[i] = PrimRef{vmin(t.v0, vmin(t.v1, t.v2)), i, vmax(t.v0, vmax(t.v1, t.v2)), 0};
                     acc.add(refs_[i]);
                 }
                 return acc;
@@ -244,17 +258,14 @@ private:
         return 1;
     }
 
-    BinSet bin_range(uint32_t begin, uint32_t end, const BinMapping& map) const {
+    void bin_range(uint32_t begin, uint32_t end, const BinMapping& map, BinSet& set) const {
+        set.clear(bin_count_);
         if (end - begin < kParallelBinningSize) {
-            BinSet set;
-            set.clear(bin_count_);
             for (uint32_t i = begin; i < end; ++i) set.add(map, refs_[i]);
-            return set;
+            return;
         }
-        BinSet empty;
-        empty.clear(bin_count_);
-        return tbb::parallel_reduce(
-            tbb::blocked_range<uint32_t>(begin, end, kGrainSize), empty,
+        set = tbb::parallel_reduce(
+            tbb::blocked_range<uint32_t>(begin, end, kGrainSize), set,
             [&](const tbb::blocked_range<uint32_t>& r, BinSet acc) {
                 for (uint32_t i = r.begin(); i != r.end(); ++i) acc.add(map, refs_[i]);
                 return acc;
@@ -268,7 +279,8 @@ private:
         const BinMapping map(centroids, bin_count_);
         Split best;
         if (!map.usable(0) && !map.usable(1) && !map.usable(2)) return best;
-        const BinSet set = bin_range(begin, end, map);
+        BinSet set;  // plain data: only the bins in use get cleared
+        bin_range(begin, end, map, set);
 
         float right_area[kMaxBins];
         uint32_t right_count[kMaxBins];
@@ -279,7 +291,7 @@ private:
             Box3f acc;
             uint32_t n = 0;
             for (int i = bin_count_ - 1; i > 0; --i) {
-                acc.extend(bins[i].bounds());
+                grow(acc, bins[i].bounds().lo, bins[i].bounds().hi);
                 n += bins[i].count;
                 right_area[i] = acc.surface_area();
                 right_count[i] = n;
@@ -288,12 +300,12 @@ private:
             acc = Box3f{};
             n = 0;
             for (int i = 1; i < bin_count_; ++i) {
-                acc.extend(bins[i - 1].bounds());
+                grow(acc, bins[i - 1].bounds().lo, bins[i - 1].bounds().hi);
                 n += bins[i - 1].count;
                 if (n == 0 || right_count[i] == 0) continue;
                 const float cost = acc.surface_area() * static_cast<float>(n) +
                                    right_area[i] * static_cast<float>(right_count[i]);
-                if (cost < best.cost) best = Split{axis, i, cost, n};
+                if (!best.valid() || cost < best.cost) best = Split{axis, i, cost, n};  // even when costs overflow
             }
         }
         return best;

@@ -1,0 +1,131 @@
+// The rayforge command line: help, info, render, and its error contract
+// (exit 1 with one "rayforge: error:" line; exit 2 for usage errors).
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "rayforge/io/image_io.h"
+#include "test_paths.h"
+
+namespace rf {
+namespace {
+
+struct CliResult {
+    int exit_code = -1;
+    std::string out;
+    std::string err;
+};
+
+std::string read_file(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+}
+
+std::vector<std::string> lines_of(const std::string& text) {
+    std::vector<std::string> lines;
+    std::stringstream ss(text);
+    for (std::string line; std::getline(ss, line);) lines.push_back(line);
+    return lines;
+}
+
+// Runs `rayforge ARGS` with stdout and stderr captured to files.
+CliResult run_cli(const std::string& args) {
+    static int counter = 0;
+    std::string dir = test::temp_dir("cli_run_" + std::to_string(counter++));
+    std::string out = dir + "/out.txt", err = dir + "/err.txt";
+    std::string command = "'" + test::cli_path() + "' " + args + " >'" + out + "' 2>'" + err + "' </dev/null";
+    int status = std::system(command.c_str());
+    CliResult r;
+    r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.out = read_file(out);
+    r.err = read_file(err);
+    return r;
+}
+
+void expect_one_error_line(const CliResult& r) {
+    EXPECT_EQ(r.exit_code, 1) << r.err;
+    std::vector<std::string> lines = lines_of(r.err);
+    ASSERT_EQ(lines.size(), 1u) << r.err;
+    EXPECT_EQ(lines[0].rfind("rayforge: error: ", 0), 0u) << lines[0];
+}
+
+TEST(Cli, HelpForEveryVerbAndVersion) {
+    for (const char* args : {"--help", "info --help", "render --help"}) {
+        CliResult r = run_cli(args);
+        EXPECT_EQ(r.exit_code, 0) << args << ": " << r.err;
+        EXPECT_NE(r.out.find("Usage"), std::string::npos) << args << ": " << r.out;
+    }
+    CliResult render_help = run_cli("render --help");
+    for (const char* option : {"--res", "--spp", "--integrator", "--camera", "--threads", "--max-depth", "--ao-radius",
+                               "--exposure", "--seed"})
+        EXPECT_NE(render_help.out.find(option), std::string::npos) << option;
+    CliResult version = run_cli("--version");
+    EXPECT_EQ(version.exit_code, 0);
+    EXPECT_EQ(version.out.rfind("rayforge ", 0), 0u) << version.out;
+}
+
+TEST(Cli, InfoPrintsTheCornellBoxContents) {
+    CliResult r = run_cli("info builtin:cornell");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    for (const char* field : {"triangles:", "vertices:", "meshes:", "instances:", "bounds:", "materials:", "textures:",
+                              "lights:", "camera:", "memory:"})
+        EXPECT_NE(r.out.find(field), std::string::npos) << field << " missing in\n" << r.out;
+    EXPECT_NE(r.out.find("emissive triangles"), std::string::npos) << r.out;
+    CliResult verbose = run_cli("info --verbose builtin:cornell");
+    EXPECT_EQ(verbose.exit_code, 0);
+    EXPECT_GT(lines_of(verbose.out).size(), lines_of(r.out).size());
+}
+
+TEST(Cli, RenderWritesThePngAndOneSummaryLine) {
+    std::string out = test::temp_dir("cli_render") + "/cornell.png";
+    CliResult r = run_cli("render builtin:cornell -o '" + out + "' --res 64x48 --spp 1 --threads 2");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    ASSERT_TRUE(std::filesystem::exists(out));
+    Image image = read_image(out);
+    EXPECT_EQ(image.width, 64);
+    EXPECT_EQ(image.height, 48);
+    std::vector<std::string> lines = lines_of(r.out);
+    ASSERT_EQ(lines.size(), 1u) << r.out;
+    EXPECT_NE(lines[0].find(out), std::string::npos);
+    EXPECT_NE(lines[0].find("render"), std::string::npos);
+
+    // Other formats and integrators by name and extension.
+    std::string exr = test::temp_dir("cli_render_exr") + "/normals.exr";
+    r = run_cli("render builtin:cornell -o '" + exr + "' --res 16x12 --integrator normals "
+                "--camera 0,1,3.5,0,1,0,0,1,0,40");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_EQ(read_image(exr).width, 16);
+}
+
+TEST(Cli, RuntimeErrorsAreOneLineAndExitOne) {
+    expect_one_error_line(run_cli("info /no/such/scene.obj"));
+    expect_one_error_line(run_cli("render /no/such/scene.obj -o /tmp/x.png"));
+    expect_one_error_line(run_cli("info '" + test::data_path("cli/malformed.json") + "'"));
+    expect_one_error_line(run_cli("info builtin:no_such_builtin"));
+    std::string dir = test::temp_dir("cli_errors");
+    expect_one_error_line(run_cli("render builtin:cornell --res 8x8 -o '" + dir + "/out.unknown'"));
+    expect_one_error_line(run_cli("render builtin:cornell --res 8x8 -o '" + dir + "/missing/dir/out.png'"));
+    // A camera looking nowhere is a runtime error too.
+    expect_one_error_line(run_cli("render builtin:cornell --res 8x8 -o '" + dir + "/x.png' --camera 0,0,0,0,0,0,0,1,0,45"));
+}
+
+TEST(Cli, UsageErrorsExitTwo) {
+    for (const char* args : {"", "bogus-verb", "render", "render builtin:cornell", "render builtin:cornell -o x.png --spp 0",
+                             "render builtin:cornell -o x.png --res 640", "render builtin:cornell -o x.png --integrator path",
+                             "render builtin:cornell -o x.png --camera 1,2,3", "info builtin:cornell --no-such-flag"}) {
+        CliResult r = run_cli(args);
+        EXPECT_EQ(r.exit_code, 2) << "'" << args << "': " << r.err;
+    }
+}
+
+}  // namespace
+}  // namespace rf
