@@ -103,7 +103,7 @@ void compare_with_brute_force(const SceneGeometry& g, const BuildOptions& option
 
 TEST(BvhTraversal, MatchesBruteForceOnTriangleSoup) {
     const SceneGeometry soup = test::make_triangle_soup(4000, 21, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.7f);
-    for (int leaf : {1, 4, 8}) compare_with_brute_force(soup, BuildOptions{.max_leaf_size = leaf}, 3000, 1);
+    for (int leaf : {1, 4, 8}) compare_with_brute_force(soup, BuildOptions{.max_leaf_size = leaf}, 1500, 1);
 }
 
 TEST(BvhTraversal, MatchesBruteForceOnTessellatedSphere) {
@@ -156,7 +156,7 @@ TEST(BvhTraversal, EmptySceneAlwaysMisses) {
 
 TEST(BvhTraversal, BatchesEqualSingleRays) {
     const SceneGeometry soup = test::make_triangle_soup(3000, 24, {Vec3f(-5.0f), Vec3f(5.0f)}, 0.5f);
-    const std::vector<Ray> rays = make_rays(soup, 5000, 6);
+    const std::vector<Ray> rays = make_rays(soup, 2000, 6);
     for (Structure structure : {Structure::Bvh, Structure::BruteForce}) {
         const auto accel = build_accel(soup, BuildOptions{.structure = structure});
         std::vector<Hit> hits(rays.size());

@@ -118,7 +118,8 @@ TEST(Color, SrgbTransferFunctionRoundTrips) {
     EXPECT_FLOAT_EQ(srgb_to_linear(1.0f), 1.0f);
     EXPECT_NEAR(linear_to_srgb(0.18f), 0.46135f, 1e-4f);
     for (float v = 0.0f; v <= 1.0f; v += 0.01f) EXPECT_NEAR(srgb_to_linear(linear_to_srgb(v)), v, 1e-5f);
-    EXPECT_EQ(linear_to_srgb(2.0f), 1.0f);
+    EXPECT_FLOAT_EQ(linear_to_srgb(2.0f), 1.0f);  // clamped
+    EXPECT_EQ(linear_to_srgb(-1.0f), 0.0f);
     EXPECT_NEAR(luminance(Vec3f(1.0f)), 1.0f, 1e-6f);
 }
 

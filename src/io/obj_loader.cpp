@@ -363,7 +363,7 @@ struct MaterialTextures {
 // Decoded texture files (each decoded once) and the scene textures made from them.
 class TextureTable {
 public:
-    TextureTable(const std::string& obj_path, bool enabled) : obj_path_(obj_path), enabled_(enabled) {}
+    explicit TextureTable(bool enabled) : enabled_(enabled) {}
 
     // Resolves an MTL texture name; "" when absent (warned once per name).
     std::string request(const MaterialLibrary& library, const std::string& name) {
@@ -460,7 +460,6 @@ private:
         return out;
     }
 
-    std::string obj_path_;
     bool enabled_;
     std::vector<std::string> paths_;
     std::map<std::string, size_t> slot_;
@@ -487,7 +486,7 @@ bool looks_like_normal_map(const Texture& t) {
 // usemtl name, its index in scene.materials.
 std::vector<uint32_t> add_materials(Scene& scene, const std::string& obj_path, const ObjGeometry& geo,
                                     const std::vector<MaterialLibrary>& libraries, bool load_textures) {
-    TextureTable textures(obj_path, load_textures);
+    TextureTable textures(load_textures);
     std::vector<MaterialTextures> wanted(geo.used_materials.size());
     std::vector<uint32_t> scene_index(geo.used_materials.size());
 

@@ -194,17 +194,17 @@ uint64_t min_element_bytes(const PlyElement& element, PlyFormat format) {
     return bytes;
 }
 
+// Every element needs at least min_element_bytes: a count that cannot fit in
+// the rest of the body is rejected here, before anything is allocated.
 void check_counts_fit(const std::string& path, const PlyHeader& header, uint64_t body_bytes) {
-    uint64_t needed = 0;
+    uint64_t budget = body_bytes + 1;  // +1: the last ascii value may lack its separator
     for (const PlyElement& element : header.elements) {
         if (element.properties.empty()) continue;  // nothing to read, skipped without looping
-        uint64_t per = min_element_bytes(element, header.format);
-        // The last ascii value of the file may lack its separator: allow one byte of slack.
-        uint64_t available = body_bytes + 1 - std::min(needed, body_bytes + 1);
-        if (element.count > available / per)
+        const uint64_t per = min_element_bytes(element, header.format);
+        if (element.count > budget / per)
             throw file_error(path, 0, "header declares " + std::to_string(element.count) + " '" + element.name +
                                           "' elements but the body has only " + std::to_string(body_bytes) + " bytes");
-        needed += element.count * per;
+        budget -= element.count * per;
     }
 }
 
@@ -306,8 +306,7 @@ public:
             throw file_error(path_, line_, "bad integer '" + std::string(token.substr(0, 32)) + "'");
         return value;
     }
-    void skip(PlyType type, uint64_t count) {
-        (void)type;
+    void skip(PlyType, uint64_t count) {
         for (uint64_t i = 0; i < count; ++i) next();
     }
     // Remembers the line of the next value, for errors about the element that starts there.
