@@ -11,14 +11,14 @@ namespace rf::cli {
 inline constexpr const char* kVersion = "0.1.0";  // keep in step with project(VERSION) in CMakeLists.txt
 
 struct InfoArgs {
-    std::string scene = "builtin:cornell";
+    std::string scene;  // a file or builtin:NAME (e.g. builtin:cornell)
     bool verbose = false;
 };
 CLI::App* add_info_command(CLI::App& app, InfoArgs& args);
 int run_info(const InfoArgs& args);
 
 struct RenderArgs {
-    std::string scene = "builtin:cornell";
+    std::string scene;  // a file or builtin:NAME (e.g. builtin:cornell)
     std::string output;
     std::string resolution;   // "WxH"
     int spp = 1;
