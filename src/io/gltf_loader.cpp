@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "rayforge/core/error.h"
+#include "rayforge/core/memory_budget.h"
 #include "rayforge/io/image_io.h"
 #include "rayforge/io/scene_io.h"
 
@@ -270,7 +271,9 @@ std::vector<float> GltfReader::read_floats(int accessor_index, const char* what,
         fail(std::string(what) + " accessor " + std::to_string(accessor_index) +
              ": unexpected element type");
     components = view.components;
-    std::vector<float> out(view.count * size_t(view.components), 0.0f);
+    std::vector<float> out;
+    budgeted_resize(out, view.count * size_t(view.components),
+                    path_ + ": " + what + " accessor " + std::to_string(accessor_index));
     const size_t csize = component_size(view.component_type);
     for (size_t i = 0; i < view.count; ++i) {
         const unsigned char* element = view.data + i * view.stride;
@@ -290,7 +293,8 @@ std::vector<uint32_t> GltfReader::read_indices(int accessor_index) const {
          view.component_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT))
         fail("indices accessor " + std::to_string(accessor_index) +
              ": indices must be unsigned byte, short or int scalars");
-    std::vector<uint32_t> out(view.count, 0);
+    std::vector<uint32_t> out;
+    budgeted_resize(out, view.count, path_ + ": indices accessor " + std::to_string(accessor_index));
     for (size_t i = 0; i < view.count; ++i)
         out[i] = read_index(view.data + i * view.stride, view.component_type);
     return out;
@@ -422,7 +426,7 @@ bool GltfReader::convert_primitive(const tinygltf::Primitive& primitive, const s
     std::vector<float> positions =
         read_floats(position_it->second, "POSITION", {TINYGLTF_TYPE_VEC3}, components);
     const size_t vertex_count = positions.size() / 3;
-    mesh.positions.resize(vertex_count);
+    budgeted_resize(mesh.positions, vertex_count, path_ + ": " + name + ": vertex array");
     for (size_t i = 0; i < vertex_count; ++i) {
         Vec3f p(positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]);
         if (!is_finite(p))
@@ -433,7 +437,7 @@ bool GltfReader::convert_primitive(const tinygltf::Primitive& primitive, const s
     if (auto it = primitive.attributes.find("NORMAL"); it != primitive.attributes.end()) {
         std::vector<float> normals = read_floats(it->second, "NORMAL", {TINYGLTF_TYPE_VEC3}, components);
         if (normals.size() != positions.size()) fail(name + ": NORMAL count differs from POSITION count");
-        mesh.normals.resize(vertex_count);
+        budgeted_resize(mesh.normals, vertex_count, path_ + ": " + name + ": normal array");
         for (size_t i = 0; i < vertex_count; ++i) {
             Vec3f n(normals[3 * i], normals[3 * i + 1], normals[3 * i + 2]);
             if (!is_finite(n)) fail(name + ": NORMAL " + std::to_string(i) + " is not finite");
@@ -443,7 +447,7 @@ bool GltfReader::convert_primitive(const tinygltf::Primitive& primitive, const s
     if (auto it = primitive.attributes.find("TEXCOORD_0"); it != primitive.attributes.end()) {
         std::vector<float> uvs = read_floats(it->second, "TEXCOORD_0", {TINYGLTF_TYPE_VEC2}, components);
         if (uvs.size() != vertex_count * 2) fail(name + ": TEXCOORD_0 count differs from POSITION count");
-        mesh.uvs.resize(vertex_count);
+        budgeted_resize(mesh.uvs, vertex_count, path_ + ": " + name + ": texture coordinate array");
         for (size_t i = 0; i < vertex_count; ++i) {
             if (!std::isfinite(uvs[2 * i]) || !std::isfinite(uvs[2 * i + 1]))
                 fail(name + ": TEXCOORD_0 " + std::to_string(i) + " is not finite");
@@ -453,7 +457,7 @@ bool GltfReader::convert_primitive(const tinygltf::Primitive& primitive, const s
     if (auto it = primitive.attributes.find("TANGENT"); it != primitive.attributes.end()) {
         std::vector<float> tangents = read_floats(it->second, "TANGENT", {TINYGLTF_TYPE_VEC4}, components);
         if (tangents.size() != vertex_count * 4) fail(name + ": TANGENT count differs from POSITION count");
-        mesh.tangents.resize(vertex_count);
+        budgeted_resize(mesh.tangents, vertex_count, path_ + ": " + name + ": tangent array");
         for (size_t i = 0; i < vertex_count; ++i) {
             const float* t = &tangents[4 * i];
             if (!std::isfinite(t[0]) || !std::isfinite(t[1]) || !std::isfinite(t[2]) || !std::isfinite(t[3]))
@@ -471,7 +475,7 @@ bool GltfReader::convert_primitive(const tinygltf::Primitive& primitive, const s
                 fail(name + ": index " + std::to_string(i) + " = " + std::to_string(order[i]) +
                      " is out of range (" + std::to_string(vertex_count) + " vertices)");
     } else {
-        order.resize(vertex_count);
+        budgeted_resize(order, vertex_count, path_ + ": " + name + ": index array");
         for (size_t i = 0; i < vertex_count; ++i) order[i] = uint32_t(i);
     }
 
@@ -480,7 +484,7 @@ bool GltfReader::convert_primitive(const tinygltf::Primitive& primitive, const s
                                         " is not a multiple of 3");
         mesh.indices = std::move(order);
     } else if (order.size() >= 3) {
-        mesh.indices.reserve((order.size() - 2) * 3);
+        budgeted_reserve(mesh.indices, (order.size() - 2) * 3, path_ + ": " + name + ": index array");
         for (size_t i = 2; i < order.size(); ++i) {
             if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
                 // Every other triangle of a strip is flipped to keep the winding.
@@ -493,7 +497,10 @@ bool GltfReader::convert_primitive(const tinygltf::Primitive& primitive, const s
     }
     if (mesh.indices.empty()) return false;
 
-    mesh.material_ids.assign(mesh.triangle_count(), material_index(primitive.material, scene));
+    checked_index_count(path_ + ": " + name + ": triangle count", mesh.indices.size() / 3);
+    const uint32_t material = material_index(primitive.material, scene);
+    budgeted_resize(mesh.material_ids, mesh.triangle_count(), path_ + ": " + name + ": material id array");
+    std::fill(mesh.material_ids.begin(), mesh.material_ids.end(), material);
     if (mesh.normals.empty() && options_.compute_missing_normals) mesh.compute_vertex_normals();
     return true;
 }

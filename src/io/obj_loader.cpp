@@ -29,6 +29,7 @@
 #include "io/number_parsing.h"
 #include "io/path_utils.h"
 #include "rayforge/core/error.h"
+#include "rayforge/core/memory_budget.h"
 #include "rayforge/io/image_io.h"
 #include "rayforge/io/scene_io.h"
 
@@ -73,7 +74,10 @@ struct ForwardReference {
 
 class ObjParser {
 public:
-    ObjParser(const std::string& path, std::string_view text) : path_(path), text_(text) {}
+    ObjParser(const std::string& path, std::string_view text)
+        : path_(path), text_(text), positions_what_(path + ": OBJ vertex array"),
+          uvs_what_(path + ": OBJ texture coordinate array"), normals_what_(path + ": OBJ normal array"),
+          corners_what_(path + ": OBJ face corner array") {}
 
     ObjGeometry parse() {
         std::unordered_map<std::string, uint32_t> material_ids;
@@ -91,14 +95,14 @@ public:
             if (p_ == end_) continue;
 
             if (keyword("v")) {
-                out_.positions.push_back(read_vec3("vertex position"));
+                budgeted_push_back(out_.positions, read_vec3("vertex position"), positions_what_);
             } else if (keyword("vt")) {
                 float u = read_float("texture coordinate");
                 float v = at_end() ? 0.0f : read_float("texture coordinate");
                 // OBJ's v points up; ours has v = 0 at the top row of the image.
-                out_.uvs.push_back({u, 1.0f - v});
+                budgeted_push_back(out_.uvs, Vec2f{u, 1.0f - v}, uvs_what_);
             } else if (keyword("vn")) {
-                out_.normals.push_back(read_vec3("normal"));
+                budgeted_push_back(out_.normals, read_vec3("normal"), normals_what_);
             } else if (keyword("f")) {
                 read_face(current_material);
             } else if (keyword("usemtl")) {
@@ -200,10 +204,12 @@ private:
         }
         // Fan triangulation, as most exporters write convex polygons.
         for (size_t k = 2; k < face_.size(); ++k) {
+            if (out_.corners.capacity() - out_.corners.size() < 3)
+                budgeted_reserve(out_.corners, 2 * out_.corners.size() + 3, corners_what_);
             out_.corners.push_back(face_[0]);
             out_.corners.push_back(face_[k - 1]);
             out_.corners.push_back(face_[k]);
-            out_.triangle_material.push_back(material);
+            budgeted_push_back(out_.triangle_material, material, corners_what_);
         }
     }
 
@@ -220,6 +226,7 @@ private:
 
     const std::string& path_;
     std::string_view text_;
+    const std::string positions_what_, uvs_what_, normals_what_, corners_what_;  // budget error prefixes
     std::string_view line_text_;
     const char* p_ = nullptr;
     const char* end_ = nullptr;
@@ -231,7 +238,8 @@ private:
 
 // One mesh vertex per distinct (v, vt, vn). Variants of a position are chained
 // from first_variant[v]: a hash map whose hash is the position index itself.
-Mesh build_mesh(const ObjGeometry& geo, const std::vector<uint32_t>& triangle_material, bool compute_normals) {
+Mesh build_mesh(const std::string& path, const ObjGeometry& geo, const std::vector<uint32_t>& triangle_material,
+                bool compute_normals) {
     const bool any_uv = std::any_of(geo.corners.begin(), geo.corners.end(), [](const ObjCorner& c) { return c.vt != kAbsent; });
     const bool any_normal = std::any_of(geo.corners.begin(), geo.corners.end(), [](const ObjCorner& c) { return c.vn != kAbsent; });
 
@@ -242,7 +250,7 @@ Mesh build_mesh(const ObjGeometry& geo, const std::vector<uint32_t>& triangle_ma
     vertex_key.reserve(geo.positions.size());
 
     Mesh mesh;
-    mesh.indices.resize(geo.corners.size());
+    budgeted_resize(mesh.indices, geo.corners.size(), path + ": OBJ index array");
     for (size_t i = 0; i < geo.corners.size(); ++i) {
         const ObjCorner& c = geo.corners[i];
         uint32_t found = first_variant[c.v];
@@ -258,10 +266,10 @@ Mesh build_mesh(const ObjGeometry& geo, const std::vector<uint32_t>& triangle_ma
     }
 
     const size_t n = vertex_key.size();
-    mesh.positions.resize(n);
+    budgeted_resize(mesh.positions, n, path + ": OBJ vertex array");
     for (size_t i = 0; i < n; ++i) mesh.positions[i] = geo.positions[vertex_key[i].v];
     if (any_uv) {
-        mesh.uvs.resize(n);
+        budgeted_resize(mesh.uvs, n, path + ": OBJ texture coordinate array");
         for (size_t i = 0; i < n; ++i)
             if (vertex_key[i].vt != kAbsent) mesh.uvs[i] = geo.uvs[vertex_key[i].vt];
     }
@@ -269,7 +277,7 @@ Mesh build_mesh(const ObjGeometry& geo, const std::vector<uint32_t>& triangle_ma
 
     const bool all_normals = std::all_of(vertex_key.begin(), vertex_key.end(), [](const ObjCorner& c) { return c.vn != kAbsent; });
     if (any_normal && all_normals) {
-        mesh.normals.resize(n);
+        budgeted_resize(mesh.normals, n, path + ": OBJ normal array");
         for (size_t i = 0; i < n; ++i) mesh.normals[i] = geo.normals[vertex_key[i].vn];
     } else if (compute_normals) {
         // Vertices without a normal get the computed one; the file's normals are kept.
@@ -438,7 +446,7 @@ private:
         out.height = have_base ? base->height : mask.height;
         out.channels = 4;
         out.encoding = TextureEncoding::Srgb8;
-        out.texels8.resize(size_t(out.width) * out.height * 4);
+        budgeted_resize(out.texels8, size_t(out.width) * size_t(out.height) * 4, "texture '" + out.name + "'");
         const int mask_channel = (mask.channels == 2 || mask.channels == 4) ? mask.channels - 1 : 0;
         for (int y = 0; y < out.height; ++y) {
             const int my = int(int64_t(y) * mask.height / out.height);
@@ -556,7 +564,7 @@ Scene load_obj(const std::string& path, const LoadOptions& options) {
     if (geo.corners.empty()) throw file_error(path, 0, "no faces");
     if (geo.skipped_faces > 0)
         warn(path + ": skipped " + std::to_string(geo.skipped_faces) + " faces with fewer than 3 vertices");
-    if (geo.corners.size() / 3 > 0xFFFFFFFFull) throw file_error(path, 0, "more than 2^32-1 triangles");
+    checked_index_count(path + ": OBJ triangle count", geo.corners.size() / 3);
 
     Scene scene;
     scene.source = path;
@@ -581,7 +589,7 @@ Scene load_obj(const std::string& path, const LoadOptions& options) {
     geo.triangle_material.clear();
     geo.triangle_material.shrink_to_fit();
 
-    Mesh mesh = build_mesh(geo, triangle_material, options.compute_missing_normals);
+    Mesh mesh = build_mesh(path, geo, triangle_material, options.compute_missing_normals);
     mesh.name = std::filesystem::path(path).stem().string();
     scene.meshes.push_back(std::move(mesh));
     scene.finalize();

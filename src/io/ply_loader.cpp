@@ -21,6 +21,7 @@
 #include "io/file_reader.h"
 #include "io/number_parsing.h"
 #include "rayforge/core/error.h"
+#include "rayforge/core/memory_budget.h"
 #include "rayforge/io/scene_io.h"
 
 namespace rf {
@@ -354,7 +355,7 @@ void skip_element(Reader& reader, const PlyElement& element) {
 }
 
 template <typename Reader>
-void read_vertices(Reader& reader, const PlyElement& element, Mesh& mesh) {
+void read_vertices(Reader& reader, const PlyElement& element, Mesh& mesh, const std::string& path) {
     bool has_normals = false, has_uvs = false;
     int xyz = 0;
     for (const PlyProperty& p : element.properties) {
@@ -365,9 +366,9 @@ void read_vertices(Reader& reader, const PlyElement& element, Mesh& mesh) {
     if (xyz != 3) throw reader.error("vertex element lacks x, y or z");
 
     const size_t n = size_t(element.count);
-    mesh.positions.resize(n);
-    if (has_normals) mesh.normals.resize(n);
-    if (has_uvs) mesh.uvs.resize(n);
+    budgeted_resize(mesh.positions, n, path + ": PLY vertex array");
+    if (has_normals) budgeted_resize(mesh.normals, n, path + ": PLY normal array");
+    if (has_uvs) budgeted_resize(mesh.uvs, n, path + ": PLY texture coordinate array");
     for (size_t i = 0; i < n; ++i) {
         reader.mark();
         Vec3f p{}, nrm{};
@@ -408,12 +409,17 @@ void read_vertices(Reader& reader, const PlyElement& element, Mesh& mesh) {
 }
 
 template <typename Reader>
-void read_faces(Reader& reader, const PlyElement& element, uint64_t vertex_count, Mesh& mesh) {
+void read_faces(Reader& reader, const PlyElement& element, uint64_t vertex_count, Mesh& mesh,
+                const std::string& path) {
     bool has_indices = false;
     for (const PlyProperty& p : element.properties) has_indices |= p.role == Role::FaceIndices;
     if (!has_indices) throw reader.error("face element has no vertex_indices list");
 
-    mesh.indices.reserve(size_t(element.count) * 3);
+    // One triangle per face is the common case; polygons grow the array under the budget too.
+    const std::string what = path + ": PLY index array";
+    if (element.count > std::numeric_limits<size_t>::max() / 3)
+        throw Error(what + ": " + std::to_string(element.count) + " x 3 indices overflows");
+    budgeted_reserve(mesh.indices, size_t(element.count) * 3, what);
     for (uint64_t f = 0; f < element.count; ++f) {
         reader.mark();
         for (const PlyProperty& prop : element.properties) {
@@ -437,6 +443,8 @@ void read_faces(Reader& reader, const PlyElement& element, uint64_t vertex_count
                 uint32_t v = uint32_t(index);
                 if (k == 0) first = v;
                 if (k >= 2) {
+                    if (mesh.indices.capacity() - mesh.indices.size() < 3)
+                        budgeted_reserve(mesh.indices, 2 * mesh.indices.size() + 3, what);
                     mesh.indices.push_back(first);
                     mesh.indices.push_back(previous);
                     mesh.indices.push_back(v);
@@ -448,17 +456,17 @@ void read_faces(Reader& reader, const PlyElement& element, uint64_t vertex_count
 }
 
 template <typename Reader>
-void read_body(Reader& reader, const PlyHeader& header, Mesh& mesh) {
+void read_body(Reader& reader, const PlyHeader& header, Mesh& mesh, const std::string& path) {
     uint64_t vertex_count = 0;
     bool have_vertices = false, have_faces = false;
     for (const PlyElement& element : header.elements)
         if (element.name == "vertex") vertex_count = element.count;
     for (const PlyElement& element : header.elements) {
         if (element.name == "vertex" && !have_vertices) {
-            read_vertices(reader, element, mesh);
+            read_vertices(reader, element, mesh, path);
             have_vertices = true;
         } else if (element.name == "face" && !have_faces) {
-            read_faces(reader, element, vertex_count, mesh);
+            read_faces(reader, element, vertex_count, mesh, path);
             have_faces = true;
         } else {
             skip_element(reader, element);
@@ -482,24 +490,22 @@ Scene load_ply(const std::string& path, const LoadOptions& options) {
     if (!vertices) throw file_error(path, 0, "no vertex element");
     if (!faces || faces->count == 0) throw file_error(path, 0, "no faces (point clouds are not supported)");
     check_counts_fit(path, header, data.size() - header.body_offset);
-    if (vertices->count > std::numeric_limits<uint32_t>::max())
-        throw file_error(path, 0, std::to_string(vertices->count) + " vertices exceed 32-bit indices");
+    checked_index_count(path + ": PLY vertex count", vertices->count);
 
     Mesh mesh;
     mesh.name = std::filesystem::path(path).stem().string();
     if (header.format == PlyFormat::Ascii) {
         AsciiReader reader(path, data, header.body_offset, header.body_line);
-        read_body(reader, header, mesh);
+        read_body(reader, header, mesh, path);
     } else {
         const bool big_endian_host = std::endian::native == std::endian::big;
         const bool file_big_endian = header.format == PlyFormat::BinaryBigEndian;
         BinaryReader reader(path, data, header.body_offset, big_endian_host != file_big_endian);
-        read_body(reader, header, mesh);
+        read_body(reader, header, mesh, path);
     }
     if (mesh.indices.empty()) throw file_error(path, 0, "no triangles (every face has fewer than 3 vertices)");
-    if (mesh.indices.size() / 3 > std::numeric_limits<uint32_t>::max())
-        throw file_error(path, 0, "more than 2^32-1 triangles");
-    mesh.material_ids.assign(mesh.triangle_count(), 0);
+    checked_index_count(path + ": PLY triangle count", mesh.indices.size() / 3);
+    budgeted_resize(mesh.material_ids, mesh.indices.size() / 3, path + ": PLY material id array");
     if (mesh.normals.empty() && options.compute_missing_normals) mesh.compute_vertex_normals();
 
     Scene scene;

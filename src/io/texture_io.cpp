@@ -12,6 +12,7 @@
 
 #include "io/file_reader.h"
 #include "rayforge/core/error.h"
+#include "rayforge/core/memory_budget.h"
 #include "rayforge/io/image_io.h"
 
 namespace rf {
@@ -25,6 +26,14 @@ constexpr long long kMaxTexels = 1ll << 28;
 void check_dimensions(long long width, long long height, const std::string& name) {
     if (width <= 0 || height <= 0 || width > kMaxDimension || height > kMaxDimension || width * height > kMaxTexels)
         throw file_error(name, 0, "unsupported image size " + std::to_string(width) + "x" + std::to_string(height));
+}
+
+// The decoder's buffer and our copy of it, checked against the memory budget
+// before the decoder allocates anything.
+void check_budget(long long width, long long height, int channels, size_t bytes_per_channel,
+                  const std::string& name) {
+    checked_array_bytes("texture '" + name + "'", size_t(width) * size_t(height) * size_t(channels),
+                        2 * bytes_per_channel);
 }
 
 // OpenEXR files start with the magic number 20000630 (little-endian).
@@ -56,6 +65,7 @@ Texture decode_exr(const unsigned char* data, size_t size, const std::string& na
     long long h = (long long)header.data_window.max_y - header.data_window.min_y + 1;
     FreeEXRHeader(&header);
     check_dimensions(w, h, name);
+    check_budget(w, h, 4, sizeof(float), name);  // tinyexr decodes to RGBA float
 
     float* rgba = nullptr;
     int width = 0, height = 0;
@@ -94,6 +104,7 @@ Texture decode_stb(const unsigned char* data, size_t size, const std::string& na
     if (!stbi_info_from_memory(data, len, &width, &height, &channels))
         throw file_error(name, 0, "cannot decode image: " + stb_reason());
     check_dimensions(width, height, name);
+    check_budget(width, height, channels, stbi_is_hdr_from_memory(data, len) ? sizeof(float) : 1, name);
 
     Texture tex;
     tex.name = name;
