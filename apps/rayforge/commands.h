@@ -8,7 +8,7 @@
 
 namespace rf::cli {
 
-inline constexpr const char* kVersion = "0.1.0";  // keep in step with project(VERSION) in CMakeLists.txt
+inline constexpr const char* kVersion = RAYFORGE_VERSION;  // project(VERSION) in CMakeLists.txt
 
 struct InfoArgs {
     std::string scene;  // a file or builtin:NAME (e.g. builtin:cornell)

@@ -100,6 +100,7 @@ Scene make_cornell() {
     Material light = diffuse("light", {0.78f, 0.78f, 0.78f});
     light.emission = {17.0f, 12.0f, 4.0f};
     light.emission_strength = 1.0f;
+    light.double_sided = false;  // only the face towards the room emits; the back would light the ceiling gap
     const uint32_t light_material = add_material(scene, light);
     Material mirror_material;
     mirror_material.name = "mirror";
