@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include <string>
+#include <vector>
 
 namespace rf::cli {
 
@@ -31,6 +32,9 @@ struct RenderArgs {
     float exposure = 1.0f;
     unsigned seed = 0;
     std::string accel = "bvh";
+    std::vector<std::string> lights;  // "x,y,z[,intensity]" point lights added to the scene
+    std::string environment;          // "r,g,b" constant environment radiance
+    bool no_headlight = false;
     bool quiet = false;
     // Which options were given, so that they override the scene's settings.
     CLI::Option* resolution_opt = nullptr;

@@ -70,6 +70,35 @@ Camera parse_camera(const std::string& text) {
     return c;
 }
 
+// The scene has nothing that emits: no lights, no emissive triangles, black environment.
+bool has_no_light(const Scene& scene, const SceneGeometry& geometry) {
+    const Environment& env = scene.environment;
+    const bool env_emits = env.texture >= 0 || max_component(env.color) > 0.0f;
+    return scene.lights.empty() && geometry.emissive_triangles.empty() && !(env_emits && env.strength > 0.0f);
+}
+
+// Point lights from --light and the environment from --env.
+void apply_light_options(const RenderArgs& a, Scene& scene, const SceneGeometry& geometry) {
+    const float diagonal = length(geometry.bounds.extent());
+    for (const std::string& text : a.lights) {
+        std::vector<float> v;
+        if (!parse_floats(text, 3, v) && !parse_floats(text, 4, v))
+            throw Error("--light: expected x,y,z or x,y,z,intensity, got '" + text + "'");
+        Light light;
+        light.position = {v[0], v[1], v[2]};
+        light.intensity = v.size() == 4 ? v[3] : 0.25f * diagonal * diagonal;
+        scene.lights.push_back(light);
+    }
+    if (!a.environment.empty()) {
+        std::vector<float> v;
+        if (!parse_floats(a.environment, 3, v) || v[0] < 0 || v[1] < 0 || v[2] < 0)
+            throw Error("--env: expected r,g,b (non-negative), got '" + a.environment + "'");
+        scene.environment.color = {v[0], v[1], v[2]};
+        scene.environment.texture = -1;
+        scene.environment.strength = 1.0f;
+    }
+}
+
 }  // namespace
 
 CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
@@ -106,6 +135,12 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
     cmd->add_option("--seed", a.seed, "Random seed (default 0)");
     cmd->add_option("--accel", a.accel, "Acceleration structure: bvh | brute (default bvh)")
         ->check(CLI::IsMember({"bvh", "brute"}));
+    cmd->add_option("--light", a.lights,
+                     "Add a point light at x,y,z with optional intensity (W/sr; default: the squared scene "
+                     "diagonal / 4); repeatable");
+    cmd->add_option("--env", a.environment, "Constant environment radiance r,g,b (replaces the scene's)");
+    cmd->add_flag("--no-headlight", a.no_headlight,
+                  "Do not add a light at the camera when a whitted render would have no light at all");
     cmd->add_flag("-q,--quiet", a.quiet, "No progress bar");
     return cmd;
 }
@@ -134,6 +169,19 @@ int run_render(const RenderArgs& a) {
     options.threads = a.threads;
     options.seed = a.seed;
     Camera camera = a.camera.empty() ? scene.camera_or_default() : parse_camera(a.camera);
+    apply_light_options(a, scene, geometry);
+    if (options.integrator == IntegratorKind::Whitted && !a.no_headlight && has_no_light(scene, geometry)) {
+        // Many OBJ/PLY files carry no light; a black image helps nobody. A
+        // headlight lights a surface at the target distance with irradiance pi,
+        // so a white diffuse surface there renders at about 1.
+        Light headlight;
+        headlight.position = camera.eye;
+        const float distance = length(camera.target - camera.eye);
+        headlight.intensity = 3.14159265f * distance * distance;
+        scene.lights.push_back(headlight);
+        std::fprintf(stderr, "rayforge: note: the scene has no light; adding a headlight at the camera "
+                             "(--light to place lights, --no-headlight to disable)\n");
+    }
 
     BuildOptions build_options;
     build_options.structure = parse_structure(a.accel);
