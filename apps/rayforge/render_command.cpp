@@ -70,11 +70,16 @@ Camera parse_camera(const std::string& text) {
     return c;
 }
 
-// The scene has nothing that emits: no lights, no emissive triangles, black environment.
+// Nothing lights the scene: no lights, a black environment, and no emitting
+// triangle other than textured emission (glowing details such as displays,
+// which light nothing around them).
 bool has_no_light(const Scene& scene, const SceneGeometry& geometry) {
     const Environment& env = scene.environment;
     const bool env_emits = env.texture >= 0 || max_component(env.color) > 0.0f;
-    return scene.lights.empty() && geometry.emissive_triangles.empty() && !(env_emits && env.strength > 0.0f);
+    if (!scene.lights.empty() || (env_emits && env.strength > 0.0f)) return false;
+    for (uint32_t tri : geometry.emissive_triangles)
+        if (scene.materials[geometry.material[tri]].emission_texture == kNoTexture) return false;
+    return true;
 }
 
 // Point lights from --light and the environment from --env.
