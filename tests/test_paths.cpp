@@ -2,6 +2,8 @@
 
 #include <filesystem>
 
+#include <unistd.h>
+
 namespace fs = std::filesystem;
 
 namespace rf::test {
@@ -18,7 +20,8 @@ std::string shared_path(const std::string& relative) {
 }
 
 std::string temp_dir(const std::string& name) {
-    fs::path p = fs::temp_directory_path() / ("rayforge_test_" + name);
+    // ctest runs tests as parallel processes: the pid keeps their folders apart.
+    fs::path p = fs::temp_directory_path() / ("rayforge_test_" + std::to_string(getpid()) + "_" + name);
     fs::remove_all(p);
     fs::create_directories(p);
     return p.string();
