@@ -18,6 +18,7 @@ case "$mode" in
     ctest_args=(-LE "install|gpu")
     export ASAN_OPTIONS="detect_leaks=1:abort_on_error=1:strict_string_checks=1:detect_stack_use_after_return=1"
     export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1"
+    export LSAN_OPTIONS="suppressions=$PWD/tests/sanitizers/lsan.supp:print_suppressions=0"
     ;;
   thread)
     build_dir=build-tsan
