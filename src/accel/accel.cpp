@@ -1,11 +1,9 @@
 // build_accel: option checking and dispatch; the batched queries every Accel
 // inherits.
 #include "rayforge/accel/accel.h"
+#include "core/parallel.h"
 
 #include <cmath>
-
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include "accel/brute_force.h"
 #include "accel/bvh/bvh_accel.h"
@@ -70,8 +68,8 @@ void Accel::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
         throw Error("Accel::intersect: " + std::to_string(rays.size()) + " rays but " +
                     std::to_string(hits.size()) + " hit slots");
     }
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), kRayGrainSize), [&](const auto& r) {
-        for (size_t i = r.begin(); i != r.end(); ++i) hits[i] = intersect(rays[i]);
+    parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i != hi; ++i) hits[i] = intersect(rays[i]);
     });
 }
 
@@ -80,8 +78,8 @@ void Accel::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) con
         throw Error("Accel::occluded: " + std::to_string(rays.size()) + " rays but " +
                     std::to_string(occluded.size()) + " result slots");
     }
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), kRayGrainSize), [&](const auto& r) {
-        for (size_t i = r.begin(); i != r.end(); ++i) occluded[i] = this->occluded(rays[i]) ? 1 : 0;
+    parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i != hi; ++i) occluded[i] = this->occluded(rays[i]) ? 1 : 0;
     });
 }
 

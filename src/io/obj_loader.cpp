@@ -8,7 +8,6 @@
 // OBJ indexes positions, texture coordinates and normals separately; the
 // mesh gets one vertex per distinct (v, vt, vn) triple. The whole file
 // becomes one rf::Mesh with a material per triangle.
-#include <tbb/parallel_for.h>
 #include <tiny_obj_loader.h>
 
 #include <algorithm>
@@ -25,6 +24,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "core/parallel.h"
 #include "io/file_reader.h"
 #include "io/number_parsing.h"
 #include "io/path_utils.h"
@@ -394,7 +394,7 @@ public:
     void decode_all() {
         decoded_.resize(paths_.size());
         std::vector<std::string> failures(paths_.size());  // one slot per task: no sharing
-        tbb::parallel_for(size_t(0), paths_.size(), [&](size_t i) {
+        parallel::for_each_index(size_t(0), paths_.size(), [&](size_t i) {
             try {
                 decoded_[i] = load_texture(paths_[i], TextureEncoding::Srgb8);
             } catch (const Error& e) {

@@ -2,9 +2,6 @@
 // every sample draws its random numbers from its own counter-based stream
 // (render/random.h), so the result does not depend on the thread count or
 // on which thread renders which tile.
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -12,6 +9,7 @@
 #include <string>
 
 #include "rayforge/core/error.h"
+#include "core/parallel.h"
 #include "rayforge/render/render.h"
 #include "render/integrators/ao.h"
 #include "render/integrators/normals.h"
@@ -109,12 +107,7 @@ Image render(const Scene& scene, const SceneGeometry& geometry, const Accel& acc
         }
     };
 
-    tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
-    arena.execute([&] {
-        tbb::parallel_for(tbb::blocked_range<int>(0, tile_count, 1), [&](const tbb::blocked_range<int>& range) {
-            for (int tile = range.begin(); tile != range.end(); ++tile) render_tile(tile);
-        });
-    });
+    parallel::with_threads(options.threads, [&] { parallel::for_each_index(0, tile_count, render_tile); });
     return image;
 }
 

@@ -3,8 +3,7 @@
 #include <cmath>
 #include <string>
 
-#include <tbb/parallel_for.h>
-
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf {
@@ -26,8 +25,8 @@ SceneGeometry SceneGeometry::build(const Scene& scene) {
         const Mesh& mesh = scene.meshes[inst.mesh];
         g.normal_matrices.push_back(inst.transform.normal_matrix());
         const size_t count = mesh.triangle_count();
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 4096), [&](const tbb::blocked_range<size_t>& r) {
-            for (size_t t = r.begin(); t != r.end(); ++t) {
+        parallel::for_range(size_t(0), count, size_t(4096), [&](size_t lo, size_t hi) {
+            for (size_t t = lo; t != hi; ++t) {
                 const uint32_t* idx = &mesh.indices[3 * t];
                 Triangle& tri = g.triangles[base + t];
                 tri.v0 = inst.transform.transform_point(mesh.positions[idx[0]]);

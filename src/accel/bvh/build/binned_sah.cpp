@@ -23,11 +23,8 @@
 #include <cstdint>
 #include <vector>
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_invoke.h>
-#include <tbb/parallel_reduce.h>
-#include <tbb/task_arena.h>
+#include "core/parallel.h"
+
 
 namespace rf {
 namespace {
@@ -189,18 +186,18 @@ public:
         copy_descendants(bvh.nodes, 0, 0, 1);
 
         bvh.prim_indices.resize(count);
-        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, count, kGrainSize), [&](const auto& r) {
-            for (uint32_t i = r.begin(); i != r.end(); ++i) bvh.prim_indices[i] = refs_[i].id;
+        parallel::for_range(0u, count, kGrainSize, [&](uint32_t lo, uint32_t hi) {
+            for (uint32_t i = lo; i != hi; ++i) bvh.prim_indices[i] = refs_[i].id;
         });
         return bvh;
     }
 
 private:
     RangeBounds make_prim_refs() {
-        return tbb::parallel_reduce(
-            tbb::blocked_range<uint32_t>(0, static_cast<uint32_t>(refs_.size()), kGrainSize), RangeBounds{},
-            [&](const tbb::blocked_range<uint32_t>& r, RangeBounds acc) {
-                for (uint32_t i = r.begin(); i != r.end(); ++i) {
+        return parallel::reduce(
+            0u, static_cast<uint32_t>(refs_.size()), kGrainSize, RangeBounds{},
+            [&](uint32_t lo, uint32_t hi, RangeBounds acc) {
+                for (uint32_t i = lo; i != hi; ++i) {
                     const Triangle& t = triangles_[i];
                     refs_[i] = PrimRef{vmin(t.v0, vmin(t.v1, t.v2)), i, vmax(t.v0, vmax(t.v1, t.v2)), 0};
                     acc.add(refs_[i]);
@@ -241,7 +238,7 @@ private:
         out.count = 0;
         uint32_t left_size = 0, right_size = 0;
         if (count > kParallelSubtreeSize) {
-            tbb::parallel_invoke([&] { left_size = build_node(pair, begin, mid, left, depth + 1); },
+            parallel::invoke([&] { left_size = build_node(pair, begin, mid, left, depth + 1); },
                                  [&] { right_size = build_node(pair + 1, mid, end, right, depth + 1); });
         } else {
             left_size = build_node(pair, begin, mid, left, depth + 1);
@@ -264,10 +261,10 @@ private:
             for (uint32_t i = begin; i < end; ++i) set.add(map, refs_[i]);
             return;
         }
-        set = tbb::parallel_reduce(
-            tbb::blocked_range<uint32_t>(begin, end, kGrainSize), set,
-            [&](const tbb::blocked_range<uint32_t>& r, BinSet acc) {
-                for (uint32_t i = r.begin(); i != r.end(); ++i) acc.add(map, refs_[i]);
+        set = parallel::reduce(
+            begin, end, kGrainSize, set,
+            [&](uint32_t lo, uint32_t hi, BinSet acc) {
+                for (uint32_t i = lo; i != hi; ++i) acc.add(map, refs_[i]);
                 return acc;
             },
             [&](BinSet a, const BinSet& b) { a.merge(b, bin_count_); return a; });
@@ -358,7 +355,7 @@ private:
         const uint32_t left_size = subtree_size_[left];
         const uint32_t right_base = base + 2 + (left_size - 1);
         if (subtree_size_[from] > kParallelCopySize) {
-            tbb::parallel_invoke([&] { copy_descendants(out, left, base, base + 2); },
+            parallel::invoke([&] { copy_descendants(out, left, base, base + 2); },
                                  [&] { copy_descendants(out, left + 1, base + 1, right_base); });
         } else {
             copy_descendants(out, left, base, base + 2);
@@ -382,11 +379,7 @@ private:
 
 Bvh build_binned_sah(std::span<const Triangle> triangles, const BuildOptions& options) {
     BinnedSahBuilder builder(triangles, options);
-    if (options.threads > 0) {
-        tbb::task_arena arena(options.threads);
-        return arena.execute([&] { return builder.build(); });
-    }
-    return builder.build();
+    return parallel::with_threads(options.threads, [&] { return builder.build(); });
 }
 
 }  // namespace rf
