@@ -1,105 +1,53 @@
 // The few parallel patterns rayforge uses (for, invoke, reduce), on TBB.
 //
-// Every parallel call goes through here for one reason: Debian's libtbb is not
-// built for ThreadSanitizer, so TSan cannot see the happens-before edges of
-// TBB's fork and join and would report every task's result as a race. Under
-// TSan (scripts/run-sanitizers.sh thread) these wrappers announce the edges:
-// the caller releases before forking and each task acquires it; each task
-// releases when done and the caller acquires after the join. Tasks never
-// synchronise with their siblings, so races between them are still reported.
-// In normal builds the annotations compile to nothing.
+// Every parallel call goes through here so that ThreadSanitizer can check our
+// code: Debian's libtbb is not built for TSan, which then cannot see the
+// happens-before edges of TBB's fork and join (inside the library) and reports
+// every task's result as a race. A TSan build (scripts/run-sanitizers.sh
+// thread) therefore runs the same patterns on std::thread, whose creation and
+// join TSan understands; races between our tasks are still reported.
 #pragma once
 
+#include <algorithm>
+#include <atomic>
 #include <cstddef>
+#include <thread>
 #include <utility>
+#include <vector>
 
+#if !defined(__SANITIZE_THREAD__)
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
-
-#if defined(__SANITIZE_THREAD__)
-#include <sanitizer/tsan_interface.h>
-#define RF_TSAN_RELEASE(addr) __tsan_release(const_cast<void*>(static_cast<const void*>(addr)))
-#define RF_TSAN_ACQUIRE(addr) __tsan_acquire(const_cast<void*>(static_cast<const void*>(addr)))
-#else
-#define RF_TSAN_RELEASE(addr) ((void)(addr))
-#define RF_TSAN_ACQUIRE(addr) ((void)(addr))
 #endif
 
 namespace rf::parallel {
 
-// Synchronisation objects for one fork/join: only their addresses matter.
-struct ForkJoin {
-    char fork = 0;
-    char join = 0;
-    ForkJoin() { RF_TSAN_RELEASE(&fork); }
-    void task_begins() const { RF_TSAN_ACQUIRE(&fork); }
-    void task_ends() const { RF_TSAN_RELEASE(&join); }
-    void joined() const { RF_TSAN_ACQUIRE(&join); }
-};
+#if !defined(__SANITIZE_THREAD__)
 
 // body(lo, hi) over [begin, end) in chunks of about `grain`.
 template <class Index, class Body>
 void for_range(Index begin, Index end, Index grain, Body&& body) {
-    ForkJoin sync;
-    tbb::parallel_for(tbb::blocked_range<Index>(begin, end, grain), [&](const tbb::blocked_range<Index>& r) {
-        sync.task_begins();
-        body(r.begin(), r.end());
-        sync.task_ends();
-    });
-    sync.joined();
-}
-
-// body(i) for every i in [begin, end).
-template <class Index, class Body>
-void for_each_index(Index begin, Index end, Body&& body) {
-    for_range(begin, end, Index(1), [&](Index lo, Index hi) {
-        for (Index i = lo; i < hi; ++i) body(i);
-    });
+    tbb::parallel_for(tbb::blocked_range<Index>(begin, end, grain),
+                      [&](const tbb::blocked_range<Index>& r) { body(r.begin(), r.end()); });
 }
 
 // Runs both functions, possibly at once, and returns when both are done.
 template <class F, class G>
 void invoke(F&& f, G&& g) {
-    ForkJoin sync;
-    tbb::parallel_invoke(
-        [&] {
-            sync.task_begins();
-            f();
-            sync.task_ends();
-        },
-        [&] {
-            sync.task_begins();
-            g();
-            sync.task_ends();
-        });
-    sync.joined();
+    tbb::parallel_invoke(std::forward<F>(f), std::forward<G>(g));
 }
 
 // Reduction over [begin, end): body(lo, hi, acc) -> acc folds a chunk into a
 // partial result; combine(a, b) -> a merges two partial results.
 template <class Index, class Value, class Body, class Combine>
 Value reduce(Index begin, Index end, Index grain, Value identity, Body&& body, Combine&& combine) {
-    ForkJoin sync;
-    Value result = tbb::parallel_reduce(
+    return tbb::parallel_reduce(
         tbb::blocked_range<Index>(begin, end, grain), std::move(identity),
-        [&](const tbb::blocked_range<Index>& r, Value acc) {
-            sync.task_begins();
-            acc = body(r.begin(), r.end(), std::move(acc));
-            sync.task_ends();
-            return acc;
-        },
-        [&](Value a, const Value& b) {
-            // Joins read partial results other tasks wrote.
-            RF_TSAN_ACQUIRE(&sync.join);
-            a = combine(std::move(a), b);
-            sync.task_ends();
-            return a;
-        });
-    sync.joined();
-    return result;
+        [&](const tbb::blocked_range<Index>& r, Value acc) { return body(r.begin(), r.end(), std::move(acc)); },
+        [&](Value a, const Value& b) { return combine(std::move(a), b); });
 }
 
 // Runs f with at most `threads` worker threads (0 = all cores).
@@ -108,6 +56,79 @@ auto with_threads(int threads, F&& f) {
     if (threads <= 0) return f();
     tbb::task_arena arena(threads);
     return arena.execute(std::forward<F>(f));
+}
+
+#else  // ThreadSanitizer build: plain threads.
+
+namespace detail {
+// Bounds the threads alive at once when invoke() recurses.
+inline std::atomic<int> live_threads{0};
+inline constexpr int kMaxLiveThreads = 16;
+inline int worker_count() { return std::max(2, int(std::thread::hardware_concurrency())); }
+}  // namespace detail
+
+template <class Index, class Body>
+void for_range(Index begin, Index end, Index grain, Body&& body) {
+    if (end <= begin) return;
+    grain = std::max<Index>(grain, Index(1));
+    const size_t chunks = (size_t(end - begin) + size_t(grain) - 1) / size_t(grain);
+    const size_t workers = std::min<size_t>(chunks, size_t(detail::worker_count()));
+    std::vector<std::thread> threads;
+    for (size_t w = 0; w < workers; ++w) {
+        threads.emplace_back([&, w] {
+            for (size_t c = w; c < chunks; c += workers) {
+                const Index lo = Index(begin + Index(c) * grain);
+                body(lo, std::min<Index>(end, Index(lo + grain)));
+            }
+        });
+    }
+    for (std::thread& t : threads) t.join();
+}
+
+template <class F, class G>
+void invoke(F&& f, G&& g) {
+    if (detail::live_threads.fetch_add(1) >= detail::kMaxLiveThreads) {
+        detail::live_threads.fetch_sub(1);
+        f();
+        g();
+        return;
+    }
+    std::thread other([&] { g(); });
+    f();
+    other.join();
+    detail::live_threads.fetch_sub(1);
+}
+
+template <class Index, class Value, class Body, class Combine>
+Value reduce(Index begin, Index end, Index grain, Value identity, Body&& body, Combine&& combine) {
+    if (end <= begin) return identity;
+    grain = std::max<Index>(grain, Index(1));
+    const size_t chunks = (size_t(end - begin) + size_t(grain) - 1) / size_t(grain);
+    std::vector<Value> partial(chunks, identity);
+    for_range(size_t(0), chunks, size_t(1), [&](size_t lo, size_t hi) {
+        for (size_t c = lo; c < hi; ++c) {
+            const Index chunk_begin = Index(begin + Index(c) * grain);
+            partial[c] = body(chunk_begin, std::min<Index>(end, Index(chunk_begin + grain)), partial[c]);
+        }
+    });
+    Value result = std::move(identity);
+    for (const Value& v : partial) result = combine(std::move(result), v);
+    return result;
+}
+
+template <class F>
+auto with_threads(int /*threads*/, F&& f) {
+    return f();
+}
+
+#endif
+
+// body(i) for every i in [begin, end).
+template <class Index, class Body>
+void for_each_index(Index begin, Index end, Body&& body) {
+    for_range(begin, end, Index(1), [&](Index lo, Index hi) {
+        for (Index i = lo; i < hi; ++i) body(i);
+    });
 }
 
 }  // namespace rf::parallel
