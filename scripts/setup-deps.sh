@@ -17,6 +17,7 @@ packages=(
   libbenchmark-dev               # micro-benchmarks
   libembree-dev                  # optional benchmark peer (Embree 3)
   libzstd-dev                    # compressed geometry pages (later issues)
+  clang libclang-rt-14-dev       # libFuzzer targets and sanitizer runtimes (scripts/fuzz.sh)
 )
 
 missing=()
