@@ -54,6 +54,7 @@ cmake --build "$BUILD" -j"$jobs" --target "${targets[@]/#/fuzz_}" >/dev/null
 # ASan: a leak is a bug too; a crash stops at the first report.
 export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=1:symbolize=1}"
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
+export LSAN_OPTIONS="${LSAN_OPTIONS:-suppressions=$ROOT/fuzz/lsan.supp:print_suppressions=0}"
 
 failed=0
 printf '%-12s %12s %8s  %s\n' target executions seconds result

@@ -18,7 +18,8 @@ namespace {
 
 // Opens `path` for reading and returns its size; throws the loaders' one-line errors.
 int open_regular_file(const std::string& path, size_t& size) {
-    int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    // O_NONBLOCK: opening a FIFO must not wait for a writer; fstat then rejects it.
+    int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
     if (fd < 0) {
         if (errno == ENOENT) throw file_error(path, 0, "file not found");
         throw file_error(path, 0, std::string("cannot open: ") + std::strerror(errno));

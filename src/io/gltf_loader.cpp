@@ -22,6 +22,7 @@
 #include <tuple>
 #include <vector>
 
+#include "io/file_reader.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 #include "rayforge/io/image_io.h"
@@ -91,6 +92,34 @@ bool keep_encoded_image(tinygltf::Image* image, const int image_index, std::stri
     image->image.assign(bytes, bytes + size);
     image->width = image->height = 0;  // marks "encoded, not decoded"
     return true;
+}
+
+// --- Files ------------------------------------------------------------------
+
+// tinygltf's own file callbacks fopen() whatever a URI names: a FIFO or a
+// device blocks or streams forever. These read regular files only, whole,
+// with our one-line errors.
+bool regular_file_exists(const std::string& path, void*) {
+    std::error_code ec;  // the throwing overload throws for names that are too long
+    return std::filesystem::is_regular_file(path, ec);
+}
+
+std::string unexpanded_path(const std::string& path, void*) { return path; }
+
+bool read_regular_file(std::vector<unsigned char>* out, std::string* err, const std::string& path, void*) {
+    try {
+        const std::string bytes = io::read_file(path);
+        out->assign(bytes.begin(), bytes.end());
+        return true;
+    } catch (const Error& e) {
+        if (err) *err += std::string(e.what()) + "\n";
+        return false;
+    }
+}
+
+bool refuse_write(std::string* err, const std::string&, const std::vector<unsigned char>&, void*) {
+    if (err) *err += "writing is not supported\n";
+    return false;
 }
 
 // --- Accessors --------------------------------------------------------------
@@ -189,7 +218,7 @@ private:
     std::vector<uint32_t> read_indices(int accessor_index) const;
 
     Affine3f local_transform(const tinygltf::Node& node, int node_index) const;
-    void visit_node(int node_index, const Affine3f& parent, Scene& scene);
+    void visit_node(int node_index, const Affine3f& parent, Scene& scene, int depth);
     const std::vector<uint32_t>& mesh_primitives(int mesh_index, Scene& scene);
     bool convert_primitive(const tinygltf::Primitive& primitive, const std::string& name,
                            Scene& scene, Mesh& mesh);
@@ -205,6 +234,7 @@ private:
     std::map<int, std::vector<uint32_t>> mesh_cache_;  // glTF mesh -> rf meshes (one per primitive)
     std::map<std::tuple<int, TextureEncoding>, int32_t> texture_cache_;
     std::vector<char> on_path_;      // nodes on the current root-to-node path (cycle check)
+    size_t node_visits_ = 0;         // nodes visited so far, counting each time a shared node is reached
     int default_material_ = -1;      // appended for primitives without a material
     bool warned_non_triangles_ = false;
 };
@@ -606,25 +636,43 @@ void GltfReader::set_camera(int camera_index, const Affine3f& world, Scene& scen
     scene.camera = camera;
 }
 
-void GltfReader::visit_node(int node_index, const Affine3f& parent, Scene& scene) {
+// Node hierarchies are DAGs in practice: a node listed as the child of several
+// parents is visited once per path. Both limits stop malicious files: a deep
+// chain (recursion depth) and a few shared levels that multiply into
+// billions of paths (2 children per level, 40 levels).
+constexpr int kMaxNodeDepth = 1000;
+constexpr size_t kMaxNodeVisits = size_t(1) << 22;
+
+void GltfReader::visit_node(int node_index, const Affine3f& parent, Scene& scene, int depth) {
     if (node_index < 0 || size_t(node_index) >= model_.nodes.size())
         fail("node " + std::to_string(node_index) + " does not exist");
     if (on_path_[size_t(node_index)])
         fail("node " + std::to_string(node_index) + " is its own ancestor (cycle in the node tree)");
+    if (depth > kMaxNodeDepth)
+        fail("node " + std::to_string(node_index) + " is nested more than " + std::to_string(kMaxNodeDepth) +
+             " levels deep");
+    if (++node_visits_ > kMaxNodeVisits)
+        fail("the node hierarchy expands to more than " + std::to_string(kMaxNodeVisits) +
+             " node instances (nodes shared by many parents)");
     const tinygltf::Node& node = model_.nodes[size_t(node_index)];
     const Affine3f world = parent * local_transform(node, node_index);
 
     if (node.mesh >= 0) {
-        for (uint32_t mesh : mesh_primitives(node.mesh, scene)) scene.instances.push_back({mesh, world});
+        for (uint32_t mesh : mesh_primitives(node.mesh, scene))
+            budgeted_push_back(scene.instances, Instance{mesh, world}, path_ + ": instance array");
     }
     if (node.camera >= 0 && !scene.camera) set_camera(node.camera, world, scene);
     if (auto it = node.extensions.find("KHR_lights_punctual"); it != node.extensions.end()) {
-        if (it->second.Has("light") && it->second.Get("light").IsNumber())
-            add_light(int(it->second.Get("light").GetNumberAsDouble()), world, scene);
+        if (it->second.Has("light") && it->second.Get("light").IsNumber()) {
+            // Range-checked before the cast: converting 1e300 to int is undefined.
+            const double light = it->second.Get("light").GetNumberAsDouble();
+            add_light(light >= 0.0 && light < double(std::numeric_limits<int>::max()) ? int(light) : -1, world,
+                      scene);
+        }
     }
 
     on_path_[size_t(node_index)] = 1;
-    for (int child : node.children) visit_node(child, world, scene);
+    for (int child : node.children) visit_node(child, world, scene, depth + 1);
     on_path_[size_t(node_index)] = 0;
 }
 
@@ -648,18 +696,19 @@ Scene GltfReader::read() {
         for (size_t i = 0; i < model_.nodes.size(); ++i)
             if (!is_child[i]) roots.push_back(int(i));
     }
-    for (int root : roots) visit_node(root, Affine3f::identity(), scene);
+    for (int root : roots) visit_node(root, Affine3f::identity(), scene, 0);
     return scene;
 }
 
 }  // namespace
 
 Scene load_gltf(const std::string& path, const LoadOptions& options) {
-    if (!std::filesystem::is_regular_file(path)) throw file_error(path, 0, "cannot open file");
+    if (!regular_file_exists(path, nullptr)) throw file_error(path, 0, "cannot open file");
     tinygltf::Model model;
     tinygltf::TinyGLTF loader;
     ImageLoaderContext image_context{&model};
     loader.SetImageLoader(&keep_encoded_image, &image_context);
+    loader.SetFsCallbacks({&regular_file_exists, &unexpanded_path, &read_regular_file, &refuse_write, nullptr});
 
     std::string err, warnings;
     // A .glb starts with the magic "glTF"; decide by content so a misnamed

@@ -33,6 +33,13 @@ constexpr int kMaxNesting = 8;
 
 float radians(float degrees) { return degrees * kPi / 180.0f; }
 
+// fs::is_regular_file without the throwing overload's filesystem_error (file
+// names too long, permission denied on a parent): such a file is not found.
+bool is_regular_file(const std::string& path) {
+    std::error_code ec;
+    return fs::is_regular_file(path, ec);
+}
+
 // Scene files may include scene files: the files being read, outermost
 // first, to report a file that includes itself.
 thread_local std::vector<std::string> g_open_scene_files;
@@ -144,7 +151,7 @@ int32_t JsonSceneReader::load_texture_file(const Json& value, const std::string&
                                            TextureEncoding encoding, Scene& scene) const {
     const std::string file = resolve(string(value, where));
     if (!options_.load_textures) return kNoTexture;
-    if (!fs::is_regular_file(file)) fail(where, "texture file '" + file + "' not found");
+    if (!is_regular_file(file)) fail(where, "texture file '" + file + "' not found");
     try {
         scene.textures.push_back(load_texture(file, encoding));
     } catch (const Error& e) {
@@ -299,7 +306,7 @@ void JsonSceneReader::read_mesh_entry(const Json& value, const std::string& wher
     auto key = std::make_pair(file, material_name);
     auto it = parts_.find(key);
     if (it == parts_.end()) {
-        if (!builtin && !fs::is_regular_file(file)) fail(where + ".file", "'" + file + "' not found");
+        if (!builtin && !is_regular_file(file)) fail(where + ".file", "'" + file + "' not found");
         Scene part;
         try {
             part = load_scene(file, options_);
@@ -467,6 +474,9 @@ Scene load_json_scene(const std::string& path, const LoadOptions& options) {
         root = Json::parse(in);
     } catch (const Json::parse_error& e) {
         throw file_byte_error(path, e.byte, parse_error_reason(e.what()));
+    } catch (const Json::exception& e) {
+        // Not only syntax errors: a number too large for a double ("1e999") is out_of_range.
+        throw file_error(path, 0, parse_error_reason(e.what()));
     }
     std::error_code ec;
     std::string canonical = fs::weakly_canonical(path, ec).string();

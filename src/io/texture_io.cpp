@@ -9,6 +9,8 @@
 #include <limits>
 #include <memory>
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include "io/file_reader.h"
 #include "rayforge/core/error.h"
@@ -46,53 +48,157 @@ std::string stb_reason() {
     return reason ? reason : "unknown error";
 }
 
+// tinyexr's C structs, freed on every path. tinyexr's own LoadEXRFromMemory
+// leaks its header on most errors (found by fuzz_exr), so the decode below
+// does the same steps with the header owned here.
+struct ExrHeaderOwner {
+    EXRHeader header;
+    ExrHeaderOwner() { InitEXRHeader(&header); }
+    ~ExrHeaderOwner() { FreeEXRHeader(&header); }  // also after a failed parse, which allocates too
+    ExrHeaderOwner(const ExrHeaderOwner&) = delete;
+    ExrHeaderOwner& operator=(const ExrHeaderOwner&) = delete;
+};
+
+struct ExrImageOwner {
+    EXRImage image;
+    bool loaded = false;  // a failed LoadEXRImageFromMemory has already freed what it allocated
+    ExrImageOwner() { InitEXRImage(&image); }
+    ~ExrImageOwner() {
+        if (loaded) FreeEXRImage(&image);
+    }
+    ExrImageOwner(const ExrImageOwner&) = delete;
+    ExrImageOwner& operator=(const ExrImageOwner&) = delete;
+};
+
+Error exr_error(const std::string& name, const char* err, const char* fallback) {
+    std::string reason = err ? err : fallback;
+    FreeEXRErrorMessage(err);
+    return file_error(name, 0, "cannot decode EXR: " + reason);
+}
+
+// One decoded channel value; HALF channels were requested as FLOAT.
+float exr_value(const unsigned char* channel, int pixel_type, size_t index) {
+    if (pixel_type == TINYEXR_PIXELTYPE_UINT) {
+        uint32_t v;
+        std::memcpy(&v, channel + 4 * index, 4);
+        return float(v);
+    }
+    float v;
+    std::memcpy(&v, channel + 4 * index, 4);
+    return v;
+}
+
+// tinyexr 1.0.1 assumes that the "tiles" attribute holds 9 bytes and
+// "compression" at least 1 (asserts compiled out in release builds) and reads
+// past shorter ones (found by fuzz_exr). The header's attributes are checked
+// here first: name\0 type\0 uint32 size, data; a 0 byte ends the header.
+bool exr_attribute_sizes_are_safe(const unsigned char* data, size_t size) {
+    size_t pos = 8;  // magic number and version
+    while (pos < size && data[pos] != 0) {
+        std::string_view names[2];
+        for (std::string_view& field : names) {
+            const void* nul = std::memchr(data + pos, 0, size - pos);
+            if (nul == nullptr) return true;  // truncated: tinyexr reports it
+            const size_t end = size_t(static_cast<const unsigned char*>(nul) - data);
+            field = std::string_view(reinterpret_cast<const char*>(data + pos), end - pos);
+            pos = end + 1;
+        }
+        if (size - pos < 4) return true;
+        uint32_t length = 0;
+        std::memcpy(&length, data + pos, 4);  // little-endian, like the host
+        pos += 4;
+        if (names[0] == "tiles" && length != 9) return false;
+        if (names[0] == "compression" && length < 1) return false;
+        if (length > size - pos) return true;
+        pos += length;
+    }
+    return true;
+}
+
 Texture decode_exr(const unsigned char* data, size_t size, const std::string& name) {
-    // Read the header first so that an absurd data window is rejected before decoding.
     EXRVersion version;
     if (ParseEXRVersionFromMemory(&version, data, size) != TINYEXR_SUCCESS)
         throw file_error(name, 0, "cannot decode EXR: bad version header");
     if (version.multipart || version.non_image)
         throw file_error(name, 0, "cannot decode EXR: multi-part and deep images are not supported");
-    EXRHeader header;
-    InitEXRHeader(&header);
+    if (!exr_attribute_sizes_are_safe(data, size))
+        throw file_error(name, 0, "cannot decode EXR: malformed 'tiles' or 'compression' attribute");
+    ExrHeaderOwner header_owner;
+    EXRHeader& header = header_owner.header;
     const char* err = nullptr;
-    if (ParseEXRHeaderFromMemory(&header, &version, data, size, &err) != TINYEXR_SUCCESS) {
-        std::string reason = err ? err : "bad header";
-        FreeEXRErrorMessage(err);
-        throw file_error(name, 0, "cannot decode EXR: " + reason);
-    }
-    long long w = (long long)header.data_window.max_x - header.data_window.min_x + 1;
-    long long h = (long long)header.data_window.max_y - header.data_window.min_y + 1;
-    FreeEXRHeader(&header);
+    if (ParseEXRHeaderFromMemory(&header, &version, data, size, &err) != TINYEXR_SUCCESS)
+        throw exr_error(name, err, "bad header");
+    // tinyexr 1.0.1's PIZ decoder trusts the lengths inside the data and reads
+    // past the end of the file on malformed input (found by fuzz_exr), so PIZ
+    // files are refused rather than decoded unsafely.
+    if (header.compression_type == TINYEXR_COMPRESSIONTYPE_PIZ)
+        throw file_error(name, 0, "cannot decode EXR: PIZ compression is not supported (save with ZIP or none)");
+    // An absurd data window is rejected before anything is decoded.
+    const long long w = (long long)header.data_window.max_x - header.data_window.min_x + 1;
+    const long long h = (long long)header.data_window.max_y - header.data_window.min_y + 1;
     check_dimensions(w, h, name);
-    check_budget(w, h, 4, sizeof(float), name);  // tinyexr decodes to RGBA float
+    check_budget(w, h, 4, sizeof(float), name);  // the channels as floats, and our copy
 
-    float* rgba = nullptr;
-    int width = 0, height = 0;
-    err = nullptr;
-    if (LoadEXRFromMemory(&rgba, &width, &height, data, size, &err) != TINYEXR_SUCCESS) {
-        std::string reason = err ? err : "decode failed";
-        FreeEXRErrorMessage(err);
-        throw file_error(name, 0, "cannot decode EXR: " + reason);
+    // The color channels: R, G, B (A optional), or a single gray channel.
+    int rgba[4] = {-1, -1, -1, -1};
+    for (int c = 0; c < header.num_channels; ++c) {
+        if (header.pixel_types[c] == TINYEXR_PIXELTYPE_HALF) header.requested_pixel_types[c] = TINYEXR_PIXELTYPE_FLOAT;
+        const std::string channel = header.channels[c].name;
+        for (int k = 0; k < 4; ++k)
+            if (channel == std::string(1, "RGBA"[k])) rgba[k] = c;
     }
-    std::unique_ptr<float, void (*)(void*)> owned(rgba, &std::free);
-    check_dimensions(width, height, name);
+    if (header.num_channels == 1) rgba[0] = rgba[1] = rgba[2] = 0;
+    if (rgba[0] < 0 || rgba[1] < 0 || rgba[2] < 0)
+        throw file_error(name, 0, "cannot decode EXR: no R, G and B channels");
 
+    ExrImageOwner image_owner;
+    EXRImage& image = image_owner.image;
+    if (LoadEXRImageFromMemory(&image, &header, data, size, &err) != TINYEXR_SUCCESS)
+        throw exr_error(name, err, "decode failed");
+    image_owner.loaded = true;
+    if (image.width != w || image.height != h)
+        throw file_error(name, 0, "cannot decode EXR: decoded size differs from the data window");
+
+    const int channels = rgba[3] >= 0 ? 4 : 3;
     Texture tex;
     tex.name = name;
-    tex.width = width;
-    tex.height = height;
+    tex.width = int(w);
+    tex.height = int(h);
+    tex.channels = channels;
     tex.encoding = TextureEncoding::LinearFloat;
-    const size_t texels = size_t(width) * size_t(height);
-    bool opaque = true;
-    for (size_t i = 0; i < texels && opaque; ++i) opaque = rgba[4 * i + 3] == 1.0f;
-    // Drop an all-opaque alpha channel: environment maps are large.
-    tex.channels = opaque ? 3 : 4;
-    if (opaque) {
-        tex.texels_f.resize(texels * 3);
-        for (size_t i = 0; i < texels; ++i) std::memcpy(&tex.texels_f[3 * i], &rgba[4 * i], 3 * sizeof(float));
+    budgeted_resize(tex.texels_f, size_t(w) * size_t(h) * size_t(channels), "texture '" + name + "'");
+    auto copy_texel = [&](unsigned char** source, size_t from, size_t to) {
+        for (int k = 0; k < channels; ++k)
+            tex.texels_f[to * size_t(channels) + size_t(k)] =
+                exr_value(source[rgba[k]], header.requested_pixel_types[rgba[k]], from);
+    };
+    if (header.tiled) {
+        // Tiles hold tile_size_x * tile_size_y values per channel; edge tiles are clipped.
+        for (int t = 0; t < image.num_tiles; ++t) {
+            const EXRTile& tile = image.tiles[t];
+            for (int j = 0; j < header.tile_size_y; ++j)
+                for (int i = 0; i < header.tile_size_x; ++i) {
+                    const long long x = (long long)tile.offset_x * header.tile_size_x + i;
+                    const long long y = (long long)tile.offset_y * header.tile_size_y + j;
+                    if (x < 0 || y < 0 || x >= w || y >= h) continue;
+                    copy_texel(tile.images, size_t(i) + size_t(j) * size_t(header.tile_size_x),
+                               size_t(y) * size_t(w) + size_t(x));
+                }
+        }
     } else {
-        tex.texels_f.assign(rgba, rgba + texels * 4);
+        for (size_t i = 0; i < size_t(w) * size_t(h); ++i) copy_texel(image.images, i, i);
+    }
+    // Drop an all-opaque alpha channel: environment maps are large.
+    if (channels == 4) {
+        bool opaque = true;
+        for (size_t i = 3; i < tex.texels_f.size() && opaque; i += 4) opaque = tex.texels_f[i] == 1.0f;
+        if (opaque) {
+            for (size_t i = 0; i < size_t(w) * size_t(h); ++i)
+                for (int k = 0; k < 3; ++k) tex.texels_f[3 * i + size_t(k)] = tex.texels_f[4 * i + size_t(k)];
+            tex.texels_f.resize(size_t(w) * size_t(h) * 3);
+            tex.texels_f.shrink_to_fit();
+            tex.channels = 3;
+        }
     }
     return tex;
 }

@@ -1,0 +1,164 @@
+#!/usr/bin/env python3
+"""Writes the generated seeds of the fuzz corpora (python3 stdlib only).
+
+Run from anywhere: python3 tests/fuzz/make_seeds.py
+The other seeds are copies of tests/data fixtures. The fuzz harnesses
+(fuzz/fuzz_*.cpp) put t.ppm, buf.bin, m.obj and m.ply next to the input, so
+the seeds below reference them. texture/seed.jpg was written by
+stb_image_write (stbi_write_jpg, 8x8 gradient, quality 90); JPEG cannot be
+encoded with the standard library, so it is committed as is.
+"""
+import json
+import os
+import struct
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def write(path, data):
+    full = os.path.join(HERE, path)
+    os.makedirs(os.path.dirname(full), exist_ok=True)
+    with open(full, "wb") as f:
+        f.write(data if isinstance(data, bytes) else data.encode())
+
+
+# --- textures: one small image per stb_image format ---------------------------
+W, H = 4, 3
+RGB = b"".join(bytes((x * 60, y * 80, (x + y) * 30)) for y in range(H) for x in range(W))
+
+
+def bmp24():
+    row = (W * 3 + 3) & ~3
+    pixels = b"".join(
+        b"".join(bytes(reversed(RGB[(y * W + x) * 3:(y * W + x) * 3 + 3])) for x in range(W)).ljust(row, b"\0")
+        for y in reversed(range(H)))
+    header = struct.pack("<2sIHHI", b"BM", 54 + len(pixels), 0, 0, 54)
+    info = struct.pack("<IiiHHIIiiII", 40, W, H, 1, 24, 0, len(pixels), 2835, 2835, 0, 0)
+    return header + info + pixels
+
+
+def bmp8_palette():
+    row = (W + 3) & ~3
+    palette = b"".join(bytes((i * 16, i * 8, 255 - i * 16, 0)) for i in range(16))
+    pixels = b"".join(bytes((x + y * W) % 16 for x in range(W)).ljust(row, b"\0") for y in range(H))
+    offset = 54 + len(palette)
+    header = struct.pack("<2sIHHI", b"BM", offset + len(pixels), 0, 0, offset)
+    info = struct.pack("<IiiHHIIiiII", 40, W, H, 1, 8, 0, len(pixels), 2835, 2835, 16, 0)
+    return header + info + palette + pixels
+
+
+def tga_rle():
+    header = struct.pack("<BBBHHBHHHHBB", 0, 0, 10, 0, 0, 0, 0, 0, W, H, 24, 0x20)
+    body = bytes([0x80 | (W - 1), 10, 20, 30]) * H  # one run per row
+    return header + body
+
+
+def hdr_flat():
+    header = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y %d +X %d\n" % (H, W)
+    return header + bytes((128, 64, 32, 129)) * (W * H)
+
+
+write("texture/seed24.bmp", bmp24())
+write("texture/seed8.bmp", bmp8_palette())
+write("texture/seed.pgm", b"P5\n%d %d\n255\n" % (W, H) + bytes(range(0, W * H * 20, 20)))
+write("texture/seed_ascii.ppm", "P3\n2 1\n255\n255 0 0 0 255 0\n")
+write("texture/seed_rle.tga", tga_rle())
+write("texture/seed_flat.hdr", hdr_flat())
+
+# --- MTL: every statement the loader maps, textures that exist (t.ppm) ----------
+write("mtl/all_statements.mtl", """newmtl full
+Ka 0.1 0.1 0.1
+Kd 0.5 0.4 0.3
+Ks 0.9 0.9 0.9
+Ke 1 1 1
+Ns 250
+Ni 1.5
+d 0.5
+Tr 0.5
+illum 5
+map_Kd t.ppm
+map_Ks t.ppm
+map_Ke t.ppm
+map_d t.ppm
+map_bump -bm 0.5 t.ppm
+norm t.ppm
+bump t.ppm
+newmtl glass
+Kd 1 1 1
+illum 7
+Ni 1.33
+newmtl pbr
+Pr 0.5
+Pm 1
+Ps 0.2
+Pc 0.3
+Pcr 0.1
+aniso 0.5
+anisor 0.2
+map_Pr t.ppm
+map_Pm t.ppm
+""")
+
+# --- OBJ: material library and texture next to the input -------------------------
+write("obj/with_mtllib.obj", "mtllib input.obj\nusemtl a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n"
+                             "f 1/1/1 2/1/1 3/1/1\ng group\ns 1\no object\nf -3 -2 -1\nl 1 2\np 1\n")
+
+# --- glTF: external buffer and image that exist in the harness's directory -------
+quad = {
+    "asset": {"version": "2.0"},
+    "buffers": [{"uri": "buf.bin", "byteLength": 60}],
+    "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48},
+                    {"buffer": 0, "byteOffset": 48, "byteLength": 12}],
+    "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3"},
+                  {"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}],
+    "images": [{"uri": "t.ppm"}],
+    "samplers": [{"wrapS": 33071, "wrapT": 33648}],
+    "textures": [{"source": 0, "sampler": 0}],
+    "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "metallicFactor": 0.5},
+                   "normalTexture": {"index": 0}, "emissiveTexture": {"index": 0},
+                   "alphaMode": "MASK",
+                   "extensions": {"KHR_materials_ior": {"ior": 1.4},
+                                  "KHR_materials_transmission": {"transmissionFactor": 0.5}}}],
+    "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0},
+                               {"attributes": {"POSITION": 0}, "mode": 5},
+                               {"attributes": {"POSITION": 0}, "mode": 6}]}],
+    "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}}],
+    "extensions": {"KHR_lights_punctual": {"lights": [{"type": "spot", "spot": {}}]}},
+    "nodes": [{"mesh": 0, "children": [1, 2]},
+              {"camera": 0, "translation": [0, 0, 5], "rotation": [0, 0, 0, 1], "scale": [1, 1, 1]},
+              {"extensions": {"KHR_lights_punctual": {"light": 0}},
+               "matrix": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 3, 0, 1]}],
+    "scenes": [{"nodes": [0]}],
+    "scene": 0,
+}
+write("gltf/external_files.gltf", json.dumps(quad, indent=1))
+
+# GLB: the same quad with the buffer in the BIN chunk.
+glb_json = dict(quad)
+glb_json["buffers"] = [{"byteLength": 60}]
+glb_json.pop("images"), glb_json.pop("textures"), glb_json.pop("samplers")
+glb_json["materials"] = [{"pbrMetallicRoughness": {"baseColorFactor": [1, 0, 0, 1]}}]
+positions = struct.pack("<12f", 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0)
+indices = struct.pack("<6H", 0, 1, 2, 0, 2, 3)
+chunk_json = json.dumps(glb_json, separators=(",", ":")).encode()
+chunk_json += b" " * (-len(chunk_json) % 4)
+chunk_bin = positions + indices
+chunk_bin += b"\0" * (-len(chunk_bin) % 4)
+glb = (struct.pack("<II", len(chunk_json), 0x4E4F534A) + chunk_json +
+       struct.pack("<II", len(chunk_bin), 0x004E4942) + chunk_bin)
+write("glb/quad.glb", struct.pack("<4sII", b"glTF", 2, 12 + len(glb)) + glb)
+
+# --- JSON scenes referencing the harness's files and every section ----------------
+write("json_scene/references.json", json.dumps({
+    "materials": {"red": {"base_color": [0.8, 0.1, 0.1], "roughness": 0.5, "metallic": 0.2,
+                          "base_color_texture": "t.ppm"},
+                  "lamp": {"emission": [1, 1, 1], "emission_strength": 10}},
+    "meshes": [{"file": "m.obj", "material": "red", "transform": {"translate": [0, 0, 1], "scale": 2}},
+               {"file": "m.ply", "transform": {"rotate": {"axis": [0, 1, 0], "degrees": 45}}},
+               {"file": "builtin:cornell"},
+               {"file": "m.obj", "material": "lamp"}],
+    "camera": {"eye": [0, 2, 20], "target": [0, 1, 0], "up": [0, 1, 0], "fov": 35},
+    "lights": [{"type": "point", "position": [0, 8, 0], "intensity": 50}],
+    "environment": {"color": [0.1, 0.2, 0.3], "map": "t.ppm", "strength": 2, "rotation_deg": 30},
+    "render": {"width": 32, "height": 24, "spp": 1, "integrator": "ao", "max_depth": 2, "ao_radius": 0.5},
+}, indent=1))

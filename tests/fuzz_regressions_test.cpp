@@ -1,0 +1,155 @@
+// Inputs found by the fuzzers (fuzz/, scripts/fuzz.sh) that once crashed a
+// loader or let another exception type escape. Each file under
+// tests/data/<area>/regressions/ must now load or throw rf::Error, nothing else.
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <exception>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+#include <vector>
+
+#include "rayforge/core/error.h"
+#include "rayforge/core/memory_budget.h"
+#include "rayforge/io/image_io.h"
+#include "rayforge/io/scene_io.h"
+#include "test_paths.h"
+
+namespace rf {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::vector<std::string> regression_files(const std::string& area) {
+    std::vector<std::string> files;
+    std::error_code ec;
+    for (const auto& entry : fs::directory_iterator(test::data_path(area + "/regressions"), ec))
+        if (entry.is_regular_file() && entry.path().extension() != ".py") files.push_back(entry.path().string());
+    std::sort(files.begin(), files.end());
+    return files;
+}
+
+// The loader the fuzz target for this file used.
+void load_like_the_fuzzer(const std::string& area, const std::string& path) {
+    if (area == "textures") {
+        std::ifstream in(path, std::ios::binary);
+        std::vector<unsigned char> bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+        (void)load_texture_from_memory(bytes.data(), bytes.size(), path);
+    } else {
+        (void)load_scene(path);
+    }
+}
+
+// "" when the file loaded or threw rf::Error; otherwise what escaped.
+std::string other_exception(const std::string& area, const std::string& path) {
+    try {
+        load_like_the_fuzzer(area, path);
+    } catch (const Error&) {
+    } catch (const std::exception& e) {
+        return std::string("std::exception: ") + e.what();
+    } catch (...) {
+        return "unknown exception";
+    }
+    return "";
+}
+
+class FuzzRegressions : public testing::TestWithParam<const char*> {};
+
+TEST_P(FuzzRegressions, LoadOrThrowRfErrorOnly) {
+    const std::string area = GetParam();
+    // The fuzzers run with this budget; some regressions are about it.
+    const size_t previous = set_memory_budget(size_t(256) << 20);
+    for (const std::string& path : regression_files(area)) EXPECT_EQ(other_exception(area, path), "") << path;
+    set_memory_budget(previous);
+}
+
+INSTANTIATE_TEST_SUITE_P(Areas, FuzzRegressions, testing::Values("obj", "ply", "gltf", "json", "textures"));
+
+// Found while writing fuzz_json_scene: a file name longer than NAME_MAX made
+// std::filesystem::is_regular_file throw filesystem_error.
+TEST(FuzzRegressionsJson, OverlongFileNamesAreNotFound) {
+    for (const char* name : {"json/regressions/long_mesh_file_name.json", "json/regressions/long_texture_file_name.json"}) {
+        try {
+            load_json_scene(test::data_path(name));
+            FAIL() << name << " loaded";
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find("not found"), std::string::npos) << e.what();
+        }
+    }
+}
+
+// Found by fuzz_json_scene: a number beyond double's range ("3e308") made
+// nlohmann::json throw out_of_range, which escaped as a non-rf::Error.
+TEST(FuzzRegressionsJson, NumberOverflowIsAnRfError) {
+    for (const char* name : {"json/regressions/number_overflow.json", "json/regressions/number_overflow_fuzzed.json"}) {
+        try {
+            load_json_scene(test::data_path(name));
+            FAIL() << name << " loaded";
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+        }
+    }
+}
+
+// Found by fuzz_exr: tinyexr's PIZ decoder read past the end of the buffer
+// (heap-buffer-overflow under ASan); PIZ files are now refused.
+TEST(FuzzRegressionsTextures, PizExrIsRefused) {
+    const std::string path = test::data_path("textures/regressions/exr_piz_out_of_bounds_read.exr");
+    try {
+        load_texture(path);
+        FAIL() << "loaded";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("PIZ compression is not supported"), std::string::npos) << e.what();
+    }
+}
+
+// Found by fuzz_exr: tinyexr read 9 bytes from a shorter "tiles" attribute.
+TEST(FuzzRegressionsTextures, ShortTilesAttributeIsRefused) {
+    const std::string path = test::data_path("textures/regressions/exr_header_out_of_bounds_read.exr");
+    try {
+        load_texture(path);
+        FAIL() << "loaded";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("malformed 'tiles' or 'compression' attribute"), std::string::npos)
+            << e.what();
+    }
+}
+
+std::string gltf_error(const std::string& name) {
+    try {
+        load_gltf(test::data_path("gltf/regressions/" + name));
+    } catch (const Error& e) {
+        return e.what();
+    }
+    return "";
+}
+
+// Nodes shared by several parents are visited once per path: 40 levels of
+// "two children, the same node" made 2^40 visits (a hang).
+TEST(FuzzRegressionsGltf, SharedNodesCannotMultiplyWithoutBound) {
+    EXPECT_NE(gltf_error("shared_node_explosion.gltf").find("node hierarchy expands to more than"), std::string::npos);
+}
+
+// One recursion level per node: a long chain overflowed the stack.
+TEST(FuzzRegressionsGltf, NodeChainDepthIsLimited) {
+    EXPECT_NE(gltf_error("deep_node_chain.gltf").find("levels deep"), std::string::npos);
+}
+
+// A file that names a FIFO (a texture, a glTF buffer) must fail at once, not
+// wait for a writer: opening a FIFO for reading blocks.
+TEST(FuzzRegressionsFiles, FifoIsNotARegularFile) {
+    const std::string dir = test::temp_dir("fuzz_fifo");
+    const std::string fifo = dir + "/pipe.png";
+    ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+    EXPECT_THROW(load_texture(fifo), Error);
+
+    const std::string gltf = dir + "/pipe.gltf";
+    std::ofstream(gltf) << R"({"asset": {"version": "2.0"}, "buffers": [{"uri": "pipe.png", "byteLength": 4}]})";
+    EXPECT_THROW(load_gltf(gltf), Error);
+}
+
+}  // namespace
+}  // namespace rf
