@@ -18,6 +18,7 @@ packages=(
   libembree-dev                  # optional benchmark peer (Embree 3)
   libzstd-dev                    # compressed geometry pages (later issues)
   clang libclang-rt-14-dev       # libFuzzer targets and sanitizer runtimes (scripts/fuzz.sh)
+  zlib1g-dev                     # tinyexr compiled into the fuzzers needs zlib.h
 )
 
 missing=()
