@@ -9,6 +9,7 @@
 #include <string>
 
 #include "rayforge/core/error.h"
+#include "rayforge/core/memory_budget.h"
 #include "core/parallel.h"
 #include "rayforge/render/render.h"
 #include "render/integrators/ao.h"
@@ -36,6 +37,8 @@ void validate(const RenderOptions& o) {
         throw Error("render: a " + std::to_string(o.width) + "x" + std::to_string(o.height) + " image needs " +
                     std::to_string(bytes >> 20) + " MiB, more than the " +
                     std::to_string(kMaxImageBytes >> 20) + " MiB allowed");
+    checked_array_bytes("render: " + std::to_string(o.width) + "x" + std::to_string(o.height) + " image",
+                        size_t(o.width) * size_t(o.height), sizeof(Vec3f));
     if (!in_range(o.spp, 1, kMaxSpp))
         throw Error("render: spp must be in 1.." + std::to_string(kMaxSpp) + ", got " + std::to_string(o.spp));
     if (o.threads < 0) throw Error("render: threads must be >= 0, got " + std::to_string(o.threads));

@@ -5,6 +5,7 @@
 
 #include "core/parallel.h"
 #include "rayforge/core/error.h"
+#include "rayforge/core/memory_budget.h"
 
 namespace rf {
 
@@ -13,10 +14,10 @@ SceneGeometry SceneGeometry::build(const Scene& scene) {
     const size_t total = scene.triangle_count();
     if (total >= size_t(kInvalidId))
         throw Error("scene has " + std::to_string(total) + " triangles; at most 4294967294 are supported");
-    g.triangles.resize(total);
-    g.triangle_instance.resize(total);
-    g.local_triangle.resize(total);
-    g.material.resize(total);
+    budgeted_resize(g.triangles, total, "scene geometry: triangles");
+    budgeted_resize(g.triangle_instance, total, "scene geometry: triangle instances");
+    budgeted_resize(g.local_triangle, total, "scene geometry: local triangle indices");
+    budgeted_resize(g.material, total, "scene geometry: triangle materials");
     g.normal_matrices.reserve(scene.instances.size());
 
     size_t base = 0;

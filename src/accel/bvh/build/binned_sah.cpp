@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "core/parallel.h"
+#include "rayforge/core/memory_budget.h"
 
 
 namespace rf {
@@ -169,23 +170,23 @@ public:
 
     Bvh build() {
         Bvh bvh;
-        const auto count = static_cast<uint32_t>(triangles_.size());
+        const uint32_t count = checked_index_count("BVH primitive count", triangles_.size());
         if (count == 0) return bvh;
-        refs_.resize(count);
+        budgeted_resize(refs_, count, "BVH build: primitive references");
         const RangeBounds root = make_prim_refs();
 
         // At most 2n - 1 nodes: every leaf holds at least one primitive.
-        scratch_.resize(2 * size_t{count} - 1);
-        subtree_size_.resize(scratch_.size());
+        budgeted_resize(scratch_, 2 * size_t{count} - 1, "BVH build: scratch nodes");
+        budgeted_resize(subtree_size_, scratch_.size(), "BVH build: subtree sizes");
         next_node_.store(1, std::memory_order_relaxed);
         build_node(0, 0, count, root, 0);
 
         const uint32_t node_count = subtree_size_[0];
-        bvh.nodes.resize(node_count);
+        budgeted_resize(bvh.nodes, node_count, "BVH nodes");
         bvh.nodes[0] = scratch_[0];
         copy_descendants(bvh.nodes, 0, 0, 1);
 
-        bvh.prim_indices.resize(count);
+        budgeted_resize(bvh.prim_indices, count, "BVH primitive indices");
         parallel::for_range(0u, count, kGrainSize, [&](uint32_t lo, uint32_t hi) {
             for (uint32_t i = lo; i != hi; ++i) bvh.prim_indices[i] = refs_[i].id;
         });
