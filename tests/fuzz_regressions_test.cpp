@@ -106,6 +106,19 @@ TEST(FuzzRegressionsTextures, PizExrIsRefused) {
     }
 }
 
+// Found by fuzz_texture: a PNG whose IDAT chunk declares about 1 GB in a
+// 70-byte file made stb_image grow its buffer to 2 GB before reading it.
+// Chunk lengths are now checked against the file first.
+TEST(FuzzRegressionsTextures, PngChunkLongerThanTheFileIsRefusedBeforeAllocating) {
+    const std::string path = test::data_path("textures/regressions/png_idat_length_oom.png");
+    try {
+        load_texture(path);
+        FAIL() << "loaded";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("PNG chunk declares"), std::string::npos) << e.what();
+    }
+}
+
 // Found by fuzz_exr: tinyexr read 9 bytes from a shorter "tiles" attribute.
 TEST(FuzzRegressionsTextures, ShortTilesAttributeIsRefused) {
     const std::string path = test::data_path("textures/regressions/exr_header_out_of_bounds_read.exr");

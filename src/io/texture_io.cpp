@@ -203,8 +203,30 @@ Texture decode_exr(const unsigned char* data, size_t size, const std::string& na
     return tex;
 }
 
+// stb_image grows its PNG data buffer to whatever an IDAT chunk's length field
+// says before reading it, so a 100-byte file can make it allocate gigabytes
+// (found by fuzz_texture). Every chunk must fit in the file before stb sees it.
+void check_png_chunks(const unsigned char* data, size_t size, const std::string& name) {
+    static const unsigned char kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    if (size < 8 || std::memcmp(data, kSignature, 8) != 0) return;
+    size_t offset = 8;
+    while (offset + 8 <= size) {
+        const uint64_t length = (uint64_t(data[offset]) << 24) | (uint64_t(data[offset + 1]) << 16) |
+                                (uint64_t(data[offset + 2]) << 8) | uint64_t(data[offset + 3]);
+        const std::string type(reinterpret_cast<const char*>(data + offset + 4), 4);
+        const uint64_t remaining = size - offset - 8;
+        if (length + 4 > remaining)  // data plus CRC
+            throw file_byte_error(name, offset,
+                                  "PNG chunk declares " + std::to_string(length) + " bytes but only " +
+                                      std::to_string(remaining) + " remain in the file");
+        if (type == "IEND") return;
+        offset += 12 + size_t(length);
+    }
+}
+
 Texture decode_stb(const unsigned char* data, size_t size, const std::string& name, TextureEncoding encoding8) {
     if (size > size_t(std::numeric_limits<int>::max())) throw file_error(name, 0, "image file too large");
+    check_png_chunks(data, size, name);
     const int len = int(size);
     int width = 0, height = 0, channels = 0;
     if (!stbi_info_from_memory(data, len, &width, &height, &channels))
