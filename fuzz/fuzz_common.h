@@ -55,6 +55,21 @@ inline void write_scratch_texture() {
 }
 
 // Once per process: the low budget, warnings (std::cerr) silenced.
+// Files a glTF input may reference by URI: buf.bin (a quad's floats and
+// indices) and t.ppm, so buffer and image references can succeed. Once per process.
+inline void write_scratch_gltf_files() {
+    static const bool written = [] {
+        write_scratch_texture();
+        const float quad[] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};
+        const uint16_t indices[] = {0, 1, 2, 0, 2, 3};
+        std::string bin(reinterpret_cast<const char*>(quad), sizeof quad);
+        bin.append(reinterpret_cast<const char*>(indices), sizeof indices);
+        write_scratch("buf.bin", bin);
+        return true;
+    }();
+    (void)written;
+}
+
 inline void init_once() {
     static const bool done = [] {
         set_memory_budget(kFuzzMemoryBudget);
