@@ -19,6 +19,7 @@ packages=(
   libzstd-dev                    # compressed geometry pages (later issues)
   clang libclang-rt-14-dev       # libFuzzer targets and sanitizer runtimes (scripts/fuzz.sh)
   zlib1g-dev                     # tinyexr compiled into the fuzzers needs zlib.h
+  python3-matplotlib             # charts of `rayforge bench --json` (scripts/plot-bench.py)
 )
 
 missing=()

@@ -1,14 +1,20 @@
 // Built-in scenes: every name loads and validates, the Cornell box and the
 // sphere field have the geometry, materials, lights and cameras they promise,
-// and generation is deterministic.
+// the procedural benchmark scenes (sphereflake, terrain, instances) are large,
+// finite, lit and framed by their cameras, and generation is deterministic.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <string>
 
+#include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
+#include "rayforge/scene/camera.h"
+#include "rayforge/scene/scene_geometry.h"
 
 namespace rf {
 namespace {
@@ -126,6 +132,143 @@ TEST(BuiltinScenes, TinyScenes) {
     Box3f cube = make_builtin_scene("cube").bounds();
     expect_vec(cube.lo, {-0.5f, -0.5f, -0.5f});
     expect_vec(cube.hi, {0.5f, 0.5f, 0.5f});
+}
+
+
+// The procedural benchmark scenes, the meshes each one is about (the rest is
+// ground or water; "" = all but the ground), and whether the image centre
+// shows them (between the instances it may show the ground).
+struct BenchmarkScene {
+    const char* name;
+    const char* featured_mesh_prefix;
+    bool centre_is_featured;
+};
+constexpr BenchmarkScene kBenchmarkScenes[] = {
+    {"sphereflake", "flake", true}, {"terrain", "terrain", true}, {"instances", "", false}};
+
+bool is_featured(const Scene& scene, const SceneGeometry& geometry, uint32_t prim, const std::string& prefix) {
+    const std::string& mesh = scene.meshes[scene.instances[geometry.triangle_instance[prim]].mesh].name;
+    if (prefix.empty()) return mesh != "ground";
+    return mesh.rfind(prefix, 0) == 0;
+}
+
+TEST(BuiltinBenchmarkScenes, AreListedAndLoad) {
+    const auto names = builtin_scene_names();
+    for (const BenchmarkScene& b : kBenchmarkScenes) {
+        EXPECT_NE(std::find(names.begin(), names.end(), b.name), names.end()) << b.name;
+        Scene scene = load_scene(std::string("builtin:") + b.name);  // finalize() validates every mesh
+        EXPECT_EQ(scene.source, std::string("builtin:") + b.name);
+        EXPECT_FALSE(scene.lights.empty()) << b.name;
+        ASSERT_TRUE(scene.camera.has_value()) << b.name;
+        for (const Material& m : scene.materials) {
+            EXPECT_EQ(m.metallic, 0.0f) << b.name << " " << m.name;
+            EXPECT_EQ(m.transmission, 0.0f) << b.name << " " << m.name;
+            EXPECT_FALSE(m.is_emissive()) << b.name << " " << m.name;
+        }
+    }
+}
+
+TEST(BuiltinBenchmarkScenes, TriangleCountsAreInTheBenchmarkRange) {
+    for (const BenchmarkScene& b : kBenchmarkScenes) {
+        const size_t count = make_builtin_scene(b.name).triangle_count();
+        EXPECT_GE(count, 100000u) << b.name;
+        EXPECT_LE(count, 400000u) << b.name;
+    }
+    // 1 + 9 + 81 + 729 + 6561 spheres of slices * (2 * stacks - 2) triangles, and the ground.
+    EXPECT_EQ(make_builtin_scene("sphereflake").triangle_count(),
+              64u * 62u + 9u * 32u * 30u + 81u * 16u * 14u + 729u * 12u * 10u + 6561u * 6u * 4u + 2u);
+    // 384 x 384 cells and the water plane.
+    EXPECT_EQ(make_builtin_scene("terrain").triangle_count(), 2u * 384u * 384u + 2u);
+    Scene instances = make_builtin_scene("instances");
+    EXPECT_EQ(instances.instances.size(), 401u);  // 400 objects and the ground
+    EXPECT_LT(instances.meshes.size(), 16u);      // few meshes, many instances
+}
+
+TEST(BuiltinBenchmarkScenes, GenerationIsDeterministic) {
+    for (const BenchmarkScene& b : kBenchmarkScenes) {
+        const SceneGeometry first = SceneGeometry::build(make_builtin_scene(b.name));
+        const SceneGeometry second = SceneGeometry::build(make_builtin_scene(b.name));
+        ASSERT_EQ(first.size(), second.size()) << b.name;
+        EXPECT_EQ(std::memcmp(first.triangles.data(), second.triangles.data(), first.size() * sizeof(Triangle)), 0)
+            << b.name;
+        EXPECT_EQ(first.material, second.material) << b.name;
+        EXPECT_EQ(first.triangle_instance, second.triangle_instance) << b.name;
+    }
+}
+
+TEST(BuiltinBenchmarkScenes, GeometryIsFiniteAndRestsOnTheGround) {
+    for (const BenchmarkScene& b : kBenchmarkScenes) {
+        const Scene scene = make_builtin_scene(b.name);
+        for (const Mesh& mesh : scene.meshes) {
+            ASSERT_EQ(mesh.normals.size(), mesh.positions.size()) << b.name << " " << mesh.name;
+            for (size_t i = 0; i < mesh.positions.size(); ++i) {
+                ASSERT_TRUE(is_finite(mesh.positions[i])) << b.name << " " << mesh.name << " vertex " << i;
+                ASSERT_NEAR(length(mesh.normals[i]), 1.0f, 1e-3f) << b.name << " " << mesh.name << " normal " << i;
+            }
+        }
+        // Nothing below the ground plane y = 0 (the terrain's lowest point is 0 by construction).
+        const SceneGeometry geometry = SceneGeometry::build(scene);
+        EXPECT_GT(geometry.bounds.lo.y, -1e-4f) << b.name;
+        EXPECT_LT(geometry.bounds.lo.y, 1e-4f) << b.name;
+        EXPECT_GT(geometry.bounds.hi.y, 2.0f) << b.name;
+    }
+}
+
+TEST(BuiltinBenchmarkScenes, TerrainNormalsPointUpAndMatchTheSurface) {
+    const Scene scene = make_builtin_scene("terrain");
+    const Mesh& terrain = scene.meshes[scene.instances[0].mesh];
+    ASSERT_EQ(terrain.name, "terrain");
+    for (const Vec3f& n : terrain.normals) ASSERT_GT(n.y, 0.0f);
+    // Vertex normals come from central differences of the heights: on average
+    // they agree closely with the faces around them.
+    double agreement = 0.0;
+    for (size_t t = 0; t < terrain.triangle_count(); ++t) {
+        const uint32_t a = terrain.indices[3 * t], b = terrain.indices[3 * t + 1], c = terrain.indices[3 * t + 2];
+        const Vec3f face = normalize(cross(terrain.positions[b] - terrain.positions[a],
+                                           terrain.positions[c] - terrain.positions[a]));
+        ASSERT_GT(face.y, 0.0f) << "triangle " << t;
+        agreement += dot(face, normalize(terrain.normals[a] + terrain.normals[b] + terrain.normals[c]));
+    }
+    EXPECT_GT(agreement / double(terrain.triangle_count()), 0.95);
+}
+
+TEST(BuiltinBenchmarkScenes, CameraSeesTheFeaturedGeometry) {
+    constexpr int kWidth = 64, kHeight = 48;
+    for (const BenchmarkScene& b : kBenchmarkScenes) {
+        const Scene scene = make_builtin_scene(b.name);
+        const SceneGeometry geometry = SceneGeometry::build(scene);
+        BuildOptions options;
+        options.threads = 1;
+        const auto accel = build_accel(geometry, options);
+        const CameraFrame frame = CameraFrame::make(*scene.camera, kWidth, kHeight);
+
+        const Hit centre = accel->intersect(frame.generate(0.5f * kWidth, 0.5f * kHeight, kWidth, kHeight));
+        ASSERT_TRUE(centre.found()) << b.name;
+        if (b.centre_is_featured) EXPECT_TRUE(is_featured(scene, geometry, centre.prim, b.featured_mesh_prefix)) << b.name;
+
+        // Most of the image shows the scene, and a good part of it the featured geometry.
+        int hits = 0, featured = 0;
+        for (int y = 0; y < kHeight; ++y) {
+            for (int x = 0; x < kWidth; ++x) {
+                const Hit hit = accel->intersect(frame.generate(float(x) + 0.5f, float(y) + 0.5f, kWidth, kHeight));
+                if (!hit.found()) continue;
+                ++hits;
+                featured += is_featured(scene, geometry, hit.prim, b.featured_mesh_prefix) ? 1 : 0;
+            }
+        }
+        EXPECT_GT(hits, kWidth * kHeight / 2) << b.name;
+        EXPECT_GT(featured, kWidth * kHeight / 5) << b.name;
+    }
+}
+
+TEST(BuiltinBenchmarkScenes, GenerationIsFast) {
+    for (const BenchmarkScene& b : kBenchmarkScenes) {
+        const auto start = std::chrono::steady_clock::now();
+        Scene scene = make_builtin_scene(b.name);
+        const double ms =
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        EXPECT_LT(ms, 1000.0) << b.name;  // tens of ms in a release build; generous for debug and sanitizer builds
+    }
 }
 
 }  // namespace

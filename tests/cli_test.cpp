@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "rayforge/io/image_io.h"
 #include "test_paths.h"
 
@@ -59,7 +61,7 @@ void expect_one_error_line(const CliResult& r) {
 }
 
 TEST(Cli, HelpForEveryVerbAndVersion) {
-    for (const char* args : {"--help", "info --help", "render --help"}) {
+    for (const char* args : {"--help", "info --help", "render --help", "bench --help"}) {
         CliResult r = run_cli(args);
         EXPECT_EQ(r.exit_code, 0) << args << ": " << r.err;
         EXPECT_NE(r.out.find("Usage"), std::string::npos) << args << ": " << r.out;
@@ -125,6 +127,49 @@ TEST(Cli, UsageErrorsExitTwo) {
         CliResult r = run_cli(args);
         EXPECT_EQ(r.exit_code, 2) << "'" << args << "': " << r.err;
     }
+}
+
+TEST(Cli, BenchRunsTheProtocolAndWritesJson) {
+    const std::string dir = test::temp_dir("cli_bench");
+    const std::string json = dir + "/out.json";
+    CliResult r = run_cli("bench --scene builtin:cube --res 32x24 --reps 1 --build-reps 1 --threads 2 -q --json '" +
+                          json + "'");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.out.find("bvh/binned/bvh2"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("reflection"), std::string::npos) << r.out;
+    std::ifstream in(json);
+    const nlohmann::json root = nlohmann::json::parse(in);
+    EXPECT_EQ(root["tool"], "rayforge bench");
+    EXPECT_NE(root["command"].get<std::string>().find("--scene builtin:cube"), std::string::npos);
+    ASSERT_EQ(root["records"].size(), 5u);
+    for (const auto& rec : root["records"]) {
+        EXPECT_EQ(rec["scene"], "builtin:cube");
+        EXPECT_EQ(rec["builder"], "binned");
+        EXPECT_GT(rec["rays"].get<size_t>(), 0u);
+        EXPECT_GT(rec["mrays_per_s"].get<double>(), 0.0);
+        EXPECT_TRUE(rec.contains("sah_cost") && rec.contains("quality_cost") && rec.contains("nodes_per_ray"));
+    }
+}
+
+TEST(Cli, BenchListsAndExplainsWhatIsMissing) {
+    CliResult list = run_cli("bench --list");
+    ASSERT_EQ(list.exit_code, 0) << list.err;
+    EXPECT_NE(list.out.find("seed002"), std::string::npos);
+    EXPECT_NE(list.out.find("not implemented yet"), std::string::npos);
+    CliResult preset = run_cli("bench --preset seed001 --scene builtin:cube --reps 1 --build-reps 1 -q --res 16x16");
+    ASSERT_EQ(preset.exit_code, 0) << preset.err;
+    EXPECT_NE(preset.out.find("not implemented yet (skipped): grid/uniform-32/grid"), std::string::npos)
+        << preset.out;
+    EXPECT_NE(preset.out.find("PSR"), std::string::npos) << preset.out;
+}
+
+TEST(Cli, BenchErrorsAreOneLine) {
+    expect_one_error_line(run_cli("bench --scene builtin:cube --builder binnned"));
+    expect_one_error_line(run_cli("bench --scene builtin:cube --rays primaries"));
+    expect_one_error_line(run_cli("bench --scene builtin:cube --res 0x10"));
+    expect_one_error_line(run_cli("bench --scene /no/such/scene.obj"));
+    expect_one_error_line(run_cli("bench --preset seed999"));
+    expect_one_error_line(run_cli("bench --scene builtin:cube --structure grid"));
 }
 
 }  // namespace

@@ -46,4 +46,26 @@ struct RenderArgs {
 CLI::App* add_render_command(CLI::App& app, RenderArgs& args);
 int run_render(const RenderArgs& args);
 
+struct BenchArgs {
+    std::vector<std::string> scenes;       // comma lists allowed in every list option
+    std::string scenes_dir;
+    std::vector<std::string> views;
+    std::vector<std::string> resolutions;
+    std::vector<std::string> ray_sets;
+    std::vector<std::string> structures;
+    std::vector<std::string> builders;
+    std::vector<std::string> layouts;
+    std::vector<std::string> embree;
+    std::string preset;
+    int threads = 0;
+    int repetitions = 5;
+    int build_repetitions = 3;
+    bool no_counts = false;
+    std::string json;
+    bool list = false;
+    bool quiet = false;
+};
+CLI::App* add_bench_command(CLI::App& app, BenchArgs& args);
+int run_bench(const BenchArgs& args, const std::string& command_line);
+
 }  // namespace rf::cli

@@ -73,6 +73,8 @@ void Accel::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
     });
 }
 
+bool Accel::count_traversal(std::span<const Ray>, bool, TraversalTotals&) const { return false; }
+
 void Accel::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const {
     if (rays.size() != occluded.size()) {
         throw Error("Accel::occluded: " + std::to_string(rays.size()) + " rays but " +

@@ -1,5 +1,7 @@
 #include "accel/brute_force.h"
 
+#include <limits>
+
 #include "trace/triangle_intersect.h"
 
 namespace rf {
@@ -31,6 +33,8 @@ bool BruteForceAccel::occluded(const Ray& ray) const {
 AccelStats BruteForceAccel::stats() const {
     AccelStats s;
     s.name = "brute";
+    s.sah_cost = std::numeric_limits<double>::quiet_NaN();
+    s.quality_cost = std::numeric_limits<double>::quiet_NaN();
     return s;
 }
 

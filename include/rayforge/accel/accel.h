@@ -28,11 +28,22 @@ struct BuildOptions {
 
 struct AccelStats {
     std::string name;            // e.g. "bvh/binned"
-    double build_ms = 0.0;
+    double build_ms = 0.0;       // triangles in memory -> traversable, layout conversion included
+    double layout_ms = 0.0;      // the layout conversion alone (0 when traced in the built form)
     size_t node_count = 0;
     size_t leaf_count = 0;
     size_t bytes = 0;            // structure memory, excluding the triangles
+    // Tree quality; NaN where the metric does not apply (e.g. brute force).
     double sah_cost = 0.0;       // C_trav = C_int = 1, normalised by root area
+    double quality_cost = 0.0;   // Garanzha's formula 4.2, C(root) with nc = 2 (quality = 1 / C)
+};
+
+// Work done by traversals, summed over rays (the instrumented pass of the bench).
+struct TraversalTotals {
+    uint64_t rays = 0;
+    uint64_t steps = 0;        // node visits (box tests) in trees, cells visited in grids
+    uint64_t prim_tests = 0;   // ray-triangle tests
+    uint64_t restarts = 0;     // kd-tree restarts (0 elsewhere)
 };
 
 class Accel {
@@ -46,6 +57,9 @@ public:
     virtual void intersect(std::span<const Ray> rays, std::span<Hit> hits) const;
     virtual void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const;
     [[nodiscard]] virtual AccelStats stats() const = 0;
+    // Instrumented traversal of every ray (closest hit, or any hit), adding
+    // its work to `totals`; false when the structure keeps no counters.
+    virtual bool count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const;
 };
 
 // Builds the structure named in `options` over `geometry`, which must outlive

@@ -3,6 +3,8 @@
 #include <chrono>
 
 #include "accel/bvh/build/binned_sah.h"
+#include "core/parallel.h"
+#include "rayforge/core/error.h"
 
 namespace rf {
 
@@ -22,7 +24,66 @@ AccelStats BvhAccel::stats() const {
     s.leaf_count = bvh_.leaf_count();
     s.bytes = bvh_.memory_bytes();
     s.sah_cost = bvh_.sah_cost(1.0f, 1.0f);
+    s.quality_cost = bvh_.quality_cost(2.0);
     return s;
+}
+
+namespace {
+
+constexpr size_t kRayGrainSize = 256;
+
+void check_sizes(const char* what, size_t rays, size_t results) {
+    if (rays != results) {
+        throw Error(std::string(what) + ": " + std::to_string(rays) + " rays but " + std::to_string(results) +
+                    " result slots");
+    }
+}
+
+}  // namespace
+
+void BvhAccel::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
+    check_sizes("BvhAccel::intersect", rays.size(), hits.size());
+    const BvhView bvh = view();
+    parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i != hi; ++i) hits[i] = bvh_intersect(bvh, rays[i]);
+    });
+}
+
+void BvhAccel::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const {
+    check_sizes("BvhAccel::occluded", rays.size(), occluded.size());
+    const BvhView bvh = view();
+    parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i != hi; ++i) occluded[i] = bvh_occluded(bvh, rays[i]) ? 1 : 0;
+    });
+}
+
+bool BvhAccel::count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const {
+    const BvhView bvh = view();
+    const TraversalTotals sum = parallel::reduce(
+        size_t(0), rays.size(), kRayGrainSize, TraversalTotals{},
+        [&](size_t lo, size_t hi, TraversalTotals acc) {
+            for (size_t i = lo; i != hi; ++i) {
+                TraversalCounters counters;
+                if (any_hit) (void)bvh_occluded_counted(bvh, rays[i], counters);
+                else (void)bvh_intersect_counted(bvh, rays[i], counters);
+                acc.steps += counters.nodes_visited;
+                acc.prim_tests += counters.prims_tested;
+            }
+            acc.rays += hi - lo;
+            return acc;
+        },
+        [](TraversalTotals a, const TraversalTotals& b) {
+            a.rays += b.rays;
+            a.steps += b.steps;
+            a.prim_tests += b.prim_tests;
+            a.restarts += b.restarts;
+            return a;
+        });
+    totals.rays += sum.rays;
+    totals.steps += sum.steps;
+    totals.prim_tests += sum.prim_tests;
+    totals.restarts += sum.restarts;
+    return true;
 }
 
 }  // namespace rf

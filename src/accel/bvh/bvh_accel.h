@@ -15,9 +15,11 @@ public:
 
     [[nodiscard]] Hit intersect(const Ray& ray) const override { return bvh_intersect(view(), ray); }
     [[nodiscard]] bool occluded(const Ray& ray) const override { return bvh_occluded(view(), ray); }
-    using Accel::intersect;
-    using Accel::occluded;
+    // Batches call the traversal directly (no virtual call per ray).
+    void intersect(std::span<const Ray> rays, std::span<Hit> hits) const override;
+    void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const override;
     [[nodiscard]] AccelStats stats() const override;
+    bool count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const override;
 
     [[nodiscard]] const Bvh& bvh() const { return bvh_; }
     [[nodiscard]] BvhView view() const {

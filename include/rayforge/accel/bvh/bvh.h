@@ -34,6 +34,10 @@ struct Bvh {
     // SAH cost with C_trav = C_int = 1, normalised by the root's area
     // (sum over inner nodes of A/A_root + sum over leaves of A/A_root * count).
     [[nodiscard]] double sah_cost(float traversal_cost = 1.0f, float intersection_cost = 1.0f) const;
+    // Garanzha's recursive tree-quality cost (dissertation, formula 4.2):
+    // leaf C = primitive count; inner C = nc + sum over children of
+    // C(child) * area(child) / area(node). Tree quality is 1 / C(root).
+    [[nodiscard]] double quality_cost(double node_cost = 2.0) const;
 };
 
 }  // namespace rf

@@ -1,0 +1,219 @@
+// `rayforge bench`: every performance figure of the project comes from here
+// (protocol: ../shared/docs/BENCHMARK-PROTOCOL.md, harness: bench/harness/).
+// Tables on stdout, progress on stderr, records in --json FILE.
+#include <iostream>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "bench_report.h"
+#include "bench_runner.h"
+#include "commands.h"
+#include "presets.h"
+#include "rayforge/core/error.h"
+
+namespace rf::cli {
+namespace {
+
+std::vector<std::string> split_list(const std::vector<std::string>& items) {
+    std::vector<std::string> out;
+    for (const std::string& item : items) {
+        std::stringstream ss(item);
+        std::string part;
+        while (std::getline(ss, part, ','))
+            if (!part.empty()) out.push_back(part);
+    }
+    return out;
+}
+
+bench::Resolution parse_resolution_or_throw(const std::string& text) {
+    const size_t x = text.find_first_of("xX");
+    try {
+        size_t used_w = 0, used_h = 0;
+        if (x == std::string::npos) throw Error("");
+        const std::string w = text.substr(0, x), h = text.substr(x + 1);
+        bench::Resolution r{std::stoi(w, &used_w), std::stoi(h, &used_h)};
+        if (used_w != w.size() || used_h != h.size() || r.width <= 0 || r.height <= 0 || r.width > 16384 ||
+            r.height > 16384)
+            throw Error("");
+        return r;
+    } catch (const std::exception&) {
+        throw Error("--res: expected WxH with sides in [1, 16384], got '" + text + "'");
+    }
+}
+
+std::vector<bench::RaySetKind> parse_ray_sets(const std::vector<std::string>& names) {
+    std::vector<bench::RaySetKind> kinds;
+    for (const std::string& name : names) {
+        if (name == "all") return {std::begin(bench::kAllRaySets), std::end(bench::kAllRaySets)};
+        const auto kind = bench::parse_ray_set(name);
+        if (!kind) throw Error("--rays: unknown ray set '" + name + "' (primary, shadow, ao, diffuse, reflection, all)");
+        kinds.push_back(*kind);
+    }
+    return kinds;
+}
+
+std::vector<bench::EmbreeQuality> parse_embree(const std::vector<std::string>& names) {
+    std::vector<bench::EmbreeQuality> qualities;
+    for (const std::string& name : names) {
+        if (name == "none") return {};
+        if (name == "all") return {std::begin(bench::kAllEmbreeQualities), std::end(bench::kAllEmbreeQualities)};
+        bool found = false;
+        for (bench::EmbreeQuality q : bench::kAllEmbreeQualities) {
+            if (name != bench::embree_quality_name(q)) continue;
+            qualities.push_back(q);
+            found = true;
+        }
+        if (!found) throw Error("--embree: unknown quality '" + name + "' (low, medium, high, all, none)");
+    }
+    return qualities;
+}
+
+void print_list(const std::string& scenes_dir) {
+    std::cout << "scenes (views.json in " << (scenes_dir.empty() ? "<not found>" : scenes_dir) << "):\n";
+    for (const std::string& name : bench::views_json_scene_names(scenes_dir)) std::cout << "  " << name << '\n';
+    std::cout << "  builtin:sphereflake, builtin:terrain, builtin:instances, ... (rayforge info --help), or any "
+                 "scene file\n\nstructure/builder/layout:\n";
+    for (const bench::Candidate& c : bench::candidate_catalogue())
+        std::cout << "  " << c.label() << (c.implemented ? "" : "  [not implemented yet]")
+                  << (c.in_all ? "" : "  [only when named]") << "  (" << c.source << ")\n";
+    std::cout << "\npresets:\n";
+    for (const bench::Preset& p : bench::presets()) std::cout << "  " << p.name << ": " << p.description << '\n';
+    std::cout << "\nembree peer: "
+              << (bench::embree_available() ? "Embree " + bench::embree_version() : std::string("not built in"))
+              << '\n';
+}
+
+}  // namespace
+
+CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
+    CLI::App* cmd = app.add_subcommand(
+        "bench", "Benchmark structures and builders on the standard ray sets, with Embree side by side");
+    cmd->add_option("--scene", a.scenes,
+                    "Scenes: views.json names (e.g. sponza), files, builtin:NAME, or all; comma-separated or "
+                    "repeated (default: sponza,conference,bunny, or three builtin scenes without ../shared)");
+    cmd->add_option("--scenes-dir", a.scenes_dir,
+                    "Folder with views.json (default: $RAYFORGE_SCENES_DIR, else shared/scenes found upwards)");
+    cmd->add_option("--view", a.views, "View indices of views.json, comma-separated, or all (default all)");
+    cmd->add_option("--res", a.resolutions, "Image sizes WxH, comma-separated (default 1024x768)");
+    cmd->add_option("--rays", a.ray_sets, "Ray sets: primary, shadow, ao, diffuse, reflection, all (default all)");
+    cmd->add_option("--structure", a.structures, "Structures, or all (default bvh; brute only when named)");
+    cmd->add_option("--builder", a.builders, "Builders, or all (default all)");
+    cmd->add_option("--layout", a.layouts, "Layouts, or all (default all)");
+    cmd->add_option("--embree", a.embree, "Embree peer build qualities: low, medium, high, all, none (default all)");
+    cmd->add_option("--preset", a.preset, "seed001 | seed002 | seed000: reproduce a seed's tables (see --list)");
+    cmd->add_option("--threads", a.threads, "Threads for builds and traces (0 = all cores)")
+        ->check(CLI::NonNegativeNumber);
+    cmd->add_option("--reps", a.repetitions, "Timed traces per ray set, after one warm-up (default 5)")
+        ->check(CLI::Range(1, 1000));
+    cmd->add_option("--build-reps", a.build_repetitions, "Builds per structure (default 3)")
+        ->check(CLI::Range(1, 1000));
+    cmd->add_flag("--no-counts", a.no_counts, "Skip the instrumented pass (node visits and tests per ray)");
+    cmd->add_option("--json", a.json, "Write one JSON record per (scene, structure, builder, layout, ray set)");
+    cmd->add_flag("--list", a.list, "List scenes, structures, presets and the Embree peer, then exit");
+    cmd->add_flag("-q,--quiet", a.quiet, "No progress lines on stderr");
+    return cmd;
+}
+
+int run_bench(const BenchArgs& a, const std::string& command_line) {
+    bench::BenchConfig config;
+    config.scenes_dir = bench::find_scenes_dir(a.scenes_dir);
+    if (a.list) {
+        print_list(config.scenes_dir);
+        return 0;
+    }
+    bench::RunInfo info;
+    info.command = command_line;
+    std::vector<bench::Candidate> unimplemented;
+
+    std::vector<std::string> scenes = split_list(a.scenes);
+    const bench::Preset* preset = nullptr;
+    if (!a.preset.empty()) {
+        preset = &bench::find_preset(a.preset);
+        info.preset = preset->name;
+        info.notes = preset->notes;
+        config.candidates = bench::candidates_by_label(preset->candidates, &unimplemented);
+        config.resolutions = preset->resolutions;
+        config.ray_sets = preset->ray_sets;
+        if (scenes.empty()) {
+            scenes = config.scenes_dir.empty() ? preset->fallback_scenes : preset->scenes;
+            config.skip_unloadable = true;  // e.g. BART .aff scenes until their loader exists
+        }
+    } else {
+        config.candidates = bench::select_candidates(
+            a.structures.empty() ? std::vector<std::string>{"bvh"} : split_list(a.structures),
+            a.builders.empty() ? std::vector<std::string>{"all"} : split_list(a.builders),
+            a.layouts.empty() ? std::vector<std::string>{"all"} : split_list(a.layouts), &unimplemented);
+    }
+    if (scenes.empty()) scenes = bench::default_scene_names(config.scenes_dir);
+    if (scenes.size() == 1 && scenes.front() == "all") {
+        scenes = bench::views_json_scene_names(config.scenes_dir);
+        if (scenes.empty()) throw Error("--scene all: no views.json found (give --scenes-dir)");
+        config.skip_unloadable = true;
+    }
+    config.scenes = scenes;
+    for (const bench::Candidate& c : unimplemented) info.unimplemented.push_back(c.label());
+    if (!a.resolutions.empty()) {
+        config.resolutions.clear();
+        for (const std::string& r : split_list(a.resolutions)) config.resolutions.push_back(parse_resolution_or_throw(r));
+    }
+    if (!a.ray_sets.empty()) config.ray_sets = parse_ray_sets(split_list(a.ray_sets));
+    for (const std::string& v : split_list(a.views)) {
+        if (v == "all") {
+            config.views.clear();
+            break;
+        }
+        try {
+            size_t used = 0;
+            const int index = std::stoi(v, &used);
+            if (used != v.size() || index < 0) throw Error("");
+            config.views.push_back(index);
+        } catch (const std::exception&) {
+            throw Error("--view: expected view indices or all, got '" + v + "'");
+        }
+    }
+    const std::vector<std::string> embree_names = a.embree.empty() ? std::vector<std::string>{"all"} : split_list(a.embree);
+    config.embree = parse_embree(embree_names);
+    if (!config.embree.empty() && !bench::embree_available()) {
+        if (!a.embree.empty()) throw Error("--embree: this rayforge was built without Embree (Debian: libembree-dev)");
+        std::cerr << "rayforge: note: built without Embree; no peer columns (Debian: apt-get install libembree-dev)\n";
+        config.embree.clear();
+    }
+    config.threads = a.threads;
+    config.repetitions = a.repetitions;
+    config.build_repetitions = a.build_repetitions;
+    config.count_traversal = !a.no_counts;
+    config.progress = !a.quiet;
+    info.threads = a.threads;
+    info.repetitions = a.repetitions;
+    info.build_repetitions = a.build_repetitions;
+
+    if (preset) std::cout << "preset " << preset->name << ": " << preset->description << '\n';
+    for (const std::string& note : info.notes) std::cout << "note: " << note << '\n';
+    if (!info.unimplemented.empty()) {
+        std::cout << "not implemented yet (skipped):";
+        for (const std::string& label : info.unimplemented) std::cout << ' ' << label;
+        std::cout << '\n';
+    }
+    if (config.candidates.empty()) throw Error("nothing to run: none of the selected structures is implemented yet");
+    if (a.repetitions < 5)
+        std::cerr << "rayforge: note: --reps " << a.repetitions << " is below the protocol's 5 timed runs\n";
+    if (a.build_repetitions < 3)
+        std::cerr << "rayforge: note: --build-reps " << a.build_repetitions << " is below the protocol's 3 builds\n";
+
+    const std::vector<bench::BenchRecord> records =
+        bench::run_bench(config, std::cerr, [&](const std::vector<bench::BenchRecord>& scene_records) {
+            bench::print_scene_tables(std::cout, scene_records, a.threads > 0 ? a.threads : bench::machine_info().cores,
+                                      a.repetitions, a.build_repetitions);
+        });
+    if (preset && preset->configuration_table) bench::print_configuration_table(std::cout, records);
+    if (!a.json.empty()) {
+        bench::write_json(a.json, records, info);
+        std::cout << "\nwrote " << records.size() << " records to " << a.json << '\n';
+    }
+    if (records.empty()) throw Error("no scene could be benchmarked");
+    return 0;
+}
+
+}  // namespace rf::cli

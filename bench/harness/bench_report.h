@@ -1,0 +1,43 @@
+// Output of the bench: the stdout tables and the --json file (one record
+// per (scene, view, resolution, structure, builder, layout, ray set)).
+#pragma once
+
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+#include "bench_runner.h"
+
+namespace rf::bench {
+
+struct MachineInfo {
+    std::string cpu;     // /proc/cpuinfo model name
+    int cores = 0;       // hardware threads
+    std::string gpu;     // "" when none is known
+};
+MachineInfo machine_info();
+
+// The tables of one scene's records: builds (ours and Embree's), then one
+// row per (ray set, candidate) with Embree columns, ratios, agreement and
+// per-ray traversal counts.
+void print_scene_tables(std::ostream& out, const std::vector<BenchRecord>& records, int threads, int repetitions,
+                        int build_repetitions);
+
+// Seeds 001/002 configurations: per (scene, resolution, candidate) the summed
+// trace time of P (primary), PS (+ shadow) and PSR (+ reflection).
+void print_configuration_table(std::ostream& out, const std::vector<BenchRecord>& records);
+
+struct RunInfo {
+    std::string command;   // the full command line
+    std::string preset;    // "" for none
+    int threads = 0;
+    int repetitions = 0;
+    int build_repetitions = 0;
+    std::vector<std::string> unimplemented;  // candidate labels asked for but not implemented
+    std::vector<std::string> notes;
+};
+
+// Writes the JSON file; throws rf::Error when it cannot be written.
+void write_json(const std::string& path, const std::vector<BenchRecord>& records, const RunInfo& info);
+
+}  // namespace rf::bench

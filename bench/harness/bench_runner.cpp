@@ -1,0 +1,235 @@
+#include "bench_runner.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <ostream>
+
+#include "core/parallel.h"
+#include "rayforge/core/error.h"
+
+namespace rf::bench {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double ms_since(Clock::time_point start) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+// One warm-up run, then `repetitions` timed runs of `trace`.
+template <class F>
+std::vector<double> timed_runs(int repetitions, F&& trace) {
+    trace();
+    std::vector<double> runs;
+    for (int r = 0; r < repetitions; ++r) {
+        const auto start = Clock::now();
+        trace();
+        runs.push_back(ms_since(start));
+    }
+    return runs;
+}
+
+// The results of one tracer on one ray set: hits for closest-hit sets,
+// occlusion flags for any-hit sets.
+struct TraceResult {
+    std::vector<Hit> hits;
+    std::vector<uint8_t> occluded;
+};
+
+void agreement_any_hit(const std::vector<uint8_t>& ours, const std::vector<uint8_t>& peer, double& agreement) {
+    size_t same = 0;
+    for (size_t i = 0; i < ours.size(); ++i) same += (ours[i] != 0) == (peer[i] != 0) ? 1 : 0;
+    agreement = ours.empty() ? 1.0 : double(same) / double(ours.size());
+}
+
+struct BuiltCandidate {
+    Candidate candidate;
+    std::unique_ptr<Accel> accel;
+    std::vector<double> build_runs;
+};
+
+struct BuiltPeer {
+    EmbreeQuality quality;
+    std::unique_ptr<EmbreePeer> peer;
+    std::vector<double> build_runs;
+};
+
+}  // namespace
+
+double median(std::vector<double> values) {
+    if (values.empty()) return 0.0;
+    std::sort(values.begin(), values.end());
+    const size_t n = values.size();
+    return n % 2 ? values[n / 2] : 0.5 * (values[n / 2 - 1] + values[n / 2]);
+}
+
+void compare_hits(const std::vector<Hit>& ours, const std::vector<Hit>& peer, double& agreement,
+                  double& max_rel_t_diff) {
+    size_t same = 0;
+    double worst = 0.0;
+    for (size_t i = 0; i < ours.size(); ++i) {
+        const Hit& a = ours[i];
+        const Hit& b = peer[i];
+        if (a.found() != b.found()) continue;
+        if (!a.found()) {
+            ++same;
+            continue;
+        }
+        same += a.prim == b.prim ? 1 : 0;
+        const double scale = std::max(std::fabs(double(a.t)), std::fabs(double(b.t)));
+        if (scale > 0.0) worst = std::max(worst, std::fabs(double(a.t) - double(b.t)) / scale);
+    }
+    agreement = ours.empty() ? 1.0 : double(same) / double(ours.size());
+    max_rel_t_diff = worst;
+}
+
+std::vector<BenchRecord> run_bench(const BenchConfig& config, std::ostream& log,
+                                   const std::function<void(const std::vector<BenchRecord>&)>& on_scene) {
+    if (config.repetitions < 1 || config.build_repetitions < 1)
+        throw Error("bench: repetitions must be at least 1");
+    if (config.candidates.empty()) throw Error("bench: no implemented structure selected");
+    std::vector<BenchRecord> all_records;
+    const auto say = [&](const std::string& line) {
+        if (config.progress) log << line << std::endl;
+    };
+
+    parallel::with_threads(config.threads, [&] {
+        for (const std::string& scene_name : config.scenes) {
+            LoadedScene scene;
+            try {
+                scene = load_bench_scene(resolve_scene(scene_name, config.scenes_dir));
+            } catch (const Error& e) {
+                if (!config.skip_unloadable) throw;
+                log << "skipped scene " << scene_name << ": " << e.what() << std::endl;
+                continue;
+            }
+            const SceneGeometry& geometry = scene.geometry;
+            say(scene.spec.name + ": " + std::to_string(geometry.triangles.size()) + " triangles, loaded in " +
+                std::to_string(int(scene.load_ms)) + " ms");
+
+            // Builds: ours, then the peer's qualities; the last build of each is traced.
+            std::vector<BuiltCandidate> built;
+            for (const Candidate& candidate : config.candidates) {
+                say("  building " + candidate.label() + " x" + std::to_string(config.build_repetitions));
+                BuiltCandidate b{candidate, nullptr, {}};
+                for (int r = 0; r < config.build_repetitions; ++r) {
+                    b.accel.reset();
+                    const auto start = Clock::now();
+                    b.accel = build_accel(geometry, candidate.options);
+                    b.build_runs.push_back(ms_since(start));
+                }
+                built.push_back(std::move(b));
+            }
+            std::vector<BuiltPeer> peers;
+            for (EmbreeQuality quality : config.embree) {
+                say(std::string("  building embree/") + embree_quality_name(quality) + " x" +
+                    std::to_string(config.build_repetitions));
+                BuiltPeer p{quality, nullptr, {}};
+                for (int r = 0; r < config.build_repetitions; ++r) {
+                    p.peer.reset();
+                    p.peer = std::make_unique<EmbreePeer>(geometry, quality, config.threads);
+                    p.build_runs.push_back(p.peer->build_ms());
+                }
+                peers.push_back(std::move(p));
+            }
+
+            std::vector<int> views = config.views;
+            if (views.empty())
+                for (int v = 0; v < view_count(scene); ++v) views.push_back(v);
+            std::vector<BenchRecord> scene_records;
+            for (int view_index : views) {
+                for (const Resolution& res : config.resolutions) {
+                    const ViewSetup view = make_view_setup(scene, view_index, res.width, res.height);
+                    // The reference for primary hits is the first candidate: every
+                    // correct structure finds the same closest hits.
+                    const std::vector<RaySet> sets = make_ray_sets(geometry, *built.front().accel, view, config.ray_sets);
+                    for (const RaySet& set : sets) {
+                        const bool any_hit = is_any_hit(set.kind);
+                        const size_t n = set.rays.size();
+                        say("  tracing " + std::string(ray_set_name(set.kind)) + ": " + std::to_string(n) + " rays (" +
+                            std::to_string(res.width) + "x" + std::to_string(res.height) + ", view " +
+                            std::to_string(view_index) + ")");
+                        // The peer first: its results are the reference for agreement.
+                        std::vector<TraceResult> peer_results(peers.size());
+                        std::vector<PeerFigures> peer_figures;
+                        for (size_t p = 0; p < peers.size(); ++p) {
+                            TraceResult& out = peer_results[p];
+                            const EmbreePeer& peer = *peers[p].peer;
+                            std::vector<double> runs;
+                            if (any_hit) {
+                                out.occluded.assign(n, 0);
+                                runs = timed_runs(config.repetitions, [&] { peer.occluded(set.rays, out.occluded); });
+                            } else {
+                                out.hits.assign(n, Hit{});
+                                runs = timed_runs(config.repetitions, [&] { peer.intersect(set.rays, out.hits); });
+                            }
+                            PeerFigures f;
+                            f.quality = peers[p].quality;
+                            f.trace_ms = median(runs);
+                            f.mrays_per_s = f.trace_ms > 0.0 ? double(n) / (f.trace_ms * 1e3) : 0.0;
+                            f.build_ms = median(peers[p].build_runs);
+                            f.bytes = peer.bytes();
+                            peer_figures.push_back(f);
+                        }
+                        for (const BuiltCandidate& b : built) {
+                            BenchRecord rec;
+                            rec.scene = scene.spec.name;
+                            rec.triangles = geometry.triangles.size();
+                            rec.load_ms = scene.load_ms;
+                            rec.view = view_index;
+                            rec.width = res.width;
+                            rec.height = res.height;
+                            rec.candidate = b.candidate;
+                            rec.ray_set = set.kind;
+                            rec.rays = n;
+                            TraceResult out;
+                            if (any_hit) {
+                                out.occluded.assign(n, 0);
+                                rec.trace_ms_runs =
+                                    timed_runs(config.repetitions, [&] { b.accel->occluded(set.rays, out.occluded); });
+                            } else {
+                                out.hits.assign(n, Hit{});
+                                rec.trace_ms_runs =
+                                    timed_runs(config.repetitions, [&] { b.accel->intersect(set.rays, out.hits); });
+                            }
+                            rec.trace_ms = median(rec.trace_ms_runs);
+                            rec.mrays_per_s = rec.trace_ms > 0.0 ? double(n) / (rec.trace_ms * 1e3) : 0.0;
+                            rec.build_ms_runs = b.build_runs;
+                            rec.build_ms = median(b.build_runs);
+                            rec.stats = b.accel->stats();
+                            rec.layout_ms = rec.stats.layout_ms;
+                            rec.triangle_bytes = geometry.triangles.size() * sizeof(Triangle);
+                            if (config.count_traversal) {
+                                TraversalTotals totals;
+                                if (b.accel->count_traversal(set.rays, any_hit, totals) && totals.rays > 0) {
+                                    rec.has_counts = true;
+                                    rec.steps_per_ray = double(totals.steps) / double(totals.rays);
+                                    rec.prims_per_ray = double(totals.prim_tests) / double(totals.rays);
+                                    rec.restarts_per_ray = double(totals.restarts) / double(totals.rays);
+                                }
+                            }
+                            rec.embree = peer_figures;
+                            for (size_t p = 0; p < peers.size(); ++p) {
+                                PeerFigures& f = rec.embree[p];
+                                if (any_hit) {
+                                    agreement_any_hit(out.occluded, peer_results[p].occluded, f.agreement);
+                                    f.max_rel_t_diff = 0.0;
+                                } else {
+                                    compare_hits(out.hits, peer_results[p].hits, f.agreement, f.max_rel_t_diff);
+                                }
+                            }
+                            scene_records.push_back(std::move(rec));
+                        }
+                    }
+                }
+            }
+            if (on_scene) on_scene(scene_records);
+            all_records.insert(all_records.end(), scene_records.begin(), scene_records.end());
+        }
+    });
+    return all_records;
+}
+
+}  // namespace rf::bench

@@ -1,0 +1,86 @@
+// Runs the benchmark protocol: per scene and view, ray sets are generated
+// once; every candidate and every Embree quality is built (median of
+// build_repetitions) and traces every set (one warm-up, then the median of
+// repetitions); an untimed instrumented pass counts traversal work; hits are
+// compared with Embree's.
+#pragma once
+
+#include <functional>
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+#include "bench_scenes.h"
+#include "candidates.h"
+#include "embree_peer.h"
+#include "ray_sets.h"
+
+namespace rf::bench {
+
+struct Resolution {
+    int width = 1024;
+    int height = 768;
+};
+
+struct BenchConfig {
+    std::vector<std::string> scenes;         // views.json names, files, builtin:NAME
+    std::string scenes_dir;                  // folder of views.json ("" = none)
+    std::vector<int> views;                  // view indices; empty = every view
+    std::vector<Resolution> resolutions{Resolution{}};
+    std::vector<RaySetKind> ray_sets{std::begin(kAllRaySets), std::end(kAllRaySets)};
+    std::vector<Candidate> candidates;
+    std::vector<EmbreeQuality> embree;       // peer qualities; empty = no peer
+    int threads = 0;                         // 0 = all cores
+    int repetitions = 5;                     // timed traces (after one warm-up)
+    int build_repetitions = 3;
+    bool count_traversal = true;             // the instrumented pass
+    bool skip_unloadable = false;            // report and skip scenes that fail to load
+    bool progress = true;                    // progress lines on the log stream
+};
+
+// One Embree quality traced on the same rays as a record.
+struct PeerFigures {
+    EmbreeQuality quality = EmbreeQuality::Medium;
+    double mrays_per_s = 0.0;
+    double trace_ms = 0.0;
+    double build_ms = 0.0;
+    size_t bytes = 0;
+    double agreement = 0.0;       // share of rays with the same hit/miss and primitive (any-hit: same answer)
+    double max_rel_t_diff = 0.0;  // over rays both hit: |t_ours - t_peer| / max(|t_ours|, |t_peer|)
+};
+
+// One (scene, view, resolution, candidate, ray set).
+struct BenchRecord {
+    std::string scene;
+    size_t triangles = 0;
+    double load_ms = 0.0;
+    int view = 0;
+    int width = 0, height = 0;
+    Candidate candidate;
+    RaySetKind ray_set = RaySetKind::Primary;
+    size_t rays = 0;
+    double mrays_per_s = 0.0;
+    double trace_ms = 0.0;               // median
+    std::vector<double> trace_ms_runs;   // every timed run
+    double build_ms = 0.0;               // median, layout conversion included
+    std::vector<double> build_ms_runs;
+    double layout_ms = 0.0;
+    AccelStats stats;                    // of the last build
+    size_t triangle_bytes = 0;
+    bool has_counts = false;
+    double steps_per_ray = 0.0, prims_per_ray = 0.0, restarts_per_ray = 0.0;
+    std::vector<PeerFigures> embree;
+};
+
+double median(std::vector<double> values);
+
+// Hit agreement between two closest-hit result arrays.
+void compare_hits(const std::vector<Hit>& ours, const std::vector<Hit>& peer, double& agreement,
+                  double& max_rel_t_diff);
+
+// Calls on_scene with each scene's records as soon as that scene is done;
+// returns all records. Progress goes to `log`.
+std::vector<BenchRecord> run_bench(const BenchConfig& config, std::ostream& log,
+                                   const std::function<void(const std::vector<BenchRecord>&)>& on_scene = {});
+
+}  // namespace rf::bench

@@ -1,0 +1,140 @@
+#include "ray_sets.h"
+
+#include <cmath>
+
+#include "core/parallel.h"
+#include "rayforge/core/error.h"
+#include "render/random.h"
+#include "render/sampling.h"
+
+namespace rf::bench {
+
+const char* ray_set_name(RaySetKind kind) {
+    switch (kind) {
+        case RaySetKind::Primary: return "primary";
+        case RaySetKind::Shadow: return "shadow";
+        case RaySetKind::Ao: return "ao";
+        case RaySetKind::Diffuse: return "diffuse";
+        case RaySetKind::Reflection: return "reflection";
+    }
+    return "?";
+}
+
+std::optional<RaySetKind> parse_ray_set(const std::string& name) {
+    for (RaySetKind kind : kAllRaySets)
+        if (name == ray_set_name(kind)) return kind;
+    return std::nullopt;
+}
+
+bool is_any_hit(RaySetKind kind) { return kind == RaySetKind::Shadow || kind == RaySetKind::Ao; }
+
+RaySet make_primary_rays(const ViewSetup& view) {
+    const CameraFrame frame = CameraFrame::make(view.camera, view.width, view.height);
+    RaySet set;
+    set.kind = RaySetKind::Primary;
+    set.rays.resize(size_t(view.width) * size_t(view.height));
+    parallel::for_range(0, view.height, 8, [&](int y0, int y1) {
+        for (int y = y0; y < y1; ++y)
+            for (int x = 0; x < view.width; ++x)
+                set.rays[size_t(y) * size_t(view.width) + size_t(x)] =
+                    frame.generate(float(x) + 0.5f, float(y) + 0.5f, view.width, view.height);
+    });
+    return set;
+}
+
+namespace {
+
+// Where a secondary ray starts and which way the surface faces the viewer.
+struct SurfaceSample {
+    Vec3f origin;
+    Vec3f normal;  // unit geometric normal, facing the primary ray
+};
+
+SurfaceSample surface_sample(const Triangle& tri, const Ray& ray, const Hit& hit, float offset) {
+    Vec3f n = tri.geometric_normal();
+    const float len = length(n);
+    // Degenerate triangles never produce hits, but guard the division anyway.
+    n = len > 0.0f ? n * (1.0f / len) : Vec3f(0, 0, 1);
+    if (dot(n, ray.dir) > 0.0f) n = -n;
+    return {ray.org + ray.dir * hit.t + n * offset, n};
+}
+
+size_t rays_per_hit(RaySetKind kind) {
+    return (kind == RaySetKind::Ao || kind == RaySetKind::Diffuse) ? size_t(kAoSamplesPerHit) : 1;
+}
+
+}  // namespace
+
+std::vector<RaySet> make_ray_sets(const SceneGeometry& geometry, const Accel& reference, const ViewSetup& view,
+                                  const std::vector<RaySetKind>& kinds) {
+    if (!(view.ao_radius > 0.0f) || !std::isfinite(view.ao_radius))
+        throw Error("ray sets: the ao radius must be a positive number");
+    RaySet primary = make_primary_rays(view);
+    std::vector<Hit> hits(primary.rays.size());
+    reference.intersect(primary.rays, hits);
+
+    // Slot of each hit among all hits, so parallel generation keeps pixel order.
+    std::vector<uint32_t> hit_slot(hits.size());
+    uint32_t hit_count = 0;
+    for (size_t p = 0; p < hits.size(); ++p) {
+        hit_slot[p] = hit_count;
+        hit_count += hits[p].found() ? 1 : 0;
+    }
+    const float offset = 1e-4f * length(geometry.bounds.extent());
+
+    std::vector<RaySet> sets;
+    for (RaySetKind kind : kinds) {
+        if (kind == RaySetKind::Primary) {
+            sets.push_back(primary);
+            continue;
+        }
+        RaySet set;
+        set.kind = kind;
+        const size_t per_hit = rays_per_hit(kind);
+        set.rays.resize(size_t(hit_count) * per_hit);
+        parallel::for_range(size_t(0), hits.size(), size_t(1024), [&](size_t lo, size_t hi) {
+            for (size_t p = lo; p < hi; ++p) {
+                if (!hits[p].found()) continue;
+                const Ray& eye_ray = primary.rays[p];
+                const SurfaceSample s = surface_sample(geometry.triangles[hits[p].prim], eye_ray, hits[p], offset);
+                Ray* out = &set.rays[size_t(hit_slot[p]) * per_hit];
+                switch (kind) {
+                    case RaySetKind::Shadow: {
+                        const Vec3f to_light = view.light - s.origin;
+                        const float distance = length(to_light);
+                        out->org = s.origin;
+                        out->dir = distance > 0.0f ? to_light * (1.0f / distance) : s.normal;
+                        out->tmin = 0.0f;
+                        out->tmax = distance;
+                        break;
+                    }
+                    case RaySetKind::Ao:
+                    case RaySetKind::Diffuse: {
+                        const Frame frame = Frame::from_normal(s.normal);
+                        for (uint32_t sample = 0; sample < uint32_t(kAoSamplesPerHit); ++sample) {
+                            RandomStream random(uint32_t(p), sample, kRaySetSeed);
+                            out[sample].org = s.origin;
+                            out[sample].dir = frame.to_world(sample_cosine_hemisphere(random.next2()));
+                            out[sample].tmin = 0.0f;
+                            out[sample].tmax = kind == RaySetKind::Ao ? view.ao_radius : kInfinity;
+                        }
+                        break;
+                    }
+                    case RaySetKind::Reflection: {
+                        const Vec3f d = eye_ray.dir;
+                        out->org = s.origin;
+                        out->dir = normalize(d - s.normal * (2.0f * dot(d, s.normal)));
+                        out->tmin = 0.0f;
+                        out->tmax = kInfinity;
+                        break;
+                    }
+                    case RaySetKind::Primary: break;
+                }
+            }
+        });
+        sets.push_back(std::move(set));
+    }
+    return sets;
+}
+
+}  // namespace rf::bench

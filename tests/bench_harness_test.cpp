@@ -1,0 +1,333 @@
+// The benchmark harness itself: identical ray sets on every run, the tree
+// quality metrics on hand-built BVHs, the Embree adapter against brute
+// force, candidate selection, views.json parsing and the `bench` command.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "accel/bvh/bvh_accel.h"
+#include "accel_test_scenes.h"
+#include "bench_runner.h"
+#include "bench_scenes.h"
+#include "candidates.h"
+#include "core/parallel.h"
+#include "embree_peer.h"
+#include "ray_sets.h"
+#include "rayforge/core/error.h"
+#include "rayforge/io/scene_io.h"
+#include "test_paths.h"
+
+namespace rf {
+namespace {
+
+using bench::RaySetKind;
+
+bool same_bits(const std::vector<Ray>& a, const std::vector<Ray>& b) {
+    return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(Ray)) == 0);
+}
+
+struct CornellFixture {
+    Scene scene = make_builtin_scene("cornell");
+    SceneGeometry geometry = SceneGeometry::build(scene);
+};
+
+bench::ViewSetup small_view(const Scene& scene) {
+    bench::ViewSetup view;
+    view.camera = scene.camera_or_default();
+    view.width = 64;
+    view.height = 48;
+    view.light = {0.0f, 1.5f, 0.0f};
+    view.ao_radius = 0.5f;
+    return view;
+}
+
+TEST(BenchRaySets, GenerationIsDeterministicAcrossRunsAndThreadCounts) {
+    CornellFixture f;
+    const auto accel = build_accel(f.geometry);
+    const bench::ViewSetup view = small_view(f.scene);
+    const std::vector<RaySetKind> kinds(std::begin(bench::kAllRaySets), std::end(bench::kAllRaySets));
+    const auto one = parallel::with_threads(1, [&] { return bench::make_ray_sets(f.geometry, *accel, view, kinds); });
+    const auto two = parallel::with_threads(2, [&] { return bench::make_ray_sets(f.geometry, *accel, view, kinds); });
+    const auto again = bench::make_ray_sets(f.geometry, *accel, view, kinds);
+    ASSERT_EQ(one.size(), kinds.size());
+    for (size_t i = 0; i < kinds.size(); ++i) {
+        EXPECT_EQ(one[i].kind, kinds[i]);
+        EXPECT_FALSE(one[i].rays.empty()) << bench::ray_set_name(kinds[i]);
+        EXPECT_TRUE(same_bits(one[i].rays, two[i].rays)) << bench::ray_set_name(kinds[i]);
+        EXPECT_TRUE(same_bits(one[i].rays, again[i].rays)) << bench::ray_set_name(kinds[i]);
+    }
+    // A different view gives different rays (the test above can fail).
+    bench::ViewSetup other = view;
+    other.light = {0.1f, 1.5f, 0.0f};
+    const auto moved = bench::make_ray_sets(f.geometry, *accel, other, {RaySetKind::Shadow});
+    EXPECT_FALSE(same_bits(moved[0].rays, one[1].rays));
+}
+
+TEST(BenchRaySets, RaysFollowTheProtocol) {
+    CornellFixture f;
+    const auto accel = build_accel(f.geometry);
+    const bench::ViewSetup view = small_view(f.scene);
+    const auto sets = bench::make_ray_sets(f.geometry, *accel, view,
+                                           {RaySetKind::Primary, RaySetKind::Shadow, RaySetKind::Ao,
+                                            RaySetKind::Diffuse, RaySetKind::Reflection});
+    const auto& primary = sets[0].rays;
+    ASSERT_EQ(primary.size(), size_t(64 * 48));
+    std::vector<Hit> hits(primary.size());
+    accel->intersect(primary, hits);
+    size_t hit_count = 0;
+    for (const Hit& h : hits) hit_count += h.found() ? 1 : 0;
+    ASSERT_GT(hit_count, 0u);
+    EXPECT_EQ(sets[1].rays.size(), hit_count);
+    EXPECT_EQ(sets[2].rays.size(), hit_count * bench::kAoSamplesPerHit);
+    EXPECT_EQ(sets[3].rays.size(), hit_count * bench::kAoSamplesPerHit);
+    EXPECT_EQ(sets[4].rays.size(), hit_count);
+
+    const float offset = 1e-4f * length(f.geometry.bounds.extent());
+    size_t slot = 0;
+    for (size_t p = 0; p < hits.size(); ++p) {
+        if (!hits[p].found()) continue;
+        const Vec3f point = primary[p].org + primary[p].dir * hits[p].t;
+        Vec3f n = normalize(f.geometry.triangles[hits[p].prim].geometric_normal());
+        if (dot(n, primary[p].dir) > 0.0f) n = -n;
+        const Ray& shadow = sets[1].rays[slot];
+        EXPECT_NEAR(length(shadow.org - point), offset, 1e-3f * offset + 1e-6f);
+        EXPECT_NEAR(shadow.tmax, length(view.light - shadow.org), 1e-4f);
+        EXPECT_NEAR(length(shadow.dir), 1.0f, 1e-5f);
+        for (int s = 0; s < bench::kAoSamplesPerHit; ++s) {
+            const Ray& ao = sets[2].rays[slot * bench::kAoSamplesPerHit + size_t(s)];
+            const Ray& diffuse = sets[3].rays[slot * bench::kAoSamplesPerHit + size_t(s)];
+            EXPECT_GE(dot(ao.dir, n), -1e-5f);  // in the hemisphere facing the viewer
+            EXPECT_FLOAT_EQ(ao.tmax, view.ao_radius);
+            EXPECT_EQ(diffuse.tmax, kInfinity);
+            EXPECT_EQ(ao.dir.x, diffuse.dir.x);
+        }
+        const Ray& reflection = sets[4].rays[slot];
+        EXPECT_NEAR(dot(reflection.dir, n), -dot(primary[p].dir, n), 1e-4f);  // mirror angle
+        ++slot;
+    }
+}
+
+TEST(BenchRaySets, NamesRoundTrip) {
+    for (RaySetKind kind : bench::kAllRaySets) EXPECT_EQ(bench::parse_ray_set(bench::ray_set_name(kind)), kind);
+    EXPECT_FALSE(bench::parse_ray_set("primaries").has_value());
+    EXPECT_TRUE(bench::is_any_hit(RaySetKind::Shadow));
+    EXPECT_TRUE(bench::is_any_hit(RaySetKind::Ao));
+    EXPECT_FALSE(bench::is_any_hit(RaySetKind::Diffuse));
+}
+
+// Root [0,2]^3 (area 24); left leaf [0,1]^3 (area 6, 2 triangles); right leaf
+// [1,2]x[0,2]x[0,2] (area 16, 3 triangles).
+Bvh hand_built_bvh() {
+    Bvh bvh;
+    bvh.nodes.resize(3);
+    bvh.nodes[0].bounds = Box3f(Vec3f(0, 0, 0), Vec3f(2, 2, 2));
+    bvh.nodes[0].first = 1;
+    bvh.nodes[1].bounds = Box3f(Vec3f(0, 0, 0), Vec3f(1, 1, 1));
+    bvh.nodes[1].first = 0;
+    bvh.nodes[1].count = 2;
+    bvh.nodes[2].bounds = Box3f(Vec3f(1, 0, 0), Vec3f(2, 2, 2));
+    bvh.nodes[2].first = 2;
+    bvh.nodes[2].count = 3;
+    bvh.prim_indices = {0, 1, 2, 3, 4};
+    return bvh;
+}
+
+TEST(BenchMetrics, SahCostOfAHandBuiltBvh) {
+    const Bvh bvh = hand_built_bvh();
+    // 1 (root) + 6/24 * 2 + 16/24 * 3 = 1 + 0.5 + 2.
+    EXPECT_DOUBLE_EQ(bvh.sah_cost(1.0f, 1.0f), 3.5);
+    // C_trav = 2, C_int = 3: 2 + 0.5 * 3 + 2 * 3.
+    EXPECT_DOUBLE_EQ(bvh.sah_cost(2.0f, 3.0f), 9.5);
+}
+
+TEST(BenchMetrics, Formula42OfAHandBuiltBvh) {
+    Bvh bvh = hand_built_bvh();
+    // C = nc + 6/24 * 2 + 16/24 * 3 = 2 + 0.5 + 2.
+    EXPECT_DOUBLE_EQ(bvh.quality_cost(2.0), 4.5);
+    // Two levels: split the right leaf into [1,2]x[0,1]x[0,2] (area 10, 1 tri)
+    // and [1,2]x[1,2]x[0,2] (area 10, 2 tris): C(right) = 2 + 10/16 + 10/16 * 2.
+    bvh.nodes[2].count = 0;
+    bvh.nodes[2].first = 3;
+    bvh.nodes.resize(5);
+    bvh.nodes[3].bounds = Box3f(Vec3f(1, 0, 0), Vec3f(2, 1, 2));
+    bvh.nodes[3].first = 2;
+    bvh.nodes[3].count = 1;
+    bvh.nodes[4].bounds = Box3f(Vec3f(1, 1, 0), Vec3f(2, 2, 2));
+    bvh.nodes[4].first = 3;
+    bvh.nodes[4].count = 2;
+    const double right = 2.0 + 10.0 / 16.0 + 10.0 / 16.0 * 2.0;
+    EXPECT_DOUBLE_EQ(bvh.quality_cost(2.0), 2.0 + 0.5 + 16.0 / 24.0 * right);
+    // Unrolled, formula 4.2 is the SAH with C_trav = nc, C_int = 1.
+    EXPECT_NEAR(bvh.quality_cost(2.0), bvh.sah_cost(2.0f, 1.0f), 1e-12);
+}
+
+TEST(BenchMetrics, Formula42MatchesSahOnABuiltTree) {
+    const SceneGeometry geometry = test::make_triangle_soup(5000, 7, Box3f(Vec3f(-10.0f), Vec3f(10.0f)), 0.5f);
+    BuildOptions options;
+    const BvhAccel accel(geometry, options);
+    const AccelStats stats = accel.stats();
+    EXPECT_NEAR(stats.quality_cost, accel.bvh().sah_cost(2.0f, 1.0f), 1e-6 * stats.quality_cost);
+    EXPECT_GT(stats.quality_cost, stats.sah_cost);
+}
+
+TEST(BenchMetrics, MedianAndHitComparison) {
+    EXPECT_DOUBLE_EQ(bench::median({5, 1, 3}), 3.0);
+    EXPECT_DOUBLE_EQ(bench::median({4, 1, 3, 2}), 2.5);
+    std::vector<Hit> a(4), b(4);
+    a[0].prim = b[0].prim = 1;
+    a[0].t = 1.0f;
+    b[0].t = 1.001f;
+    a[1].prim = 2;  // hit vs miss
+    a[1].t = 2.0f;
+    a[2].prim = 3;  // different primitive
+    b[2].prim = 4;
+    a[2].t = b[2].t = 3.0f;
+    double agreement = 0, max_dt = 0;
+    bench::compare_hits(a, b, agreement, max_dt);
+    EXPECT_DOUBLE_EQ(agreement, 0.5);  // rays 0 and 3 (both miss)
+    EXPECT_NEAR(max_dt, 0.001 / 1.001, 1e-6);
+}
+
+TEST(BenchEmbree, AgreesWithBruteForce) {
+    if (!bench::embree_available()) GTEST_SKIP() << "rayforge built without Embree";
+    const SceneGeometry geometry = test::make_triangle_soup(3000, 11, Box3f(Vec3f(-5.0f), Vec3f(5.0f)), 0.8f);
+    const auto brute = build_accel(geometry, BuildOptions{.structure = Structure::BruteForce});
+    std::mt19937 rng(5);
+    std::vector<Ray> rays(4000);
+    for (Ray& ray : rays) {
+        ray.org = test::random_in_box(rng, Box3f(Vec3f(-7.0f), Vec3f(7.0f)));
+        ray.dir = test::random_direction(rng);
+    }
+    for (size_t i = 0; i < rays.size(); i += 2) rays[i].tmax = 3.0f;  // bounded rays too
+    std::vector<Hit> expected(rays.size());
+    brute->intersect(rays, expected);
+    std::vector<uint8_t> expected_occluded(rays.size());
+    brute->occluded(rays, expected_occluded);
+    size_t hits = 0;
+    for (const Hit& h : expected) hits += h.found() ? 1 : 0;
+    ASSERT_GT(hits, rays.size() / 10);
+
+    for (bench::EmbreeQuality quality : bench::kAllEmbreeQualities) {
+        const bench::EmbreePeer peer(geometry, quality, 2);
+        std::vector<Hit> got(rays.size());
+        peer.intersect(rays, got);
+        double agreement = 0, max_dt = 0;
+        bench::compare_hits(expected, got, agreement, max_dt);
+        // Embree's (non-watertight) test may differ on a grazing edge hit or two.
+        EXPECT_GE(agreement, 0.999) << bench::embree_quality_name(quality);
+        EXPECT_LT(max_dt, 1e-4) << bench::embree_quality_name(quality);
+        for (size_t i = 0; i < rays.size(); ++i) {
+            if (expected[i].found() && got[i].found() && expected[i].prim == got[i].prim) {
+                EXPECT_NEAR(got[i].u, expected[i].u, 1e-3f);
+                EXPECT_NEAR(got[i].v, expected[i].v, 1e-3f);
+            }
+        }
+        std::vector<uint8_t> occluded(rays.size());
+        peer.occluded(rays, occluded);
+        size_t same = 0;
+        for (size_t i = 0; i < rays.size(); ++i) same += occluded[i] == expected_occluded[i] ? 1 : 0;
+        EXPECT_GE(double(same) / double(rays.size()), 0.999) << bench::embree_quality_name(quality);
+        EXPECT_GT(peer.build_ms(), 0.0);
+    }
+}
+
+TEST(BenchCandidates, SelectionNamesWhatIsMissing) {
+    std::vector<bench::Candidate> missing;
+    const auto chosen = bench::select_candidates({"bvh"}, {"all"}, {"all"}, &missing);
+    ASSERT_FALSE(chosen.empty());
+    EXPECT_EQ(chosen.front().label(), "bvh/binned/bvh2");
+    for (const auto& c : chosen) EXPECT_TRUE(c.implemented);
+    bool names_sbvh = false;
+    for (const auto& c : missing) names_sbvh |= c.label() == "bvh/sbvh/bvh2";
+    EXPECT_TRUE(names_sbvh);
+    // `all` leaves brute force out; naming it brings it in.
+    for (const auto& c : bench::select_candidates({"all"}, {"all"}, {"all"}, nullptr))
+        EXPECT_NE(c.structure, "brute");
+    EXPECT_EQ(bench::select_candidates({"brute"}, {"all"}, {"all"}, nullptr).size(), 1u);
+    EXPECT_THROW(bench::select_candidates({"bvh"}, {"binnned"}, {"all"}, nullptr), Error);
+    EXPECT_THROW(bench::candidates_by_label({"bvh/nope/bvh2"}, nullptr), Error);
+}
+
+TEST(BenchScenes, ViewsJsonIsReadAndCheckedForErrors) {
+    const std::string dir = test::temp_dir("bench_views");
+    {
+        std::ofstream out(dir + "/views.json");
+        out << R"({"scenes": {
+            "tri": {"file": "tri.obj", "views": [{"eye": [0, 0, 3], "target": [0, 0, 0], "fov": 50}],
+                    "light": [1, 2, 3], "ao_radius": 0.25},
+            "bad": {"file": "tri.obj", "light": [1, 2]},
+            "nofile": {"views": []}}})";
+    }
+    {
+        std::ofstream out(dir + "/tri.obj");
+        out << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    }
+    EXPECT_EQ(bench::find_scenes_dir(dir), dir);
+    EXPECT_THROW(bench::find_scenes_dir(dir + "/missing"), Error);
+    const bench::SceneSpec spec = bench::resolve_scene("tri", dir);
+    EXPECT_EQ(spec.path, dir + "/tri.obj");
+    ASSERT_EQ(spec.views.size(), 1u);
+    EXPECT_EQ(spec.views[0].eye.z, 3.0f);
+    EXPECT_EQ(spec.views[0].vfov_degrees, 50.0f);
+    EXPECT_TRUE(spec.has_light);
+    EXPECT_EQ(spec.light.z, 3.0f);
+    EXPECT_EQ(spec.ao_radius, 0.25f);
+    const bench::LoadedScene loaded = bench::load_bench_scene(spec);
+    const bench::ViewSetup view = bench::make_view_setup(loaded, 0, 32, 16);
+    EXPECT_EQ(view.width, 32);
+    EXPECT_EQ(view.ao_radius, 0.25f);
+    EXPECT_THROW(bench::make_view_setup(loaded, 1, 32, 16), Error);
+    EXPECT_THROW(bench::resolve_scene("bad", dir), Error);
+    EXPECT_THROW(bench::resolve_scene("nofile", dir), Error);
+    EXPECT_THROW(bench::resolve_scene("unknown", dir), Error);
+    EXPECT_THROW(bench::resolve_scene("unknown", ""), Error);
+    EXPECT_EQ(bench::resolve_scene("builtin:cube", dir).path, "builtin:cube");
+}
+
+TEST(BenchScenes, SharedViewsJsonNamesLoad) {
+    const std::string views = test::shared_path("scenes/views.json");
+    if (views.empty()) GTEST_SKIP() << "../shared/scenes is absent";
+    const std::string dir = views.substr(0, views.size() - std::strlen("/views.json"));
+    const bench::SceneSpec spec = bench::resolve_scene("bunny", dir);
+    EXPECT_EQ(spec.views.size(), 1u);
+    EXPECT_TRUE(spec.has_light);
+    EXPECT_GT(spec.ao_radius, 0.0f);
+}
+
+TEST(BenchRunner, RecordsEveryRaySetAndAgreesWithThePeer) {
+    bench::BenchConfig config;
+    config.scenes = {"builtin:cornell"};
+    config.resolutions = {{32, 24}};
+    config.candidates = bench::select_candidates({"bvh"}, {"all"}, {"all"}, nullptr);
+    if (bench::embree_available()) config.embree = {bench::EmbreeQuality::Medium};
+    config.repetitions = 2;
+    config.build_repetitions = 1;
+    config.threads = 2;
+    config.progress = false;
+    std::ostringstream log;
+    size_t scenes_reported = 0;
+    const auto records =
+        bench::run_bench(config, log, [&](const std::vector<bench::BenchRecord>&) { ++scenes_reported; });
+    EXPECT_EQ(scenes_reported, 1u);
+    ASSERT_EQ(records.size(), 5u);
+    for (const auto& r : records) {
+        EXPECT_GT(r.rays, 0u);
+        EXPECT_GT(r.mrays_per_s, 0.0);
+        EXPECT_EQ(r.trace_ms_runs.size(), 2u);
+        EXPECT_TRUE(r.has_counts);
+        EXPECT_GT(r.steps_per_ray, 0.0);
+        EXPECT_GT(r.stats.sah_cost, 1.0);
+        if (bench::embree_available()) {
+            ASSERT_EQ(r.embree.size(), 1u);
+            EXPECT_GE(r.embree[0].agreement, 0.99) << bench::ray_set_name(r.ray_set);
+        }
+    }
+}
+
+}  // namespace
+}  // namespace rf
