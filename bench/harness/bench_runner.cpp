@@ -77,7 +77,8 @@ void compare_hits(const std::vector<Hit>& ours, const std::vector<Hit>& peer, do
             ++same;
             continue;
         }
-        same += a.prim == b.prim ? 1 : 0;
+        if (a.prim != b.prim) continue;
+        ++same;
         const double scale = std::max(std::fabs(double(a.t)), std::fabs(double(b.t)));
         if (scale > 0.0) worst = std::max(worst, std::fabs(double(a.t) - double(b.t)) / scale);
     }

@@ -46,7 +46,10 @@ struct PeerFigures {
     double build_ms = 0.0;
     size_t bytes = 0;
     double agreement = 0.0;       // share of rays with the same hit/miss and primitive (any-hit: same answer)
-    double max_rel_t_diff = 0.0;  // over rays both hit: |t_ours - t_peer| / max(|t_ours|, |t_peer|)
+    // Over rays where both hit the same primitive (the precision of t):
+    // |t_ours - t_peer| / max(|t_ours|, |t_peer|). Rays that hit different
+    // primitives count against `agreement` instead.
+    double max_rel_t_diff = 0.0;
 };
 
 // One (scene, view, resolution, candidate, ray set).
