@@ -23,8 +23,8 @@ case "$mode" in
   thread)
     build_dir=build-tsan
     sanitize="thread"
-    # Every test that runs TBB-parallel code: builds, flattening, rendering, batched traversal.
-    ctest_args=(-R "BvhBuild|BvhTraversal|Render|EndToEnd|SceneGeometry|Builtin" -LE "install|gpu")
+    # Every test that runs TBB-parallel code: builds, flattening, rendering, batched traversal, bench.
+    ctest_args=(-R "BvhBuild|BvhTraversal|Render|EndToEnd|SceneGeometry|Builtin|Bench" -LE "install|gpu")
     export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1"
     ;;
   *) echo "usage: $0 [address|thread]" >&2; exit 2 ;;

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "accel/brute_force.h"
+#include "accel/bvh/build/build_bvh.h"
 #include "accel/bvh/bvh_accel.h"
 #include "accel_test_scenes.h"
 #include "rayforge/accel/accel.h"
@@ -178,7 +179,7 @@ TEST(BvhTraversal, BatchesEqualSingleRays) {
 
 TEST(BvhTraversal, CountingVariantGivesSameResultsAndCounts) {
     const SceneGeometry sphere = test::to_geometry(test::make_icosphere(4));
-    const BvhAccel accel(sphere, BuildOptions{});
+    const BvhAccel accel(sphere, build_bvh(sphere.triangles, BuildOptions{}), "bvh/binned/bvh2", 0.0);
     const BvhView view = accel.view();
     TraversalCounters total;
     uint64_t brute_tests = 0;

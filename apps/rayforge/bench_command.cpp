@@ -177,7 +177,7 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
     config.embree = parse_embree(embree_names);
     if (!config.embree.empty() && !bench::embree_available()) {
         if (!a.embree.empty()) throw Error("--embree: this rayforge was built without Embree (Debian: libembree-dev)");
-        std::cerr << "rayforge: note: built without Embree; no peer columns (Debian: apt-get install libembree-dev)\n";
+        info.notes.push_back("built without Embree; no peer columns (Debian: apt-get install libembree-dev)");
         config.embree.clear();
     }
     config.threads = a.threads;
@@ -189,6 +189,11 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
     info.repetitions = a.repetitions;
     info.build_repetitions = a.build_repetitions;
 
+    // Notes go to stdout (and the JSON): stderr carries progress and at most one error line.
+    if (a.repetitions < 5)
+        info.notes.push_back("--reps " + std::to_string(a.repetitions) + " is below the protocol's 5 timed runs");
+    if (a.build_repetitions < 3)
+        info.notes.push_back("--build-reps " + std::to_string(a.build_repetitions) + " is below the protocol's 3 builds");
     if (preset) std::cout << "preset " << preset->name << ": " << preset->description << '\n';
     for (const std::string& note : info.notes) std::cout << "note: " << note << '\n';
     if (!info.unimplemented.empty()) {
@@ -197,10 +202,6 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
         std::cout << '\n';
     }
     if (config.candidates.empty()) throw Error("nothing to run: none of the selected structures is implemented yet");
-    if (a.repetitions < 5)
-        std::cerr << "rayforge: note: --reps " << a.repetitions << " is below the protocol's 5 timed runs\n";
-    if (a.build_repetitions < 3)
-        std::cerr << "rayforge: note: --build-reps " << a.build_repetitions << " is below the protocol's 3 builds\n";
 
     const std::vector<bench::BenchRecord> records =
         bench::run_bench(config, std::cerr, [&](const std::vector<bench::BenchRecord>& scene_records) {

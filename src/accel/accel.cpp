@@ -4,8 +4,13 @@
 #include "core/parallel.h"
 
 #include <cmath>
+#include <utility>
 
+#include <chrono>
+
+#include "accel/accel_factories.h"
 #include "accel/brute_force.h"
+#include "accel/bvh/build/build_bvh.h"
 #include "accel/bvh/bvh_accel.h"
 #include "rayforge/core/error.h"
 
@@ -28,6 +33,30 @@ void validate(const BuildOptions& options) {
         throw Error("build options: intersection_cost must be a positive number, got " +
                     std::to_string(options.intersection_cost));
     }
+    if (options.optimize_iterations < 0 || options.optimize_iterations > 1000) {
+        throw Error("build options: optimize_iterations must be in [0, 1000], got " +
+                    std::to_string(options.optimize_iterations));
+    }
+    if (!(options.sbvh_alpha >= 0.0f && options.sbvh_alpha <= 1.0f)) {
+        throw Error("build options: sbvh_alpha must be in [0, 1], got " + std::to_string(options.sbvh_alpha));
+    }
+    if (options.ploc_radius < 1 || options.ploc_radius > 256) {
+        throw Error("build options: ploc_radius must be in [1, 256], got " + std::to_string(options.ploc_radius));
+    }
+    if (!(options.split_budget >= 0.0f && options.split_budget <= 4.0f)) {
+        throw Error("build options: split_budget must be in [0, 4], got " + std::to_string(options.split_budget));
+    }
+    if (options.grid_resolution < 0 || options.grid_resolution > 2048) {
+        throw Error("build options: grid_resolution must be in [0, 2048] (0 = automatic), got " +
+                    std::to_string(options.grid_resolution));
+    }
+    if (!(options.kd_empty_bonus >= 0.0f && options.kd_empty_bonus < 1.0f)) {
+        throw Error("build options: kd_empty_bonus must be in [0, 1), got " + std::to_string(options.kd_empty_bonus));
+    }
+    if (options.kd_short_stack_size < 1 || options.kd_short_stack_size > 64) {
+        throw Error("build options: kd_short_stack_size must be in [1, 64], got " +
+                    std::to_string(options.kd_short_stack_size));
+    }
     if (options.threads < 0) {
         throw Error("build options: threads must be >= 0 (0 = all cores), got " + std::to_string(options.threads));
     }
@@ -46,22 +75,72 @@ std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOpt
                     " triangles exceed the limit of " + std::to_string(kMaxTriangles));
     }
     switch (options.structure) {
-        case Structure::Bvh: return std::make_unique<BvhAccel>(geometry, options);
+        case Structure::Bvh: {
+            const auto start = std::chrono::steady_clock::now();
+            Bvh bvh = parallel::with_threads(options.threads, [&] { return build_bvh(geometry.triangles, options); });
+            const double build_ms =
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+            std::string name = "bvh/" + to_string(options.builder) + (options.optimize ? "+opt" : "") + "/" +
+                               to_string(options.layout);
+            if (options.layout == Layout::Bvh2)
+                return std::make_unique<BvhAccel>(geometry, std::move(bvh), std::move(name), build_ms);
+            return make_wide_bvh_accel(geometry, std::move(bvh), options, build_ms, std::move(name));
+        }
+        case Structure::Grid:
+        case Structure::ProximityGrid: return make_grid_accel(geometry, options);
+        case Structure::KdTree: return make_kdtree_accel(geometry, options);
         case Structure::BruteForce: return std::make_unique<BruteForceAccel>(geometry);
     }
     throw Error("build options: unknown structure");
 }
 
-Structure parse_structure(const std::string& name) {
-    if (name == "bvh") return Structure::Bvh;
-    if (name == "brute") return Structure::BruteForce;
-    throw Error("unknown acceleration structure '" + name + "' (expected bvh or brute)");
+namespace {
+
+template <typename Enum, size_t N>
+Enum parse_name(const std::string& name, const std::pair<const char*, Enum> (&names)[N], const char* what) {
+    for (const auto& [text, value] : names)
+        if (name == text) return value;
+    std::string known;
+    for (const auto& [text, value] : names) known += (known.empty() ? "" : ", ") + std::string(text);
+    throw Error("unknown " + std::string(what) + " '" + name + "' (expected one of: " + known + ")");
 }
 
-Builder parse_builder(const std::string& name) {
-    if (name == "binned") return Builder::BinnedSah;
-    throw Error("unknown BVH builder '" + name + "' (expected binned)");
+template <typename Enum, size_t N>
+std::string name_of(Enum value, const std::pair<const char*, Enum> (&names)[N]) {
+    for (const auto& [text, v] : names)
+        if (v == value) return text;
+    return "?";
 }
+
+constexpr std::pair<const char*, Structure> kStructureNames[] = {
+    {"bvh", Structure::Bvh},      {"grid", Structure::Grid},         {"grid-proximity", Structure::ProximityGrid},
+    {"kdtree", Structure::KdTree}, {"brute", Structure::BruteForce},
+};
+// "lbvh" (an alias of lbvh30) comes after lbvh30 so that to_string gives "lbvh30".
+constexpr std::pair<const char*, Builder> kBuilderNames[] = {
+    {"binned", Builder::BinnedSah}, {"sweep", Builder::SweepSah},   {"sbvh", Builder::Sbvh},
+    {"lbvh30", Builder::Lbvh30},    {"lbvh63", Builder::Lbvh63},    {"lbvh", Builder::Lbvh30},
+    {"hlbvh2", Builder::Hlbvh2},    {"gridbvh", Builder::GridBvh},  {"gridbvh-split", Builder::GridBvhSplit},
+    {"ploc", Builder::Ploc},
+};
+constexpr std::pair<const char*, Layout> kLayoutNames[] = {
+    {"bvh2", Layout::Bvh2}, {"bvh4", Layout::Bvh4}, {"bvh8", Layout::Bvh8}};
+constexpr std::pair<const char*, KdTraversal> kKdTraversalNames[] = {
+    {"stack", KdTraversal::Stack}, {"short-stack", KdTraversal::ShortStack},
+    {"restart", KdTraversal::Restart}, {"pushdown", KdTraversal::Pushdown}};
+
+}  // namespace
+
+Structure parse_structure(const std::string& name) { return parse_name(name, kStructureNames, "acceleration structure"); }
+Builder parse_builder(const std::string& name) { return parse_name(name, kBuilderNames, "BVH builder"); }
+Layout parse_layout(const std::string& name) { return parse_name(name, kLayoutNames, "BVH layout"); }
+KdTraversal parse_kd_traversal(const std::string& name) {
+    return parse_name(name, kKdTraversalNames, "kd-tree traversal");
+}
+std::string to_string(Structure structure) { return name_of(structure, kStructureNames); }
+std::string to_string(Builder builder) { return name_of(builder, kBuilderNames); }
+std::string to_string(Layout layout) { return name_of(layout, kLayoutNames); }
+std::string to_string(KdTraversal traversal) { return name_of(traversal, kKdTraversalNames); }
 
 void Accel::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
     if (rays.size() != hits.size()) {

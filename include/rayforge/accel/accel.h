@@ -13,17 +13,61 @@
 
 namespace rf {
 
-enum class Structure : uint8_t { Bvh, BruteForce };
-enum class Builder : uint8_t { BinnedSah };
+enum class Structure : uint8_t {
+    Bvh,            // binary BVH from one of the builders below, traced in one of the layouts
+    Grid,           // uniform grid, 3D-DDA (seeds 001, 002)
+    ProximityGrid,  // uniform grid with proximity clouds (seed 001)
+    KdTree,         // SAH kd-tree (seed 002; Wald and Havran 2006)
+    BruteForce,     // every triangle for every ray: the reference
+};
+
+// BVH builders; every one produces the canonical rf::Bvh.
+enum class Builder : uint8_t {
+    BinnedSah,     // Wald 2007
+    SweepSah,      // full sweep over sorted centroids
+    Sbvh,          // Stich et al. 2009, spatial splits
+    Lbvh30,        // Karras 2012, 30-bit Morton codes
+    Lbvh63,        // Karras 2012, 63-bit Morton codes
+    Hlbvh2,        // seed 000 ch. 5
+    GridBvh,       // seed 000 ch. 4
+    GridBvhSplit,  // seed 000 ch. 4, with partial triangles
+    Ploc,          // Meister and Bittner 2018
+};
+
+// How a BVH is laid out for tracing: the canonical binary nodes, or 4/8-wide
+// nodes collapsed from it by SAH and traced with SIMD box tests.
+enum class Layout : uint8_t { Bvh2, Bvh4, Bvh8 };
+
+// kd-tree traversal algorithms (seed 002).
+enum class KdTraversal : uint8_t { Stack, ShortStack, Restart, Pushdown };
 
 struct BuildOptions {
     Structure structure = Structure::Bvh;
     Builder builder = Builder::BinnedSah;
+    Layout layout = Layout::Bvh2;
     int bin_count = 16;          // SAH bins per axis (binned builders)
     int max_leaf_size = 4;       // leaves never hold more primitives than this
     float traversal_cost = 1.0f; // SAH C_trav
     float intersection_cost = 1.0f;  // SAH C_int
     int threads = 0;             // 0 = all cores
+    // Post-build optimizer for any BVH builder (reinsertion, Meister and Bittner 2018).
+    bool optimize = false;
+    int optimize_iterations = 0;  // 0 = the optimizer's default
+    // SBVH: spatial splits are tried where the overlap of the best object split
+    // exceeds alpha times the root's area (Stich et al. 2009).
+    float sbvh_alpha = 1e-5f;
+    // PLOC: nearest-neighbour search radius along the Morton curve.
+    int ploc_radius = 16;
+    // GridBvhSplit: partial-triangle budget as a fraction of the triangle count.
+    float split_budget = 0.3f;
+    // Uniform grids: cells on the longest axis; 0 = seed 002's rule
+    // (4 * n^(1/4) cells on the shortest axis, cubic cells).
+    int grid_resolution = 0;
+    // kd-tree.
+    KdTraversal kd_traversal = KdTraversal::Stack;
+    bool kd_perfect_splits = true;   // clip triangles to the cell when evaluating splits
+    float kd_empty_bonus = 0.2f;     // SAH discount for cutting off empty space
+    int kd_short_stack_size = 4;     // entries of the short-stack traversal
 };
 
 struct AccelStats {
@@ -44,6 +88,13 @@ struct TraversalTotals {
     uint64_t steps = 0;        // node visits (box tests) in trees, cells visited in grids
     uint64_t prim_tests = 0;   // ray-triangle tests
     uint64_t restarts = 0;     // kd-tree restarts (0 elsewhere)
+    TraversalTotals& operator+=(const TraversalTotals& o) {
+        rays += o.rays;
+        steps += o.steps;
+        prim_tests += o.prim_tests;
+        restarts += o.restarts;
+        return *this;
+    }
 };
 
 class Accel {
@@ -66,8 +117,18 @@ public:
 // the result. Throws rf::Error for invalid options.
 std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options = {});
 
-// Names for the CLI and scene files ("bvh", "brute"; "binned"); throw rf::Error when unknown.
+// Names for the CLI, the bench and scene files; parse_* throw rf::Error when unknown.
+//   structures: bvh, grid, grid-proximity, kdtree, brute
+//   builders:   binned, sweep, sbvh, lbvh30, lbvh63 (lbvh = lbvh30), hlbvh2, gridbvh, gridbvh-split, ploc
+//   layouts:    bvh2, bvh4, bvh8
+//   kd-tree traversals: stack, short-stack, restart, pushdown
 Structure parse_structure(const std::string& name);
 Builder parse_builder(const std::string& name);
+Layout parse_layout(const std::string& name);
+KdTraversal parse_kd_traversal(const std::string& name);
+std::string to_string(Structure structure);
+std::string to_string(Builder builder);
+std::string to_string(Layout layout);
+std::string to_string(KdTraversal traversal);
 
 }  // namespace rf

@@ -1,24 +1,13 @@
 #include "accel/bvh/bvh_accel.h"
 
-#include <chrono>
-
-#include "accel/bvh/build/binned_sah.h"
 #include "core/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf {
 
-BvhAccel::BvhAccel(const SceneGeometry& geometry, const BuildOptions& options) : geometry_(geometry) {
-    const auto start = std::chrono::steady_clock::now();
-    switch (options.builder) {
-        case Builder::BinnedSah: bvh_ = build_binned_sah(geometry.triangles, options); break;
-    }
-    build_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-}
-
 AccelStats BvhAccel::stats() const {
     AccelStats s;
-    s.name = "bvh/binned";
+    s.name = name_;
     s.build_ms = build_ms_;
     s.node_count = bvh_.nodes.size();
     s.leaf_count = bvh_.leaf_count();
@@ -72,17 +61,8 @@ bool BvhAccel::count_traversal(std::span<const Ray> rays, bool any_hit, Traversa
             acc.rays += hi - lo;
             return acc;
         },
-        [](TraversalTotals a, const TraversalTotals& b) {
-            a.rays += b.rays;
-            a.steps += b.steps;
-            a.prim_tests += b.prim_tests;
-            a.restarts += b.restarts;
-            return a;
-        });
-    totals.rays += sum.rays;
-    totals.steps += sum.steps;
-    totals.prim_tests += sum.prim_tests;
-    totals.restarts += sum.restarts;
+        [](TraversalTotals a, const TraversalTotals& b) { return a += b; });
+    totals += sum;
     return true;
 }
 

@@ -1,6 +1,9 @@
 // rf::Accel over the canonical BVH, traversed by trace/bvh_traversal.h.
 #pragma once
 
+#include <string>
+#include <utility>
+
 #include "rayforge/accel/accel.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "trace/bvh_traversal.h"
@@ -9,9 +12,10 @@ namespace rf {
 
 class BvhAccel final : public Accel {
 public:
-    // Builds with the builder named in `options` (validated by build_accel);
-    // `geometry` must outlive this object.
-    BvhAccel(const SceneGeometry& geometry, const BuildOptions& options);
+    // Traces `bvh`, built over `geometry` in `build_ms` by the builder `name`
+    // describes (e.g. "bvh/binned/bvh2"); `geometry` must outlive this object.
+    BvhAccel(const SceneGeometry& geometry, Bvh bvh, std::string name, double build_ms)
+        : geometry_(geometry), bvh_(std::move(bvh)), name_(std::move(name)), build_ms_(build_ms) {}
 
     [[nodiscard]] Hit intersect(const Ray& ray) const override { return bvh_intersect(view(), ray); }
     [[nodiscard]] bool occluded(const Ray& ray) const override { return bvh_occluded(view(), ray); }
@@ -30,6 +34,7 @@ public:
 private:
     const SceneGeometry& geometry_;
     Bvh bvh_;
+    std::string name_;
     double build_ms_ = 0.0;
 };
 

@@ -1,0 +1,19 @@
+// One entry point for every BVH builder: runs the builder named in
+// options.builder, then the optimizer when options.optimize is set.
+#pragma once
+
+#include <span>
+
+#include "rayforge/accel/accel.h"
+#include "rayforge/accel/bvh/bvh.h"
+
+namespace rf {
+
+// Options are assumed validated (build_accel). The result satisfies the
+// canonical BVH invariants (rayforge/accel/bvh/bvh.h): depth-first order,
+// siblings adjacent, depth <= kBvhMaxDepth, leaves of at most max_leaf_size
+// references. Builders with spatial splits (SBVH, GridBvhSplit) may reference
+// a triangle from several leaves; all others reference each exactly once.
+Bvh build_bvh(std::span<const Triangle> triangles, const BuildOptions& options);
+
+}  // namespace rf

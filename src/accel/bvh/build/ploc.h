@@ -1,0 +1,16 @@
+// PLOC builder (Meister and Bittner 2018, "Parallel Locally-Ordered
+// Clustering for Bounding Volume Hierarchy Construction"), producing the
+// canonical rf::Bvh.
+#pragma once
+
+#include <span>
+
+#include "rayforge/accel/accel.h"
+#include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/scene/scene_geometry.h"
+
+namespace rf {
+
+Bvh build_ploc(std::span<const Triangle> triangles, const BuildOptions& options);
+
+}  // namespace rf

@@ -1,0 +1,16 @@
+// SBVH builder (Stich, Friedrich, Dietrich 2009, "Spatial Splits in Bounding
+// Volume Hierarchies"), producing the canonical rf::Bvh (triangles may be
+// referenced from several leaves).
+#pragma once
+
+#include <span>
+
+#include "rayforge/accel/accel.h"
+#include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/scene/scene_geometry.h"
+
+namespace rf {
+
+Bvh build_sbvh(std::span<const Triangle> triangles, const BuildOptions& options);
+
+}  // namespace rf
