@@ -2,50 +2,108 @@
 
 #include <algorithm>
 #include <set>
+#include <tuple>
+#include <utility>
 
 #include "rayforge/core/error.h"
 
 namespace rf::bench {
 namespace {
 
-Candidate planned(std::string structure, std::string builder, std::string layout, std::string source) {
+// What rayforge implements so far: a candidate runs when every part of it is
+// here. Flip entries on as structures land (issue 4).
+bool builder_implemented(const std::string& builder) {
+    static const std::set<std::string> names = {"binned"};
+    return names.count(builder) != 0;
+}
+bool layout_implemented(const std::string& layout) {
+    static const std::set<std::string> names = {"bvh2"};
+    return names.count(layout) != 0;
+}
+bool structure_implemented(const std::string& structure) {
+    static const std::set<std::string> names = {"bvh", "brute"};
+    return names.count(structure) != 0;
+}
+
+Candidate make(std::string structure, std::string builder, std::string layout, std::string source,
+               const BuildOptions& options) {
     Candidate c;
     c.structure = std::move(structure);
     c.builder = std::move(builder);
     c.layout = std::move(layout);
     c.source = std::move(source);
+    c.options = options;
     return c;
 }
 
 std::vector<Candidate> make_catalogue() {
     std::vector<Candidate> all;
-    Candidate binned = planned("bvh", "binned", "bvh2", "Wald 2007, binned SAH");
-    binned.implemented = true;
-    binned.options.structure = Structure::Bvh;
-    binned.options.builder = Builder::BinnedSah;
-    all.push_back(binned);
+    struct BuilderInfo {
+        const char* name;
+        Builder builder;
+        const char* source;
+    };
+    const BuilderInfo builders[] = {
+        {"binned", Builder::BinnedSah, "Wald 2007, binned SAH"},
+        {"sweep", Builder::SweepSah, "full sweep SAH"},
+        {"sbvh", Builder::Sbvh, "Stich et al. 2009, spatial splits"},
+        {"lbvh30", Builder::Lbvh30, "Karras 2012, 30-bit Morton codes"},
+        {"lbvh63", Builder::Lbvh63, "Karras 2012, 63-bit Morton codes"},
+        {"hlbvh2", Builder::Hlbvh2, "seed 000 ch. 5 (HLBVH2)"},
+        {"gridbvh", Builder::GridBvh, "seed 000 ch. 4 (GridBvh)"},
+        {"gridbvh-split", Builder::GridBvhSplit, "seed 000 ch. 4 (GridBvhSplit, partial triangles)"},
+        {"ploc", Builder::Ploc, "Meister and Bittner 2018"},
+    };
+    const std::pair<const char*, Layout> layouts[] = {
+        {"bvh2", Layout::Bvh2}, {"bvh4", Layout::Bvh4}, {"bvh8", Layout::Bvh8}};
+    for (const auto& [layout_name, layout] : layouts) {
+        for (const BuilderInfo& info : builders) {
+            for (const bool optimize : {false, true}) {
+                BuildOptions options;
+                options.structure = Structure::Bvh;
+                options.builder = info.builder;
+                options.layout = layout;
+                options.optimize = optimize;
+                Candidate c = make("bvh", std::string(info.name) + (optimize ? "+opt" : ""), layout_name,
+                                   std::string(info.source) + (optimize ? ", then reinsertion" : ""), options);
+                c.implemented = builder_implemented(info.name) && layout_implemented(layout_name) &&
+                                (!optimize || builder_implemented("+opt"));
+                // Optimised variants run only when named (they double a bench's length).
+                c.in_all = !optimize;
+                all.push_back(c);
+            }
+        }
+    }
 
-    Candidate brute = planned("brute", "none", "triangles", "reference: every triangle");
+    BuildOptions brute_options;
+    brute_options.structure = Structure::BruteForce;
+    Candidate brute = make("brute", "none", "triangles", "reference: every triangle", brute_options);
     brute.implemented = true;
     brute.in_all = false;
-    brute.options.structure = Structure::BruteForce;
     all.push_back(brute);
 
-    // Planned (issue 4); flip `implemented` and fill `options` as each lands.
-    all.push_back(planned("bvh", "sweep", "bvh2", "full sweep SAH"));
-    all.push_back(planned("bvh", "sbvh", "bvh2", "Stich et al. 2009, spatial splits"));
-    all.push_back(planned("bvh", "lbvh30", "bvh2", "Karras 2012, 30-bit Morton codes"));
-    all.push_back(planned("bvh", "lbvh63", "bvh2", "Karras 2012, 63-bit Morton codes"));
-    all.push_back(planned("bvh", "hlbvh2", "bvh2", "seed 000 ch. 5 (HLBVH2)"));
-    all.push_back(planned("bvh", "gridbvh", "bvh2", "seed 000 ch. 4 (GridBvh)"));
-    all.push_back(planned("bvh", "gridbvh-split", "bvh2", "seed 000 ch. 4 (GridBvhSplit, partial triangles)"));
-    all.push_back(planned("bvh", "ploc", "bvh2", "Meister and Bittner 2018"));
-    for (const char* res : {"32", "64", "128", "auto"}) {
-        all.push_back(planned("grid", std::string("uniform-") + res, "grid", "seeds 001/002, 3D-DDA"));
-        all.push_back(planned("proximity-grid", std::string("uniform-") + res, "grid", "seed 001, proximity clouds"));
+    for (const auto& [res_name, res] : {std::pair{"32", 32}, {"64", 64}, {"128", 128}, {"auto", 0}}) {
+        for (const auto& [structure_name, structure, source] :
+             {std::tuple{"grid", Structure::Grid, "seeds 001/002, 3D-DDA"},
+              {"grid-proximity", Structure::ProximityGrid, "seed 001, proximity clouds"}}) {
+            BuildOptions options;
+            options.structure = structure;
+            options.grid_resolution = res;
+            Candidate c = make(structure_name, std::string("uniform-") + res_name, "grid", source, options);
+            c.implemented = structure_implemented(structure_name);
+            all.push_back(c);
+        }
     }
-    for (const char* traversal : {"stack", "short-stack", "restart", "pushdown"})
-        all.push_back(planned("kdtree", "sah", traversal, "seed 002, Wald and Havran 2006"));
+    for (const auto& [traversal_name, traversal] :
+         {std::pair{"stack", KdTraversal::Stack}, {"short-stack", KdTraversal::ShortStack},
+          {"restart", KdTraversal::Restart}, {"pushdown", KdTraversal::Pushdown}}) {
+        BuildOptions options;
+        options.structure = Structure::KdTree;
+        options.kd_traversal = traversal;
+        Candidate c = make("kdtree", "sah", traversal_name, "seed 002, Wald and Havran 2006", options);
+        c.implemented = structure_implemented("kdtree");
+        all.push_back(c);
+    }
     return all;
 }
 

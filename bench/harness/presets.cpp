@@ -19,7 +19,7 @@ std::vector<Preset> make_presets() {
         p.ray_sets = {RaySetKind::Primary, RaySetKind::Shadow, RaySetKind::Reflection};
         for (const char* res : {"32", "64", "128"}) {
             p.candidates.push_back(std::string("grid/uniform-") + res + "/grid");
-            p.candidates.push_back(std::string("proximity-grid/uniform-") + res + "/grid");
+            p.candidates.push_back(std::string("grid-proximity/uniform-") + res + "/grid");
         }
         p.candidates.push_back("bvh/binned/bvh2");  // the reference every table is anchored to
         p.configuration_table = true;
