@@ -4,6 +4,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "accel_options.h"
+
 #include <string>
 #include <vector>
 
@@ -31,7 +33,7 @@ struct RenderArgs {
     int ao_samples = 16;
     float exposure = 1.0f;
     unsigned seed = 0;
-    std::string accel = "bvh";
+    AccelArgs accel;
     std::vector<std::string> lights;  // "x,y,z[,intensity]" point lights added to the scene
     std::string environment;          // "r,g,b" constant environment radiance
     bool no_headlight = false;

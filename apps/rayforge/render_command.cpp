@@ -138,8 +138,7 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
     cmd->add_option("--exposure", a.exposure, "Linear scale applied before writing (default 1)")
         ->check(CLI::NonNegativeNumber);
     cmd->add_option("--seed", a.seed, "Random seed (default 0)");
-    cmd->add_option("--accel", a.accel, "Acceleration structure: bvh | brute (default bvh)")
-        ->check(CLI::IsMember({"bvh", "brute"}));
+    add_accel_options(cmd, a.accel);
     cmd->add_option("--light", a.lights,
                      "Add a point light at x,y,z with optional intensity (W/sr; default: the squared scene "
                      "diagonal / 4); repeatable");
@@ -188,9 +187,7 @@ int run_render(const RenderArgs& a) {
                              "(--light to place lights, --no-headlight to disable)\n");
     }
 
-    BuildOptions build_options;
-    build_options.structure = parse_structure(a.accel);
-    build_options.threads = a.threads;
+    const BuildOptions build_options = to_build_options(a.accel, a.threads);
     std::unique_ptr<Accel> accel = build_accel(geometry, build_options);
     AccelStats stats = accel->stats();
 
