@@ -1,0 +1,516 @@
+// Full-sweep SAH builder, SBVH builder and the reinsertion optimizer:
+// structural invariants of the canonical BVH (relaxed for SBVH, whose leaves
+// reference clipped triangle pieces), the depth limit, determinism across
+// thread counts, traversal against brute force, and SAH quality relations.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "accel/brute_force.h"
+#include "accel/bvh/build/binned_sah.h"
+#include "accel/bvh/build/build_bvh.h"
+#include "accel/bvh/build/sbvh.h"
+#include "accel/bvh/build/sweep_sah.h"
+#include "accel/bvh/optimize/reinsertion.h"
+#include "accel_test_scenes.h"
+#include "rayforge/accel/accel.h"
+
+namespace rf {
+namespace {
+
+bool same_box(const Box3f& a, const Box3f& b) { return a.lo == b.lo && a.hi == b.hi; }
+
+bool identical(const Bvh& a, const Bvh& b) {
+    return a.nodes.size() == b.nodes.size() && a.prim_indices == b.prim_indices &&
+           std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(BvhNode)) == 0;
+}
+
+struct TreeShape {
+    int max_depth = 0;  // inner nodes on the longest root-to-leaf path
+    size_t leaves = 0;
+};
+
+// Every invariant of a canonical BVH (bvh_build_test.cpp's check_bvh). With
+// `spatial` (SBVH), a triangle may sit in several leaves, leaf boxes may be
+// clipped (inside the union of their triangles' boxes), and a parent's box
+// need only contain its children's.
+TreeShape check_bvh(const Bvh& bvh, std::span<const Triangle> triangles, int max_leaf_size, bool spatial = false) {
+    TreeShape shape;
+    if (triangles.empty()) {
+        EXPECT_TRUE(bvh.nodes.empty());
+        EXPECT_TRUE(bvh.prim_indices.empty());
+        return shape;
+    }
+    if (spatial) {
+        EXPECT_GE(bvh.prim_indices.size(), triangles.size());
+    } else {
+        EXPECT_EQ(bvh.prim_indices.size(), triangles.size());
+    }
+    std::vector<int> slot_seen(bvh.prim_indices.size(), 0);
+    std::vector<int> prim_seen(triangles.size(), 0);
+    auto walk = [&](auto&& self, uint32_t index, uint32_t base, int depth) -> uint32_t {
+        const BvhNode& node = bvh.nodes[index];
+        if (node.is_leaf()) {
+            shape.max_depth = std::max(shape.max_depth, depth);
+            ++shape.leaves;
+            EXPECT_LE(node.count, static_cast<uint32_t>(max_leaf_size));
+            EXPECT_LE(size_t{node.first} + node.count, bvh.prim_indices.size());
+            Box3f prims;
+            for (uint32_t slot = node.first; slot < node.first + node.count && slot < slot_seen.size(); ++slot) {
+                ++slot_seen[slot];
+                const uint32_t prim = bvh.prim_indices[slot];
+                if (prim >= triangles.size()) {
+                    ADD_FAILURE() << "prim index out of range: " << prim;
+                    continue;
+                }
+                ++prim_seen[prim];
+                prims.extend(triangles[prim].bounds());
+            }
+            if (spatial) {
+                EXPECT_TRUE(prims.contains(node.bounds)) << "leaf " << index << " box is outside its triangles' box";
+                EXPECT_FALSE(node.bounds.is_empty());
+            } else {
+                EXPECT_TRUE(same_box(node.bounds, prims)) << "leaf " << index << " box is not its triangles' box";
+            }
+            return base;
+        }
+        EXPECT_EQ(node.first, base) << "children of node " << index << " are not in depth-first order";
+        if (node.first != base || size_t{base} + 2 > bvh.nodes.size()) return base;
+        const BvhNode& left = bvh.nodes[base];
+        const BvhNode& right = bvh.nodes[base + 1];
+        EXPECT_TRUE(node.bounds.contains(left.bounds));
+        EXPECT_TRUE(node.bounds.contains(right.bounds));
+        if (!spatial) EXPECT_TRUE(same_box(node.bounds, merge(left.bounds, right.bounds)));
+        const uint32_t after_left = self(self, base, base + 2, depth + 1);
+        return self(self, base + 1, after_left, depth + 1);
+    };
+    const uint32_t end = walk(walk, 0, 1, 0);
+    EXPECT_EQ(end, bvh.nodes.size()) << "unreachable nodes";
+    EXPECT_TRUE(std::all_of(slot_seen.begin(), slot_seen.end(), [](int n) { return n == 1; }))
+        << "a leaf slot is used twice or never";
+    if (spatial) {
+        EXPECT_TRUE(std::all_of(prim_seen.begin(), prim_seen.end(), [](int n) { return n >= 1; }))
+            << "a triangle is in no leaf";
+    } else {
+        EXPECT_TRUE(std::all_of(prim_seen.begin(), prim_seen.end(), [](int n) { return n == 1; }))
+            << "a triangle is in no leaf or in two";
+    }
+    EXPECT_LE(shape.max_depth, kBvhMaxDepth);
+    EXPECT_EQ(shape.leaves, bvh.leaf_count());
+    EXPECT_EQ(bvh.nodes.size(), 2 * shape.leaves - 1);
+    return shape;
+}
+
+// SBVH coverage: every point of every triangle lies in the box of at least
+// one leaf that references it (sampled; child boxes lie inside their parents,
+// which check_bvh verifies, so a ray reaching the point reaches the leaf).
+void check_coverage(const Bvh& bvh, std::span<const Triangle> triangles, uint32_t seed) {
+    std::vector<std::vector<Box3f>> leaf_boxes(triangles.size());
+    for (const BvhNode& node : bvh.nodes) {
+        if (!node.is_leaf()) continue;
+        for (uint32_t s = node.first; s < node.first + node.count; ++s) {
+            leaf_boxes[bvh.prim_indices[s]].push_back(node.bounds);
+        }
+    }
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    size_t missing = 0;
+    for (size_t t = 0; t < triangles.size(); ++t) {
+        const Triangle& tri = triangles[t];
+        for (int k = 0; k < 8; ++k) {
+            // In double, so the point really lies on the triangle (up to ~1e-16 relative).
+            double b1 = unit(rng), b2 = unit(rng);
+            if (b1 + b2 > 1.0) { b1 = 1.0 - b1; b2 = 1.0 - b2; }
+            if (k < 3) { b1 = k == 1 ? 1.0 : 0.0; b2 = k == 2 ? 1.0 : 0.0; }
+            double p[3];
+            for (int a = 0; a < 3; ++a) p[a] = tri.v0[a] * (1.0 - b1 - b2) + tri.v1[a] * b1 + tri.v2[a] * b2;
+            const bool covered = std::any_of(leaf_boxes[t].begin(), leaf_boxes[t].end(), [&](const Box3f& b) {
+                for (int a = 0; a < 3; ++a) {
+                    // The weights' rounding (about 1e-16), far below a float ulp.
+                    const double slack = 1e-12 * (1.0 + std::fabs(p[a]));
+                    if (p[a] < b.lo[a] - slack || p[a] > b.hi[a] + slack) return false;
+                }
+                return true;
+            });
+            missing += covered ? 0 : 1;
+        }
+    }
+    EXPECT_EQ(missing, 0u) << "triangle points outside every leaf box of their triangle";
+}
+
+// Unit triangles at x = 1.09^i (bvh_build_test.cpp): lopsided splits that
+// would make a chain over 100 levels deep without the depth limit.
+SceneGeometry make_geometric_row(int count) {
+    SceneGeometry g;
+    float x = 1.0f;
+    for (int i = 0; i < count; ++i, x *= 1.09f) {
+        test::append(g, {Vec3f(x, 0, 0), Vec3f(x, 1, 0), Vec3f(x, 0, 1)});
+    }
+    return g;
+}
+
+// Long thin triangles along the box diagonals: their boxes overlap almost
+// everywhere, which object splits cannot fix and spatial splits can.
+SceneGeometry make_thin_diagonals(int count, uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(-10.0f, 10.0f);
+    SceneGeometry g;
+    for (int i = 0; i < count; ++i) {
+        const Vec3f a(u(rng), u(rng), u(rng));
+        const Vec3f dir = (i % 2) ? Vec3f(1.0f, 1.0f, 0.3f) : Vec3f(-1.0f, 1.0f, -0.2f);
+        const Vec3f b = a + dir * 12.0f;
+        test::append(g, {a, b, a + Vec3f(0.0f, 0.0f, 0.05f)});
+    }
+    g.normal_matrices.push_back(Affine3f::identity());
+    return g;
+}
+
+struct NamedScene {
+    std::string name;
+    SceneGeometry geometry;
+};
+
+std::vector<NamedScene> test_scenes() {
+    std::vector<NamedScene> scenes;
+    scenes.push_back({"soup", test::make_triangle_soup(3000, 1, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f)});
+    scenes.push_back({"sphere", test::to_geometry(test::make_icosphere(4))});
+    scenes.push_back({"nasty", test::make_nasty_geometry(2)});
+    scenes.push_back({"far", test::make_triangle_soup(2000, 3, {Vec3f(1e6f), Vec3f(1e6f + 100.0f)}, 1.0f)});
+    scenes.push_back({"huge", test::make_triangle_soup(2000, 23, {Vec3f(-1e6f), Vec3f(1e6f)}, 3e4f)});
+    scenes.push_back({"diagonals", make_thin_diagonals(1500, 4)});
+    scenes.push_back({"geometric", make_geometric_row(900)});
+    SceneGeometry same;
+    for (int i = 0; i < 100; ++i) test::append(same, {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)});
+    scenes.push_back({"identical", std::move(same)});
+    SceneGeometry points;
+    for (int i = 0; i < 50; ++i) test::append(points, {Vec3f(3.0f), Vec3f(3.0f), Vec3f(3.0f)});
+    scenes.push_back({"points", std::move(points)});
+    return scenes;
+}
+
+// The ray mix of bvh_traversal_test.cpp: random, aimed at triangles (mostly
+// hits), zero direction components, and [tmin, tmax] limits.
+std::vector<Ray> make_rays(const SceneGeometry& g, size_t count, uint32_t seed) {
+    std::mt19937 rng(seed);
+    const Vec3f margin = g.bounds.extent() * 0.25f + Vec3f(1e-3f);
+    const Box3f around{g.bounds.lo - margin, g.bounds.hi + margin};
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    std::uniform_int_distribution<size_t> pick(0, g.triangles.size() - 1);
+    std::vector<Ray> rays;
+    for (size_t i = 0; i < count; ++i) {
+        Ray ray;
+        ray.org = test::random_in_box(rng, around);
+        switch (i % 5) {
+            case 0: ray.dir = test::random_direction(rng); break;
+            case 1:
+            case 2: {
+                const Triangle& tri = g.triangles[pick(rng)];
+                float b1 = unit(rng), b2 = unit(rng);
+                if (b1 + b2 > 1.0f) { b1 = 1.0f - b1; b2 = 1.0f - b2; }
+                ray.dir = tri.v0 * (1.0f - b1 - b2) + tri.v1 * b1 + tri.v2 * b2 - ray.org;
+                break;
+            }
+            case 3: {
+                Vec3f d = test::random_direction(rng);
+                d[static_cast<int>(i % 3)] = 0.0f;
+                if (i % 2) d[static_cast<int>((i + 1) % 3)] = 0.0f;
+                if (length_squared(d) == 0.0f) d = Vec3f(1, 0, 0);
+                ray.dir = d;
+                break;
+            }
+            case 4: {
+                const Triangle& tri = g.triangles[pick(rng)];
+                ray.dir = tri.v1 - ray.org;
+                ray.tmin = unit(rng) * 0.5f;
+                ray.tmax = 0.5f + unit(rng);
+                break;
+            }
+        }
+        if (i % 7 == 0) ray.tmax = unit(rng) * length(g.bounds.extent()) / std::max(length(ray.dir), 1e-20f);
+        rays.push_back(ray);
+    }
+    return rays;
+}
+
+void compare_with_brute_force(const SceneGeometry& g, const BuildOptions& options, size_t ray_count, uint32_t seed) {
+    const auto accel = build_accel(g, options);
+    const BruteForceAccel brute(g);
+    size_t hits = 0;
+    for (const Ray& ray : make_rays(g, ray_count, seed)) {
+        const Hit expected = brute.intersect(ray);
+        const Hit got = accel->intersect(ray);
+        ASSERT_EQ(got.found(), expected.found());
+        EXPECT_EQ(accel->occluded(ray), expected.found());
+        if (!expected.found()) continue;
+        ++hits;
+        if (got.prim != expected.prim) {  // another triangle at (almost) the same distance
+            EXPECT_NEAR(got.t, expected.t, 1e-5f * std::fabs(expected.t));
+        } else {
+            EXPECT_EQ(got.t, expected.t);
+        }
+        EXPECT_GE(got.t, ray.tmin);
+        EXPECT_LE(got.t, ray.tmax);
+    }
+    EXPECT_GT(hits, ray_count / 10);
+}
+
+std::vector<NamedScene> traversal_scenes() {
+    std::vector<NamedScene> scenes;
+    scenes.push_back({"soup", test::make_triangle_soup(3000, 21, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.7f)});
+    scenes.push_back({"sphere", test::to_geometry(test::make_icosphere(3), 3.0f)});
+    scenes.push_back({"nasty", test::make_nasty_geometry(4)});
+    scenes.push_back({"far", test::make_triangle_soup(2000, 22, {Vec3f(1e6f), Vec3f(1e6f + 50.0f)}, 2.0f)});
+    scenes.push_back({"huge", test::make_triangle_soup(2000, 23, {Vec3f(-1e6f), Vec3f(1e6f)}, 3e4f)});
+    scenes.push_back({"diagonals", make_thin_diagonals(1500, 5)});
+    return scenes;
+}
+
+// --- Full sweep SAH -------------------------------------------------------
+
+TEST(SweepSah, InvariantsHoldForScenesLeafSizesAndThreads) {
+    for (const NamedScene& scene : test_scenes()) {
+        for (int leaf_size : {1, 4, 16}) {
+            for (int threads : {1, 2}) {
+                SCOPED_TRACE(scene.name + " leaf " + std::to_string(leaf_size) + " threads " + std::to_string(threads));
+                const Bvh bvh = build_sweep_sah(scene.geometry.triangles,
+                                                BuildOptions{.max_leaf_size = leaf_size, .threads = threads});
+                check_bvh(bvh, scene.geometry.triangles, leaf_size);
+                EXPECT_TRUE(std::isfinite(bvh.sah_cost()));
+            }
+        }
+    }
+}
+
+// Coordinates so large that every box area overflows to infinity: all SAH
+// costs tie, every split peels off one triangle, and only the depth limit
+// stops a chain hundreds of levels deep.
+SceneGeometry make_overflowing_soup() {
+    return test::make_triangle_soup(600, 3, {Vec3f(-1e25f), Vec3f(1e25f)}, 1e24f);
+}
+
+TEST(SweepSah, DepthStaysWithinLimitOnPathologicalInput) {
+    const SceneGeometry row = make_geometric_row(900);
+    const SceneGeometry overflow = make_overflowing_soup();
+    for (int leaf_size : {1, 4}) {
+        const BuildOptions options{.max_leaf_size = leaf_size};
+        check_bvh(build_sweep_sah(row.triangles, options), row.triangles, leaf_size);
+        const TreeShape shape = check_bvh(build_sweep_sah(overflow.triangles, options), overflow.triangles, leaf_size);
+        EXPECT_LE(shape.max_depth, kBvhMaxDepth);
+        EXPECT_GT(shape.max_depth, 50);  // the input really is lopsided
+    }
+}
+
+TEST(SweepSah, SameTreeForEveryThreadCount) {
+    // Large enough for parallel sorts, axis tasks and subtree tasks.
+    const SceneGeometry soup = test::make_triangle_soup(80000, 5, {Vec3f(-100.0f), Vec3f(100.0f)}, 1.0f);
+    const Bvh one = build_sweep_sah(soup.triangles, BuildOptions{.threads = 1});
+    const Bvh two = build_sweep_sah(soup.triangles, BuildOptions{.threads = 2});
+    const Bvh all = build_sweep_sah(soup.triangles, BuildOptions{.threads = 0});
+    EXPECT_TRUE(identical(one, two));
+    EXPECT_TRUE(identical(one, all));
+    check_bvh(one, soup.triangles, 4);
+}
+
+TEST(SweepSah, SahNoWorseThanBinned) {
+    for (const NamedScene& scene : test_scenes()) {
+        if (scene.name == "identical" || scene.name == "points" || scene.name == "geometric") continue;
+        SCOPED_TRACE(scene.name);
+        const double binned = build_binned_sah(scene.geometry.triangles, BuildOptions{}).sah_cost();
+        const double sweep = build_sweep_sah(scene.geometry.triangles, BuildOptions{}).sah_cost();
+        EXPECT_LE(sweep, binned * 1.02);
+    }
+}
+
+TEST(SweepSah, MatchesBruteForce) {
+    for (const NamedScene& scene : traversal_scenes()) {
+        SCOPED_TRACE(scene.name);
+        compare_with_brute_force(scene.geometry, BuildOptions{.builder = Builder::SweepSah, .max_leaf_size = 2}, 1500, 11);
+    }
+}
+
+TEST(SweepSah, EmptyAndSingleTriangle) {
+    EXPECT_TRUE(build_sweep_sah({}, BuildOptions{}).nodes.empty());
+    const Triangle tri{Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)};
+    const Bvh one = build_sweep_sah(std::span<const Triangle>(&tri, 1), BuildOptions{});
+    ASSERT_EQ(one.nodes.size(), 1u);
+    EXPECT_EQ(one.nodes[0].count, 1u);
+    EXPECT_TRUE(same_box(one.nodes[0].bounds, tri.bounds()));
+}
+
+// --- SBVH -----------------------------------------------------------------
+
+TEST(Sbvh, InvariantsHoldForScenesLeafSizesAndThreads) {
+    for (const NamedScene& scene : test_scenes()) {
+        for (int leaf_size : {1, 4, 16}) {
+            for (int threads : {1, 2}) {
+                SCOPED_TRACE(scene.name + " leaf " + std::to_string(leaf_size) + " threads " + std::to_string(threads));
+                const Bvh bvh =
+                    build_sbvh(scene.geometry.triangles, BuildOptions{.max_leaf_size = leaf_size, .threads = threads});
+                check_bvh(bvh, scene.geometry.triangles, leaf_size, true);
+                check_coverage(bvh, scene.geometry.triangles, 7);
+                EXPECT_LE(bvh.prim_indices.size(), 2 * scene.geometry.triangles.size());  // the reference budget
+                EXPECT_TRUE(std::isfinite(bvh.sah_cost()));
+            }
+        }
+    }
+}
+
+TEST(Sbvh, DepthStaysWithinLimitOnPathologicalInput) {
+    const SceneGeometry row = make_geometric_row(900);
+    const SceneGeometry overflow = make_overflowing_soup();
+    for (int leaf_size : {1, 4}) {
+        const BuildOptions options{.max_leaf_size = leaf_size};
+        check_bvh(build_sbvh(row.triangles, options), row.triangles, leaf_size, true);
+        const TreeShape shape = check_bvh(build_sbvh(overflow.triangles, options), overflow.triangles, leaf_size, true);
+        EXPECT_LE(shape.max_depth, kBvhMaxDepth);
+        EXPECT_GT(shape.max_depth, 50);
+    }
+}
+
+TEST(Sbvh, SameTreeForEveryThreadCount) {
+    const SceneGeometry soup = test::make_triangle_soup(12000, 6, {Vec3f(-40.0f), Vec3f(40.0f)}, 3.0f);
+    const Bvh one = build_sbvh(soup.triangles, BuildOptions{.threads = 1});
+    const Bvh two = build_sbvh(soup.triangles, BuildOptions{.threads = 2});
+    const Bvh all = build_sbvh(soup.triangles, BuildOptions{.threads = 0});
+    EXPECT_GT(one.prim_indices.size(), soup.triangles.size());  // spatial splits happened
+    EXPECT_TRUE(identical(one, two));
+    EXPECT_TRUE(identical(one, all));
+}
+
+TEST(Sbvh, LowestSahWhereSpatialSplitsMatter) {
+    const SceneGeometry diagonals = make_thin_diagonals(3000, 8);
+    const double binned = build_binned_sah(diagonals.triangles, BuildOptions{}).sah_cost();
+    const double sweep = build_sweep_sah(diagonals.triangles, BuildOptions{}).sah_cost();
+    const double sbvh = build_sbvh(diagonals.triangles, BuildOptions{}).sah_cost();
+    EXPECT_LT(sbvh, sweep * 0.9);
+    EXPECT_LT(sbvh, binned * 0.9);
+    // Elsewhere it is still no worse than the sweep (its object splits are the same sweep).
+    for (const NamedScene& scene : test_scenes()) {
+        if (scene.name == "identical" || scene.name == "points") continue;
+        SCOPED_TRACE(scene.name);
+        const double s = build_sweep_sah(scene.geometry.triangles, BuildOptions{}).sah_cost();
+        EXPECT_LE(build_sbvh(scene.geometry.triangles, BuildOptions{}).sah_cost(), s * 1.001);
+    }
+}
+
+TEST(Sbvh, AlphaOneDisablesSpatialSplits) {
+    const SceneGeometry diagonals = make_thin_diagonals(1000, 9);
+    const Bvh sbvh = build_sbvh(diagonals.triangles, BuildOptions{.sbvh_alpha = 1.0f});
+    EXPECT_EQ(sbvh.prim_indices.size(), diagonals.triangles.size());
+    EXPECT_TRUE(identical(sbvh, build_sweep_sah(diagonals.triangles, BuildOptions{})));
+}
+
+TEST(Sbvh, MatchesBruteForce) {
+    for (const NamedScene& scene : traversal_scenes()) {
+        SCOPED_TRACE(scene.name);
+        compare_with_brute_force(scene.geometry, BuildOptions{.builder = Builder::Sbvh, .max_leaf_size = 2}, 1500, 12);
+    }
+}
+
+TEST(Sbvh, EmptyAndSingleTriangle) {
+    EXPECT_TRUE(build_sbvh({}, BuildOptions{}).nodes.empty());
+    const Triangle tri{Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)};
+    const Bvh one = build_sbvh(std::span<const Triangle>(&tri, 1), BuildOptions{});
+    ASSERT_EQ(one.nodes.size(), 1u);
+    EXPECT_EQ(one.prim_indices, std::vector<uint32_t>{0});
+    EXPECT_TRUE(same_box(one.nodes[0].bounds, tri.bounds()));
+}
+
+// --- Reinsertion ----------------------------------------------------------
+
+TEST(Reinsertion, NeverIncreasesSahAndKeepsInvariants) {
+    for (const NamedScene& scene : test_scenes()) {
+        for (const Builder builder : {Builder::BinnedSah, Builder::SweepSah, Builder::Sbvh}) {
+            SCOPED_TRACE(scene.name + " " + to_string(builder));
+            const BuildOptions options{.builder = builder, .max_leaf_size = 2};
+            const std::span<const Triangle> tris = scene.geometry.triangles;
+            Bvh bvh = builder == Builder::BinnedSah  ? build_binned_sah(tris, options)
+                      : builder == Builder::SweepSah ? build_sweep_sah(tris, options)
+                                                     : build_sbvh(tris, options);
+            const double before = bvh.sah_cost();
+            const size_t leaves = bvh.leaf_count();
+            optimize_reinsertion(bvh, tris, options);
+            EXPECT_LE(bvh.sah_cost(), before);
+            EXPECT_EQ(bvh.leaf_count(), leaves);
+            check_bvh(bvh, tris, 2, builder == Builder::Sbvh);
+        }
+    }
+}
+
+TEST(Reinsertion, LowersSahOfPoorTree) {
+    const SceneGeometry sphere = test::to_geometry(test::make_icosphere(5));
+    // An LBVH (Morton order, no SAH above the leaves) leaves much to gain.
+    const BuildOptions lbvh{.builder = Builder::Lbvh30};
+    Bvh bvh = build_bvh(sphere.triangles, lbvh);
+    const double before = bvh.sah_cost();
+    optimize_reinsertion(bvh, sphere.triangles, lbvh);
+    const double after = bvh.sah_cost();
+    EXPECT_LT(after, before * 0.97) << before << " -> " << after;
+    check_bvh(bvh, sphere.triangles, 4);
+
+    // Two bins per axis: spatial-median splits, a poor tree too.
+    const BuildOptions two_bins{.bin_count = 2};
+    Bvh binned = build_binned_sah(sphere.triangles, two_bins);
+    const double binned_before = binned.sah_cost();
+    optimize_reinsertion(binned, sphere.triangles, two_bins);
+    EXPECT_LT(binned.sah_cost(), binned_before);
+
+    // More batches never do worse than one.
+    Bvh once = build_bvh(sphere.triangles, lbvh);
+    optimize_reinsertion(once, sphere.triangles, BuildOptions{.builder = Builder::Lbvh30, .optimize_iterations = 1});
+    EXPECT_LT(once.sah_cost(), before);
+    EXPECT_LE(after, once.sah_cost());
+}
+
+TEST(Reinsertion, DepthStaysWithinLimit) {
+    // A tree already close to the depth limit: reinsertion must not push it over.
+    const SceneGeometry row = make_geometric_row(900);
+    const BuildOptions options{.bin_count = 2, .max_leaf_size = 1};
+    Bvh bvh = build_binned_sah(row.triangles, options);
+    const double before = bvh.sah_cost();
+    optimize_reinsertion(bvh, row.triangles, BuildOptions{.bin_count = 2, .max_leaf_size = 1, .optimize_iterations = 20});
+    EXPECT_LE(bvh.sah_cost(), before);
+    check_bvh(bvh, row.triangles, 1);
+    // A tree at the depth limit whose costs are all infinite stays valid.
+    const SceneGeometry overflow = make_overflowing_soup();
+    Bvh deep = build_sweep_sah(overflow.triangles, BuildOptions{.max_leaf_size = 1});
+    optimize_reinsertion(deep, overflow.triangles, BuildOptions{.max_leaf_size = 1});
+    EXPECT_LE(check_bvh(deep, overflow.triangles, 1).max_depth, kBvhMaxDepth);
+}
+
+TEST(Reinsertion, SameTreeForEveryThreadCount) {
+    const SceneGeometry soup = test::make_triangle_soup(30000, 11, {Vec3f(-50.0f), Vec3f(50.0f)}, 1.0f);
+    const Bvh base = build_binned_sah(soup.triangles, BuildOptions{.bin_count = 4});
+    Bvh one = base, two = base, all = base;
+    optimize_reinsertion(one, soup.triangles, BuildOptions{.threads = 1});
+    optimize_reinsertion(two, soup.triangles, BuildOptions{.threads = 2});
+    optimize_reinsertion(all, soup.triangles, BuildOptions{.threads = 0});
+    EXPECT_TRUE(identical(one, two));
+    EXPECT_TRUE(identical(one, all));
+}
+
+TEST(Reinsertion, MatchesBruteForce) {
+    for (const NamedScene& scene : traversal_scenes()) {
+        SCOPED_TRACE(scene.name);
+        compare_with_brute_force(scene.geometry, BuildOptions{.bin_count = 4, .optimize = true}, 1500, 13);
+    }
+}
+
+TEST(Reinsertion, TinyTreesAreLeftAlone) {
+    Bvh empty;
+    optimize_reinsertion(empty, {}, BuildOptions{});
+    EXPECT_TRUE(empty.nodes.empty());
+    const SceneGeometry three = test::make_triangle_soup(3, 12, {Vec3f(-1.0f), Vec3f(1.0f)}, 0.2f);
+    Bvh bvh = build_binned_sah(three.triangles, BuildOptions{.max_leaf_size = 1});
+    const Bvh before = bvh;
+    optimize_reinsertion(bvh, three.triangles, BuildOptions{.max_leaf_size = 1});
+    EXPECT_TRUE(identical(bvh, before));
+}
+
+}  // namespace
+}  // namespace rf
