@@ -1,12 +1,298 @@
-// Placeholder: the HLBVH2 builder is not implemented yet.
+// HLBVH2 builder (Garanzha 2014, dissertation ch. 5, "BVH construction with
+// binary search and work queues"; Garanzha, Pantaleoni and McAllister,
+// HPG 2011). Parameters from the seed digest (000-dissertation-ch5-6.md, 1.3-1.4):
+//
+//  1. 30-bit Morton codes (n = 10 bits per axis) of the triangles' box
+//     centres in the centroid bounds.
+//  2. One radix sort of (code, triangle) pairs.
+//  3. Clusters by compaction: runs of equal top 15 bits (m = 5), i.e. the
+//     non-empty cells of a 32^3 grid; at most 32,768.
+//  4. Bottom levels, one per cluster: a node over sorted range [a, b) splits
+//     where the highest bit in which codes[a] and codes[b-1] differ turns
+//     from 0 to 1, found by binary search (O(log n) code reads; geometrically
+//     a midpoint split of the node's Morton cell). A range of at most
+//     numLeafTri (= options.max_leaf_size) triangles is a leaf. Ranges whose
+//     codes are all equal are halved by position. The GPU work queues (one
+//     node per thread, one level per launch) become TBB tasks: clusters in
+//     parallel, and large ranges split into parallel subtasks. Boxes are
+//     computed bottom-up as the recursion returns.
+//  5. Top level over the clusters, each an indivisible primitive with its
+//     box, by the grid SAH of ch. 4 with the top grid only: candidate planes
+//     lie on the 32^3 cluster grid, at most 8 bins (7 planes) per axis across
+//     the node's integer cell bounds; cost = area(L) * triangles(L) +
+//     area(R) * triangles(R).
+//  6. The shared emitter (morton_tree.cpp) bounds the depth to kBvhMaxDepth
+//     and writes the canonical depth-first layout.
+// Node indices are fixed by the input (bottom inner node = its split position
+// - 1; top nodes numbered by their cluster ranges), so the tree is the same
+// for every thread count.
 #include "accel/bvh/build/hlbvh2.h"
 
-#include "rayforge/core/error.h"
+#include <algorithm>
+#include <bit>
+#include <chrono>
+
+#include "accel/bvh/build/morton_radix_sort.h"
+#include "accel/bvh/build/morton_tree.h"
+#include "core/parallel.h"
+#include "rayforge/core/memory_budget.h"
 
 namespace rf {
+namespace {
+
+using morton::kLeafRef;
+
+constexpr int kCodeBits = 30;
+constexpr int kClusterShift = 15;                  // clusters: the top 15 of 30 bits
+constexpr uint32_t kClusterGrid = 32;              // 2^5 cells per axis
+constexpr uint32_t kTopBins = 8;                   // grid SAH: up to 8 bins (7 planes) per axis
+constexpr uint32_t kParallelRange = 4096;          // triangles per range to split into tasks
+constexpr uint32_t kParallelTop = 256;             // clusters per top node to split into tasks
+constexpr uint32_t kCompactBlock = 64 * 1024;
+
+class Stopwatch {
+public:
+    double lap() {
+        const auto now = std::chrono::steady_clock::now();
+        const double ms = std::chrono::duration<double, std::milli>(now - last_).count();
+        last_ = now;
+        return ms;
+    }
+private:
+    std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
+
+// Cell of a 15-bit cluster prefix on one axis (x: bits 3k+2, y: 3k+1, z: 3k).
+uint32_t cluster_cell(uint32_t prefix, int axis) {
+    uint32_t cell = 0;
+    for (int k = 0; k < 5; ++k) cell |= ((prefix >> (3 * k + 2 - axis)) & 1u) << k;
+    return cell;
+}
+
+class Hlbvh2Builder {
+public:
+    Hlbvh2Builder(std::span<const Triangle> triangles, const BuildOptions& options)
+        : tree_(triangles, options), leaf_size_(static_cast<uint32_t>(std::max(options.max_leaf_size, 1))) {}
+
+    Bvh build(Hlbvh2Stages& stages) {
+        Stopwatch clock;
+        std::vector<uint32_t> order;
+        morton::compute_morton_codes(tree_.triangles, keys_, order);
+        stages.morton_ms = clock.lap();
+        const uint32_t n = static_cast<uint32_t>(keys_.size());
+        if (n == 0) return {};
+
+        radix_sort_pairs(keys_, order, kCodeBits);
+        tree_.set_order(std::move(order));
+        stages.sort_ms = clock.lap();
+
+        find_clusters();
+        const uint32_t clusters = static_cast<uint32_t>(cluster_begin_.size() - 1);
+        stages.cluster_count = clusters;
+        stages.clusters_ms = clock.lap();
+
+        tree_.enable_leaf_runs();
+        budgeted_resize(tree_.nodes, size_t{n} - 1 + (clusters - 1), "HLBVH2: nodes");
+        budgeted_resize(cluster_root_, clusters, "HLBVH2: cluster roots");
+        parallel::for_range(0u, clusters, 1u, [&](uint32_t lo, uint32_t hi) {
+            for (uint32_t c = lo; c != hi; ++c) cluster_root_[c] = build_range(cluster_begin_[c], cluster_begin_[c + 1]);
+        });
+        stages.bottom_ms = clock.lap();
+
+        const uint32_t root = build_top(clusters);
+        stages.top_ms = clock.lap();
+
+        Bvh bvh = tree_.emit(root);
+        stages.emit_ms = clock.lap();
+        return bvh;
+    }
+
+private:
+    // Starts of the runs of equal 15-bit prefixes, plus n at the end.
+    void find_clusters() {
+        const uint32_t n = static_cast<uint32_t>(keys_.size());
+        const uint32_t blocks = (n + kCompactBlock - 1) / kCompactBlock;
+        auto is_start = [&](uint32_t i) { return i == 0 || (keys_[i] >> kClusterShift) != (keys_[i - 1] >> kClusterShift); };
+        std::vector<uint32_t> block_offset(blocks + 1, 0);
+        parallel::for_range(0u, blocks, 1u, [&](uint32_t lo, uint32_t hi) {
+            for (uint32_t b = lo; b != hi; ++b) {
+                uint32_t starts = 0;
+                for (uint32_t i = b * kCompactBlock, end = std::min(n, i + kCompactBlock); i != end; ++i) starts += is_start(i);
+                block_offset[b + 1] = starts;
+            }
+        });
+        for (uint32_t b = 0; b < blocks; ++b) block_offset[b + 1] += block_offset[b];
+        cluster_begin_.assign(block_offset[blocks] + 1, n);
+        parallel::for_range(0u, blocks, 1u, [&](uint32_t lo, uint32_t hi) {
+            for (uint32_t b = lo; b != hi; ++b) {
+                uint32_t at = block_offset[b];
+                for (uint32_t i = b * kCompactBlock, end = std::min(n, i + kCompactBlock); i != end; ++i) {
+                    if (is_start(i)) cluster_begin_[at++] = i;
+                }
+            }
+        });
+    }
+
+    // The bottom-level subtree over sorted range [a, b); returns its reference.
+    uint32_t build_range(uint32_t a, uint32_t b) {
+        const uint32_t count = b - a;
+        if (count <= leaf_size_) {
+            tree_.set_leaf_run(a, count);
+            return kLeafRef | a;
+        }
+        uint32_t mid;
+        const uint32_t differ = keys_[a] ^ keys_[b - 1];
+        if (differ != 0) {
+            // Codes in [a, b) share every bit above `bit`, so that bit is 0s then 1s:
+            // binary search for the first 1.
+            const uint32_t bit = static_cast<uint32_t>(std::bit_width(differ) - 1);
+            uint32_t lo = a + 1, hi = b - 1;  // keys_[a] has a 0 there, keys_[b-1] a 1
+            while (lo < hi) {
+                const uint32_t m = lo + (hi - lo) / 2;
+                if ((keys_[m] >> bit) & 1u) hi = m; else lo = m + 1;
+            }
+            mid = lo;
+        } else {
+            mid = a + count / 2;  // all codes equal: halve by position
+        }
+        uint32_t left, right;
+        if (count > kParallelRange) {
+            parallel::invoke([&] { left = build_range(a, mid); }, [&] { right = build_range(mid, b); });
+        } else {
+            left = build_range(a, mid);
+            right = build_range(mid, b);
+        }
+        const uint32_t index = mid - 1;  // each split position occurs once
+        tree_.finalize(index, left, right);
+        return index;
+    }
+
+    struct Cluster {
+        uint32_t cell[3];
+        uint32_t triangles;
+        Box3f box;
+        uint32_t root;
+    };
+
+    uint32_t build_top(uint32_t count) {
+        std::vector<Cluster> clusters(count);
+        parallel::for_range(0u, count, 64u, [&](uint32_t lo, uint32_t hi) {
+            for (uint32_t c = lo; c != hi; ++c) {
+                const uint32_t prefix = keys_[cluster_begin_[c]] >> kClusterShift;
+                Cluster& cl = clusters[c];
+                for (int axis = 0; axis < 3; ++axis) cl.cell[axis] = cluster_cell(prefix, axis);
+                cl.triangles = cluster_begin_[c + 1] - cluster_begin_[c];
+                cl.box = tree_.bounds(cluster_root_[c]);
+                cl.root = cluster_root_[c];
+            }
+        });
+        top_base_ = tree_.size() - 1;
+        return build_top_node(clusters, 0);
+    }
+
+    // Top-level subtree over `clusters`; its inner nodes are numbered
+    // top_base_ + first_index .. + clusters.size() - 2.
+    uint32_t build_top_node(std::span<Cluster> clusters, uint32_t first_index) {
+        if (clusters.size() == 1) return clusters[0].root;
+        uint32_t lo[3] = {kClusterGrid, kClusterGrid, kClusterGrid}, hi[3] = {0, 0, 0};
+        for (const Cluster& c : clusters) {
+            for (int axis = 0; axis < 3; ++axis) {
+                lo[axis] = std::min(lo[axis], c.cell[axis]);
+                hi[axis] = std::max(hi[axis], c.cell[axis]);
+            }
+        }
+        struct Bin {
+            Box3f box;
+            uint32_t triangles = 0;
+            uint32_t clusters = 0;
+        };
+        float best_cost = 0.0f;
+        int best_axis = -1;
+        uint32_t best_plane = 0;
+        for (int axis = 0; axis < 3; ++axis) {
+            const uint32_t cells = hi[axis] - lo[axis] + 1;
+            if (cells < 2) continue;
+            const uint32_t bins = std::min(kTopBins, cells);
+            Bin bin[kTopBins];
+            for (const Cluster& c : clusters) {
+                Bin& b = bin[(c.cell[axis] - lo[axis]) * bins / cells];
+                b.box = morton::box_union(b.box, c.box);
+                b.triangles += c.triangles;
+                ++b.clusters;
+            }
+            float right_area[kTopBins];
+            uint32_t right_triangles[kTopBins], right_clusters[kTopBins];
+            Box3f acc;
+            uint32_t tris = 0, cls = 0;
+            for (uint32_t k = bins - 1; k > 0; --k) {
+                acc = morton::box_union(acc, bin[k].box);
+                tris += bin[k].triangles;
+                cls += bin[k].clusters;
+                right_area[k] = cls ? morton::half_area(acc) : 0.0f;
+                right_triangles[k] = tris;
+                right_clusters[k] = cls;
+            }
+            acc = Box3f{};
+            tris = cls = 0;
+            for (uint32_t k = 1; k < bins; ++k) {
+                acc = morton::box_union(acc, bin[k - 1].box);
+                tris += bin[k - 1].triangles;
+                cls += bin[k - 1].clusters;
+                if (cls == 0 || right_clusters[k] == 0) continue;
+                const float cost = morton::half_area(acc) * static_cast<float>(tris) +
+                                   right_area[k] * static_cast<float>(right_triangles[k]);
+                if (best_axis < 0 || cost < best_cost) {
+                    best_cost = cost;
+                    best_axis = axis;
+                    best_plane = k;
+                }
+            }
+        }
+        // Distinct clusters occupy distinct cells, so some axis spans two or
+        // more cells and its first and last bins are both occupied.
+        const int axis = best_axis;
+        const uint32_t cells = hi[axis] - lo[axis] + 1, bins = std::min(kTopBins, cells);
+        const auto middle = std::stable_partition(clusters.begin(), clusters.end(), [&](const Cluster& c) {
+            return (c.cell[axis] - lo[axis]) * bins / cells < best_plane;
+        });
+        const size_t left_count = static_cast<size_t>(middle - clusters.begin());
+        const std::span<Cluster> left_clusters = clusters.first(left_count);
+        const std::span<Cluster> right_clusters = clusters.subspan(left_count);
+        const uint32_t left_first = first_index + 1;
+        const uint32_t right_first = first_index + static_cast<uint32_t>(left_count);
+        uint32_t left, right;
+        if (clusters.size() > kParallelTop) {
+            parallel::invoke([&] { left = build_top_node(left_clusters, left_first); },
+                             [&] { right = build_top_node(right_clusters, right_first); });
+        } else {
+            left = build_top_node(left_clusters, left_first);
+            right = build_top_node(right_clusters, right_first);
+        }
+        const uint32_t index = top_base_ + first_index;
+        tree_.finalize(index, left, right);
+        return index;
+    }
+
+    morton::RawTree tree_;
+    uint32_t leaf_size_;
+    std::vector<uint32_t> keys_;
+    std::vector<uint32_t> cluster_begin_;
+    std::vector<uint32_t> cluster_root_;
+    uint32_t top_base_ = 0;
+};
+
+}  // namespace
+
+Bvh build_hlbvh2(std::span<const Triangle> triangles, const BuildOptions& options, Hlbvh2Stages* stages) {
+    Hlbvh2Stages local;
+    Hlbvh2Builder builder(triangles, options);
+    Bvh bvh = parallel::with_threads(options.threads, [&] { return builder.build(local); });
+    if (stages) *stages = local;
+    return bvh;
+}
 
 Bvh build_hlbvh2(std::span<const Triangle> triangles, const BuildOptions& options) {
-    throw Error("the HLBVH2 builder is not implemented yet");
+    return build_hlbvh2(triangles, options, nullptr);
 }
 
 }  // namespace rf

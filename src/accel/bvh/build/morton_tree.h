@@ -1,0 +1,118 @@
+// Shared machinery of the Morton-ordered builders (LBVH, Karras 2012; HLBVH2,
+// Garanzha 2014 ch. 5; PLOC, Meister and Bittner 2018): Morton codes of the
+// triangles' box centres, and an intermediate binary tree ("raw tree") whose
+// leaves are runs of Morton-sorted primitives. The raw tree is turned into
+// the canonical rf::Bvh by one emitter:
+//   - bottom-up, while a builder creates inner nodes, finalize() computes
+//     each node's box, primitive count, SAH cost, and whether the subtree is
+//     cheaper as one leaf (only possible for <= max_leaf_size primitives);
+//   - emit() then rebuilds subtrees that would end deeper than kBvhMaxDepth
+//     (Morton trees can: exponentially spaced input, long runs of equal
+//     codes) as balanced halvings of their primitives, and writes the nodes
+//     in depth-first order with siblings adjacent, in parallel.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "rayforge/accel/accel.h"
+#include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/scene/scene_geometry.h"
+
+namespace rf::morton {
+
+// Child references: inner node index, or kLeafRef | sorted position of the
+// first primitive of a leaf run.
+inline constexpr uint32_t kLeafRef = 0x80000000u;
+inline bool is_leaf_ref(uint32_t ref) { return (ref & kLeafRef) != 0; }
+
+// Box growth with std::min/max semantics (single instructions); inputs are finite.
+inline Box3f box_union(const Box3f& a, const Box3f& b) {
+    Box3f r;
+    r.lo = Vec3f(a.lo.x < b.lo.x ? a.lo.x : b.lo.x, a.lo.y < b.lo.y ? a.lo.y : b.lo.y, a.lo.z < b.lo.z ? a.lo.z : b.lo.z);
+    r.hi = Vec3f(a.hi.x > b.hi.x ? a.hi.x : b.hi.x, a.hi.y > b.hi.y ? a.hi.y : b.hi.y, a.hi.z > b.hi.z ? a.hi.z : b.hi.z);
+    return r;
+}
+// Surface area without the empty-box test (boxes here are never empty).
+inline float half_area(const Box3f& b) {
+    const float x = b.hi.x - b.lo.x, y = b.hi.y - b.lo.y, z = b.hi.z - b.lo.z;
+    return x * y + y * z + z * x;
+}
+
+struct RawNode {
+    Box3f box;
+    uint32_t child[2];
+    uint32_t count;     // primitives below
+    float cost;         // SAH cost of the subtree as emitted (half areas, unnormalised)
+    uint32_t out_size;  // nodes this subtree becomes in the output
+    uint16_t height;    // inner nodes on its longest path, as emitted
+    uint8_t flags;      // kCollapsed, kRebuild
+    uint8_t unused;
+};
+inline constexpr uint8_t kCollapsed = 1;  // emitted as one leaf
+inline constexpr uint8_t kRebuild = 2;    // emitted as a balanced tree (depth limit)
+
+// Morton codes of the triangles' box centres inside the bounds of those
+// centres, and the identity order 0..n-1, ready for radix_sort_pairs.
+// uint32_t keys get 30-bit codes, uint64_t keys 63-bit codes.
+void compute_morton_codes(std::span<const Triangle> triangles, std::vector<uint32_t>& keys,
+                          std::vector<uint32_t>& order);
+void compute_morton_codes(std::span<const Triangle> triangles, std::vector<uint64_t>& keys,
+                          std::vector<uint32_t>& order);
+
+class RawTree {
+public:
+    RawTree(std::span<const Triangle> triangles, const BuildOptions& options);
+
+    // Takes the Morton order (sorted position -> triangle) and gathers the
+    // triangles' boxes into it.
+    void set_order(std::vector<uint32_t>&& order);
+    // Leaf runs longer than one primitive (HLBVH2): sizes per first position.
+    void enable_leaf_runs();
+    void set_leaf_run(uint32_t first, uint32_t count) { leaf_run_[first] = static_cast<uint8_t>(count); }
+
+    // Sets node `index`'s children and derives its box, count, cost and
+    // collapse decision from theirs (which must be final already).
+    void finalize(uint32_t index, uint32_t left, uint32_t right);
+    void finalize(uint32_t index) { finalize(index, nodes[index].child[0], nodes[index].child[1]); }
+
+    [[nodiscard]] Box3f bounds(uint32_t ref) const;
+    [[nodiscard]] uint32_t count(uint32_t ref) const;
+
+    // The canonical BVH of the subtree at `root`.
+    [[nodiscard]] Bvh emit(uint32_t root);
+
+    uint32_t size() const { return static_cast<uint32_t>(order.size()); }
+
+    std::span<const Triangle> triangles;
+    std::vector<uint32_t> order;  // sorted position -> triangle index
+    std::vector<Box3f> boxes;     // sorted position -> triangle box
+    std::vector<RawNode> nodes;
+
+private:
+    struct Info {
+        Box3f box;
+        uint32_t count;
+        float cost;
+        uint32_t out_size;
+        uint32_t height;
+    };
+    [[nodiscard]] Info info(uint32_t ref) const;
+    void plan_depth(uint32_t index, int depth);
+    void emit_node(Bvh& bvh, uint32_t ref, uint32_t at, uint32_t child_base, uint32_t slot) const;
+    void gather_positions(uint32_t ref, std::vector<uint32_t>& positions) const;
+    Box3f emit_balanced(Bvh& bvh, std::span<const uint32_t> positions, uint32_t at, uint32_t child_base,
+                        uint32_t slot) const;
+    [[nodiscard]] uint32_t balanced_size(uint32_t count) const;
+
+    uint32_t max_leaf_size_;
+    float traversal_cost_;
+    float intersection_cost_;
+    std::vector<uint8_t> leaf_run_;  // empty: every leaf run is one primitive
+};
+
+// Levels of halving until `count` primitives fit in leaves of `leaf_size`.
+int balanced_levels(uint32_t count, uint32_t leaf_size);
+
+}  // namespace rf::morton
