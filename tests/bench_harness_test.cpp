@@ -242,9 +242,15 @@ TEST(BenchCandidates, SelectionNamesWhatIsMissing) {
     ASSERT_FALSE(chosen.empty());
     EXPECT_EQ(chosen.front().label(), "bvh/binned/bvh2");
     for (const auto& c : chosen) EXPECT_TRUE(c.implemented);
-    bool names_sbvh = false;
-    for (const auto& c : missing) names_sbvh |= c.label() == "bvh/sbvh/bvh2";
-    EXPECT_TRUE(names_sbvh);
+    for (const auto& c : missing) EXPECT_FALSE(c.implemented);
+    // Every bvh candidate in `all` is either chosen or named as missing.
+    size_t bvh_in_all = 0;
+    for (const auto& c : bench::candidate_catalogue()) bvh_in_all += c.structure == "bvh" && c.in_all;
+    EXPECT_EQ(chosen.size() + missing.size(), bvh_in_all);
+    // +opt variants come only when their builder is named.
+    const auto optimised = bench::select_candidates({"bvh"}, {"binned+opt"}, {"bvh2"}, nullptr);
+    ASSERT_EQ(optimised.size(), 1u);
+    EXPECT_TRUE(optimised.front().options.optimize);
     // `all` leaves brute force out; naming it brings it in.
     for (const auto& c : bench::select_candidates({"all"}, {"all"}, {"all"}, nullptr))
         EXPECT_NE(c.structure, "brute");
@@ -303,7 +309,7 @@ TEST(BenchRunner, RecordsEveryRaySetAndAgreesWithThePeer) {
     bench::BenchConfig config;
     config.scenes = {"builtin:cornell"};
     config.resolutions = {{32, 24}};
-    config.candidates = bench::select_candidates({"bvh"}, {"all"}, {"all"}, nullptr);
+    config.candidates = bench::select_candidates({"bvh"}, {"binned"}, {"bvh2"}, nullptr);
     if (bench::embree_available()) config.embree = {bench::EmbreeQuality::Medium};
     config.repetitions = 2;
     config.build_repetitions = 1;

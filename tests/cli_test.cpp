@@ -132,7 +132,7 @@ TEST(Cli, UsageErrorsExitTwo) {
 TEST(Cli, BenchRunsTheProtocolAndWritesJson) {
     const std::string dir = test::temp_dir("cli_bench");
     const std::string json = dir + "/out.json";
-    CliResult r = run_cli("bench --scene builtin:cube --res 32x24 --reps 1 --build-reps 1 --threads 2 -q --json '" +
+    CliResult r = run_cli("bench --scene builtin:cube --layout bvh2 --res 32x24 --reps 1 --build-reps 1 --threads 2 -q --json '" +
                           json + "'");
     ASSERT_EQ(r.exit_code, 0) << r.err;
     EXPECT_NE(r.out.find("bvh/binned/bvh2"), std::string::npos) << r.out;

@@ -11,6 +11,7 @@
 #include "bench_runner.h"
 #include "commands.h"
 #include "presets.h"
+#include "stage_breakdown.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cli {
@@ -87,6 +88,15 @@ void print_list(const std::string& scenes_dir) {
 
 }  // namespace
 
+// Without --builder: the default BVH builder, and every "builder" of the
+// other structures (grid resolutions, the kd-tree's SAH).
+static std::vector<std::string> default_builders() {
+    std::set<std::string> names{to_string(BuildOptions{}.builder)};
+    for (const bench::Candidate& c : bench::candidate_catalogue())
+        if (c.structure != "bvh") names.insert(c.builder);
+    return {names.begin(), names.end()};
+}
+
 CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
     CLI::App* cmd = app.add_subcommand(
         "bench", "Benchmark structures and builders on the standard ray sets, with Embree side by side");
@@ -99,7 +109,7 @@ CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
     cmd->add_option("--res", a.resolutions, "Image sizes WxH, comma-separated (default 1024x768)");
     cmd->add_option("--rays", a.ray_sets, "Ray sets: primary, shadow, ao, diffuse, reflection, all (default all)");
     cmd->add_option("--structure", a.structures, "Structures, or all (default bvh; brute only when named)");
-    cmd->add_option("--builder", a.builders, "Builders, or all (default all)");
+    cmd->add_option("--builder", a.builders, "Builders, or all (default: the default builder, binned)");
     cmd->add_option("--layout", a.layouts, "Layouts, or all (default all)");
     cmd->add_option("--embree", a.embree, "Embree peer build qualities: low, medium, high, all, none (default all)");
     cmd->add_option("--preset", a.preset, "seed001 | seed002 | seed000: reproduce a seed's tables (see --list)");
@@ -143,7 +153,7 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
     } else {
         config.candidates = bench::select_candidates(
             a.structures.empty() ? std::vector<std::string>{"bvh"} : split_list(a.structures),
-            a.builders.empty() ? std::vector<std::string>{"all"} : split_list(a.builders),
+            a.builders.empty() ? default_builders() : split_list(a.builders),
             a.layouts.empty() ? std::vector<std::string>{"all"} : split_list(a.layouts), &unimplemented);
     }
     if (scenes.empty()) scenes = bench::default_scene_names(config.scenes_dir);
@@ -209,6 +219,22 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
                                       a.repetitions, a.build_repetitions);
         });
     if (preset && preset->configuration_table) bench::print_configuration_table(std::cout, records);
+    if (preset && preset->stage_breakdown) {
+        std::vector<bench::StageBreakdown> stages;
+        for (const std::string& name : scenes) {
+            try {
+                const bench::LoadedScene scene =
+                    bench::load_bench_scene(bench::resolve_scene(name, config.scenes_dir));
+                if (!a.quiet) std::cerr << "stage breakdown: " << scene.spec.name << '\n';
+                for (bench::StageBreakdown& row :
+                     bench::measure_stage_breakdowns(scene, a.threads, a.build_repetitions))
+                    stages.push_back(std::move(row));
+            } catch (const Error&) {
+                // Unloadable scenes were reported by the main run.
+            }
+        }
+        bench::print_stage_breakdowns(std::cout, stages, a.threads, a.build_repetitions);
+    }
     if (!a.json.empty()) {
         bench::write_json(a.json, records, info);
         std::cout << "\nwrote " << records.size() << " records to " << a.json << '\n';

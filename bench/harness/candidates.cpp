@@ -13,15 +13,15 @@ namespace {
 // What rayforge implements so far: a candidate runs when every part of it is
 // here. Flip entries on as structures land (issue 4).
 bool builder_implemented(const std::string& builder) {
-    static const std::set<std::string> names = {"binned"};
+    static const std::set<std::string> names = {"binned", "sweep", "sbvh", "lbvh30", "lbvh63", "hlbvh2", "ploc", "+opt"};
     return names.count(builder) != 0;
 }
 bool layout_implemented(const std::string& layout) {
-    static const std::set<std::string> names = {"bvh2"};
+    static const std::set<std::string> names = {"bvh2", "bvh4", "bvh8"};
     return names.count(layout) != 0;
 }
 bool structure_implemented(const std::string& structure) {
-    static const std::set<std::string> names = {"bvh", "brute"};
+    static const std::set<std::string> names = {"bvh", "brute", "kdtree"};
     return names.count(structure) != 0;
 }
 
@@ -70,6 +70,7 @@ std::vector<Candidate> make_catalogue() {
                                 (!optimize || builder_implemented("+opt"));
                 // Optimised variants run only when named (they double a bench's length).
                 c.in_all = !optimize;
+                c.named_by = &Candidate::builder;
                 all.push_back(c);
             }
         }
@@ -145,8 +146,8 @@ std::vector<Candidate> select_candidates(const std::vector<std::string>& structu
     for (const Candidate& c : candidate_catalogue()) {
         if (!matches(structures, c.structure) || !matches(builders, c.builder) || !matches(layouts, c.layout))
             continue;
-        // Structures left out of `all` run only when named explicitly.
-        if (!c.in_all && !named(structures, c.structure)) continue;
+        // Candidates left out of `all` run only when named explicitly.
+        if (!c.in_all && !named(c.named_by == &Candidate::builder ? builders : structures, c.*c.named_by)) continue;
         if (c.implemented) chosen.push_back(c);
         else if (unimplemented) unimplemented->push_back(c);
     }

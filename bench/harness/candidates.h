@@ -16,7 +16,10 @@ struct Candidate {
     std::string builder;    // "binned", "sbvh", ...
     std::string layout;     // how it is traced: "bvh2" = the canonical 32-byte binary nodes
     bool implemented = false;
-    bool in_all = true;     // part of `all` (brute force is not: far too slow for real scenes)
+    // Part of `all`? Brute force is not (far too slow for real scenes): it runs
+    // when its structure is named; the +opt variants run when their builder is.
+    bool in_all = true;
+    std::string Candidate::*named_by = &Candidate::structure;
     BuildOptions options;   // how to build it (implemented ones)
     std::string source;     // paper or seed it comes from
 

@@ -25,6 +25,7 @@ struct Preset {
     std::vector<RaySetKind> ray_sets;
     std::vector<std::string> candidates;      // labels, implemented or not
     bool configuration_table = false;         // print P / PS / PSR sums
+    bool stage_breakdown = false;             // print GridBvh / HLBVH2 build stages per scene
     std::vector<std::string> notes;           // printed and stored in the JSON
 };
 

@@ -1,0 +1,92 @@
+#include "stage_breakdown.h"
+
+#include <algorithm>
+#include <iomanip>
+#include <ostream>
+
+#include "accel/bvh/build/grid_bvh.h"
+#include "accel/bvh/build/hlbvh2.h"
+#include "core/parallel.h"
+
+namespace rf::bench {
+namespace {
+
+template <class Stages, class Build>
+Stages median_build(int repetitions, Build&& build, double (*total)(const Stages&)) {
+    std::vector<Stages> runs;
+    for (int i = 0; i < std::max(1, repetitions); ++i) {
+        Stages stages;
+        (void)build(stages);
+        runs.push_back(stages);
+    }
+    std::sort(runs.begin(), runs.end(), [&](const Stages& a, const Stages& b) { return total(a) < total(b); });
+    return runs[runs.size() / 2];
+}
+
+double grid_total(const GridBvhStages& s) { return s.total_ms; }
+double hlbvh2_total(const Hlbvh2Stages& s) { return s.total_ms(); }
+
+}  // namespace
+
+std::vector<StageBreakdown> measure_stage_breakdowns(const LoadedScene& scene, int threads, int repetitions) {
+    std::vector<StageBreakdown> rows;
+    const std::span<const Triangle> triangles = scene.geometry.triangles;
+    BuildOptions options;
+    options.threads = threads;
+    for (const bool split : {false, true}) {
+        const GridBvhStages s = median_build<GridBvhStages>(
+            repetitions,
+            [&](GridBvhStages& stages) {
+                return parallel::with_threads(threads, [&] { return build_grid_bvh(triangles, options, split, &stages); });
+            },
+            grid_total);
+        StageBreakdown row;
+        row.scene = scene.spec.name;
+        row.triangles = triangles.size();
+        row.builder = split ? "gridbvh-split" : "gridbvh";
+        row.stages = {{"partial tris", s.partial_triangles_ms}, {"sort", s.sort_ms},
+                      {"grid0", s.grid0_ms},                    {"coarse levels", s.coarse_levels_ms},
+                      {"hierarchy", s.hierarchy_ms},            {"leaves", s.leaf_finish_ms},
+                      {"emission", s.emission_ms}};
+        row.total_ms = s.total_ms;
+        row.detail = std::to_string(s.references) + " refs, " + std::to_string(s.occupied_top_cells) +
+                     " top cells, grid " + std::to_string(s.grid_bytes / 1024) + " KiB";
+        rows.push_back(row);
+    }
+    const Hlbvh2Stages h = median_build<Hlbvh2Stages>(
+        repetitions,
+        [&](Hlbvh2Stages& stages) {
+            return parallel::with_threads(threads, [&] { return build_hlbvh2(triangles, options, &stages); });
+        },
+        hlbvh2_total);
+    StageBreakdown row;
+    row.scene = scene.spec.name;
+    row.triangles = triangles.size();
+    row.builder = "hlbvh2";
+    row.stages = {{"morton", h.morton_ms}, {"sort", h.sort_ms},  {"clusters", h.clusters_ms},
+                  {"bottom", h.bottom_ms}, {"top", h.top_ms},    {"emission", h.emit_ms}};
+    row.total_ms = h.total_ms();
+    row.detail = std::to_string(h.cluster_count) + " clusters";
+    rows.push_back(row);
+    return rows;
+}
+
+void print_stage_breakdowns(std::ostream& out, const std::vector<StageBreakdown>& rows, int threads,
+                            int repetitions) {
+    if (rows.empty()) return;
+    out << "\nBuild stages (dissertation tables 4.1 and 5.1), ms of the median of " << repetitions << " builds, "
+        << (threads > 0 ? std::to_string(threads) : std::string("all")) << " threads\n";
+    const auto flags = out.flags();
+    const auto precision = out.precision();
+    out << std::fixed << std::setprecision(1);
+    for (const StageBreakdown& row : rows) {
+        out << "  " << std::left << std::setw(20) << row.scene << ' ' << std::setw(14) << row.builder << std::right
+            << " total " << std::setw(8) << row.total_ms << " |";
+        for (const auto& [name, ms] : row.stages) out << ' ' << name << ' ' << ms;
+        out << " | " << row.detail << " (" << row.triangles << " triangles)\n";
+    }
+    out.flags(flags);
+    out.precision(precision);
+}
+
+}  // namespace rf::bench
