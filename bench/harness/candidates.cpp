@@ -21,7 +21,7 @@ bool layout_implemented(const std::string& layout) {
     return names.count(layout) != 0;
 }
 bool structure_implemented(const std::string& structure) {
-    static const std::set<std::string> names = {"bvh", "brute", "kdtree"};
+    static const std::set<std::string> names = {"bvh", "brute", "kdtree", "grid", "grid-proximity"};
     return names.count(structure) != 0;
 }
 

@@ -1,0 +1,395 @@
+// Uniform grid build (seeds 001 §2.1.2 and 002 §4.2.1): layout by seed 002's
+// resolution rule, exact triangle/cell overlap by Akenine-Möller's SAT test
+// (seed 001), compact per-cell lists built in parallel by a count pass, a
+// prefix sum and a fill pass.
+#include "accel/grid/uniform_grid.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "accel/grid/proximity_clouds.h"
+#include "accel/grid/triangle_box_overlap.h"
+#include "core/parallel.h"
+#include "rayforge/core/error.h"
+#include "rayforge/core/memory_budget.h"
+
+namespace rf {
+namespace {
+
+constexpr size_t kTriangleGrain = 256;
+constexpr size_t kCellGrain = size_t(1) << 14;
+// The largest cell count: indices and the +1 offset stay 32-bit.
+constexpr double kMaxCells = 4294967294.0;
+// Seed 002's rule, capped at this many times the cells of a cubic scene.
+constexpr double kAutoCellFactor = 8.0;
+
+double max_abs_coordinate(const Box3f& b) {
+    double m = 0.0;
+    for (int a = 0; a < 3; ++a) m = std::max({m, std::fabs(double(b.lo[a])), std::fabs(double(b.hi[a]))});
+    return m;
+}
+
+// Cells per axis for cubic cells of size s over padded extents.
+std::array<double, 3> cells_for(const double (&padded)[3], double s) {
+    std::array<double, 3> d{};
+    for (int a = 0; a < 3; ++a) d[a] = std::max(1.0, std::ceil(padded[a] / s - 1e-6));
+    return d;
+}
+
+}  // namespace
+
+GridLayout choose_grid_layout(const Box3f& bounds, size_t triangle_count, int resolution) {
+    GridLayout layout;
+    if (triangle_count == 0 || bounds.is_empty()) return layout;
+    if (!is_finite(bounds.lo) || !is_finite(bounds.hi)) throw Error("uniform grid: scene bounds are not finite");
+    if (resolution < 0) throw Error("uniform grid: resolution must be >= 0, got " + std::to_string(resolution));
+
+    double extent[3], padded[3];
+    double max_extent = 0.0;
+    for (int a = 0; a < 3; ++a) {
+        extent[a] = double(bounds.hi[a]) - double(bounds.lo[a]);
+        max_extent = std::max(max_extent, extent[a]);
+    }
+    const double magnitude = max_abs_coordinate(bounds);
+    // Geometry stays strictly inside the grid box: rays grazing the box miss it.
+    const double margin = max_extent * 1e-5 + magnitude * 0x1p-20;
+    double max_padded = 0.0;
+    for (int a = 0; a < 3; ++a) {
+        padded[a] = extent[a] + 2.0 * margin;
+        max_padded = std::max(max_padded, padded[a]);
+    }
+
+    double s = 0.0;
+    double auto_cap = 0.0;
+    if (resolution > 0) {
+        s = max_padded / resolution;
+    } else {
+        const double r = std::max(1.0, std::floor(4.0 * std::pow(double(triangle_count), 0.25)));
+        double shortest = 0.0;
+        for (int a = 0; a < 3; ++a) {
+            if (extent[a] > 0.0 && (shortest == 0.0 || padded[a] < shortest)) shortest = padded[a];
+        }
+        s = shortest / r;
+        auto_cap = std::max(kAutoCellFactor * r * r * r, 64.0);
+    }
+    // Cells at least a few ulps of the coordinates wide, so that consecutive
+    // float boundaries stay distinct; a point-like scene gets one cell.
+    s = std::max(s, magnitude * 0x1p-21);
+    if (!(s > 0.0)) s = 1.0;
+
+    std::array<double, 3> dims = cells_for(padded, s);
+    if (auto_cap > 0.0) {
+        for (int i = 0; i < 64 && dims[0] * dims[1] * dims[2] > auto_cap; ++i) {
+            s *= std::cbrt(dims[0] * dims[1] * dims[2] / auto_cap) * 1.001;
+            dims = cells_for(padded, s);
+        }
+    }
+    const double cells = dims[0] * dims[1] * dims[2];
+    if (cells > kMaxCells) {
+        throw Error("uniform grid: " + std::to_string(dims[0]) + " x " + std::to_string(dims[1]) + " x " +
+                    std::to_string(dims[2]) + " cells exceed 32-bit cell indices (resolution " +
+                    std::to_string(resolution) + ")");
+    }
+
+    layout.cell_size = static_cast<float>(s);
+    for (int a = 0; a < 3; ++a) {
+        layout.dims[a] = static_cast<int>(dims[a]);
+        const double center = 0.5 * (double(bounds.lo[a]) + double(bounds.hi[a]));
+        float origin = static_cast<float>(center - 0.5 * dims[a] * s);
+        // Rounding to float must not leave geometry outside the grid box.
+        const auto plane = [&](int i) { return origin + static_cast<float>(i) * layout.cell_size; };
+        while (!(plane(0) <= bounds.lo[a])) origin = std::nextafter(origin, -std::numeric_limits<float>::infinity());
+        while (!(plane(layout.dims[a]) >= bounds.hi[a])) ++layout.dims[a];
+        layout.origin[a] = origin;
+    }
+    if (double(layout.dims[0]) * layout.dims[1] * layout.dims[2] > kMaxCells) {
+        throw Error("uniform grid: too many cells for 32-bit cell indices (resolution " + std::to_string(resolution) +
+                    ")");
+    }
+    return layout;
+}
+
+namespace {
+
+// Visits the cells a triangle overlaps (cells inflated by `eps`): cell ranges
+// from the triangle's bounds, then the SAT test per cell. Large triangles
+// are walked in columns along the normal's dominant axis, where the plane
+// spans only a couple of cells, instead of testing their whole bounding box.
+class CellOverlap {
+public:
+    CellOverlap(const GridLayout& layout, double eps) : layout_(layout), eps_(eps) {
+        const GridView view{nullptr, nullptr, nullptr, nullptr, layout.origin, layout.cell_size,
+                            1.0f / layout.cell_size, {layout.dims[0], layout.dims[1], layout.dims[2]}};
+        for (int a = 0; a < 3; ++a) {
+            planes_[a].resize(static_cast<size_t>(layout.dims[a]) + 1);
+            for (int i = 0; i <= layout.dims[a]; ++i) planes_[a][i] = grid_plane(view, a, i);
+        }
+    }
+
+    template <class Visit>
+    void for_each_cell(const Triangle& tri, Visit&& visit) const {
+        const Box3f bb = tri.bounds();
+        int lo[3], hi[3];
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = first_cell(a, bb.lo[a]);
+            hi[a] = last_cell(a, bb.hi[a]);
+            if (lo[a] > hi[a]) return;
+        }
+        const size_t box_cells = size_t(hi[0] - lo[0] + 1) * size_t(hi[1] - lo[1] + 1) * size_t(hi[2] - lo[2] + 1);
+        if (box_cells == 1) {
+            // The triangle lies inside this one (inflated) cell.
+            visit(index(lo[0], lo[1], lo[2]));
+            return;
+        }
+        const SatVec3 v0(tri.v0), v1(tri.v1), v2(tri.v2);
+        const SatVec3 e0 = v1 - v0, e1 = v2 - v0;
+        const SatVec3 n = sat_cross(e0, e1);
+        const double nn = sat_dot(n, n);
+        const bool well_shaped = nn > 1e-12 * sat_dot(e0, e0) * sat_dot(e1, e1);
+        if (box_cells <= 8 || !well_shaped) {
+            // Small boxes, and (near-)degenerate triangles whose plane is unreliable.
+            for (int z = lo[2]; z <= hi[2]; ++z)
+                for (int y = lo[1]; y <= hi[1]; ++y)
+                    for (int x = lo[0]; x <= hi[0]; ++x)
+                        if (overlaps(v0, v1, v2, x, y, z)) visit(index(x, y, z));
+            return;
+        }
+        const double na[3] = {std::fabs(n.x), std::fabs(n.y), std::fabs(n.z)};
+        const int k = na[0] >= na[1] && na[0] >= na[2] ? 0 : (na[1] >= na[2] ? 1 : 2);
+        const int i_axis = k == 0 ? 1 : 0, j_axis = k == 2 ? 1 : 2;
+        const double nv[3] = {n.x, n.y, n.z};
+        const double d = sat_dot(n, v0);
+        int cell[3];
+        for (int ci = lo[i_axis]; ci <= hi[i_axis]; ++ci) {
+            for (int cj = lo[j_axis]; cj <= hi[j_axis]; ++cj) {
+                // The plane's k-range over this column (inflated), clipped to the bounds.
+                const double x0 = planes_[i_axis][ci] - eps_, x1 = planes_[i_axis][ci + 1] + eps_;
+                const double y0 = planes_[j_axis][cj] - eps_, y1 = planes_[j_axis][cj + 1] + eps_;
+                double kmin = std::numeric_limits<double>::infinity(), kmax = -kmin;
+                for (double x : {x0, x1}) {
+                    for (double y : {y0, y1}) {
+                        const double pk = (d - nv[i_axis] * x - nv[j_axis] * y) / nv[k];
+                        kmin = std::min(kmin, pk);
+                        kmax = std::max(kmax, pk);
+                    }
+                }
+                const double slack = 1e-9 * (std::fabs(kmin) + std::fabs(kmax));
+                kmin = std::max(kmin - slack, double(bb.lo[k]));
+                kmax = std::min(kmax + slack, double(bb.hi[k]));
+                if (kmin > kmax) continue;
+                const int k_lo = std::max(lo[k], first_cell(k, kmin));
+                const int k_hi = std::min(hi[k], last_cell(k, kmax));
+                cell[i_axis] = ci;
+                cell[j_axis] = cj;
+                for (int ck = k_lo; ck <= k_hi; ++ck) {
+                    cell[k] = ck;
+                    if (overlaps(v0, v1, v2, cell[0], cell[1], cell[2])) visit(index(cell[0], cell[1], cell[2]));
+                }
+            }
+        }
+    }
+
+private:
+    [[nodiscard]] uint32_t index(int x, int y, int z) const {
+        return static_cast<uint32_t>(x) +
+               static_cast<uint32_t>(layout_.dims[0]) *
+                   (static_cast<uint32_t>(y) + static_cast<uint32_t>(layout_.dims[1]) * static_cast<uint32_t>(z));
+    }
+
+    [[nodiscard]] int estimate(int a, double x) const {
+        const double c = std::floor((x - double(layout_.origin[a])) / double(layout_.cell_size));
+        return static_cast<int>(std::clamp(c, 0.0, double(layout_.dims[a] - 1)));
+    }
+    // The first cell whose inflated box reaches x: planes[i + 1] + eps >= x.
+    [[nodiscard]] int first_cell(int a, double x) const {
+        const std::vector<double>& p = planes_[a];
+        int i = estimate(a, x);
+        while (i > 0 && p[i] + eps_ >= x) --i;
+        while (i < layout_.dims[a] - 1 && p[i + 1] + eps_ < x) ++i;
+        return i;
+    }
+    // The last cell whose inflated box starts at or below x: planes[i] - eps <= x.
+    [[nodiscard]] int last_cell(int a, double x) const {
+        const std::vector<double>& p = planes_[a];
+        int i = estimate(a, x);
+        while (i < layout_.dims[a] - 1 && p[i + 1] - eps_ <= x) ++i;
+        while (i > 0 && p[i] - eps_ > x) --i;
+        return i;
+    }
+
+    [[nodiscard]] bool overlaps(SatVec3 v0, SatVec3 v1, SatVec3 v2, int x, int y, int z) const {
+        const SatVec3 lo(planes_[0][x], planes_[1][y], planes_[2][z]);
+        const SatVec3 hi(planes_[0][x + 1], planes_[1][y + 1], planes_[2][z + 1]);
+        const SatVec3 center(0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), 0.5 * (lo.z + hi.z));
+        const SatVec3 half(0.5 * (hi.x - lo.x) + eps_, 0.5 * (hi.y - lo.y) + eps_, 0.5 * (hi.z - lo.z) + eps_);
+        return triangle_box_overlap(center, half, v0, v1, v2);
+    }
+
+    const GridLayout& layout_;
+    double eps_;
+    std::vector<double> planes_[3];
+};
+
+// Inclusive prefix sum of the per-cell counts in place, in parallel blocks;
+// returns the total. Throws when it does not fit 32-bit offsets.
+uint64_t inclusive_scan(std::vector<uint32_t>& counts, size_t n) {
+    const size_t block = std::max<size_t>(kCellGrain, (n + 255) / 256);
+    const size_t blocks = (n + block - 1) / block;
+    std::vector<uint64_t> sums(blocks, 0);
+    parallel::for_range(size_t(0), blocks, size_t(1), [&](size_t lo, size_t hi) {
+        for (size_t b = lo; b < hi; ++b) {
+            uint64_t s = 0;
+            for (size_t i = b * block, end = std::min(n, (b + 1) * block); i < end; ++i) s += counts[i];
+            sums[b] = s;
+        }
+    });
+    uint64_t total = 0;
+    for (uint64_t& s : sums) {
+        const uint64_t block_sum = s;
+        s = total;  // exclusive: the block's offset
+        total += block_sum;
+    }
+    if (total > std::numeric_limits<uint32_t>::max()) {
+        throw Error("uniform grid: " + std::to_string(total) + " cell references exceed 32-bit offsets");
+    }
+    parallel::for_range(size_t(0), blocks, size_t(1), [&](size_t lo, size_t hi) {
+        for (size_t b = lo; b < hi; ++b) {
+            uint64_t s = sums[b];
+            for (size_t i = b * block, end = std::min(n, (b + 1) * block); i < end; ++i) {
+                s += counts[i];
+                counts[i] = static_cast<uint32_t>(s);
+            }
+        }
+    });
+    return total;
+}
+
+Box3f triangle_bounds(std::span<const Triangle> triangles) {
+    return parallel::reduce(
+        size_t(0), triangles.size(), size_t(4096), Box3f{},
+        [&](size_t lo, size_t hi, Box3f acc) {
+            for (size_t i = lo; i < hi; ++i) acc.extend(triangles[i].bounds());
+            return acc;
+        },
+        [](Box3f a, const Box3f& b) { return merge(a, b); });
+}
+
+}  // namespace
+
+UniformGrid build_uniform_grid(std::span<const Triangle> triangles, int resolution, bool proximity_clouds) {
+    UniformGrid grid;
+    if (triangles.size() > std::numeric_limits<uint32_t>::max() - 1) {
+        throw Error("uniform grid: " + std::to_string(triangles.size()) + " triangles exceed 32-bit indices");
+    }
+    const Box3f bounds = triangle_bounds(triangles);
+    grid.layout = choose_grid_layout(bounds, triangles.size(), resolution);
+    const size_t cells = grid.layout.cell_count();
+    if (cells == 0) return grid;
+
+    // Margin on every cell, larger than the traversal's rounding: its crossing
+    // distances are off by a few ulps of the grid's size and its positions by
+    // a few ulps of the coordinates. The triangle test, though, computes in
+    // the frame of the ray's origin, so its hits can be off the triangle by a
+    // few ulps of the origin's distance: 2^-15 of the grid's size covers
+    // origins up to ~50 grid sizes away (beyond that, a hit within rounding
+    // of a silhouette edge, an artefact of that rounding, can be missed).
+    Box3f grid_box;
+    const GridView shape = grid.view(nullptr);
+    for (int a = 0; a < 3; ++a) {
+        grid_box.lo[a] = grid_plane(shape, a, 0);
+        grid_box.hi[a] = grid_plane(shape, a, grid.layout.dims[a]);
+    }
+    grid.inflation = 1e-4 * grid.layout.cell_size + double(max_component(grid_box.extent())) * 0x1p-15 +
+                     max_abs_coordinate(grid_box) * 0x1p-22;
+    const CellOverlap overlap(grid.layout, grid.inflation);
+
+    // Count pass: references per cell.
+    budgeted_resize(grid.cell_start, cells + 1, "uniform grid: cell offsets");
+    uint32_t* start = grid.cell_start.data();
+    parallel::for_range(size_t(0), triangles.size(), kTriangleGrain, [&](size_t lo, size_t hi) {
+        for (size_t t = lo; t < hi; ++t) {
+            overlap.for_each_cell(triangles[t], [&](uint32_t cell) {
+                std::atomic_ref<uint32_t>(start[cell]).fetch_add(1, std::memory_order_relaxed);
+            });
+        }
+    });
+    // Prefix sum: start[c] = end of cell c's list, until the fill pass moves it to its beginning.
+    const uint64_t references = inclusive_scan(grid.cell_start, cells);
+    grid.cell_start[cells] = static_cast<uint32_t>(references);
+    budgeted_resize(grid.cell_prims, static_cast<size_t>(references), "uniform grid: cell references");
+
+    // Fill pass: each reference claims the slot below its cell's cursor.
+    uint32_t* prims = grid.cell_prims.data();
+    parallel::for_range(size_t(0), triangles.size(), kTriangleGrain, [&](size_t lo, size_t hi) {
+        for (size_t t = lo; t < hi; ++t) {
+            overlap.for_each_cell(triangles[t], [&](uint32_t cell) {
+                const uint32_t slot = std::atomic_ref<uint32_t>(start[cell]).fetch_sub(1, std::memory_order_relaxed) - 1;
+                prims[slot] = static_cast<uint32_t>(t);
+            });
+        }
+    });
+    // The fill order depends on thread timing: sort each list so that the
+    // grid (and so the choice among tied hits) is deterministic.
+    parallel::for_range(size_t(0), cells, kCellGrain, [&](size_t lo, size_t hi) {
+        for (size_t c = lo; c < hi; ++c) {
+            if (start[c + 1] - start[c] > 1) std::sort(prims + start[c], prims + start[c + 1]);
+        }
+    });
+
+    if (proximity_clouds) {
+        std::vector<uint8_t> occupied;
+        budgeted_resize(occupied, cells, "uniform grid: occupancy");
+        parallel::for_range(size_t(0), cells, kCellGrain, [&](size_t lo, size_t hi) {
+            for (size_t c = lo; c < hi; ++c) occupied[c] = start[c + 1] > start[c] ? 1 : 0;
+        });
+        const std::vector<uint32_t> distance = chebyshev_distance_transform(occupied, grid.layout.dims);
+        // Saturating is safe: a smaller distance only skips less.
+        grid.proximity = std::move(occupied);
+        parallel::for_range(size_t(0), cells, kCellGrain, [&](size_t lo, size_t hi) {
+            for (size_t c = lo; c < hi; ++c) grid.proximity[c] = static_cast<uint8_t>(std::min<uint32_t>(distance[c], 255));
+        });
+    }
+    return grid;
+}
+
+size_t UniformGrid::non_empty_cells() const {
+    size_t count = 0;
+    for (size_t c = 0; c + 1 < cell_start.size(); ++c) count += cell_start[c + 1] > cell_start[c];
+    return count;
+}
+
+size_t UniformGrid::memory_bytes() const {
+    return cell_start.size() * sizeof(uint32_t) + cell_prims.size() * sizeof(uint32_t) +
+           proximity.size() * sizeof(uint8_t);
+}
+
+Box3f UniformGrid::cell_box(int x, int y, int z) const {
+    const GridView v = view(nullptr);
+    Box3f b;
+    const int c[3] = {x, y, z};
+    for (int a = 0; a < 3; ++a) {
+        b.lo[a] = grid_plane(v, a, c[a]);
+        b.hi[a] = grid_plane(v, a, c[a] + 1);
+    }
+    return b;
+}
+
+GridView UniformGrid::view(const Triangle* triangles) const {
+    GridView v;
+    v.cell_start = cell_start.data();
+    v.cell_prims = cell_prims.data();
+    v.proximity = proximity.empty() ? nullptr : proximity.data();
+    v.triangles = triangles;
+    v.origin = layout.origin;
+    v.cell_size = layout.cell_size;
+    v.inv_cell_size = layout.cell_size > 0.0f ? 1.0f / layout.cell_size : 0.0f;
+    // The layout's dims describe the cells even before the lists exist; an
+    // empty grid (no cells) has dims 0.
+    for (int a = 0; a < 3; ++a) v.dims[a] = layout.dims[a];
+    return v;
+}
+
+}  // namespace rf
