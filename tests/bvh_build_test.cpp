@@ -218,9 +218,12 @@ TEST(BvhBuild, AllPointTrianglesAtOnePlace) {
 
 TEST(BvhBuild, AccelStatsDescribeTheTree) {
     const SceneGeometry sphere = test::to_geometry(test::make_icosphere(3));
-    const auto accel = build_accel(sphere);
+    BuildOptions options;
+    options.layout = Layout::Bvh2;
+    const auto accel = build_accel(sphere, options);
     const AccelStats stats = accel->stats();
     EXPECT_EQ(stats.name, "bvh/binned/bvh2");
+    EXPECT_EQ(build_accel(sphere)->stats().name, "bvh/binned/bvh8");  // the default combination
     EXPECT_GT(stats.node_count, 1u);
     EXPECT_EQ(stats.node_count, 2 * stats.leaf_count - 1);
     EXPECT_EQ(stats.bytes, stats.node_count * 32 + sphere.triangles.size() * 4);

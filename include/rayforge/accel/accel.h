@@ -44,7 +44,7 @@ enum class KdTraversal : uint8_t { Stack, ShortStack, Restart, Pushdown };
 struct BuildOptions {
     Structure structure = Structure::Bvh;
     Builder builder = Builder::BinnedSah;
-    Layout layout = Layout::Bvh2;
+    Layout layout = Layout::Bvh8;  // the fastest traversal measured (docs/benchmarks.md)
     int bin_count = 16;          // SAH bins per axis (binned builders)
     int max_leaf_size = 4;       // leaves never hold more primitives than this
     float traversal_cost = 1.0f; // SAH C_trav
