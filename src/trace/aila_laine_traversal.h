@@ -1,0 +1,144 @@
+// Closest-hit and any-hit traversal of the node-pair layout of Aila and Laine
+// 2009, "Understanding the Efficiency of Ray Traversal on GPUs"
+// (accel/bvh/wide/aila_laine_layout.h), written once for the host and the
+// CUDA backend: plain pointers in, no std containers, no exceptions.
+//
+// The loop structure is the paper's "while-while": an inner loop walks node
+// pairs until the next node is a leaf (or the stack is empty), then a leaf
+// loop tests the leaf's triangles up to its sentinel and pops, and the outer
+// loop repeats; on a GPU this keeps a warp's rays in the same phase longer
+// than one loop that does either per iteration. Both children's boxes come
+// from the one 64-byte node; when both are entered the nearer is taken and
+// the farther pushed. As in the paper the stack holds links only (no entry
+// distances), so a popped subtree's own boxes are re-tested against the
+// shrunken tmax, but a popped leaf is always tested.
+//
+// Box tests are the canonical traversal's robust slab test (Ize 2013, see
+// trace/bvh_traversal.h) and triangles go through the scalar watertight test
+// on their original vertices, so hits are those of the canonical BVH and the
+// brute-force reference, t, u, v included.
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+
+#include "accel/bvh/wide/aila_laine_layout.h"
+#include "rayforge/core/host_device.h"
+#include "rayforge/math/ray.h"
+#include "rayforge/scene/scene_geometry.h"
+#include "trace/bvh_traversal.h"
+#include "trace/triangle_intersect.h"
+
+namespace rf {
+
+namespace detail {
+
+RF_HDI uint32_t aila_laine_bits(float f) {
+#if defined(__CUDA_ARCH__)
+    return __float_as_uint(f);
+#else
+    uint32_t u;
+    std::memcpy(&u, &f, sizeof u);
+    return u;
+#endif
+}
+
+// Box of child `side` (0 or 1) of a node pair.
+RF_HDI Box3f aila_laine_child_box(const AilaLaineNode& n, int side) {
+    const AilaLaineFloat4& xy = side == 0 ? n.xy0 : n.xy1;
+    Box3f box;
+    box.lo = Vec3f(xy.x, xy.z, side == 0 ? n.z.x : n.z.z);
+    box.hi = Vec3f(xy.y, xy.w, side == 0 ? n.z.y : n.z.w);
+    return box;
+}
+
+// Shared loop: closest hit (kAnyHit = false) or first hit (kAnyHit = true).
+template <bool kAnyHit, bool kCount>
+RF_HDI Hit aila_laine_traverse(const AilaLaineView& bvh, const Ray& ray, TraversalCounters* counters) {
+    Hit hit;
+    if (bvh.root == kAilaLaineEntrySentinel) return hit;  // empty BVH
+    const SlabRay slab = SlabRay::make(ray);
+    const WatertightRay tri_ray = WatertightRay::make(ray);
+    const float tmin = ray.tmin;
+    float tmax = ray.tmax;
+
+    // At most one far child per inner node on the current path, over the
+    // sentinel that ends the traversal when popped.
+    int32_t stack[kBvhMaxDepth + 1];
+    stack[0] = kAilaLaineEntrySentinel;
+    int top = 0;
+    int32_t node = bvh.root;
+
+    while (node != kAilaLaineEntrySentinel) {
+        // Inner loop: node >= 0 and below the sentinel is a node pair (a
+        // negative link is huge as unsigned, so leaves end the loop too).
+        while (static_cast<uint32_t>(node) < static_cast<uint32_t>(kAilaLaineEntrySentinel)) {
+            const AilaLaineNode& pair = bvh.nodes[node];
+            float entry0, entry1;
+            const bool hit0 = slab_test(slab, aila_laine_child_box(pair, 0), tmin, tmax, entry0);
+            const bool hit1 = slab_test(slab, aila_laine_child_box(pair, 1), tmin, tmax, entry1);
+            if constexpr (kCount) counters->nodes_visited += 2;
+            if (!hit0 && !hit1) {
+                node = stack[top--];
+                continue;
+            }
+            int32_t near_link = hit0 ? pair.link[0] : pair.link[1];
+            if (hit0 && hit1) {
+                int32_t far_link = pair.link[1];
+                if (entry1 < entry0) {  // ties go to child 0, as in the canonical traversal
+                    far_link = near_link;
+                    near_link = pair.link[1];
+                }
+                stack[++top] = far_link;
+            }
+            node = near_link;
+        }
+        // Leaf loop: test each leaf's list up to its sentinel, then pop
+        // (which may give another leaf, a node pair or the end).
+        while (node < 0) {
+            for (int32_t i = ~node;; i += kAilaLaineTriangleStride) {
+                const AilaLaineFloat4 a = bvh.triangles[i];
+                const uint32_t prim = aila_laine_bits(a.w);
+                if (prim == kAilaLaineLeafEndW) break;
+                const AilaLaineFloat4 b = bvh.triangles[i + 1];
+                const AilaLaineFloat4 c = bvh.triangles[i + 2];
+                const Triangle tri{Vec3f(a.x, a.y, a.z), Vec3f(b.x, b.y, b.z), Vec3f(c.x, c.y, c.z)};
+                if constexpr (kCount) ++counters->prims_tested;
+                TriangleHit candidate;
+                if (intersect_triangle(tri_ray, tri, tmin, tmax, candidate)) {
+                    hit.t = candidate.t;
+                    hit.u = candidate.u;
+                    hit.v = candidate.v;
+                    hit.prim = prim;
+                    if constexpr (kAnyHit) return hit;  // any-hit: the first hit ends it
+                    tmax = candidate.t;                 // later boxes and triangles must beat it
+                }
+            }
+            node = stack[top--];
+        }
+    }
+    return hit;
+}
+
+}  // namespace detail
+
+// Closest hit with t in [ray.tmin, ray.tmax]; prim is the triangle index the
+// layout was converted with.
+RF_HDI Hit aila_laine_intersect(const AilaLaineView& bvh, const Ray& ray) {
+    return detail::aila_laine_traverse<false, false>(bvh, ray, nullptr);
+}
+
+// True when any triangle is hit with t in [ray.tmin, ray.tmax].
+RF_HDI bool aila_laine_occluded(const AilaLaineView& bvh, const Ray& ray) {
+    return detail::aila_laine_traverse<true, false>(bvh, ray, nullptr).found();
+}
+
+// Counting variants, for traversal statistics (counters are accumulated).
+RF_HDI Hit aila_laine_intersect_counted(const AilaLaineView& bvh, const Ray& ray, TraversalCounters& counters) {
+    return detail::aila_laine_traverse<false, true>(bvh, ray, &counters);
+}
+RF_HDI bool aila_laine_occluded_counted(const AilaLaineView& bvh, const Ray& ray, TraversalCounters& counters) {
+    return detail::aila_laine_traverse<true, true>(bvh, ray, &counters).found();
+}
+
+}  // namespace rf
