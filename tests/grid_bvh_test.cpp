@@ -8,7 +8,6 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -590,46 +589,6 @@ TEST(GridBvh, TraversalMatchesBruteForce) {
             compare_with_brute_force(huge, options, 1000, 5);
             compare_with_brute_force(slivers, options, 1000, 6);
             compare_with_brute_force(cube, options, 1000, 7);
-        }
-    }
-}
-
-// ------------------------------------------- measurements on ../shared scenes
-
-// Opt-in (RAYFORGE_GRIDBVH_MEASURE=1): build time and SAH of GridBvh,
-// GridBvhSplit and binned SAH on shared scenes, with the stage breakdown.
-TEST(GridBvh, MeasureSharedScenes) {
-    if (!std::getenv("RAYFORGE_GRIDBVH_MEASURE")) GTEST_SKIP() << "set RAYFORGE_GRIDBVH_MEASURE=1 to measure";
-    for (const char* relative : {"scenes/crytek-sponza/sponza.obj", "scenes/conference/conference.obj",
-                                 "scenes/stanford-bunny/bun_zipper.ply", "scenes/stanford-dragon/dragon_vrip.ply"}) {
-        const std::string path = test::shared_path(relative);
-        if (path.empty()) continue;
-        const SceneGeometry g = SceneGeometry::build(load_scene(path, LoadOptions{.compute_missing_normals = false, .load_textures = false}));
-        std::printf("%s: %zu triangles\n", relative, g.size());
-        auto time = [&](auto&& build) {
-            double best = 1e30;
-            Bvh bvh;
-            for (int i = 0; i < 3; ++i) {
-                const auto start = std::chrono::steady_clock::now();
-                bvh = build();
-                best = std::min(best, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
-            }
-            return std::make_pair(best, std::move(bvh));
-        };
-        const auto [binned_ms, binned] = time([&] { return build_binned_sah(g.triangles, BuildOptions{}); });
-        std::printf("  binned        %8.1f ms  SAH %.2f  quality C %.2f  nodes %zu\n", binned_ms, binned.sah_cost(),
-                    binned.quality_cost(), binned.nodes.size());
-        for (bool split : {false, true}) {
-            GridBvhStages s;
-            const auto [ms, bvh] = time([&] { return build_grid_bvh(g.triangles, BuildOptions{}, split, &s); });
-            std::printf("  %-13s %8.1f ms  SAH %.2f  quality C %.2f  nodes %zu  refs %zu  top cells %zu (%.2f%%)  grid %.1f MB\n",
-                        split ? "gridbvh-split" : "gridbvh", ms, bvh.sah_cost(), bvh.quality_cost(), bvh.nodes.size(),
-                        s.references, s.occupied_top_cells, 100.0 * double(s.occupied_top_cells) / (128.0 * 128 * 128),
-                        double(s.grid_bytes) / 1048576.0);
-            std::printf("    stages ms: split %.1f sort %.1f grid0 %.1f coarse %.1f hierarchy %.1f leaves %.1f emit %.1f"
-                        "  (hierarchy leaves %zu, large %zu)\n",
-                        s.partial_triangles_ms, s.sort_ms, s.grid0_ms, s.coarse_levels_ms, s.hierarchy_ms,
-                        s.leaf_finish_ms, s.emission_ms, s.hierarchy_leaves, s.large_leaves);
         }
     }
 }
