@@ -151,15 +151,15 @@ TEST(Cli, BenchRunsTheProtocolAndWritesJson) {
     }
 }
 
-TEST(Cli, BenchListsAndExplainsWhatIsMissing) {
+TEST(Cli, BenchListsEveryStructureAndRunsPresets) {
     CliResult list = run_cli("bench --list");
     ASSERT_EQ(list.exit_code, 0) << list.err;
-    EXPECT_NE(list.out.find("seed002"), std::string::npos);
-    EXPECT_NE(list.out.find("not implemented yet"), std::string::npos);
+    for (const char* label : {"seed002", "grid-proximity/uniform-64/grid", "kdtree/sah/pushdown", "bvh/sbvh/bvh8",
+                              "bvh/binned+opt/bvh4", "bvh/gridbvh-split/bvh2"})
+        EXPECT_NE(list.out.find(label), std::string::npos) << label;
     CliResult preset = run_cli("bench --preset seed001 --scene builtin:cube --reps 1 --build-reps 1 -q --res 16x16");
     ASSERT_EQ(preset.exit_code, 0) << preset.err;
-    EXPECT_NE(preset.out.find("not implemented yet (skipped): grid/uniform-32/grid"), std::string::npos)
-        << preset.out;
+    EXPECT_NE(preset.out.find("grid-proximity/uniform-128/grid"), std::string::npos) << preset.out;
     EXPECT_NE(preset.out.find("PSR"), std::string::npos) << preset.out;
 }
 
@@ -169,7 +169,8 @@ TEST(Cli, BenchErrorsAreOneLine) {
     expect_one_error_line(run_cli("bench --scene builtin:cube --res 0x10"));
     expect_one_error_line(run_cli("bench --scene /no/such/scene.obj"));
     expect_one_error_line(run_cli("bench --preset seed999"));
-    expect_one_error_line(run_cli("bench --scene builtin:cube --structure grid"));
+    expect_one_error_line(run_cli("bench --scene builtin:cube --structure octree"));
+    expect_one_error_line(run_cli("bench --scene builtin:cube --structure grid --builder binned"));
 }
 
 }  // namespace

@@ -211,7 +211,9 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
         for (const std::string& label : info.unimplemented) std::cout << ' ' << label;
         std::cout << '\n';
     }
-    if (config.candidates.empty()) throw Error("nothing to run: none of the selected structures is implemented yet");
+    if (config.candidates.empty())
+        throw Error("nothing to run: no implemented combination matches --structure, --builder and --layout "
+                    "(see --list)");
 
     const std::vector<bench::BenchRecord> records =
         bench::run_bench(config, std::cerr, [&](const std::vector<bench::BenchRecord>& scene_records) {

@@ -13,7 +13,8 @@ namespace {
 // What rayforge implements so far: a candidate runs when every part of it is
 // here. Flip entries on as structures land (issue 4).
 bool builder_implemented(const std::string& builder) {
-    static const std::set<std::string> names = {"binned", "sweep", "sbvh", "lbvh30", "lbvh63", "hlbvh2", "ploc", "gridbvh", "gridbvh-split", "+opt"};
+    static const std::set<std::string> names = {"binned",  "sweep",   "sbvh",          "lbvh30", "lbvh63",
+                                                "hlbvh2",  "gridbvh", "gridbvh-split", "ploc",   "+opt"};
     return names.count(builder) != 0;
 }
 bool layout_implemented(const std::string& layout) {
