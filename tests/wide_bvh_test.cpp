@@ -335,6 +335,29 @@ TEST(WideBvhTraversal, AxisAlignedRaysAlongBoxFaces) {
     }
 }
 
+// The one-FMA slab test replaces tiny direction components by a small signed
+// value; rays with such components (down to denormals), near the origin and
+// far from it, must still find what brute force finds.
+TEST(WideBvhTraversal, TinyDirectionComponents) {
+    const float tiny_values[] = {1e-42f, -1e-38f, 1e-30f, -1e-20f, 1e-12f, -1e-7f};
+    for (const SceneGeometry& g : {test::to_geometry(test::make_tessellated_cube(8)),
+                                   test::make_triangle_soup(1500, 27, {Vec3f(1e6f), Vec3f(1e6f + 50.0f)}, 2.0f)}) {
+        const BruteForceAccel brute(g);
+        std::vector<Ray> rays = make_rays(g, 1500, 13);
+        std::mt19937 rng(14);
+        for (size_t i = 0; i < rays.size(); ++i) {
+            Ray& ray = rays[i];
+            ray.dir[int(i % 3)] = tiny_values[i % 6];
+            if (i % 4 == 0) ray.dir[int((i + 1) % 3)] = tiny_values[(i / 6) % 6];
+            if (length_squared(ray.dir) < 1e-20f) ray.dir[int((i + 2) % 3)] = 1.0f;
+        }
+        for (Layout layout : {Layout::Bvh4, Layout::Bvh8}) {
+            const auto accel = build_accel(g, BuildOptions{.layout = layout});
+            EXPECT_GT(check_rays(*accel, brute, rays), 20u);
+        }
+    }
+}
+
 TEST(WideBvhTraversal, CoherentPacketsMatchBruteForce) {
     compare_coherent(test::to_geometry(test::make_icosphere(4), 3.0f), BuildOptions{}, Vec3f(0.3f, -0.2f, 1.0f));
     compare_coherent(test::to_geometry(test::make_tessellated_cube(10)), BuildOptions{}, Vec3f(-1.0f, -0.7f, -0.4f));

@@ -55,18 +55,18 @@ struct WideBvh {
     std::vector<WideNode<N>> nodes;  // nodes[0] is the root; empty for an empty scene
     std::vector<TrianglePack> packs;
     size_t leaf_count = 0;
+    float coord_scale = 1.0f;  // largest |coordinate| of the scene's boxes (sizes the slab test's zero guard)
 
     [[nodiscard]] size_t memory_bytes() const {
         return nodes.size() * sizeof(WideNode<N>) + packs.size() * sizeof(TrianglePack);
     }
 };
 
-// Collapses `bvh` (built over `triangles`) into N-wide nodes (N = 4 or 8):
-// starting from the binary root, the child with the largest surface area is
-// opened (replaced by its two children) until N slots are used, greedily
-// minimising the SAH cost of the wide node (the surface-area heuristic
-// favours opening big boxes, which are the ones rays hit most often).
-// Subtrees of at most four triangle references become one leaf pack.
+// Collapses `bvh` (built over `triangles`) into N-wide nodes (N = 4 or 8)
+// with the SAH-optimal assignment of binary subtrees to wide nodes and leaves
+// of Ylitie, Karras and Laine 2017 (section 3): leaves of up to four packs
+// where that is cheaper, wide nodes filled as the cost model prefers. Binary
+// leaves are never split, so leaves may hold up to 16 packs.
 template <int N>
 WideBvh<N> collapse_bvh(const Bvh& bvh, const std::vector<Triangle>& triangles);
 

@@ -109,7 +109,7 @@ public:
     }
 
     [[nodiscard]] WideBvhView<N> view() const {
-        return {bvh_.nodes.data(), bvh_.packs.data(), static_cast<uint32_t>(bvh_.nodes.size())};
+        return {bvh_.nodes.data(), bvh_.packs.data(), static_cast<uint32_t>(bvh_.nodes.size()), bvh_.coord_scale};
     }
 
 private:
