@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "accel/bvh/build/binned_sah.h"
+#include "accel/bvh/build/build_bvh.h"
 #include "accel/bvh/bvh_accel.h"
 #include "rayforge/accel/accel.h"
 
@@ -88,7 +89,7 @@ BENCHMARK(BM_BinnedSahBuild_Sphere1M)->Arg(1)->Arg(2)->Unit(benchmark::kMillisec
 // Single-threaded closest hits for rays between random points of the soup's box.
 void BM_ClosestHit_Soup1M(benchmark::State& state) {
     const rf::SceneGeometry& g = soup(kMillion);
-    const rf::BvhAccel accel(g, rf::BuildOptions{});
+    const rf::BvhAccel accel(g, rf::build_bvh(g.triangles, rf::BuildOptions{}), "bvh/binned/bvh2", 0.0);
     std::mt19937 rng(2);
     std::uniform_real_distribution<float> u(0.0f, 100.0f);
     std::vector<rf::Ray> rays(1 << 16);
