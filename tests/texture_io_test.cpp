@@ -111,6 +111,22 @@ TEST(TextureIo, DecodesFromMemoryUnderAGivenName) {
     EXPECT_THROW(load_texture_from_memory(nullptr, 0, "embedded#2"), Error);
 }
 
+TEST(TextureIo, TinyFileDeclaringAHugeImageIsRejected) {
+    // An 18-byte TGA header (uncompressed RGB, 4000 x 3000) and 3 bytes of pixels.
+    std::vector<unsigned char> tga = {0, 0, 2, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0xA0, 0x0F, 0xB8, 0x0B, 24, 0, 1, 2, 3};
+    try {
+        (void)load_texture_from_memory(tga.data(), tga.size(), "tiny.tga");
+        FAIL() << "a 21-byte file decoded as 4000x3000";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("declares 4000x3000 pixels but the file has only 21 bytes"),
+                  std::string::npos)
+            << e.what();
+    }
+    // The same header over the full pixel data decodes.
+    tga.resize(18 + 4000 * 3000 * 3, 7);
+    EXPECT_EQ(load_texture_from_memory(tga.data(), tga.size(), "full.tga").width, 4000);
+}
+
 TEST(TextureIo, RejectsBadFilesWithOneLineErrors) {
     expect_load_error(texture_fixture("corrupt.png"), "PNG chunk declares");  // checked before stb sees it
     expect_load_error(texture_fixture("truncated.png"), "cannot decode");

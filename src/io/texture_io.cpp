@@ -233,6 +233,14 @@ Texture decode_stb(const unsigned char* data, size_t size, const std::string& na
         throw file_error(name, 0, "cannot decode image: " + stb_reason());
     check_dimensions(width, height, name);
     check_budget(width, height, channels, stbi_is_hdr_from_memory(data, len) ? sizeof(float) : 1, name);
+    // No format stb decodes packs more than ~8k pixels into a byte (deflate's
+    // limit is 1032:1 on 1-bit PNG rows); a tiny file declaring a huge image is
+    // truncated or corrupt, and decoding it would only fill memory with zeros.
+    constexpr uint64_t kMaxPixelsPerByte = 16384;
+    if (uint64_t(width) * uint64_t(height) > uint64_t(size) * kMaxPixelsPerByte + 65536)
+        throw file_error(name, 0, "image declares " + std::to_string(width) + "x" + std::to_string(height) +
+                                      " pixels but the file has only " + std::to_string(size) +
+                                      " bytes (truncated or corrupt)");
 
     Texture tex;
     tex.name = name;
