@@ -12,6 +12,7 @@
 #include "accel/brute_force.h"
 #include "accel/bvh/build/build_bvh.h"
 #include "accel/bvh/bvh_accel.h"
+#include "accel_test_rays.h"
 #include "accel_test_scenes.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
@@ -21,50 +22,7 @@
 namespace rf {
 namespace {
 
-// A mix of rays: random origins and directions, rays aimed at triangles
-// (mostly hits), axis-aligned and zero-component directions, and [tmin, tmax]
-// limits.
-std::vector<Ray> make_rays(const SceneGeometry& g, size_t count, uint32_t seed) {
-    std::mt19937 rng(seed);
-    const Vec3f margin = g.bounds.extent() * 0.25f + Vec3f(1e-3f);
-    const Box3f around{g.bounds.lo - margin, g.bounds.hi + margin};
-    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
-    std::uniform_int_distribution<size_t> pick(0, g.triangles.size() - 1);
-    std::vector<Ray> rays;
-    for (size_t i = 0; i < count; ++i) {
-        Ray ray;
-        ray.org = test::random_in_box(rng, around);
-        switch (i % 5) {
-            case 0: ray.dir = test::random_direction(rng); break;
-            case 1:
-            case 2: {
-                const Triangle& tri = g.triangles[pick(rng)];
-                float b1 = unit(rng), b2 = unit(rng);
-                if (b1 + b2 > 1.0f) { b1 = 1.0f - b1; b2 = 1.0f - b2; }
-                ray.dir = tri.v0 * (1.0f - b1 - b2) + tri.v1 * b1 + tri.v2 * b2 - ray.org;
-                break;
-            }
-            case 3: {  // one or two zero components
-                Vec3f d = test::random_direction(rng);
-                d[static_cast<int>(i % 3)] = 0.0f;
-                if (i % 2) d[static_cast<int>((i + 1) % 3)] = 0.0f;
-                if (length_squared(d) == 0.0f) d = Vec3f(1, 0, 0);
-                ray.dir = d;
-                break;
-            }
-            case 4: {  // aimed at a vertex, distance-limited
-                const Triangle& tri = g.triangles[pick(rng)];
-                ray.dir = tri.v1 - ray.org;
-                ray.tmin = unit(rng) * 0.5f;
-                ray.tmax = 0.5f + unit(rng);
-                break;
-            }
-        }
-        if (i % 7 == 0) ray.tmax = unit(rng) * length(g.bounds.extent()) / std::max(length(ray.dir), 1e-20f);
-        rays.push_back(ray);
-    }
-    return rays;
-}
+using test::make_rays;
 
 void expect_same_closest(const Hit& bvh, const Hit& brute, const Ray& ray) {
     ASSERT_EQ(bvh.found(), brute.found());
