@@ -1,5 +1,6 @@
 // build_accel: option checking and dispatch; the batched queries every Accel
 // inherits.
+#include "accel/ray_batches.h"
 #include "rayforge/accel/accel.h"
 #include "core/parallel.h"
 
@@ -62,7 +63,6 @@ void validate(const BuildOptions& options) {
     }
 }
 
-constexpr size_t kRayGrainSize = 256;
 constexpr size_t kMaxTriangles = 0x7FFFFFFF;
 
 }  // namespace
@@ -143,10 +143,7 @@ std::string to_string(Layout layout) { return name_of(layout, kLayoutNames); }
 std::string to_string(KdTraversal traversal) { return name_of(traversal, kKdTraversalNames); }
 
 void Accel::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
-    if (rays.size() != hits.size()) {
-        throw Error("Accel::intersect: " + std::to_string(rays.size()) + " rays but " +
-                    std::to_string(hits.size()) + " hit slots");
-    }
+    check_batch_sizes("Accel::intersect", rays.size(), hits.size());
     parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {
         for (size_t i = lo; i != hi; ++i) hits[i] = intersect(rays[i]);
     });
@@ -155,10 +152,7 @@ void Accel::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
 bool Accel::count_traversal(std::span<const Ray>, bool, TraversalTotals&) const { return false; }
 
 void Accel::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const {
-    if (rays.size() != occluded.size()) {
-        throw Error("Accel::occluded: " + std::to_string(rays.size()) + " rays but " +
-                    std::to_string(occluded.size()) + " result slots");
-    }
+    check_batch_sizes("Accel::occluded", rays.size(), occluded.size());
     parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {
         for (size_t i = lo; i != hi; ++i) occluded[i] = this->occluded(rays[i]) ? 1 : 0;
     });

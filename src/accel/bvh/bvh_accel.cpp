@@ -1,3 +1,4 @@
+#include "accel/ray_batches.h"
 #include "accel/bvh/bvh_accel.h"
 
 #include "core/parallel.h"
@@ -19,19 +20,12 @@ AccelStats BvhAccel::stats() const {
 
 namespace {
 
-constexpr size_t kRayGrainSize = 256;
 
-void check_sizes(const char* what, size_t rays, size_t results) {
-    if (rays != results) {
-        throw Error(std::string(what) + ": " + std::to_string(rays) + " rays but " + std::to_string(results) +
-                    " result slots");
-    }
-}
 
 }  // namespace
 
 void BvhAccel::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
-    check_sizes("BvhAccel::intersect", rays.size(), hits.size());
+    check_batch_sizes("BvhAccel::intersect", rays.size(), hits.size());
     const BvhView bvh = view();
     parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {
         for (size_t i = lo; i != hi; ++i) hits[i] = bvh_intersect(bvh, rays[i]);
@@ -39,7 +33,7 @@ void BvhAccel::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
 }
 
 void BvhAccel::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const {
-    check_sizes("BvhAccel::occluded", rays.size(), occluded.size());
+    check_batch_sizes("BvhAccel::occluded", rays.size(), occluded.size());
     const BvhView bvh = view();
     parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {
         for (size_t i = lo; i != hi; ++i) occluded[i] = bvh_occluded(bvh, rays[i]) ? 1 : 0;

@@ -1,4 +1,5 @@
 // make_grid_accel and the batched queries of the uniform grid (seeds 001, 002).
+#include "accel/ray_batches.h"
 #include "accel/grid/grid_accel.h"
 
 #include <chrono>
@@ -12,14 +13,7 @@
 namespace rf {
 namespace {
 
-constexpr size_t kRayGrainSize = 256;
 
-void check_sizes(const char* what, size_t rays, size_t results) {
-    if (rays != results) {
-        throw Error(std::string(what) + ": " + std::to_string(rays) + " rays but " + std::to_string(results) +
-                    " result slots");
-    }
-}
 
 }  // namespace
 
@@ -59,7 +53,7 @@ AccelStats GridAccel::stats() const {
 }
 
 void GridAccel::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
-    check_sizes("GridAccel::intersect", rays.size(), hits.size());
+    check_batch_sizes("GridAccel::intersect", rays.size(), hits.size());
     const GridView grid = view();
     parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {
         for (size_t i = lo; i != hi; ++i) hits[i] = grid_intersect(grid, rays[i]);
@@ -67,7 +61,7 @@ void GridAccel::intersect(std::span<const Ray> rays, std::span<Hit> hits) const 
 }
 
 void GridAccel::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const {
-    check_sizes("GridAccel::occluded", rays.size(), occluded.size());
+    check_batch_sizes("GridAccel::occluded", rays.size(), occluded.size());
     const GridView grid = view();
     parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {
         for (size_t i = lo; i != hi; ++i) occluded[i] = grid_occluded(grid, rays[i]) ? 1 : 0;

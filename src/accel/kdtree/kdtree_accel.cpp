@@ -1,5 +1,6 @@
 // The kd-tree's rf::Accel (seed 002): build timing, the traversal chosen by
 // options.kd_traversal, batches and counted traversals.
+#include "accel/ray_batches.h"
 #include "accel/kdtree/kdtree_accel.h"
 
 #include <chrono>
@@ -14,7 +15,6 @@
 namespace rf {
 namespace {
 
-constexpr size_t kRayGrainSize = 256;
 
 // Calls f with the traversal as a compile-time constant.
 template <class F>
@@ -28,12 +28,6 @@ decltype(auto) with_traversal(KdTraversal traversal, F&& f) {
     return f(std::integral_constant<KdTraversal, KdTraversal::Stack>{});
 }
 
-void check_sizes(const char* what, size_t rays, size_t results) {
-    if (rays != results) {
-        throw Error(std::string(what) + ": " + std::to_string(rays) + " rays but " + std::to_string(results) +
-                    " result slots");
-    }
-}
 
 }  // namespace
 
@@ -48,7 +42,7 @@ bool KdTreeAccel::occluded(const Ray& ray) const {
 }
 
 void KdTreeAccel::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
-    check_sizes("KdTreeAccel::intersect", rays.size(), hits.size());
+    check_batch_sizes("KdTreeAccel::intersect", rays.size(), hits.size());
     const KdTreeView tree = view();
     with_traversal(traversal_, [&](auto mode) {
         parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {
@@ -58,7 +52,7 @@ void KdTreeAccel::intersect(std::span<const Ray> rays, std::span<Hit> hits) cons
 }
 
 void KdTreeAccel::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const {
-    check_sizes("KdTreeAccel::occluded", rays.size(), occluded.size());
+    check_batch_sizes("KdTreeAccel::occluded", rays.size(), occluded.size());
     const KdTreeView tree = view();
     with_traversal(traversal_, [&](auto mode) {
         parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {

@@ -7,6 +7,7 @@
 #include <string>
 #include <utility>
 
+#include "accel/ray_batches.h"
 #include "accel/accel_factories.h"
 #include "accel/bvh/wide/wide_bvh.h"
 #include "core/parallel.h"
@@ -18,14 +19,7 @@ namespace rf {
 
 namespace {
 
-constexpr size_t kRayGrainSize = 256;
 
-void check_sizes(const char* what, size_t rays, size_t results) {
-    if (rays != results) {
-        throw Error(std::string(what) + ": " + std::to_string(rays) + " rays but " + std::to_string(results) +
-                    " result slots");
-    }
-}
 
 template <int N>
 class WideBvhAccel final : public Accel {
@@ -43,7 +37,7 @@ public:
     [[nodiscard]] bool occluded(const Ray& ray) const override { return wide_bvh_occluded(view(), ray); }
 
     void intersect(std::span<const Ray> rays, std::span<Hit> hits) const override {
-        check_sizes("WideBvhAccel::intersect", rays.size(), hits.size());
+        check_batch_sizes("WideBvhAccel::intersect", rays.size(), hits.size());
         const WideBvhView<N> bvh = view();
         parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {
             size_t i = lo;
@@ -59,7 +53,7 @@ public:
     }
 
     void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const override {
-        check_sizes("WideBvhAccel::occluded", rays.size(), occluded.size());
+        check_batch_sizes("WideBvhAccel::occluded", rays.size(), occluded.size());
         const WideBvhView<N> bvh = view();
         parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {
             size_t i = lo;
