@@ -363,6 +363,84 @@ TEST(MortonCode, RadixSortMatchesStableSort) {
     EXPECT_THROW(radix_sort_pairs(keys, values, 30), Error);
 }
 
+TEST(MortonCode, FusedSortMatchesCodesSortAndGather) {
+    // RawTree::sort_by_morton_codes (boxes computed once, 30-bit codes sorted
+    // packed) gives what the separate steps give, for both code lengths.
+    const SceneGeometry sphere = test::to_geometry(test::make_icosphere(5));
+    const SceneGeometry same = make_identical(100);  // every code equal: order kept
+    for (const SceneGeometry* g : {&sphere, &same}) {
+        const BuildOptions options;
+        {
+            std::vector<uint32_t> keys, order;
+            morton::compute_morton_codes(g->triangles, keys, order);
+            radix_sort_pairs(keys, order, 30);
+            morton::RawTree reference(g->triangles, options), fused(g->triangles, options);
+            reference.set_order(std::vector<uint32_t>(order));
+            morton::Buffer<uint32_t> fused_keys;
+            fused.sort_by_morton_codes(fused_keys);
+            ASSERT_EQ(fused.size(), order.size());
+            ASSERT_EQ(fused_keys.size(), keys.size());
+            for (size_t i = 0; i < keys.size(); ++i) {
+                ASSERT_EQ(fused_keys[i], keys[i]) << i;
+                ASSERT_EQ(fused.order[i], order[i]) << i;
+                ASSERT_TRUE(same_box(fused.boxes[i], reference.boxes[i])) << i;
+            }
+        }
+        {
+            std::vector<uint64_t> keys;
+            std::vector<uint32_t> order;
+            morton::compute_morton_codes(g->triangles, keys, order);
+            radix_sort_pairs(keys, order, 63);
+            morton::RawTree fused(g->triangles, options);
+            morton::Buffer<uint64_t> fused_keys;
+            fused.sort_by_morton_codes(fused_keys);
+            ASSERT_EQ(fused_keys.size(), keys.size());
+            for (size_t i = 0; i < keys.size(); ++i) {
+                ASSERT_EQ(fused_keys[i], keys[i]) << i;
+                ASSERT_EQ(fused.order[i], order[i]) << i;
+                ASSERT_TRUE(same_box(fused.boxes[i], g->triangles[order[i]].bounds())) << i;
+            }
+        }
+    }
+    morton::RawTree empty(std::span<const Triangle>{}, BuildOptions{});
+    morton::Buffer<uint32_t> keys;
+    empty.sort_by_morton_codes(keys);
+    EXPECT_EQ(empty.size(), 0u);
+    EXPECT_TRUE(keys.empty());
+}
+
+TEST(Lbvh, InOrderEmissionMatchesGeneralEmission) {
+    // emit_in_order (the primitive order moved in) writes the same BVH as emit.
+    const SceneGeometry sphere = test::to_geometry(test::make_icosphere(4));
+    for (int leaf_size : {1, 4}) {
+        const BuildOptions options{.max_leaf_size = leaf_size, .threads = 1};
+        const Bvh lbvh = build_lbvh(sphere.triangles, options, 30);
+        // A chain over sorted positions: a tree whose leaves are in order.
+        auto chain = [&](morton::RawTree& tree) {
+            std::vector<uint32_t> order(sphere.triangles.size());
+            for (uint32_t i = 0; i < order.size(); ++i) order[i] = static_cast<uint32_t>(order.size() - 1 - i);
+            tree.set_order(std::move(order));
+            const uint32_t n = tree.size();
+            tree.nodes.resize(n - 1);
+            tree.finalize(n - 2, morton::kLeafRef | (n - 2), morton::kLeafRef | (n - 1));
+            for (uint32_t k = n - 2; k-- > 0;) tree.finalize(k, morton::kLeafRef | k, k + 1);
+        };
+        morton::RawTree a(sphere.triangles, options), b(sphere.triangles, options);
+        chain(a);
+        chain(b);
+        const Bvh general = a.emit(0), in_order = b.emit_in_order(0);
+        ASSERT_EQ(general.nodes.size(), in_order.nodes.size());
+        EXPECT_EQ(general.prim_indices, in_order.prim_indices);
+        for (size_t i = 0; i < general.nodes.size(); ++i) {
+            EXPECT_TRUE(same_box(general.nodes[i].bounds, in_order.nodes[i].bounds)) << i;
+            EXPECT_EQ(general.nodes[i].first, in_order.nodes[i].first) << i;
+            EXPECT_EQ(general.nodes[i].count, in_order.nodes[i].count) << i;
+        }
+        check_bvh(in_order, sphere.triangles, leaf_size);
+        check_bvh(lbvh, sphere.triangles, leaf_size);
+    }
+}
+
 // ---------------------------------------------------------------- Lbvh
 
 TEST(Lbvh, InvariantsHoldForScenesLeafSizesAndThreads) {

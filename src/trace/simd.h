@@ -11,6 +11,7 @@
 // bit-identical results to the scalar one.
 #pragma once
 
+#include <bit>
 #include <cmath>
 #include <cstdint>
 
@@ -185,6 +186,84 @@ RF_SIMD_INLINE vfloat<8> neg(vfloat<8> a) { return {_mm256_xor_ps(a.v, _mm256_se
 RF_SIMD_INLINE vmask<8> operator&(vmask<8> a, vmask<8> b) { return {_mm256_and_ps(a.v, b.v)}; }
 RF_SIMD_INLINE vmask<8> operator|(vmask<8> a, vmask<8> b) { return {_mm256_or_ps(a.v, b.v)}; }
 RF_SIMD_INLINE unsigned bits(vmask<8> m) { return unsigned(_mm256_movemask_ps(m.v)); }
+#endif
+
+// Sort keys of the children a ray enters: the entry distance's bit pattern
+// with its low three bits replaced by the child's slot, so that one integer
+// sort orders the children by distance and still says which is which.
+// Distances are >= 0 (they start at the ray's tmin), where float and integer
+// order agree; the cleared bits make a key's distance at most 7 ulp smaller
+// than the true one, which only makes a later "still closer than the hit?"
+// test more permissive. Keys of the lanes not in `mask` sort last.
+RF_SIMD_INLINE uint32_t distance_key(float dist, int slot) {
+    return (std::bit_cast<uint32_t>(dist) & ~7u) | uint32_t(slot);
+}
+RF_SIMD_INLINE float key_distance(uint32_t key) {
+    return std::bit_cast<float>(key & ~7u);
+}
+inline constexpr uint32_t kMissedKey = 0x7FFFFFFFu;
+
+// Writes the N keys ascending (generic: insertion sort).
+template <int N>
+RF_SIMD_INLINE void sort_distance_keys(vfloat<N> dist, unsigned mask, uint32_t* keys) {
+    alignas(32) float d[N];
+    store<N>(d, dist);
+    for (int i = 0; i < N; ++i) {
+        const uint32_t key = (mask >> i) & 1u ? distance_key(d[i], i) : kMissedKey;
+        int j = i;
+        for (; j > 0 && keys[j - 1] > key; --j) keys[j] = keys[j - 1];
+        keys[j] = key;
+    }
+}
+
+#if defined(RF_SIMD_AVX2)
+// Eight keys by a bitonic network (six compare-exchange layers, no branches):
+// the branchy insertion sort mispredicts on nearly every wide node with three
+// or more children hit.
+template <int kTakeMax>
+RF_SIMD_INLINE __m256i compare_exchange(__m256i v, __m256i partner) {
+    return _mm256_blend_epi32(_mm256_min_epi32(v, partner), _mm256_max_epi32(v, partner), kTakeMax);
+}
+template <>
+RF_SIMD_INLINE void sort_distance_keys<8>(vfloat<8> dist, unsigned mask, uint32_t* keys) {
+    const __m256i slots = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    const __m256i lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+    const __m256i hit = _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(int(mask)), lane_bits), lane_bits);
+    __m256i v = _mm256_or_si256(_mm256_andnot_si256(_mm256_set1_epi32(7), _mm256_castps_si256(dist.v)), slots);
+    v = _mm256_blendv_epi8(_mm256_set1_epi32(int(kMissedKey)), v, hit);
+    auto swap_pairs = [](__m256i x) { return _mm256_shuffle_epi32(x, 0xB1); };   // partner i ^ 1
+    auto swap_quads = [](__m256i x) { return _mm256_shuffle_epi32(x, 0x4E); };   // partner i ^ 2
+    auto swap_halves = [](__m256i x) { return _mm256_permute2x128_si256(x, x, 1); };  // partner i ^ 4
+    v = compare_exchange<0x66>(v, swap_pairs(v));
+    v = compare_exchange<0x3C>(v, swap_quads(v));
+    v = compare_exchange<0x5A>(v, swap_pairs(v));
+    v = compare_exchange<0xF0>(v, swap_halves(v));
+    v = compare_exchange<0xCC>(v, swap_quads(v));
+    v = compare_exchange<0xAA>(v, swap_pairs(v));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(keys), v);
+}
+#endif
+
+// Smallest value over the lanes set in `lanes` (+inf when none is).
+template <int N>
+RF_SIMD_INLINE float masked_min(vfloat<N> a, unsigned lanes) {
+    alignas(32) float v[N];
+    store<N>(v, a);
+    float m = __builtin_inff();
+    for (int i = 0; i < N; ++i) m = (lanes >> i) & 1u && v[i] < m ? v[i] : m;
+    return m;
+}
+#if defined(RF_SIMD_AVX2)
+template <>
+RF_SIMD_INLINE float masked_min<8>(vfloat<8> a, unsigned lanes) {
+    const __m256i lane_bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+    const __m256i in = _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(int(lanes)), lane_bits), lane_bits);
+    __m256 m = _mm256_blendv_ps(_mm256_set1_ps(__builtin_inff()), a.v, _mm256_castsi256_ps(in));
+    m = _mm256_min_ps(m, _mm256_permute2f128_ps(m, m, 1));
+    m = _mm256_min_ps(m, _mm256_shuffle_ps(m, m, 0x4E));
+    m = _mm256_min_ps(m, _mm256_shuffle_ps(m, m, 0xB1));
+    return _mm256_cvtss_f32(m);
+}
 #endif
 
 // Index of the lowest set bit (mask != 0).

@@ -11,6 +11,7 @@
 // the one its single-ray traversal finds (up to exact ties in t).
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 
 #include "trace/wide_bvh_traversal.h"
@@ -22,8 +23,10 @@ inline constexpr int kRayPacketSize = 8;
 // True when the eight rays' direction components have the same signs (the
 // condition for tracing them as one packet).
 inline bool rays_share_octant(const Ray* rays) {
-    auto octant = [](const Ray& r) {
-        return (1.0f / r.dir.x < 0.0f ? 1 : 0) | (1.0f / r.dir.y < 0.0f ? 2 : 0) | (1.0f / r.dir.z < 0.0f ? 4 : 0);
+    // The sign of 1 / d without the division: -0 counts as negative, NaN as positive.
+    auto negative = [](float d) { return d < 0.0f || (d == 0.0f && std::signbit(d)); };
+    auto octant = [&](const Ray& r) {
+        return (negative(r.dir.x) ? 1 : 0) | (negative(r.dir.y) ? 2 : 0) | (negative(r.dir.z) ? 4 : 0);
     };
     const int first = octant(rays[0]);
     for (int i = 1; i < kRayPacketSize; ++i)
@@ -65,8 +68,8 @@ inline void traverse_packet(const WideBvhView<N>& bvh, const Ray* rays, Hit* hit
         tmin_a[i] = rays[i].tmin;
         tmax[i] = rays[i].tmax;
         tmax_far[i] = rays[i].tmax * detail::kSlabFarScale;
-        tri_rays[i] = PackRay::make(rays[i]);
     }
+    unsigned tri_rays_ready = 0;  // triangle-test setups are made at a ray's first leaf
     int near_row[3], far_row[3];
     for (int axis = 0; axis < 3; ++axis) {
         const int negative = 1.0f / rays[0].dir[axis] < 0.0f ? 1 : 0;
@@ -91,10 +94,12 @@ inline void traverse_packet(const WideBvhView<N>& bvh, const Ray* rays, Hit* hit
         bool reached_leaf = true;
         while (!wide_is_leaf(ref)) {
             const WideNode<N>& node = bvh.nodes[ref];
-            uint32_t child_ref[N];
-            float child_dist[N];
+            // Test every child against the packet; a child's distance is the
+            // smallest entry distance over the rays that enter it.
+            alignas(32) float child_dist[N];
+            store<N>(child_dist, set1<N>(kInfinity));
             unsigned child_rays[N];
-            int count = 0;
+            unsigned hit_mask = 0;
             for (int c = 0; c < N; ++c) {
                 if (node.child[c] == kWideEmptyRef) break;  // empty slots come last
                 const V x0 = mul(sub(set1<kRayPacketSize>(node.bounds[near_row[0]][c]), ox), rnx);
@@ -106,33 +111,30 @@ inline void traverse_packet(const WideBvhView<N>& bvh, const Ray* rays, Hit* hit
                 const V t_near = max(z0, max(y0, max(x0, tmin_v)));
                 const V t_far = min(z1, min(y1, min(x1, tmax_far_v)));
                 const unsigned entered = bits(cmp_le(t_near, t_far)) & active;
+                child_rays[c] = entered;
                 if (entered == 0) continue;
-                alignas(32) float near[kRayPacketSize];
-                store<kRayPacketSize>(near, t_near);
-                float dist = kInfinity;
-                for (unsigned m = entered; m; m &= m - 1) {
-                    const float d = near[first_bit(m)];
-                    dist = d < dist ? d : dist;
-                }
-                // Insert sorted far to near, so the nearest ends up last.
-                int j = count++;
-                while (j > 0 && child_dist[j - 1] < dist) {
-                    child_ref[j] = child_ref[j - 1];
-                    child_dist[j] = child_dist[j - 1];
-                    child_rays[j] = child_rays[j - 1];
-                    --j;
-                }
-                child_ref[j] = node.child[c];
-                child_dist[j] = dist;
-                child_rays[j] = entered;
+                child_dist[c] = masked_min<kRayPacketSize>(t_near, entered);
+                hit_mask |= 1u << c;
             }
-            if (count == 0) {
+            if (hit_mask == 0) {
                 reached_leaf = false;
                 break;
             }
-            for (int k = 0; k < count - 1; ++k) stack[size++] = {child_ref[k], child_dist[k], child_rays[k]};
-            ref = child_ref[count - 1];
-            active = child_rays[count - 1];
+            if ((hit_mask & (hit_mask - 1)) == 0) {
+                ref = node.child[first_bit(hit_mask)];
+                active = child_rays[first_bit(hit_mask)];
+                continue;
+            }
+            // Push all but the nearest far to near, visit the nearest (see
+            // sort_distance_keys; slots past the last child are not in hit_mask).
+            alignas(32) uint32_t keys[N];
+            sort_distance_keys<N>(load<N>(child_dist), hit_mask, keys);
+            for (int i = bit_count(hit_mask) - 1; i > 0; --i) {
+                const uint32_t slot = keys[i] & 7u;
+                stack[size++] = {node.child[slot], key_distance(keys[i]), child_rays[slot]};
+            }
+            ref = node.child[keys[0] & 7u];
+            active = child_rays[keys[0] & 7u];
         }
         if (reached_leaf) {
             const uint32_t first = wide_leaf_first_pack(ref);
@@ -140,6 +142,10 @@ inline void traverse_packet(const WideBvhView<N>& bvh, const Ray* rays, Hit* hit
             bool shrunk = false;
             for (unsigned m = active; m; m &= m - 1) {
                 const int i = first_bit(m);
+                if (!(tri_rays_ready & (1u << i))) {
+                    tri_rays[i] = PackRay::make(rays[i]);
+                    tri_rays_ready |= 1u << i;
+                }
                 for (uint32_t p = first; p < end; ++p) {
                     const TrianglePack& pack = bvh.packs[p];
                     alignas(16) float t[4], u[4], v[4];

@@ -290,7 +290,10 @@ inline Hit traverse(const WideBvhView<N>& bvh, const Ray& ray, TraversalCounters
     Hit hit;
     if (bvh.node_count == 0) return hit;
     const BoxRay<N> box_ray = BoxRay<N>::make(ray, bvh.coord_scale);
-    const PackRay tri_ray = PackRay::make(ray);
+    // Set up at the first leaf: rays that miss every box (background pixels)
+    // never pay for the triangle test's divisions.
+    PackRay tri_ray;
+    bool tri_ray_ready = false;
     const float tmin = ray.tmin;
     float tmax = ray.tmax;
     const vfloat<N> tmin_v = set1<N>(tmin);
@@ -312,6 +315,7 @@ inline Hit traverse(const WideBvhView<N>& bvh, const Ray& ray, TraversalCounters
                 reached_leaf = false;
                 break;
             }
+            const unsigned hit_mask = mask;
             alignas(32) float near[N];
             store<N>(near, near_v);
             const int c0 = first_bit(mask);
@@ -333,29 +337,21 @@ inline Hit traverse(const WideBvhView<N>& bvh, const Ray& ray, TraversalCounters
                 if constexpr (kPrefetch) prefetch_ref(bvh, stack[size - 1].ref);
                 continue;
             }
-            // Three or more: push all, sort the new entries far to near, take the nearest.
-            const int base = size;
-            stack[size++] = {node.child[c0], near[c0]};
-            stack[size++] = {node.child[c1], near[c1]};
-            for (; mask; mask &= mask - 1) {
-                const int c = first_bit(mask);
-                stack[size++] = {node.child[c], near[c]};
+            // Three or more: sort by entry distance, push all but the nearest far
+            // to near (so the nearest waiting one is popped first), take the nearest.
+            alignas(32) uint32_t keys[N];
+            sort_distance_keys<N>(near_v, hit_mask, keys);
+            for (int i = bit_count(hit_mask) - 1; i > 0; --i) {
+                stack[size++] = {node.child[keys[i] & 7u], key_distance(keys[i])};
+                if constexpr (kPrefetch) prefetch_ref(bvh, stack[size - 1].ref);
             }
-            for (int i = base + 1; i < size; ++i) {
-                const StackItem item = stack[i];
-                int j = i;
-                while (j > base && stack[j - 1].dist < item.dist) {
-                    stack[j] = stack[j - 1];
-                    --j;
-                }
-                stack[j] = item;
-            }
-            ref = stack[--size].ref;
-            if constexpr (kPrefetch) {
-                for (int i = base; i < size; ++i) prefetch_ref(bvh, stack[i].ref);
-            }
+            ref = node.child[keys[0] & 7u];
         }
         if (reached_leaf) {
+            if (!tri_ray_ready) {
+                tri_ray = PackRay::make(ray);
+                tri_ray_ready = true;
+            }
             const uint32_t first = wide_leaf_first_pack(ref);
             const uint32_t end = first + wide_leaf_pack_count(ref);
             for (uint32_t p = first; p < end; ++p) {

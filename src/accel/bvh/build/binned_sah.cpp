@@ -5,14 +5,23 @@
 // per axis, a sweep over the bins evaluates the SAH for every bin boundary on
 // all three axes, and the primitive references are partitioned in place.
 //
-// Parallelism (TBB): large nodes bin their primitives in parallel, and
-// subtrees above a size threshold are built as separate tasks. Tasks allocate
-// child pairs from a shared counter, so the first pass lays nodes out in
-// whatever order tasks ran; a second pass copies the tree into depth-first
-// order (a node's children pair, then the left subtree, then the right). Every
-// decision depends only on the primitives of a node, and parallel binning only
-// merges counts and min/max bounds, so the output is identical for every
-// thread count.
+// Data layout: every primitive's box is computed once into a 32-byte,
+// 32-byte aligned record (lo, triangle index, hi, padding), so binning and
+// partitioning load it as two float4 and grow boxes with SSE min/max. A
+// node's bins are swept over the non-empty bins only (a boundary inside a run
+// of empty bins costs the same as the first one, which is the one chosen), so
+// small nodes cost little. Scratch arrays are left uninitialised, and large
+// ones are asked for transparent huge pages, as their page faults otherwise
+// cost about as much as writing them.
+//
+// Parallelism (TBB, through core/parallel.h): large nodes bin their
+// primitives in parallel, and subtrees above a size threshold are built as
+// separate tasks. Tasks allocate child pairs from a shared counter, so the
+// first pass lays nodes out in whatever order tasks ran; a second pass copies
+// the tree into depth-first order (a node's children pair, then the left
+// subtree, then the right). Every decision depends only on the primitives of
+// a node, and parallel binning only merges counts and min/max bounds, so the
+// output is identical for every thread count.
 #include "accel/bvh/build/binned_sah.h"
 
 #include <algorithm>
@@ -21,7 +30,17 @@
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
+#include <memory>
+#include <type_traits>
 #include <vector>
+
+#if defined(__SSE2__) || defined(_M_X64)
+#include <immintrin.h>
+#define RF_BINNED_SSE 1
+#endif
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
 
 #include "core/parallel.h"
 #include "rayforge/core/memory_budget.h"
@@ -36,110 +55,197 @@ constexpr uint32_t kParallelSubtreeSize = 1024;       // prims per node to spawn
 constexpr uint32_t kParallelCopySize = 4096;          // nodes per subtree to copy in parallel
 constexpr uint32_t kGrainSize = 16 * 1024;
 
-// A primitive's bounds plus the triangle it came from; partitioning moves
-// these 32-byte records so that every pass streams through memory.
-struct PrimRef {
-    Vec3f lo;
-    uint32_t id;
-    Vec3f hi;
-    uint32_t unused;
-    [[nodiscard]] Box3f bounds() const { return {lo, hi}; }
-    [[nodiscard]] Vec3f centroid() const { return (lo + hi) * 0.5f; }
+// Four floats: SSE where available, else plain arrays with the same
+// semantics. min(a, b) and max(a, b) are std::min(a, b) and std::max(a, b)
+// lane by lane (b < a ? b : a and a < b ? b : a), so results match scalar
+// code bit for bit, signed zeros included.
+#if RF_BINNED_SSE
+struct F4 {
+    __m128 v;
 };
+inline F4 load4(const float* p) { return {_mm_load_ps(p)}; }  // 16-byte aligned
+inline void store4(float* p, F4 a) { _mm_store_ps(p, a.v); }
+inline F4 set4(float x, float y, float z, float w) { return {_mm_setr_ps(x, y, z, w)}; }
+inline F4 splat4(float x) { return {_mm_set1_ps(x)}; }
+inline F4 operator+(F4 a, F4 b) { return {_mm_add_ps(a.v, b.v)}; }
+inline F4 operator-(F4 a, F4 b) { return {_mm_sub_ps(a.v, b.v)}; }
+inline F4 operator*(F4 a, F4 b) { return {_mm_mul_ps(a.v, b.v)}; }
+inline F4 min4(F4 a, F4 b) { return {_mm_min_ps(b.v, a.v)}; }
+inline F4 max4(F4 a, F4 b) { return {_mm_max_ps(b.v, a.v)}; }
+// Lane 3 cleared: it may hold integer bits (denormals, which slow arithmetic down).
+inline F4 xyz0(F4 a) { return {_mm_and_ps(a.v, _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0)))}; }
+// Bin indices: x > 0 ? x : 0 (NaN to 0), then x < last ? x : last, truncated.
+inline void bin_indices(F4 x, F4 last, int32_t* out) {
+    x.v = _mm_max_ps(x.v, _mm_setzero_ps());
+    x.v = _mm_min_ps(x.v, last.v);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm_cvttps_epi32(x.v));
+}
+#else
+struct F4 {
+    float v[4];
+};
+inline F4 load4(const float* p) { return {{p[0], p[1], p[2], p[3]}}; }
+inline void store4(float* p, F4 a) { for (int i = 0; i < 4; ++i) p[i] = a.v[i]; }
+inline F4 set4(float x, float y, float z, float w) { return {{x, y, z, w}}; }
+inline F4 splat4(float x) { return {{x, x, x, x}}; }
+#define RF_BINNED_OP(op)                                               \
+    inline F4 operator op(F4 a, F4 b) {                                \
+        F4 r;                                                          \
+        for (int i = 0; i < 4; ++i) r.v[i] = a.v[i] op b.v[i];         \
+        return r;                                                      \
+    }
+RF_BINNED_OP(+)
+RF_BINNED_OP(-)
+RF_BINNED_OP(*)
+#undef RF_BINNED_OP
+inline F4 min4(F4 a, F4 b) {
+    F4 r;
+    for (int i = 0; i < 4; ++i) r.v[i] = std::min(a.v[i], b.v[i]);
+    return r;
+}
+inline F4 max4(F4 a, F4 b) {
+    F4 r;
+    for (int i = 0; i < 4; ++i) r.v[i] = std::max(a.v[i], b.v[i]);
+    return r;
+}
+inline F4 xyz0(F4 a) { return {{a.v[0], a.v[1], a.v[2], 0.0f}}; }
+inline void bin_indices(F4 x, F4 last, int32_t* out) {
+    for (int i = 0; i < 4; ++i) {
+        float t = x.v[i] > 0.0f ? x.v[i] : 0.0f;
+        t = t < last.v[i] ? t : last.v[i];
+        out[i] = static_cast<int32_t>(t);
+    }
+}
+#endif
 
-// Box growth with std::min/max, which compile to single instructions (the
-// NaN-aware fminf/fmaxf behind Box3f::extend are library calls); inputs are finite.
-inline Vec3f vmin(const Vec3f& a, const Vec3f& b) {
-    return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)};
-}
-inline Vec3f vmax(const Vec3f& a, const Vec3f& b) {
-    return {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)};
-}
-inline void grow(Box3f& box, const Vec3f& lo, const Vec3f& hi) {
-    box.lo = vmin(box.lo, lo);
-    box.hi = vmax(box.hi, hi);
+inline Box3f to_box(F4 lo, F4 hi) {
+    alignas(16) float l[4], h[4];
+    store4(l, lo);
+    store4(h, hi);
+    return {{l[0], l[1], l[2]}, {h[0], h[1], h[2]}};
 }
 
-// Bounds of a set of primitives and of their centroids.
+// A primitive's bounds plus the triangle it came from; partitioning moves
+// these 32-byte records so that every pass streams through memory. Plain
+// data, so arrays of them are not zero-filled.
+struct alignas(32) PrimRef {
+    float lo[3];
+    uint32_t id;
+    float hi[3];
+    uint32_t unused;
+    [[nodiscard]] F4 lo4() const { return load4(lo); }  // lane 3 holds the id: no arithmetic on it
+    [[nodiscard]] F4 hi4() const { return load4(hi); }
+    [[nodiscard]] F4 centroid4() const { return (xyz0(lo4()) + xyz0(hi4())) * splat4(0.5f); }
+};
+static_assert(sizeof(PrimRef) == 32 && std::is_trivially_default_constructible_v<PrimRef>);
+
+// A node in allocation order; same layout as BvhNode, but plain data.
+struct ScratchNode {
+    float lo[3], hi[3];
+    uint32_t first, count;
+    [[nodiscard]] bool is_leaf() const { return count != 0; }
+    [[nodiscard]] BvhNode to_node() const { return {{{lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]}}, first, count}; }
+};
+static_assert(sizeof(ScratchNode) == 32 && std::is_trivially_default_constructible_v<ScratchNode>);
+
+// Uninitialised array of plain data (budget-checked), hinted for huge pages when large.
+template <class T>
+std::unique_ptr<T[]> scratch_array(size_t count, std::string_view what) {
+    checked_array_bytes(what, count, sizeof(T));
+    std::unique_ptr<T[]> a(new T[count]);
+#if defined(__linux__)
+    constexpr uintptr_t kHugePage = uintptr_t(2) << 20;
+    const auto begin = reinterpret_cast<uintptr_t>(a.get());
+    const uintptr_t lo = (begin + kHugePage - 1) & ~(kHugePage - 1);
+    const uintptr_t hi = (begin + count * sizeof(T)) & ~(kHugePage - 1);
+    if (hi > lo) (void)madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);  // a hint only
+#endif
+    return a;
+}
+
+// Bounds of a set of primitives and of their centroids (lane 3 unused).
 struct RangeBounds {
-    Box3f bounds;
-    Box3f centroids;
+    F4 lo = splat4(FLT_MAX), hi = splat4(-FLT_MAX);
+    F4 clo = splat4(FLT_MAX), chi = splat4(-FLT_MAX);
     void add(const PrimRef& p) {
-        grow(bounds, p.lo, p.hi);
-        const Vec3f c = p.centroid();
-        grow(centroids, c, c);
+        const F4 l = p.lo4(), h = p.hi4();
+        lo = min4(lo, l);
+        hi = max4(hi, h);
+        const F4 c = p.centroid4();
+        clo = min4(clo, c);
+        chi = max4(chi, c);
     }
     void add(const RangeBounds& o) {
-        grow(bounds, o.bounds.lo, o.bounds.hi);
-        grow(centroids, o.centroids.lo, o.centroids.hi);
+        lo = min4(lo, o.lo);
+        hi = max4(hi, o.hi);
+        clo = min4(clo, o.clo);
+        chi = max4(chi, o.chi);
     }
+    [[nodiscard]] Box3f bounds() const { return to_box(lo, hi); }
+    [[nodiscard]] Box3f centroids() const { return to_box(clo, chi); }
 };
 
 // Maps centroids to bins along each axis of a node's centroid bounds.
 struct BinMapping {
-    Vec3f origin;
-    Vec3f scale;  // bins per unit length; 0 on axes where all centroids coincide
-    int bin_count;
+    F4 origin;
+    F4 scale;  // bins per unit length; 0 on axes where all centroids coincide
+    F4 last;   // bin_count - 1
+    bool usable[3];
 
-    BinMapping(const Box3f& centroids, int bins) : origin(centroids.lo), bin_count(bins) {
+    BinMapping(const Box3f& centroids, int bins) {
         const Vec3f extent = centroids.extent();
+        float s[3];
         for (int axis = 0; axis < 3; ++axis) {
             // Slightly less than bins / extent so the largest centroid lands in the last bin.
-            const float s = static_cast<float>(bins) * (1.0f - 0x1p-20f) / extent[axis];
-            scale[axis] = (extent[axis] > 0.0f && std::isfinite(s)) ? s : 0.0f;
+            const float t = static_cast<float>(bins) * (1.0f - 0x1p-20f) / extent[axis];
+            s[axis] = (extent[axis] > 0.0f && std::isfinite(t)) ? t : 0.0f;
+            usable[axis] = s[axis] > 0.0f;
         }
+        origin = set4(centroids.lo.x, centroids.lo.y, centroids.lo.z, 0.0f);
+        scale = set4(s[0], s[1], s[2], 0.0f);
+        last = splat4(static_cast<float>(bins - 1));
     }
-    [[nodiscard]] bool usable(int axis) const { return scale[axis] > 0.0f; }
-    [[nodiscard]] int index(const Vec3f& c, int axis) const {
-        float x = (c[axis] - origin[axis]) * scale[axis];
-        x = x > 0.0f ? x : 0.0f;  // also maps NaN to bin 0
-        x = x < static_cast<float>(bin_count - 1) ? x : static_cast<float>(bin_count - 1);
-        return static_cast<int>(x);
+    // Bin of the centroid of p on each axis.
+    void indices(const PrimRef& p, int32_t* out) const {
+        const F4 c = p.centroid4();
+        bin_indices((c - origin) * scale, last, out);
     }
 };
 
-// Plain data (no initializers): a BinSet is built per node, and only the
+// Per axis: bin boxes (lane 3 unused) and counts. Plain data: only the
 // first bin_count bins of each axis are cleared and used.
-struct Bin {
-    float lo[3], hi[3];
-    uint32_t count;
-
-    void clear() {
-        for (int k = 0; k < 3; ++k) { lo[k] = FLT_MAX; hi[k] = -FLT_MAX; }
-        count = 0;
-    }
-    void add(const Vec3f& box_lo, const Vec3f& box_hi) {
-        for (int k = 0; k < 3; ++k) {
-            lo[k] = std::min(lo[k], box_lo[k]);
-            hi[k] = std::max(hi[k], box_hi[k]);
-        }
-    }
-    void merge(const Bin& o) {
-        add(Vec3f(o.lo[0], o.lo[1], o.lo[2]), Vec3f(o.hi[0], o.hi[1], o.hi[2]));
-        count += o.count;
-    }
-    [[nodiscard]] Box3f bounds() const { return {{lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]}}; }
-};
-
 struct BinSet {
-    Bin bins[3][kMaxBins];
+    alignas(16) float lo[3][kMaxBins][4];
+    alignas(16) float hi[3][kMaxBins][4];
+    uint32_t count[3][kMaxBins];
 
     void clear(int bin_count) {
-        for (auto& axis_bins : bins) {
-            for (int i = 0; i < bin_count; ++i) axis_bins[i].clear();
+        for (int axis = 0; axis < 3; ++axis) {
+            for (int i = 0; i < bin_count; ++i) {
+                store4(lo[axis][i], splat4(FLT_MAX));
+                store4(hi[axis][i], splat4(-FLT_MAX));
+                count[axis][i] = 0;
+            }
         }
     }
     void add(const BinMapping& map, const PrimRef& p) {
-        const Vec3f c = p.centroid();
+        alignas(16) int32_t bin[4];
+        map.indices(p, bin);
+        const F4 l = p.lo4(), h = p.hi4();
         for (int axis = 0; axis < 3; ++axis) {
-            Bin& bin = bins[axis][map.index(c, axis)];
-            bin.add(p.lo, p.hi);
-            ++bin.count;
+            const int b = bin[axis];
+            store4(lo[axis][b], min4(load4(lo[axis][b]), l));
+            store4(hi[axis][b], max4(load4(hi[axis][b]), h));
+            ++count[axis][b];
         }
     }
     void merge(const BinSet& o, int bin_count) {
         for (int axis = 0; axis < 3; ++axis) {
-            for (int i = 0; i < bin_count; ++i) bins[axis][i].merge(o.bins[axis][i]);
+            for (int i = 0; i < bin_count; ++i) {
+                store4(lo[axis][i], min4(load4(lo[axis][i]), load4(o.lo[axis][i])));
+                store4(hi[axis][i], max4(load4(hi[axis][i]), load4(o.hi[axis][i])));
+                count[axis][i] += o.count[axis][i];
+            }
         }
     }
 };
@@ -172,35 +278,57 @@ public:
         Bvh bvh;
         const uint32_t count = checked_index_count("BVH primitive count", triangles_.size());
         if (count == 0) return bvh;
-        budgeted_resize(refs_, count, "BVH build: primitive references");
-        const RangeBounds root = make_prim_refs();
+        refs_ = scratch_array<PrimRef>(count, "BVH build: primitive references");
+        const RangeBounds root = make_prim_refs(count);
 
         // At most 2n - 1 nodes: every leaf holds at least one primitive.
-        budgeted_resize(scratch_, 2 * size_t{count} - 1, "BVH build: scratch nodes");
-        budgeted_resize(subtree_size_, scratch_.size(), "BVH build: subtree sizes");
+        const size_t max_nodes = 2 * size_t{count} - 1;
+        scratch_ = scratch_array<ScratchNode>(max_nodes, "BVH build: scratch nodes");
+        subtree_size_ = scratch_array<uint32_t>(max_nodes, "BVH build: subtree sizes");
         next_node_.store(1, std::memory_order_relaxed);
         build_node(0, 0, count, root, 0);
 
         const uint32_t node_count = subtree_size_[0];
-        budgeted_resize(bvh.nodes, node_count, "BVH nodes");
-        bvh.nodes[0] = scratch_[0];
-        copy_descendants(bvh.nodes, 0, 0, 1);
-
-        budgeted_resize(bvh.prim_indices, count, "BVH primitive indices");
-        parallel::for_range(0u, count, kGrainSize, [&](uint32_t lo, uint32_t hi) {
-            for (uint32_t i = lo; i != hi; ++i) bvh.prim_indices[i] = refs_[i].id;
-        });
+        parallel::invoke(
+            [&] {
+                checked_array_bytes("BVH nodes", node_count, sizeof(BvhNode));
+                bvh.nodes.reserve(node_count);
+                hint_huge_pages(bvh.nodes.data(), size_t{node_count} * sizeof(BvhNode));
+                bvh.nodes.resize(node_count);
+                bvh.nodes[0] = scratch_[0].to_node();
+                copy_descendants(bvh.nodes, 0, 0, 1);
+            },
+            [&] {
+                budgeted_resize(bvh.prim_indices, count, "BVH primitive indices");
+                parallel::for_range(0u, count, kGrainSize, [&](uint32_t lo, uint32_t hi) {
+                    for (uint32_t i = lo; i != hi; ++i) bvh.prim_indices[i] = refs_[i].id;
+                });
+            });
         return bvh;
     }
 
 private:
-    RangeBounds make_prim_refs() {
+    static void hint_huge_pages(void* data, size_t bytes) {
+#if defined(__linux__)
+        constexpr uintptr_t kHugePage = uintptr_t(2) << 20;
+        const auto begin = reinterpret_cast<uintptr_t>(data);
+        const uintptr_t lo = (begin + kHugePage - 1) & ~(kHugePage - 1);
+        const uintptr_t hi = (begin + bytes) & ~(kHugePage - 1);
+        if (hi > lo) (void)madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
+#else
+        (void)data;
+        (void)bytes;
+#endif
+    }
+
+    RangeBounds make_prim_refs(uint32_t count) {
         return parallel::reduce(
-            0u, static_cast<uint32_t>(refs_.size()), kGrainSize, RangeBounds{},
+            0u, count, kGrainSize, RangeBounds{},
             [&](uint32_t lo, uint32_t hi, RangeBounds acc) {
                 for (uint32_t i = lo; i != hi; ++i) {
                     const Triangle& t = triangles_[i];
-                    refs_[i] = PrimRef{vmin(t.v0, vmin(t.v1, t.v2)), i, vmax(t.v0, vmax(t.v1, t.v2)), 0};
+                    const Vec3f l = vmin(t.v0, vmin(t.v1, t.v2)), h = vmax(t.v0, vmax(t.v1, t.v2));
+                    refs_[i] = PrimRef{{l.x, l.y, l.z}, i, {h.x, h.y, h.z}, 0};
                     acc.add(refs_[i]);
                 }
                 return acc;
@@ -208,15 +336,25 @@ private:
             [](RangeBounds a, const RangeBounds& b) { a.add(b); return a; });
     }
 
+    static Vec3f vmin(const Vec3f& a, const Vec3f& b) {
+        return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)};
+    }
+    static Vec3f vmax(const Vec3f& a, const Vec3f& b) {
+        return {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)};
+    }
+
     // Builds the subtree of scratch_[node] over refs_[begin, end); returns its node count.
     uint32_t build_node(uint32_t node, uint32_t begin, uint32_t end, const RangeBounds& range, int depth) {
         const uint32_t count = end - begin;
-        BvhNode& out = scratch_[node];
-        out.bounds = range.bounds;
+        ScratchNode& out = scratch_[node];
+        const Box3f bounds = range.bounds();
+        out.lo[0] = bounds.lo.x; out.lo[1] = bounds.lo.y; out.lo[2] = bounds.lo.z;
+        out.hi[0] = bounds.hi.x; out.hi[1] = bounds.hi.y; out.hi[2] = bounds.hi.z;
         if (count <= 1) return make_leaf(node, begin, count);
 
-        const float area = range.bounds.surface_area();
-        Split split = find_split(begin, end, range.centroids);
+        const Box3f centroids = range.centroids();
+        const float area = bounds.surface_area();
+        Split split = find_split(begin, end, centroids);
         const float leaf_cost = intersection_cost_ * area * static_cast<float>(count);
         const float split_cost = traversal_cost_ * area + intersection_cost_ * split.cost;
         if (count <= max_leaf_size_ && (!split.valid() || split_cost >= leaf_cost)) {
@@ -231,8 +369,8 @@ private:
         if (!split.valid() && count <= max_leaf_size_) return make_leaf(node, begin, count);
 
         RangeBounds left, right;
-        const uint32_t mid = split.valid() ? partition_by_bin(begin, end, range.centroids, split, left, right)
-                                           : partition_by_median(begin, end, range.centroids, left, right);
+        const uint32_t mid = split.valid() ? partition_by_bin(begin, end, centroids, split, left, right)
+                                           : partition_by_median(begin, end, centroids, left, right);
 
         const uint32_t pair = next_node_.fetch_add(2, std::memory_order_relaxed);
         out.first = pair;
@@ -240,7 +378,7 @@ private:
         uint32_t left_size = 0, right_size = 0;
         if (count > kParallelSubtreeSize) {
             parallel::invoke([&] { left_size = build_node(pair, begin, mid, left, depth + 1); },
-                                 [&] { right_size = build_node(pair + 1, mid, end, right, depth + 1); });
+                             [&] { right_size = build_node(pair + 1, mid, end, right, depth + 1); });
         } else {
             left_size = build_node(pair, begin, mid, left, depth + 1);
             right_size = build_node(pair + 1, mid, end, right, depth + 1);
@@ -262,13 +400,19 @@ private:
             for (uint32_t i = begin; i < end; ++i) set.add(map, refs_[i]);
             return;
         }
-        set = parallel::reduce(
-            begin, end, kGrainSize, set,
-            [&](uint32_t lo, uint32_t hi, BinSet acc) {
-                for (uint32_t i = lo; i != hi; ++i) acc.add(map, refs_[i]);
-                return acc;
-            },
-            [&](BinSet a, const BinSet& b) { a.merge(b, bin_count_); return a; });
+        // Chunks bin into their own sets (heap-allocated: a BinSet is large),
+        // merged afterwards in chunk order.
+        const uint32_t chunks = (end - begin + kGrainSize - 1) / kGrainSize;
+        std::unique_ptr<BinSet[]> partial(new BinSet[chunks]);
+        parallel::for_range(0u, chunks, 1u, [&](uint32_t lo, uint32_t hi) {
+            for (uint32_t c = lo; c != hi; ++c) {
+                BinSet& s = partial[c];
+                s.clear(bin_count_);
+                const uint32_t first = begin + c * kGrainSize, last = std::min(end, first + kGrainSize);
+                for (uint32_t i = first; i < last; ++i) s.add(map, refs_[i]);
+            }
+        });
+        for (uint32_t c = 0; c < chunks; ++c) set.merge(partial[c], bin_count_);
     }
 
     // The cheapest bin boundary over all three axes (invalid when every
@@ -276,34 +420,45 @@ private:
     Split find_split(uint32_t begin, uint32_t end, const Box3f& centroids) const {
         const BinMapping map(centroids, bin_count_);
         Split best;
-        if (!map.usable(0) && !map.usable(1) && !map.usable(2)) return best;
+        if (!map.usable[0] && !map.usable[1] && !map.usable[2]) return best;
         BinSet set;  // plain data: only the bins in use get cleared
         bin_range(begin, end, map, set);
 
+        // Boundaries are evaluated just after each non-empty bin: every
+        // boundary in a run of empty bins has the same cost, and the first
+        // of them is the one a sweep over all bins keeps.
+        int used[kMaxBins];
         float right_area[kMaxBins];
         uint32_t right_count[kMaxBins];
         for (int axis = 0; axis < 3; ++axis) {
-            if (!map.usable(axis)) continue;
-            const Bin* bins = set.bins[axis];
-            // Suffix sweep: right side of the boundary before bin i.
-            Box3f acc;
-            uint32_t n = 0;
-            for (int i = bin_count_ - 1; i > 0; --i) {
-                grow(acc, bins[i].bounds().lo, bins[i].bounds().hi);
-                n += bins[i].count;
-                right_area[i] = acc.surface_area();
-                right_count[i] = n;
+            if (!map.usable[axis]) continue;
+            int m = 0;
+            for (int i = 0; i < bin_count_; ++i) {
+                if (set.count[axis][i] != 0) used[m++] = i;
             }
-            // Prefix sweep: evaluate every boundary.
-            acc = Box3f{};
+            // Suffix sweep: right side of the boundary before used bin t.
+            F4 lo = splat4(FLT_MAX), hi = splat4(-FLT_MAX);
+            uint32_t n = 0;
+            for (int t = m - 1; t > 0; --t) {
+                const int i = used[t];
+                lo = min4(lo, load4(set.lo[axis][i]));
+                hi = max4(hi, load4(set.hi[axis][i]));
+                n += set.count[axis][i];
+                right_area[t] = to_box(lo, hi).surface_area();
+                right_count[t] = n;
+            }
+            // Prefix sweep: evaluate the boundary after each used bin but the last.
+            lo = splat4(FLT_MAX);
+            hi = splat4(-FLT_MAX);
             n = 0;
-            for (int i = 1; i < bin_count_; ++i) {
-                grow(acc, bins[i - 1].bounds().lo, bins[i - 1].bounds().hi);
-                n += bins[i - 1].count;
-                if (n == 0 || right_count[i] == 0) continue;
-                const float cost = acc.surface_area() * static_cast<float>(n) +
-                                   right_area[i] * static_cast<float>(right_count[i]);
-                if (!best.valid() || cost < best.cost) best = Split{axis, i, cost, n};  // even when costs overflow
+            for (int t = 0; t + 1 < m; ++t) {
+                const int i = used[t];
+                lo = min4(lo, load4(set.lo[axis][i]));
+                hi = max4(hi, load4(set.hi[axis][i]));
+                n += set.count[axis][i];
+                const float cost = to_box(lo, hi).surface_area() * static_cast<float>(n) +
+                                   right_area[t + 1] * static_cast<float>(right_count[t + 1]);
+                if (!best.valid() || cost < best.cost) best = Split{axis, i + 1, cost, n};  // even when costs overflow
             }
         }
         return best;
@@ -313,13 +468,18 @@ private:
     uint32_t partition_by_bin(uint32_t begin, uint32_t end, const Box3f& centroids, const Split& split,
                               RangeBounds& left, RangeBounds& right) {
         const BinMapping map(centroids, bin_count_);
-        auto goes_left = [&](const PrimRef& p) { return map.index(p.centroid(), split.axis) < split.bin; };
+        auto goes_left = [&](const PrimRef& p) {
+            alignas(16) int32_t bin[4];
+            map.indices(p, bin);
+            return bin[split.axis] < split.bin;
+        };
+        PrimRef* refs = refs_.get();
         uint32_t i = begin, j = end;
         for (;;) {
-            while (i < j && goes_left(refs_[i])) left.add(refs_[i++]);
-            while (i < j && !goes_left(refs_[j - 1])) right.add(refs_[--j]);
+            while (i < j && goes_left(refs[i])) left.add(refs[i++]);
+            while (i < j && !goes_left(refs[j - 1])) right.add(refs[--j]);
             if (i >= j) break;
-            std::swap(refs_[i], refs_[j - 1]);
+            std::swap(refs[i], refs[j - 1]);
         }
         return i;
     }
@@ -330,16 +490,16 @@ private:
                                  RangeBounds& right) {
         const uint32_t mid = begin + (end - begin) / 2;
         const Vec3f extent = centroids.extent();
+        PrimRef* refs = refs_.get();
         if (extent.x > 0.0f || extent.y > 0.0f || extent.z > 0.0f) {
             const int axis = centroids.largest_axis();
-            std::nth_element(refs_.begin() + begin, refs_.begin() + mid, refs_.begin() + end,
-                             [axis](const PrimRef& a, const PrimRef& b) {
-                                 const float ca = a.lo[axis] + a.hi[axis], cb = b.lo[axis] + b.hi[axis];
-                                 return ca < cb || (ca == cb && a.id < b.id);
-                             });
+            std::nth_element(refs + begin, refs + mid, refs + end, [axis](const PrimRef& a, const PrimRef& b) {
+                const float ca = a.lo[axis] + a.hi[axis], cb = b.lo[axis] + b.hi[axis];
+                return ca < cb || (ca == cb && a.id < b.id);
+            });
         }
-        for (uint32_t i = begin; i < mid; ++i) left.add(refs_[i]);
-        for (uint32_t i = mid; i < end; ++i) right.add(refs_[i]);
+        for (uint32_t i = begin; i < mid; ++i) left.add(refs[i]);
+        for (uint32_t i = mid; i < end; ++i) right.add(refs[i]);
         return mid;
     }
 
@@ -347,17 +507,17 @@ private:
     // out[base, base + subtree size - 1): children pair first, then the left
     // subtree's descendants, then the right's.
     void copy_descendants(std::vector<BvhNode>& out, uint32_t from, uint32_t at, uint32_t base) const {
-        const BvhNode& node = scratch_[from];
+        const ScratchNode& node = scratch_[from];
         if (node.is_leaf()) return;
         const uint32_t left = node.first;
         out[at].first = base;
-        out[base] = scratch_[left];
-        out[base + 1] = scratch_[left + 1];
+        out[base] = scratch_[left].to_node();
+        out[base + 1] = scratch_[left + 1].to_node();
         const uint32_t left_size = subtree_size_[left];
         const uint32_t right_base = base + 2 + (left_size - 1);
         if (subtree_size_[from] > kParallelCopySize) {
             parallel::invoke([&] { copy_descendants(out, left, base, base + 2); },
-                                 [&] { copy_descendants(out, left + 1, base + 1, right_base); });
+                             [&] { copy_descendants(out, left + 1, base + 1, right_base); });
         } else {
             copy_descendants(out, left, base, base + 2);
             copy_descendants(out, left + 1, base + 1, right_base);
@@ -370,9 +530,9 @@ private:
     float traversal_cost_;
     float intersection_cost_;
 
-    std::vector<PrimRef> refs_;
-    std::vector<BvhNode> scratch_;         // nodes in allocation order
-    std::vector<uint32_t> subtree_size_;   // per scratch node: nodes in its subtree
+    std::unique_ptr<PrimRef[]> refs_;
+    std::unique_ptr<ScratchNode[]> scratch_;   // nodes in allocation order
+    std::unique_ptr<uint32_t[]> subtree_size_;  // per scratch node: nodes in its subtree
     std::atomic<uint32_t> next_node_{1};
 };
 

@@ -76,15 +76,14 @@ public:
 
     Bvh build(Hlbvh2Stages& stages) {
         Stopwatch clock;
-        std::vector<uint32_t> order;
-        morton::compute_morton_codes(tree_.triangles, keys_, order);
-        stages.morton_ms = clock.lap();
-        const uint32_t n = static_cast<uint32_t>(keys_.size());
+        double code_ms = 0.0;
+        static_assert(kCodeBits == 30, "uint32_t keys give 30-bit codes");
+        tree_.sort_by_morton_codes(keys_, &code_ms);
+        const double sorted_ms = clock.lap();
+        stages.morton_ms = code_ms;
+        stages.sort_ms = std::max(0.0, sorted_ms - code_ms);
+        const uint32_t n = tree_.size();
         if (n == 0) return {};
-
-        radix_sort_pairs(keys_, order, kCodeBits);
-        tree_.set_order(std::move(order));
-        stages.sort_ms = clock.lap();
 
         find_clusters();
         const uint32_t clusters = static_cast<uint32_t>(cluster_begin_.size() - 1);
@@ -110,7 +109,7 @@ public:
 private:
     // Starts of the runs of equal 15-bit prefixes, plus n at the end.
     void find_clusters() {
-        const uint32_t n = static_cast<uint32_t>(keys_.size());
+        const uint32_t n = tree_.size();
         const uint32_t blocks = (n + kCompactBlock - 1) / kCompactBlock;
         auto is_start = [&](uint32_t i) { return i == 0 || (keys_[i] >> kClusterShift) != (keys_[i - 1] >> kClusterShift); };
         std::vector<uint32_t> block_offset(blocks + 1, 0);
@@ -275,7 +274,7 @@ private:
 
     morton::RawTree tree_;
     uint32_t leaf_size_;
-    std::vector<uint32_t> keys_;
+    morton::Buffer<uint32_t> keys_;
     std::vector<uint32_t> cluster_begin_;
     std::vector<uint32_t> cluster_root_;
     uint32_t top_base_ = 0;

@@ -9,6 +9,11 @@
 
 #include <cstdint>
 
+#if defined(__BMI2__) && !defined(__CUDA_ARCH__)
+#include <immintrin.h>
+#define RF_MORTON_PDEP 1
+#endif
+
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/box.h"
 
@@ -16,16 +21,23 @@ namespace rf {
 
 // Spreads the low 10 bits of v so that bit i moves to bit 3i.
 RF_HDI uint32_t morton_expand_10(uint32_t v) {
+#ifdef RF_MORTON_PDEP
+    return _pdep_u32(v, 0x09249249u);  // one instruction where BMI2 is compiled in
+#else
     v &= 0x3ffu;
     v = (v | (v << 16)) & 0x030000ffu;
     v = (v | (v << 8)) & 0x0300f00fu;
     v = (v | (v << 4)) & 0x030c30c3u;
     v = (v | (v << 2)) & 0x09249249u;
     return v;
+#endif
 }
 
 // Spreads the low 21 bits of v so that bit i moves to bit 3i.
 RF_HDI uint64_t morton_expand_21(uint64_t v) {
+#ifdef RF_MORTON_PDEP
+    return _pdep_u64(v, 0x1249249249249249ull);
+#else
     v &= 0x1fffffull;
     v = (v | (v << 32)) & 0x001f00000000ffffull;
     v = (v | (v << 16)) & 0x001f0000ff0000ffull;
@@ -33,6 +45,7 @@ RF_HDI uint64_t morton_expand_21(uint64_t v) {
     v = (v | (v << 4)) & 0x10c30c30c30c30c3ull;
     v = (v | (v << 2)) & 0x1249249249249249ull;
     return v;
+#endif
 }
 
 // 30-bit code of cell (x, y, z), each in [0, 1024).

@@ -3,6 +3,7 @@
 // Grimshaw 2010 that Karras 2012 and Garanzha's HLBVH2 rely on).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -17,4 +18,20 @@ namespace rf {
 void radix_sort_pairs(std::vector<uint32_t>& keys, std::vector<uint32_t>& values, int key_bits);
 void radix_sort_pairs(std::vector<uint64_t>& keys, std::vector<uint32_t>& values, int key_bits);
 
+namespace morton {
+
+// The same sort on raw arrays of n elements, with scratch arrays of n
+// elements each (their contents are overwritten):
+//
+// Packed items (a 30-bit code above a 32-bit triangle index, say), sorted by
+// bits [low_bit, low_bit + key_bits) of each item (bits above them must be
+// 0). Returns `items` or `tmp`, whichever holds the sorted items.
+uint64_t* radix_sort_packed(uint64_t* items, uint64_t* tmp, size_t n, int low_bit, int key_bits);
+
+// Separate keys and values, as radix_sort_pairs. Returns true when the sorted
+// pairs ended up in key_tmp and value_tmp, false when in keys and values.
+bool radix_sort_pairs(uint64_t* keys, uint32_t* values, uint64_t* key_tmp, uint32_t* value_tmp, size_t n,
+                      int key_bits);
+
+}  // namespace morton
 }  // namespace rf

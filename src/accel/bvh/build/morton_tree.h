@@ -12,10 +12,12 @@
 //     in depth-first order with siblings adjacent, in parallel.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <span>
 #include <vector>
 
+#include "accel/bvh/build/morton_buffer.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/scene/scene_geometry.h"
@@ -41,7 +43,12 @@ inline float half_area(const Box3f& b) {
 }
 
 struct RawNode {
-    Box3f box;
+    // Left uninitialised when a node array is sized (finalize() sets every
+    // field the emitter reads); the union keeps Box3f's constructor out.
+    RawNode() {}
+    union {
+        Box3f box;
+    };
     uint32_t child[2];
     uint32_t count;     // primitives below
     float cost;         // SAH cost of the subtree as emitted (half areas, unnormalised)
@@ -50,6 +57,7 @@ struct RawNode {
     uint8_t flags;      // kCollapsed, kRebuild
     uint8_t unused;
 };
+static_assert(sizeof(RawNode) == 48);
 inline constexpr uint8_t kCollapsed = 1;  // emitted as one leaf
 inline constexpr uint8_t kRebuild = 2;    // emitted as a balanced tree (depth limit)
 
@@ -65,6 +73,16 @@ class RawTree {
 public:
     RawTree(std::span<const Triangle> triangles, const BuildOptions& options);
 
+    // Sorts the triangles by the Morton codes of their box centres inside the
+    // bounds of those centres (30-bit codes for uint32_t keys, 63-bit codes
+    // for uint64_t keys; stable, so equal codes stay in triangle order), and
+    // fills `order` and `boxes` in that order. `keys` receives the sorted
+    // codes. The same result as compute_morton_codes, radix_sort_pairs and
+    // set_order, with each triangle's box computed once. *code_ms (when not
+    // null) receives the milliseconds spent before the sort (boxes, bounds, codes).
+    void sort_by_morton_codes(Buffer<uint32_t>& keys, double* code_ms = nullptr);
+    void sort_by_morton_codes(Buffer<uint64_t>& keys, double* code_ms = nullptr);
+
     // Takes the Morton order (sorted position -> triangle) and gathers the
     // triangles' boxes into it.
     void set_order(std::vector<uint32_t>&& order);
@@ -74,20 +92,45 @@ public:
 
     // Sets node `index`'s children and derives its box, count, cost and
     // collapse decision from theirs (which must be final already).
-    void finalize(uint32_t index, uint32_t left, uint32_t right);
+    void finalize(uint32_t index, uint32_t left, uint32_t right) {
+        if (leaf_runs_) {
+            finalize_impl<true>(index, left, right);
+        } else {
+            finalize_impl<false>(index, left, right);
+        }
+    }
     void finalize(uint32_t index) { finalize(index, nodes[index].child[0], nodes[index].child[1]); }
+    // The same for trees without leaf runs (every leaf one primitive).
+    void finalize_unit_leaves(uint32_t index, uint32_t left, uint32_t right) {
+        finalize_impl<false>(index, left, right);
+    }
 
-    [[nodiscard]] Box3f bounds(uint32_t ref) const;
-    [[nodiscard]] uint32_t count(uint32_t ref) const;
+    [[nodiscard, gnu::always_inline]] Box3f bounds(uint32_t ref) const {
+        if (!is_leaf_ref(ref)) return nodes[ref].box;
+        const uint32_t first = ref & ~kLeafRef;
+        Box3f box = boxes[first];
+        if (leaf_runs_) {
+            for (uint32_t i = 1; i < leaf_run_[first]; ++i) box = box_union(box, boxes[first + i]);
+        }
+        return box;
+    }
+    [[nodiscard, gnu::always_inline]] uint32_t count(uint32_t ref) const {
+        if (!is_leaf_ref(ref)) return nodes[ref].count;
+        return leaf_runs_ ? leaf_run_[ref & ~kLeafRef] : 1u;
+    }
 
     // The canonical BVH of the subtree at `root`.
     [[nodiscard]] Bvh emit(uint32_t root);
+    // The same for trees whose leaves, left to right, are the sorted
+    // positions 0, 1, 2, ... in order (LBVH): the primitive order is
+    // then `order` itself and moves into the BVH; the tree is spent.
+    [[nodiscard]] Bvh emit_in_order(uint32_t root);
 
     uint32_t size() const { return static_cast<uint32_t>(order.size()); }
 
     std::span<const Triangle> triangles;
     std::vector<uint32_t> order;  // sorted position -> triangle index
-    std::vector<Box3f> boxes;     // sorted position -> triangle box
+    Buffer<Box3f> boxes;          // sorted position -> triangle box
     std::vector<RawNode> nodes;
 
 private:
@@ -98,18 +141,67 @@ private:
         uint32_t out_size;
         uint32_t height;
     };
-    [[nodiscard]] Info info(uint32_t ref) const;
-    void plan_depth(uint32_t index, int depth);
-    void emit_node(Bvh& bvh, uint32_t ref, uint32_t at, uint32_t child_base, uint32_t slot) const;
-    void gather_positions(uint32_t ref, std::vector<uint32_t>& positions) const;
-    Box3f emit_balanced(Bvh& bvh, std::span<const uint32_t> positions, uint32_t at, uint32_t child_base,
-                        uint32_t slot) const;
-    [[nodiscard]] uint32_t balanced_size(uint32_t count) const;
+    template <bool kLeafRuns>
+    [[nodiscard, gnu::always_inline]] Info info(uint32_t ref) const {
+        if (is_leaf_ref(ref)) {
+            const uint32_t first = ref & ~kLeafRef;
+            Box3f box = boxes[first];
+            uint32_t n = 1;
+            if constexpr (kLeafRuns) {
+                n = leaf_run_[first];
+                for (uint32_t i = 1; i < n; ++i) box = box_union(box, boxes[first + i]);
+            }
+            return {box, n, intersection_cost_ * half_area(box) * static_cast<float>(n), 1, 0};
+        }
+        const RawNode& node = nodes[ref];
+        return {node.box, node.count, node.cost, node.out_size, node.height};
+    }
+    template <bool kLeafRuns>
+    [[gnu::always_inline]] void finalize_impl(uint32_t index, uint32_t left, uint32_t right) {
+        const Info a = info<kLeafRuns>(left), b = info<kLeafRuns>(right);
+        RawNode& node = nodes[index];
+        node.child[0] = left;
+        node.child[1] = right;
+        node.box = box_union(a.box, b.box);
+        node.count = a.count + b.count;
+        const float area = half_area(node.box);
+        const float split_cost = traversal_cost_ * area + a.cost + b.cost;
+        node.flags = 0;
+        if (node.count <= max_leaf_size_) {
+            // Karras 2013-style collapse: one leaf where the SAH prefers it.
+            const float leaf_cost = intersection_cost_ * area * static_cast<float>(node.count);
+            if (!(leaf_cost > split_cost)) {
+                node.cost = leaf_cost;
+                node.out_size = 1;
+                node.height = 0;
+                node.flags = kCollapsed;
+                return;
+            }
+        }
+        node.cost = split_cost;
+        node.out_size = 1 + a.out_size + b.out_size;
+        node.height = static_cast<uint16_t>(std::min<uint32_t>(1 + std::max(a.height, b.height), 0xffff));
+    }
+    // Hidden: called only inside the library, so the (recursive) calls skip the PLT.
+#define RF_MORTON_INTERNAL [[gnu::visibility("hidden")]]
+    template <class Key>
+    RF_MORTON_INTERNAL void sort_impl(Buffer<Key>& keys, double* code_ms);
+    RF_MORTON_INTERNAL Bvh emit_impl(uint32_t root, bool in_order);
+    RF_MORTON_INTERNAL void plan_depth(uint32_t index, int depth);
+    template <bool kInOrder>
+    RF_MORTON_INTERNAL void emit_node(Bvh& bvh, uint32_t ref, uint32_t at, uint32_t child_base, uint32_t slot) const;
+    RF_MORTON_INTERNAL void gather_positions(uint32_t ref, std::vector<uint32_t>& positions) const;
+    template <bool kInOrder>
+    RF_MORTON_INTERNAL Box3f emit_balanced(Bvh& bvh, std::span<const uint32_t> positions, uint32_t at,
+                                           uint32_t child_base, uint32_t slot) const;
+    [[nodiscard]] RF_MORTON_INTERNAL uint32_t balanced_size(uint32_t count) const;
+#undef RF_MORTON_INTERNAL
 
     uint32_t max_leaf_size_;
     float traversal_cost_;
     float intersection_cost_;
-    std::vector<uint8_t> leaf_run_;  // empty: every leaf run is one primitive
+    bool leaf_runs_ = false;   // false: every leaf run is one primitive
+    Buffer<uint8_t> leaf_run_;
 };
 
 // Levels of halving until `count` primitives fit in leaves of `leaf_size`.

@@ -7,12 +7,31 @@
 // Compared with greedy largest-area opening (Wald, Benthin and Boulos 2008)
 // it fills nodes better and picks leaf sizes by cost: 8-12% fewer
 // instructions per ray on Sponza.
+//
+// Implementation: one bottom-up pass computes, with the cost table, the
+// subtree reference counts and how many wide nodes and packs each choice
+// produces; these tables travel up the recursion by value, so only each
+// node's choices and its counts as one slot are stored, in an uninitialised
+// array. With the counts known, the output arrays get their final sizes and
+// the wide nodes (depth-first, as a sequential top-down pass would lay them
+// out) and the leaves' triangle packs are written by parallel tasks. Every
+// decision and position depends only on the subtree, so the result is the
+// same for any thread count.
+#include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <string>
 #include <utility>
+#include <vector>
+
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
 
 #include "accel/bvh/wide/wide_bvh.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf {
@@ -27,127 +46,225 @@ public:
     WideBvh<N> run() {
         WideBvh<N> out;
         if (bvh_.nodes.empty()) return out;
-        count_references();
-        optimise();
+        // Default-initialised: every reachable entry is written before it is read.
+        info_.reset(new NodeInfo[bvh_.nodes.size()]);
+        const Table root_table = solve(0, 0);
         const Box3f& root = bvh_.nodes[0].bounds;
         for (int axis = 0; axis < 3; ++axis) {
             out.coord_scale = std::fmax(out.coord_scale, std::fmax(std::fabs(root.lo[axis]), std::fabs(root.hi[axis])));
         }
+        // Only a root with more references than one pack holds becomes a
+        // wide node; a smaller scene gets a one-slot root holding a leaf.
+        const bool expand = !bvh_.nodes[0].is_leaf() && info_[0].refs > uint32_t(kTrianglePackWidth);
+        const Sub totals = expand ? root_table.as_node : root_table.slots[0];
+        if (totals.max_refs > kMaxLeafRefs) throw leaf_size_error(totals.max_refs);
+        if (totals.packs > (1u << 27) + kWideMaxPacksPerLeaf) throw Error("wide BVH collapse: too many triangle packs");
+        const uint32_t node_count = (expand ? 0u : 1u) + totals.wides;
         out_ = &out;
-        out.nodes.reserve(bvh_.nodes.size() / 2 + 1);
-        out.packs.reserve(bvh_.prim_indices.size() / 2 + 1);
-        out.nodes.emplace_back();
-        if (expandable(0)) {
-            build_node(0, 0);
+        parallel::invoke([&] { sized(out.nodes, node_count); }, [&] { sized(out.packs, totals.packs); });
+        out.leaf_count = totals.leaves;
+        if (expand) {
+            build_node(0, 0, 1, 0);
         } else {
-            // A tiny scene: the root is itself a leaf; give it a one-slot wide root.
+            // The root is itself a leaf (or covered by one wide node slot).
             clear_node(0);
-            set_slot(0, 0, 0);
+            set_root_slot();
         }
+        if (too_many_packs_.load(std::memory_order_relaxed)) throw Error("wide BVH collapse: too many triangle packs");
         return out;
     }
 
 private:
-    // Subtree triangle reference counts, bottom-up without assuming node order.
-    void count_references() {
-        refs_.assign(bvh_.nodes.size(), 0);
-        std::vector<std::pair<uint32_t, bool>> stack{{0u, false}};
-        while (!stack.empty()) {
-            const auto [index, done] = stack.back();
-            stack.pop_back();
-            const BvhNode& node = bvh_.nodes[index];
-            if (node.is_leaf()) {
-                refs_[index] = node.count;
-            } else if (!done) {
-                stack.push_back({index, true});
-                stack.push_back({node.first, false});
-                stack.push_back({node.first + 1, false});
-            } else {
-                refs_[index] = refs_[node.first] + refs_[node.first + 1];
-            }
-        }
+    // What covering a binary subtree a given way produces.
+    struct Sub {
+        float cost;         // SAH cost
+        uint32_t packs;     // triangle packs
+        uint32_t wides;     // wide nodes
+        uint32_t leaves;    // wide leaves
+        uint32_t max_refs;  // references of the largest wide leaf
+    };
+    // slots[i - 1]: the subtree covered by at most i slots; as_node: the
+    // subtree as a wide node of its own (the root's shape when it is expanded).
+    struct Table {
+        Sub slots[N];
+        Sub as_node;
+    };
+    // Per binary node: the subtree's triangle references, what it produces
+    // as one slot, and the choices of the cost-optimal assignment.
+    // split[i - 1] (i >= 2): how at most i slots are shared, left | right <<
+    // 4, 0 = one slot; split[0]: as one slot, wide node (bit 0) or leaf, and
+    // as a wide node the slots given to the left child (bits 1 to 4).
+    struct NodeInfo {
+        uint32_t refs;
+        uint32_t packs;  // as one slot
+        uint32_t wides;  // as one slot
+        uint8_t split[N];
+    };
+
+    static constexpr int kParallelDepth = 8;          // binary levels solved as parallel tasks
+    static constexpr int kMaxRecursionDepth = 512;    // then explicit stacks
+    static constexpr uint32_t kParallelPacks = 2048;  // packs under a wide node to fill its children in parallel
+    static constexpr uint32_t kMaxLeafRefs = kWideMaxPacksPerLeaf * kTrianglePackWidth;
+
+    // Resizes a fresh output array. Large ones ask Linux for transparent huge
+    // pages first: the arrays are written once, end to end, and with 4 KiB
+    // pages the page faults cost about as much as filling them.
+    template <class T>
+    static void sized(std::vector<T>& v, size_t count) {
+        v.reserve(count);
+#if defined(__linux__)
+        constexpr uintptr_t kHugePage = uintptr_t(2) << 20;
+        const auto begin = reinterpret_cast<uintptr_t>(v.data());
+        const uintptr_t lo = (begin + kHugePage - 1) & ~(kHugePage - 1);
+        const uintptr_t hi = (begin + count * sizeof(T)) & ~(kHugePage - 1);
+        if (hi > lo) (void)madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);  // a hint only
+#endif
+        v.resize(count);
     }
 
-    // Only a root with more references than one pack holds becomes a wide
-    // node; a smaller scene gets a one-slot root holding a leaf.
-    bool expandable(uint32_t b) const {
-        return !bvh_.nodes[b].is_leaf() && refs_[b] > uint32_t(kTrianglePackWidth);
+    static uint32_t pack_count(uint32_t refs) { return (refs + kTrianglePackWidth - 1) / kTrianglePackWidth; }
+    bool inner(uint32_t b) const { return (info_[b].split[0] & 1u) != 0; }
+    int node_split(uint32_t b) const { return info_[b].split[0] >> 1; }
+
+    static Error leaf_size_error(uint32_t refs) {
+        return Error("wide BVH collapse: a leaf holds " + std::to_string(refs) + " triangles (1 to " +
+                     std::to_string(kWideMaxPacksPerLeaf * kTrianglePackWidth) + " supported)");
     }
 
     // Cost-optimal assignment (Ylitie, Karras and Laine 2017, section 3):
-    // cost_[n * N + i - 1] is the least SAH cost of covering binary subtree n
+    // slots[i - 1].cost is the least SAH cost of covering binary subtree n
     // with at most i wide-node slots, each slot a leaf of packs or a wide
     // node. A wide node costs kNodeCost times its box area (one SIMD test of
     // all N child boxes, whatever their number), a leaf kPackCost per pack
-    // times its area. Evaluated children first; the choices are kept so the
-    // wide tree can be read back top-down.
-    void optimise() {
-        const size_t count = bvh_.nodes.size();
-        cost_.assign(count * N, 0.0f);
-        split_.assign(count * N, 0);
-        inner_.assign(count, 0);
-        node_split_.assign(count, 1);
-        constexpr float kInf = std::numeric_limits<float>::infinity();
-        std::vector<std::pair<uint32_t, bool>> stack{{0u, false}};
+    // times its area. Children first; the choices are kept so the wide tree
+    // can be read back top-down.
+    Table solve(uint32_t n, int depth) {
+        const BvhNode& node = bvh_.nodes[n];
+        if (node.is_leaf()) return leaf_table(n);
+        if (depth >= kParallelDepth) return solve_recursive(n, depth);
+        Table left, right;
+        parallel::invoke([&] { left = solve(node.first, depth + 1); },
+                         [&] { right = solve(node.first + 1, depth + 1); });
+        return combine(n, left, right);
+    }
+
+    // Plain recursion for trees of ordinary depth (every builder keeps
+    // within kBvhMaxDepth); deeper ones continue with explicit stacks.
+    Table solve_recursive(uint32_t n, int depth) {
+        const BvhNode& node = bvh_.nodes[n];
+        if (node.is_leaf()) return leaf_table(n);
+        if (depth >= kMaxRecursionDepth) return solve_serial(n);
+        const Table left = solve_recursive(node.first, depth + 1);
+        const Table right = solve_recursive(node.first + 1, depth + 1);
+        return combine(n, left, right);
+    }
+
+    // Post-order over subtree `root` with explicit stacks (no depth limit).
+    Table solve_serial(uint32_t root) {
+        struct Frame {
+            uint32_t node;
+            bool expanded;
+        };
+        std::vector<Frame> stack;
+        std::vector<Table> values;
+        stack.reserve(2 * kBvhMaxDepth + 2);
+        values.reserve(kBvhMaxDepth + 2);
+        stack.push_back({root, false});
         while (!stack.empty()) {
-            const auto [n, done] = stack.back();
+            const Frame frame = stack.back();
             stack.pop_back();
-            const BvhNode& node = bvh_.nodes[n];
-            if (!node.is_leaf() && !done) {
-                stack.push_back({n, true});
-                stack.push_back({node.first, false});
-                stack.push_back({node.first + 1, false});
-                continue;
-            }
-            const float area = node.bounds.surface_area();
-            const uint32_t packs = (refs_[n] + kTrianglePackWidth - 1) / kTrianglePackWidth;
-            float* cost = &cost_[size_t(n) * N];
-            uint8_t* split = &split_[size_t(n) * N];
+            const BvhNode& node = bvh_.nodes[frame.node];
             if (node.is_leaf()) {
-                for (int i = 0; i < N; ++i) cost[i] = area * kPackCost * float(packs);
-                continue;
-            }
-            const float* left = &cost_[size_t(node.first) * N];
-            const float* right = &cost_[size_t(node.first + 1) * N];
-            // dist[j - 1]: both children with at most j slots between them.
-            float dist[N];
-            uint8_t dist_split[N];
-            dist[0] = kInf;
-            dist_split[0] = 0;
-            for (int j = 2; j <= N; ++j) {
-                float best = kInf;
-                int best_k = 1;
-                for (int k = 1; k < j; ++k) {
-                    const float c = left[k - 1] + right[j - k - 1];
-                    if (c < best) {
-                        best = c;
-                        best_k = k;
-                    }
-                }
-                dist[j - 1] = best;
-                dist_split[j - 1] = uint8_t(best_k | ((j - best_k) << 4));
-            }
-            const float as_node = area * kNodeCost + dist[N - 1];
-            node_split_[n] = uint8_t(dist_split[N - 1] & 15);
-            const float as_leaf = packs <= kMaxLeafPacks ? area * kPackCost * float(packs) : kInf;
-            inner_[n] = as_node < as_leaf ? 1 : 0;
-            cost[0] = inner_[n] ? as_node : as_leaf;
-            split[0] = 0;
-            for (int i = 2; i <= N; ++i) {
-                if (dist[i - 1] < cost[i - 2]) {
-                    cost[i - 1] = dist[i - 1];
-                    split[i - 1] = dist_split[i - 1];
-                } else {
-                    cost[i - 1] = cost[i - 2];
-                    split[i - 1] = split[i - 2];
-                }
+                values.push_back(leaf_table(frame.node));
+            } else if (!frame.expanded) {
+                stack.push_back({frame.node, true});
+                stack.push_back({node.first + 1, false});
+                stack.push_back({node.first, false});
+            } else {
+                const Table right = values.back();
+                values.pop_back();
+                values.back() = combine(frame.node, values.back(), right);
             }
         }
+        return values.back();
+    }
+
+    Table leaf_table(uint32_t n) {
+        const BvhNode& node = bvh_.nodes[n];
+        const float area = node.bounds.surface_area();
+        const uint32_t packs = pack_count(node.count);
+        NodeInfo& info = info_[n];
+        info.refs = node.count;
+        info.packs = packs;
+        info.wides = 0;
+        for (int i = 0; i < N; ++i) info.split[i] = 0;
+        const Sub leaf{area * kPackCost * float(packs), packs, 0, 1, node.count};
+        Table table;
+        for (int i = 0; i < N; ++i) table.slots[i] = leaf;
+        table.as_node = leaf;  // never used: a binary leaf is never expanded
+        return table;
+    }
+
+    static Sub join(const Sub& a, const Sub& b) {
+        return {a.cost + b.cost, a.packs + b.packs, a.wides + b.wides, a.leaves + b.leaves,
+                std::max(a.max_refs, b.max_refs)};
+    }
+
+    Table combine(uint32_t n, const Table& left, const Table& right) {
+        constexpr float kInf = std::numeric_limits<float>::infinity();
+        const BvhNode& node = bvh_.nodes[n];
+        NodeInfo& info = info_[n];
+        const uint32_t refs = info_[node.first].refs + info_[node.first + 1].refs;
+        const float area = node.bounds.surface_area();
+        const uint32_t packs = pack_count(refs);
+        // dist[j - 1]: both children with at most j slots between them, the
+        // left child getting dist_k[j - 1] of them (the first best k).
+        float dist[N];
+        int dist_k[N];
+        dist[0] = kInf;
+        dist_k[0] = 0;
+        for (int j = 2; j <= N; ++j) {
+            float best = kInf;
+            int best_k = 1;
+            for (int k = 1; k < j; ++k) {
+                const float c = left.slots[k - 1].cost + right.slots[j - k - 1].cost;
+                const bool better = c < best;
+                best = better ? c : best;
+                best_k = better ? k : best_k;
+            }
+            dist[j - 1] = best;
+            dist_k[j - 1] = best_k;
+        }
+        Table table;
+        const int k = dist_k[N - 1];
+        table.as_node = join(left.slots[k - 1], right.slots[N - k - 1]);
+        table.as_node.cost = area * kNodeCost + dist[N - 1];
+        table.as_node.wides += 1;
+        const float as_leaf = packs <= kMaxLeafPacks ? area * kPackCost * float(packs) : kInf;
+        const bool is_inner = table.as_node.cost < as_leaf;
+        table.slots[0] = is_inner ? table.as_node : Sub{as_leaf, packs, 0, 1, refs};
+        info.refs = refs;
+        info.packs = table.slots[0].packs;
+        info.wides = table.slots[0].wides;
+        info.split[0] = uint8_t((is_inner ? 1u : 0u) | (unsigned(k) << 1));
+        uint8_t split = 0;
+        for (int i = 2; i <= N; ++i) {
+            if (dist[i - 1] < table.slots[i - 2].cost) {
+                const int a = dist_k[i - 1];
+                table.slots[i - 1] = join(left.slots[a - 1], right.slots[i - a - 1]);
+                table.slots[i - 1].cost = dist[i - 1];
+                split = uint8_t(a | ((i - a) << 4));
+            } else {
+                table.slots[i - 1] = table.slots[i - 2];
+            }
+            info.split[i - 1] = split;
+        }
+        return table;
     }
 
     // Appends the slots that cover binary subtree n with at most i slots.
     void gather_slots(uint32_t n, int i, uint32_t* slots, int& used) const {
-        const uint8_t s = split_[size_t(n) * N + size_t(i - 1)];
+        const uint8_t s = i >= 2 ? info_[n].split[i - 1] : uint8_t(0);
         if (s == 0) {
             slots[used++] = n;
             return;
@@ -167,70 +284,105 @@ private:
         }
     }
 
-    // Fills slot `c` of wide node `w` with binary node `b` (recursing into it).
-    void set_slot(uint32_t w, int c, uint32_t b) {
+    void set_box(uint32_t w, int c, uint32_t b) {
         const Box3f& box = bvh_.nodes[b].bounds;
-        {
-            WideNode<N>& node = out_->nodes[w];
-            node.bounds[0][c] = box.lo.x;
-            node.bounds[1][c] = box.hi.x;
-            node.bounds[2][c] = box.lo.y;
-            node.bounds[3][c] = box.hi.y;
-            node.bounds[4][c] = box.lo.z;
-            node.bounds[5][c] = box.hi.z;
-        }
-        if (inner_[b]) {
-            const auto index = static_cast<uint32_t>(out_->nodes.size());
-            out_->nodes.emplace_back();  // invalidates references into nodes
-            out_->nodes[w].child[c] = index;
-            build_node(b, index);
+        WideNode<N>& node = out_->nodes[w];
+        node.bounds[0][c] = box.lo.x;
+        node.bounds[1][c] = box.hi.x;
+        node.bounds[2][c] = box.lo.y;
+        node.bounds[3][c] = box.hi.y;
+        node.bounds[4][c] = box.lo.z;
+        node.bounds[5][c] = box.hi.z;
+    }
+
+    // The unexpanded root: slot 0 of wide node 0.
+    void set_root_slot() {
+        set_box(0, 0, 0);
+        if (inner(0)) {
+            out_->nodes[0].child[0] = 1;
+            build_node(0, 1, 2, 0);
         } else {
-            out_->nodes[w].child[c] = make_leaf(b);
+            out_->nodes[0].child[0] = wide_make_leaf(0, info_[0].packs);
+            pack_leaf(0, 0);
         }
     }
 
-    void build_node(uint32_t b, uint32_t w) {
+    // Fills wide node w with the slots of binary node b. Its descendants are
+    // laid out depth-first from wide node next_node and pack next_pack on,
+    // as a sequential top-down pass would place them.
+    void build_node(uint32_t b, uint32_t w, uint32_t next_node, uint32_t next_pack) {
         uint32_t slots[N];
         int used = 0;
         const uint32_t left = bvh_.nodes[b].first;
-        const int k = node_split_[b];
+        const int k = node_split(b);
         gather_slots(left, k, slots, used);
         gather_slots(left + 1, N - k, slots, used);
         clear_node(w);
-        for (int i = 0; i < used; ++i) set_slot(w, i, slots[i]);
+        uint32_t child_node[N], child_pack[N];
+        const uint32_t first_pack = next_pack;
+        for (int c = 0; c < used; ++c) {
+            const uint32_t s = slots[c];
+            set_box(w, c, s);
+            child_pack[c] = next_pack;
+            if (inner(s)) {
+                child_node[c] = next_node;
+                out_->nodes[w].child[c] = next_node;
+                next_node += info_[s].wides;
+            } else {
+                out_->nodes[w].child[c] = wide_make_leaf(next_pack, info_[s].packs);
+            }
+            next_pack += info_[s].packs;
+        }
+        auto fill = [&](int c) {
+            const uint32_t s = slots[c];
+            if (inner(s)) {
+                build_node(s, child_node[c], child_node[c] + 1, child_pack[c]);
+            } else {
+                pack_leaf(s, child_pack[c]);
+            }
+        };
+        if (next_pack - first_pack > kParallelPacks) {
+            parallel::for_range(0, used, 1, [&](int lo, int hi) {
+                for (int c = lo; c < hi; ++c) fill(c);
+            });
+        } else {
+            for (int c = 0; c < used; ++c) fill(c);
+        }
     }
 
-    // Gathers the subtree's references into packs of four.
-    uint32_t make_leaf(uint32_t b) {
-        std::vector<uint32_t>& prims = scratch_;
-        prims.clear();
-        std::vector<uint32_t> stack{b};
-        while (!stack.empty()) {
-            const uint32_t index = stack.back();
-            stack.pop_back();
-            const BvhNode& node = bvh_.nodes[index];
+    // Gathers the references of binary subtree b (left to right) into packs
+    // of four from pack `first` on.
+    void pack_leaf(uint32_t b, uint32_t first) {
+        if (first >= (1u << 27)) {
+            too_many_packs_.store(true, std::memory_order_relaxed);
+            return;
+        }
+        uint32_t prims[kMaxLeafRefs];
+        uint32_t count = 0;
+        // At most 64 references, so at most 64 binary leaves: the
+        // depth-first stack never holds more than 64 entries.
+        uint32_t stack[kMaxLeafRefs + 2];
+        int top = 0;
+        stack[top++] = b;
+        while (top > 0) {
+            const BvhNode& node = bvh_.nodes[stack[--top]];
             if (node.is_leaf()) {
-                for (uint32_t s = node.first; s < node.first + node.count; ++s) prims.push_back(bvh_.prim_indices[s]);
+                for (uint32_t s = node.first; s < node.first + node.count; ++s) prims[count++] = bvh_.prim_indices[s];
             } else {
-                stack.push_back(node.first + 1);
-                stack.push_back(node.first);
+                stack[top++] = node.first + 1;
+                stack[top++] = node.first;
             }
         }
-        const auto pack_count = static_cast<uint32_t>((prims.size() + kTrianglePackWidth - 1) / kTrianglePackWidth);
-        if (pack_count == 0 || pack_count > kWideMaxPacksPerLeaf) {
-            throw Error("wide BVH collapse: a leaf holds " + std::to_string(prims.size()) +
-                        " triangles (1 to " + std::to_string(kWideMaxPacksPerLeaf * kTrianglePackWidth) +
-                        " supported)");
-        }
-        const auto first = static_cast<uint32_t>(out_->packs.size());
-        if (first >= (1u << 27)) throw Error("wide BVH collapse: too many triangle packs");
+        // The triangles are scattered: ask for all of them before using any.
+        for (uint32_t i = 0; i < count; ++i) __builtin_prefetch(&triangles_[prims[i]]);
+        const uint32_t packs = pack_count(count);
         const float nan = std::numeric_limits<float>::quiet_NaN();
-        for (uint32_t p = 0; p < pack_count; ++p) {
-            TrianglePack pack;
+        for (uint32_t p = 0; p < packs; ++p) {
+            TrianglePack& pack = out_->packs[first + p];
             for (int lane = 0; lane < kTrianglePackWidth; ++lane) {
                 const size_t slot = size_t(p) * kTrianglePackWidth + size_t(lane);
-                pack.prim[lane] = slot < prims.size() ? prims[slot] : kInvalidId;
-                bool usable = slot < prims.size();
+                pack.prim[lane] = slot < count ? prims[slot] : kInvalidId;
+                bool usable = slot < count;
                 Triangle tri{};
                 if (usable) {
                     tri = triangles_[prims[slot]];
@@ -246,10 +398,7 @@ private:
                     }
                 }
             }
-            out_->packs.push_back(pack);
         }
-        ++out_->leaf_count;
-        return wide_make_leaf(first, pack_count);
     }
 
     // Relative costs of one wide-node box test and one 4-triangle pack test;
@@ -261,12 +410,8 @@ private:
 
     const Bvh& bvh_;
     const std::vector<Triangle>& triangles_;
-    std::vector<uint32_t> refs_;
-    std::vector<float> cost_;
-    std::vector<uint8_t> split_;       // per (node, slots): left | right << 4, 0 = one slot
-    std::vector<uint8_t> inner_;       // one slot: wide node (1) or leaf (0)
-    std::vector<uint8_t> node_split_;  // as a wide node: slots given to the left child
-    std::vector<uint32_t> scratch_;
+    std::unique_ptr<NodeInfo[]> info_;
+    std::atomic<bool> too_many_packs_{false};
     WideBvh<N>* out_ = nullptr;
 };
 
