@@ -36,12 +36,13 @@ Scene load_scene(const std::string& path_or_name, const LoadOptions& options) {
     else if (ext == ".gltf" || ext == ".glb") scene = load_gltf(path_or_name, options);
     else if (ext == ".ply") scene = load_ply(path_or_name, options);
     else if (ext == ".json") scene = load_json_scene(path_or_name, options);
+    else if (ext == ".aff") scene = load_aff(path_or_name, options);
     else {
         std::error_code ec;
         if (!std::filesystem::exists(path_or_name, ec)) throw file_error(path_or_name, 0, "no such file");
         throw file_error(path_or_name, 0,
                          "unsupported scene format '" + ext +
-                             "' (expected .obj, .gltf, .glb, .ply, .json or builtin:NAME)");
+                             "' (expected .obj, .gltf, .glb, .ply, .aff, .json or builtin:NAME)");
     }
     scene.finalize();
     return scene;
