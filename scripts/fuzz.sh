@@ -16,7 +16,7 @@ set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 BUILD="${FUZZ_BUILD_DIR:-$ROOT/build-fuzz}"
-ALL_TARGETS=(obj mtl ply gltf glb json_scene texture exr)
+ALL_TARGETS=(obj mtl ply gltf glb json_scene texture exr aff)
 
 seconds=60
 runs=""
@@ -37,6 +37,7 @@ dictionary_for() {
     ply) echo "$ROOT/fuzz/dictionaries/ply.dict" ;;
     gltf|glb) echo "$ROOT/fuzz/dictionaries/gltf.dict" ;;
     json_scene) echo "$ROOT/fuzz/dictionaries/json.dict" ;;
+    aff) echo "$ROOT/fuzz/dictionaries/aff.dict" ;;
     *) echo "" ;;
   esac
 }

@@ -382,6 +382,93 @@ TEST(Sbvh, EmptyAndSingleTriangle) {
     EXPECT_TRUE(same_box(one.nodes[0].bounds, tri.bounds()));
 }
 
+// --- Binned SAH: the root split against a plain reference ---------------
+
+// The root split of Wald's binned SAH computed the plain way: every
+// primitive's centroid binned, every boundary of every bin on every usable
+// axis evaluated in order, the first cheapest kept. Returns the triangles
+// that go left (empty when no boundary separates them).
+std::vector<uint32_t> reference_left_of_root(std::span<const Triangle> tris, int bins) {
+    const size_t n = tris.size();
+    std::vector<Box3f> boxes(n);
+    std::vector<Vec3f> centroids(n);
+    Box3f centroid_bounds;
+    for (size_t i = 0; i < n; ++i) {
+        boxes[i] = tris[i].bounds();
+        centroids[i] = (boxes[i].lo + boxes[i].hi) * 0.5f;
+        centroid_bounds.extend(centroids[i]);
+    }
+    float best_cost = 0.0f;
+    int best_axis = -1, best_bin = 0;
+    std::vector<int> bin(n);
+    for (int axis = 0; axis < 3; ++axis) {
+        const float extent = centroid_bounds.hi[axis] - centroid_bounds.lo[axis];
+        const float scale = static_cast<float>(bins) * (1.0f - 0x1p-20f) / extent;
+        if (!(extent > 0.0f) || !std::isfinite(scale)) continue;
+        for (size_t i = 0; i < n; ++i) {
+            const float x = (centroids[i][axis] - centroid_bounds.lo[axis]) * scale;
+            bin[i] = static_cast<int>(std::min(std::max(x, 0.0f), static_cast<float>(bins - 1)));
+        }
+        for (int b = 1; b < bins; ++b) {
+            Box3f left, right;
+            uint32_t left_count = 0, right_count = 0;
+            for (size_t i = 0; i < n; ++i) {
+                if (bin[i] < b) {
+                    left.extend(boxes[i]);
+                    ++left_count;
+                } else {
+                    right.extend(boxes[i]);
+                    ++right_count;
+                }
+            }
+            if (left_count == 0 || right_count == 0) continue;
+            const float cost = left.surface_area() * static_cast<float>(left_count) +
+                               right.surface_area() * static_cast<float>(right_count);
+            if (best_axis < 0 || cost < best_cost) {
+                best_cost = cost;
+                best_axis = axis;
+                best_bin = b;
+            }
+        }
+    }
+    std::vector<uint32_t> left;
+    if (best_axis < 0) return left;
+    const float scale = static_cast<float>(bins) * (1.0f - 0x1p-20f) /
+                        (centroid_bounds.hi[best_axis] - centroid_bounds.lo[best_axis]);
+    for (size_t i = 0; i < n; ++i) {
+        const float x = (centroids[i][best_axis] - centroid_bounds.lo[best_axis]) * scale;
+        if (static_cast<int>(std::min(std::max(x, 0.0f), static_cast<float>(bins - 1))) < best_bin) {
+            left.push_back(static_cast<uint32_t>(i));
+        }
+    }
+    return left;
+}
+
+TEST(BinnedSah, RootSplitMatchesPlainBinning) {
+    // Node sizes around the builder's shortcuts (two primitives, sparse bins
+    // up to 16, bit-mask partition up to 64, the general path beyond), and
+    // bin counts whose non-empty-bin masks span one to four words.
+    for (const size_t count : {2u, 3u, 5u, 16u, 17u, 40u, 64u, 65u, 200u, 700u}) {
+        for (const int bins : {2, 4, 16, 100, 256}) {
+            for (uint32_t seed = 1; seed <= 3; ++seed) {
+                SCOPED_TRACE(std::to_string(count) + " triangles, " + std::to_string(bins) + " bins, seed " +
+                             std::to_string(seed));
+                const SceneGeometry soup =
+                    test::make_triangle_soup(count, 100 + seed, {Vec3f(-10.0f), Vec3f(10.0f)}, 2.0f);
+                const Bvh bvh = build_binned_sah(soup.triangles, BuildOptions{.bin_count = bins, .max_leaf_size = 1});
+                const std::vector<uint32_t> expected = reference_left_of_root(soup.triangles, bins);
+                ASSERT_FALSE(expected.empty());
+                ASSERT_FALSE(bvh.nodes[0].is_leaf());
+                // Depth-first order: the left subtree's triangles come first.
+                std::vector<uint32_t> left(bvh.prim_indices.begin(),
+                                           bvh.prim_indices.begin() + static_cast<ptrdiff_t>(expected.size()));
+                std::sort(left.begin(), left.end());
+                EXPECT_EQ(left, expected);
+            }
+        }
+    }
+}
+
 // --- Reinsertion ----------------------------------------------------------
 
 TEST(Reinsertion, NeverIncreasesSahAndKeepsInvariants) {

@@ -9,10 +9,18 @@
 // 32-byte aligned record (lo, triangle index, hi, padding), so binning and
 // partitioning load it as two float4 and grow boxes with SSE min/max. A
 // node's bins are swept over the non-empty bins only (a boundary inside a run
-// of empty bins costs the same as the first one, which is the one chosen), so
-// small nodes cost little. Scratch arrays are left uninitialised, and large
+// of empty bins costs the same as the first one, which is the one chosen),
+// found from a bit mask. Scratch arrays are left uninitialised, and large
 // ones are asked for transparent huge pages, as their page faults otherwise
 // cost about as much as writing them.
+//
+// Most nodes are small, so their fixed costs matter: a node of two
+// primitives needs no bins at all, up to 16 primitives only the bins in use
+// are initialised, and up to 64 the partition works from a bit mask of the
+// sides instead of a branchy loop. Larger ranges bin odd and even primitives
+// into two sets, halving the chains of dependent updates of one bin. All of
+// these give exactly the splits, the primitive order and the bounds of the
+// plain algorithm.
 //
 // Parallelism (TBB, through core/parallel.h): large nodes bin their
 // primitives in parallel, and subtrees above a size threshold are built as
@@ -50,6 +58,9 @@ namespace rf {
 namespace {
 
 constexpr int kMaxBins = 256;
+constexpr uint32_t kSmallNodeSize = 16;               // prims per node to initialise only the bins in use
+constexpr uint32_t kSmallPartitionSize = 64;          // prims per node to partition by bit mask (at most 64)
+constexpr uint32_t kTwoSetBinningSize = 256;          // prims per range to bin into two sets
 constexpr uint32_t kParallelBinningSize = 64 * 1024;  // prims per node to bin in parallel
 constexpr uint32_t kParallelSubtreeSize = 1024;       // prims per node to spawn child tasks
 constexpr uint32_t kParallelCopySize = 4096;          // nodes per subtree to copy in parallel
@@ -79,6 +90,13 @@ inline void bin_indices(F4 x, F4 last, int32_t* out) {
     x.v = _mm_max_ps(x.v, _mm_setzero_ps());
     x.v = _mm_min_ps(x.v, last.v);
     _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm_cvttps_epi32(x.v));
+}
+// Bit i set where the bin index (as above) in lane i is below `bin`.
+inline int bins_below(F4 x, F4 last, int bin) {
+    x.v = _mm_max_ps(x.v, _mm_setzero_ps());
+    x.v = _mm_min_ps(x.v, last.v);
+    const __m128i below = _mm_cmplt_epi32(_mm_cvttps_epi32(x.v), _mm_set1_epi32(bin));
+    return _mm_movemask_ps(_mm_castsi128_ps(below));
 }
 #else
 struct F4 {
@@ -115,6 +133,11 @@ inline void bin_indices(F4 x, F4 last, int32_t* out) {
         t = t < last.v[i] ? t : last.v[i];
         out[i] = static_cast<int32_t>(t);
     }
+}
+inline int bins_below(F4 x, F4 last, int bin) {
+    int32_t b[4];
+    bin_indices(x, last, b);
+    return (b[0] < bin ? 1 : 0) | (b[1] < bin ? 2 : 0) | (b[2] < bin ? 4 : 0) | (b[3] < bin ? 8 : 0);
 }
 #endif
 
@@ -167,11 +190,12 @@ std::unique_ptr<T[]> scratch_array(size_t count, std::string_view what) {
 struct RangeBounds {
     F4 lo = splat4(FLT_MAX), hi = splat4(-FLT_MAX);
     F4 clo = splat4(FLT_MAX), chi = splat4(-FLT_MAX);
-    void add(const PrimRef& p) {
-        const F4 l = p.lo4(), h = p.hi4();
+    void add(const PrimRef& p) { add(p.lo4(), p.hi4()); }
+    // A primitive by its bounds as loaded by PrimRef::lo4 and hi4.
+    void add(F4 l, F4 h) {
         lo = min4(lo, l);
         hi = max4(hi, h);
-        const F4 c = p.centroid4();
+        const F4 c = (xyz0(l) + xyz0(h)) * splat4(0.5f);  // PrimRef::centroid4
         clo = min4(clo, c);
         chi = max4(chi, c);
     }
@@ -210,45 +234,124 @@ struct BinMapping {
         const F4 c = p.centroid4();
         bin_indices((c - origin) * scale, last, out);
     }
+    // Whether the bin of p's centroid on `axis` is below `bin` (no round
+    // trip through memory, for partitioning).
+    [[nodiscard]] bool below(const PrimRef& p, int axis, int bin) const {
+        const F4 c = p.centroid4();
+        return ((bins_below((c - origin) * scale, last, bin) >> axis) & 1) != 0;
+    }
 };
 
-// Per axis: bin boxes (lane 3 unused) and counts. Plain data: only the
-// first bin_count bins of each axis are cleared and used.
+// Per axis: bin boxes (lane 3 unused), counts and a mask of the non-empty
+// bins. Plain data: only bins in use get initialised. Stored bin by bin,
+// the three axes and both sides of a box next to each other, so that one
+// primitive's updates touch few lines and no two of them lie a multiple of
+// 4 KiB apart (the CPU would suspect a load of depending on the store).
 struct BinSet {
-    alignas(16) float lo[3][kMaxBins][4];
-    alignas(16) float hi[3][kMaxBins][4];
-    uint32_t count[3][kMaxBins];
+    static constexpr int kMaskWords = kMaxBins / 64;
+    struct Box {
+        alignas(16) float lo[4];
+        float hi[4];
+    };
+    Box box[kMaxBins][3];
+    uint32_t counts[kMaxBins][3];
+    uint64_t used[3][kMaskWords];
+
+    float* lo(int axis, int i) { return box[i][axis].lo; }
+    float* hi(int axis, int i) { return box[i][axis].hi; }
+    uint32_t& count(int axis, int i) { return counts[i][axis]; }
+    [[nodiscard]] const float* lo(int axis, int i) const { return box[i][axis].lo; }
+    [[nodiscard]] const float* hi(int axis, int i) const { return box[i][axis].hi; }
+    [[nodiscard]] uint32_t count(int axis, int i) const { return counts[i][axis]; }
 
     void clear(int bin_count) {
         for (int axis = 0; axis < 3; ++axis) {
             for (int i = 0; i < bin_count; ++i) {
-                store4(lo[axis][i], splat4(FLT_MAX));
-                store4(hi[axis][i], splat4(-FLT_MAX));
-                count[axis][i] = 0;
+                store4(lo(axis, i), splat4(FLT_MAX));
+                store4(hi(axis, i), splat4(-FLT_MAX));
+                count(axis, i) = 0;
             }
         }
     }
     void add(const BinMapping& map, const PrimRef& p) {
         alignas(16) int32_t bin[4];
         map.indices(p, bin);
+        add(bin, p);
+    }
+    void add(const int32_t* bin, const PrimRef& p) {
         const F4 l = p.lo4(), h = p.hi4();
         for (int axis = 0; axis < 3; ++axis) {
             const int b = bin[axis];
-            store4(lo[axis][b], min4(load4(lo[axis][b]), l));
-            store4(hi[axis][b], max4(load4(hi[axis][b]), h));
-            ++count[axis][b];
+            store4(lo(axis, b), min4(load4(lo(axis, b)), l));
+            store4(hi(axis, b), max4(load4(hi(axis, b)), h));
+            ++count(axis, b);
         }
+    }
+    // Bins a few primitives (at most kSmallNodeSize) without clearing every
+    // bin: the bins they fall into are first set to the box of one of them
+    // and a zero count, and marked used; adding them all then gives the
+    // same bins as clear() and add() would.
+    void bin_sparse(const BinMapping& map, const PrimRef* prims, uint32_t n) {
+        alignas(16) int32_t bins[kSmallNodeSize][4];
+        for (int axis = 0; axis < 3; ++axis) {
+            for (uint64_t& word : used[axis]) word = 0;
+        }
+        for (uint32_t k = 0; k < n; ++k) {
+            map.indices(prims[k], bins[k]);
+            const F4 l = prims[k].lo4(), h = prims[k].hi4();
+            for (int axis = 0; axis < 3; ++axis) {
+                const int b = bins[k][axis];
+                store4(lo(axis, b), l);
+                store4(hi(axis, b), h);
+                count(axis, b) = 0;
+                used[axis][b / 64] |= uint64_t{1} << (b % 64);
+            }
+        }
+        for (uint32_t k = 0; k < n; ++k) add(bins[k], prims[k]);
+    }
+    // Marks the non-empty bins after clear() and add().
+    void mark_used(int bin_count) {
+        for (int axis = 0; axis < 3; ++axis) {
+            for (uint64_t& word : used[axis]) word = 0;
+            for (int i = 0; i < bin_count; ++i) {
+                used[axis][i / 64] |= uint64_t{count(axis, i) != 0} << (i % 64);
+            }
+        }
+    }
+    // The non-empty bins of `axis` in ascending order; returns their number.
+    int used_bins(int axis, int* out) const {
+        int m = 0;
+        for (int w = 0; w < kMaskWords; ++w) {
+            for (uint64_t bits = used[axis][w]; bits != 0; bits &= bits - 1) {
+                out[m++] = w * 64 + std::countr_zero(bits);
+            }
+        }
+        return m;
     }
     void merge(const BinSet& o, int bin_count) {
         for (int axis = 0; axis < 3; ++axis) {
             for (int i = 0; i < bin_count; ++i) {
-                store4(lo[axis][i], min4(load4(lo[axis][i]), load4(o.lo[axis][i])));
-                store4(hi[axis][i], max4(load4(hi[axis][i]), load4(o.hi[axis][i])));
-                count[axis][i] += o.count[axis][i];
+                store4(lo(axis, i), min4(load4(lo(axis, i)), load4(o.lo(axis, i))));
+                store4(hi(axis, i), max4(load4(hi(axis, i)), load4(o.hi(axis, i))));
+                count(axis, i) += o.count(axis, i);
             }
         }
     }
 };
+static_assert(kMaxBins % 64 == 0);
+
+// Box3f::surface_area of a non-empty box, 2 * (x * y + y * z + z * x) in
+// the same order of operations, so the result is the same bit for bit.
+inline float surface_area(F4 lo, F4 hi) {
+#if RF_BINNED_SSE
+    const __m128 e = _mm_sub_ps(xyz0(hi).v, xyz0(lo).v);
+    const __m128 p = _mm_mul_ps(e, _mm_shuffle_ps(e, e, _MM_SHUFFLE(3, 0, 2, 1)));  // xy, yz, zx
+    const __m128 s = _mm_add_ss(p, _mm_shuffle_ps(p, p, _MM_SHUFFLE(3, 2, 1, 1)));
+    return 2.0f * _mm_cvtss_f32(_mm_add_ss(s, _mm_movehl_ps(p, p)));
+#else
+    return to_box(lo, hi).surface_area();
+#endif
+}
 
 // A split plane: primitives whose centroid bin on `axis` is below `bin` go left.
 struct Split {
@@ -354,7 +457,8 @@ private:
 
         const Box3f centroids = range.centroids();
         const float area = bounds.surface_area();
-        Split split = find_split(begin, end, centroids);
+        const BinMapping map(centroids, bin_count_);
+        Split split = find_split(begin, end, map);
         const float leaf_cost = intersection_cost_ * area * static_cast<float>(count);
         const float split_cost = traversal_cost_ * area + intersection_cost_ * split.cost;
         if (count <= max_leaf_size_ && (!split.valid() || split_cost >= leaf_cost)) {
@@ -369,7 +473,7 @@ private:
         if (!split.valid() && count <= max_leaf_size_) return make_leaf(node, begin, count);
 
         RangeBounds left, right;
-        const uint32_t mid = split.valid() ? partition_by_bin(begin, end, centroids, split, left, right)
+        const uint32_t mid = split.valid() ? partition_by_bin(begin, end, map, split, left, right)
                                            : partition_by_median(begin, end, centroids, left, right);
 
         const uint32_t pair = next_node_.fetch_add(2, std::memory_order_relaxed);
@@ -397,7 +501,7 @@ private:
     void bin_range(uint32_t begin, uint32_t end, const BinMapping& map, BinSet& set) const {
         set.clear(bin_count_);
         if (end - begin < kParallelBinningSize) {
-            for (uint32_t i = begin; i < end; ++i) set.add(map, refs_[i]);
+            bin_prims(begin, end, map, set);
             return;
         }
         // Chunks bin into their own sets (heap-allocated: a BinSet is large),
@@ -409,79 +513,167 @@ private:
                 BinSet& s = partial[c];
                 s.clear(bin_count_);
                 const uint32_t first = begin + c * kGrainSize, last = std::min(end, first + kGrainSize);
-                for (uint32_t i = first; i < last; ++i) s.add(map, refs_[i]);
+                bin_prims(first, last, map, s);
             }
         });
         for (uint32_t c = 0; c < chunks; ++c) set.merge(partial[c], bin_count_);
     }
 
+    // Adds refs_[first, last) to `set`. Neighbouring primitives often share
+    // bins, so each bin update waits for the previous one; in larger ranges
+    // odd primitives go to a second set, merged at the end, which halves
+    // those chains.
+    void bin_prims(uint32_t first, uint32_t last, const BinMapping& map, BinSet& set) const {
+        if (last - first < kTwoSetBinningSize) {
+            for (uint32_t i = first; i < last; ++i) set.add(map, refs_[i]);
+            return;
+        }
+        BinSet odd;
+        odd.clear(bin_count_);
+        uint32_t i = first;
+        for (; i + 1 < last; i += 2) {
+            set.add(map, refs_[i]);
+            odd.add(map, refs_[i + 1]);
+        }
+        if (i < last) set.add(map, refs_[i]);
+        set.merge(odd, bin_count_);
+    }
+
     // The cheapest bin boundary over all three axes (invalid when every
     // centroid falls into one bin on every axis).
-    Split find_split(uint32_t begin, uint32_t end, const Box3f& centroids) const {
-        const BinMapping map(centroids, bin_count_);
+    Split find_split(uint32_t begin, uint32_t end, const BinMapping& map) const {
         Split best;
         if (!map.usable[0] && !map.usable[1] && !map.usable[2]) return best;
-        BinSet set;  // plain data: only the bins in use get cleared
-        bin_range(begin, end, map, set);
-
-        // Boundaries are evaluated just after each non-empty bin: every
-        // boundary in a run of empty bins has the same cost, and the first
-        // of them is the one a sweep over all bins keeps.
-        int used[kMaxBins];
-        float right_area[kMaxBins];
-        uint32_t right_count[kMaxBins];
+        if (end - begin == 2) return find_split_pair(begin, map);
+        BinSet set;  // plain data: only the bins in use get initialised
+        if (end - begin <= kSmallNodeSize) {
+            set.bin_sparse(map, refs_.get() + begin, end - begin);
+        } else {
+            bin_range(begin, end, map, set);
+            set.mark_used(bin_count_);
+        }
         for (int axis = 0; axis < 3; ++axis) {
-            if (!map.usable[axis]) continue;
-            int m = 0;
-            for (int i = 0; i < bin_count_; ++i) {
-                if (set.count[axis][i] != 0) used[m++] = i;
-            }
-            // Suffix sweep: right side of the boundary before used bin t.
-            F4 lo = splat4(FLT_MAX), hi = splat4(-FLT_MAX);
-            uint32_t n = 0;
-            for (int t = m - 1; t > 0; --t) {
-                const int i = used[t];
-                lo = min4(lo, load4(set.lo[axis][i]));
-                hi = max4(hi, load4(set.hi[axis][i]));
-                n += set.count[axis][i];
-                right_area[t] = to_box(lo, hi).surface_area();
-                right_count[t] = n;
-            }
-            // Prefix sweep: evaluate the boundary after each used bin but the last.
-            lo = splat4(FLT_MAX);
-            hi = splat4(-FLT_MAX);
-            n = 0;
-            for (int t = 0; t + 1 < m; ++t) {
-                const int i = used[t];
-                lo = min4(lo, load4(set.lo[axis][i]));
-                hi = max4(hi, load4(set.hi[axis][i]));
-                n += set.count[axis][i];
-                const float cost = to_box(lo, hi).surface_area() * static_cast<float>(n) +
-                                   right_area[t + 1] * static_cast<float>(right_count[t + 1]);
-                if (!best.valid() || cost < best.cost) best = Split{axis, i + 1, cost, n};  // even when costs overflow
-            }
+            if (map.usable[axis]) sweep(set, axis, best);
         }
         return best;
     }
 
+    // find_split for two primitives: every axis that puts them into
+    // different bins splits them apart at the same cost (the same two boxes,
+    // and float addition commutes), so the first such axis is the one the
+    // sweep keeps, at the boundary after the lower bin.
+    Split find_split_pair(uint32_t begin, const BinMapping& map) const {
+        const PrimRef& a = refs_[begin];
+        const PrimRef& b = refs_[begin + 1];
+        alignas(16) int32_t bin_a[4], bin_b[4];
+        map.indices(a, bin_a);
+        map.indices(b, bin_b);
+        for (int axis = 0; axis < 3; ++axis) {
+            if (!map.usable[axis] || bin_a[axis] == bin_b[axis]) continue;
+            const bool a_lower = bin_a[axis] < bin_b[axis];
+            const PrimRef& lower = a_lower ? a : b;
+            const PrimRef& upper = a_lower ? b : a;
+            const float cost = surface_area(lower.lo4(), lower.hi4()) * 1.0f + surface_area(upper.lo4(), upper.hi4()) * 1.0f;
+            return Split{axis, std::min(bin_a[axis], bin_b[axis]) + 1, cost, 1};
+        }
+        return Split{};
+    }
+
+    // Evaluates the boundary just after each non-empty bin of `axis` but the
+    // last, keeping the first cheapest in `best` (axes in order, bins
+    // ascending). Every boundary in a run of empty bins costs the same, and
+    // the first of them is the one a sweep over all bins keeps.
+    static void sweep(const BinSet& set, int axis, Split& best) {
+        int used[kMaxBins];
+        const int m = set.used_bins(axis, used);
+        float right_area[kMaxBins];
+        uint32_t right_count[kMaxBins];
+        // Suffix sweep: right side of the boundary before used bin t.
+        F4 lo = splat4(FLT_MAX), hi = splat4(-FLT_MAX);
+        uint32_t n = 0;
+        for (int t = m - 1; t > 0; --t) {
+            const int i = used[t];
+            lo = min4(lo, load4(set.lo(axis, i)));
+            hi = max4(hi, load4(set.hi(axis, i)));
+            n += set.count(axis, i);
+            right_area[t] = surface_area(lo, hi);
+            right_count[t] = n;
+        }
+        // Prefix sweep: evaluate the boundary after each used bin but the last.
+        lo = splat4(FLT_MAX);
+        hi = splat4(-FLT_MAX);
+        n = 0;
+        for (int t = 0; t + 1 < m; ++t) {
+            const int i = used[t];
+            lo = min4(lo, load4(set.lo(axis, i)));
+            hi = max4(hi, load4(set.hi(axis, i)));
+            n += set.count(axis, i);
+            const float cost = surface_area(lo, hi) * static_cast<float>(n) +
+                               right_area[t + 1] * static_cast<float>(right_count[t + 1]);
+            if (!best.valid() || cost < best.cost) best = Split{axis, i + 1, cost, n};  // even when costs overflow
+        }
+    }
+
     // Hoare partition of refs_[begin, end) by the split; fills both sides' bounds.
-    uint32_t partition_by_bin(uint32_t begin, uint32_t end, const Box3f& centroids, const Split& split,
+    uint32_t partition_by_bin(uint32_t begin, uint32_t end, const BinMapping& map, const Split& split,
                               RangeBounds& left, RangeBounds& right) {
-        const BinMapping map(centroids, bin_count_);
-        auto goes_left = [&](const PrimRef& p) {
-            alignas(16) int32_t bin[4];
-            map.indices(p, bin);
-            return bin[split.axis] < split.bin;
-        };
+        if (end - begin <= kSmallPartitionSize) return partition_small(begin, end, map, split, left, right);
+        auto goes_left = [&](const PrimRef& p) { return map.below(p, split.axis, split.bin); };
         PrimRef* refs = refs_.get();
+        RangeBounds l, r;  // locals stay in registers
         uint32_t i = begin, j = end;
         for (;;) {
-            while (i < j && goes_left(refs[i])) left.add(refs[i++]);
-            while (i < j && !goes_left(refs[j - 1])) right.add(refs[--j]);
+            while (i < j && goes_left(refs[i])) l.add(refs[i++]);
+            while (i < j && !goes_left(refs[j - 1])) r.add(refs[--j]);
             if (i >= j) break;
-            std::swap(refs[i], refs[j - 1]);
+            // Swapped through registers (reading back the stores stalls), and
+            // both sides of the pair are known: no need to test them again.
+            PrimRef& a = refs[i++];
+            PrimRef& b = refs[--j];
+            const F4 a_lo = a.lo4(), a_hi = a.hi4(), b_lo = b.lo4(), b_hi = b.hi4();
+            store4(a.lo, b_lo);  // lane 3: the id
+            store4(a.hi, b_hi);
+            store4(b.lo, a_lo);
+            store4(b.hi, a_hi);
+            l.add(b_lo, b_hi);
+            r.add(a_lo, a_hi);
         }
+        left = l;
+        right = r;
         return i;
+    }
+
+    // partition_by_bin for at most 64 primitives, without the Hoare loop's
+    // unpredictable branches but with its result: the sides are found first,
+    // as a bit mask, then Hoare's swaps are made (the t-th right-goer from
+    // the left with the t-th left-goer from the right, while they are
+    // misplaced) and the bounds accumulated in its order (left side
+    // ascending, right side descending), so even signed zeros agree.
+    uint32_t partition_small(uint32_t begin, uint32_t end, const BinMapping& map, const Split& split,
+                             RangeBounds& left, RangeBounds& right) {
+        PrimRef* refs = refs_.get() + begin;
+        const uint32_t n = end - begin;
+        uint64_t goes_left = 0;
+        for (uint32_t k = 0; k < n; ++k) {
+            goes_left |= uint64_t{map.below(refs[k], split.axis, split.bin)} << k;
+        }
+        const uint32_t mid = static_cast<uint32_t>(std::popcount(goes_left));
+        const uint64_t low = mid == 64 ? ~uint64_t{0} : (uint64_t{1} << mid) - 1;
+        uint64_t misplaced_low = ~goes_left & low;   // right-goers below mid, ascending
+        uint64_t misplaced_high = goes_left & ~low;  // left-goers from mid on, descending
+        while (misplaced_low != 0) {
+            const int a = std::countr_zero(misplaced_low);
+            const int b = 63 - std::countl_zero(misplaced_high);
+            std::swap(refs[a], refs[b]);
+            misplaced_low &= misplaced_low - 1;
+            misplaced_high &= ~(uint64_t{1} << b);
+        }
+        RangeBounds l, r;
+        for (uint32_t k = 0; k < mid; ++k) l.add(refs[k]);
+        for (uint32_t k = n; k-- > mid;) r.add(refs[k]);
+        left = l;
+        right = r;
+        return begin + mid;
     }
 
     // Object median along the widest centroid axis (ties broken by triangle

@@ -8,13 +8,13 @@
 // it fills nodes better and picks leaf sizes by cost: 8-12% fewer
 // instructions per ray on Sponza.
 //
-// Implementation: one bottom-up pass computes, with the cost table, the
-// subtree reference counts and how many wide nodes and packs each choice
-// produces; these tables travel up the recursion by value, so only each
-// node's choices and its counts as one slot are stored, in an uninitialised
-// array. With the counts known, the output arrays get their final sizes and
-// the wide nodes (depth-first, as a sequential top-down pass would lay them
-// out) and the leaves' triangle packs are written by parallel tasks. Every
+// Implementation: one bottom-up pass computes the cost tables (they travel
+// up the recursion by value, costs only) and stores each node's reference
+// count and choices in an uninitialised array. A second pass, over the
+// chosen wide tree only, counts the wide nodes and packs under every slot.
+// With the counts known, the output arrays get their final sizes and the
+// wide nodes (depth-first, as a sequential top-down pass would lay them out)
+// and the leaves' triangle packs are written by parallel tasks. Every
 // decision and position depends only on the subtree, so the result is the
 // same for any thread count.
 #include <algorithm>
@@ -48,7 +48,7 @@ public:
         if (bvh_.nodes.empty()) return out;
         // Default-initialised: every reachable entry is written before it is read.
         info_.reset(new NodeInfo[bvh_.nodes.size()]);
-        const Table root_table = solve(0, 0);
+        (void)solve(0, 0);
         const Box3f& root = bvh_.nodes[0].bounds;
         for (int axis = 0; axis < 3; ++axis) {
             out.coord_scale = std::fmax(out.coord_scale, std::fmax(std::fabs(root.lo[axis]), std::fabs(root.hi[axis])));
@@ -56,7 +56,7 @@ public:
         // Only a root with more references than one pack holds becomes a
         // wide node; a smaller scene gets a one-slot root holding a leaf.
         const bool expand = !bvh_.nodes[0].is_leaf() && info_[0].refs > uint32_t(kTrianglePackWidth);
-        const Sub totals = expand ? root_table.as_node : root_table.slots[0];
+        const Counts totals = expand ? count_wide(0, 0) : count_slot(0, 0);
         if (totals.max_refs > kMaxLeafRefs) throw leaf_size_error(totals.max_refs);
         if (totals.packs > (1u << 27) + kWideMaxPacksPerLeaf) throw Error("wide BVH collapse: too many triangle packs");
         const uint32_t node_count = (expand ? 0u : 1u) + totals.wides;
@@ -75,22 +75,31 @@ public:
     }
 
 private:
-    // What covering a binary subtree a given way produces.
-    struct Sub {
-        float cost;         // SAH cost
+    // What covering a binary subtree the chosen way produces.
+    struct Counts {
         uint32_t packs;     // triangle packs
         uint32_t wides;     // wide nodes
         uint32_t leaves;    // wide leaves
         uint32_t max_refs;  // references of the largest wide leaf
+        Counts& operator+=(const Counts& o) {
+            packs += o.packs;
+            wides += o.wides;
+            leaves += o.leaves;
+            max_refs = std::max(max_refs, o.max_refs);
+            return *this;
+        }
     };
-    // slots[i - 1]: the subtree covered by at most i slots; as_node: the
-    // subtree as a wide node of its own (the root's shape when it is expanded).
+    // SAH costs of a binary subtree: slots[i - 1] covered by at most i
+    // slots; as_node as a wide node of its own (the root's shape when it is
+    // expanded). Costs only: what a choice produces is counted afterwards,
+    // for the chosen tree alone.
     struct Table {
-        Sub slots[N];
-        Sub as_node;
+        float slots[N];
+        float as_node;
     };
     // Per binary node: the subtree's triangle references, what it produces
-    // as one slot, and the choices of the cost-optimal assignment.
+    // as one slot (set by the counting pass, for slots of the chosen tree
+    // only), and the choices of the cost-optimal assignment.
     // split[i - 1] (i >= 2): how at most i slots are shared, left | right <<
     // 4, 0 = one slot; split[0]: as one slot, wide node (bit 0) or leaf, and
     // as a wide node the slots given to the left child (bits 1 to 4).
@@ -104,6 +113,7 @@ private:
     static constexpr int kParallelDepth = 8;          // binary levels solved as parallel tasks
     static constexpr int kMaxRecursionDepth = 512;    // then explicit stacks
     static constexpr uint32_t kParallelPacks = 2048;  // packs under a wide node to fill its children in parallel
+    static constexpr int kParallelCountDepth = 3;     // wide levels counted as parallel tasks
     static constexpr uint32_t kMaxLeafRefs = kWideMaxPacksPerLeaf * kTrianglePackWidth;
 
     // Resizes a fresh output array. Large ones ask Linux for transparent huge
@@ -191,23 +201,14 @@ private:
 
     Table leaf_table(uint32_t n) {
         const BvhNode& node = bvh_.nodes[n];
-        const float area = node.bounds.surface_area();
-        const uint32_t packs = pack_count(node.count);
         NodeInfo& info = info_[n];
         info.refs = node.count;
-        info.packs = packs;
-        info.wides = 0;
         for (int i = 0; i < N; ++i) info.split[i] = 0;
-        const Sub leaf{area * kPackCost * float(packs), packs, 0, 1, node.count};
+        const float leaf = node.bounds.surface_area() * kPackCost * float(pack_count(node.count));
         Table table;
         for (int i = 0; i < N; ++i) table.slots[i] = leaf;
         table.as_node = leaf;  // never used: a binary leaf is never expanded
         return table;
-    }
-
-    static Sub join(const Sub& a, const Sub& b) {
-        return {a.cost + b.cost, a.packs + b.packs, a.wides + b.wides, a.leaves + b.leaves,
-                std::max(a.max_refs, b.max_refs)};
     }
 
     Table combine(uint32_t n, const Table& left, const Table& right) {
@@ -227,7 +228,7 @@ private:
             float best = kInf;
             int best_k = 1;
             for (int k = 1; k < j; ++k) {
-                const float c = left.slots[k - 1].cost + right.slots[j - k - 1].cost;
+                const float c = left.slots[k - 1] + right.slots[j - k - 1];
                 const bool better = c < best;
                 best = better ? c : best;
                 best_k = better ? k : best_k;
@@ -236,30 +237,59 @@ private:
             dist_k[j - 1] = best_k;
         }
         Table table;
-        const int k = dist_k[N - 1];
-        table.as_node = join(left.slots[k - 1], right.slots[N - k - 1]);
-        table.as_node.cost = area * kNodeCost + dist[N - 1];
-        table.as_node.wides += 1;
+        table.as_node = area * kNodeCost + dist[N - 1];
         const float as_leaf = packs <= kMaxLeafPacks ? area * kPackCost * float(packs) : kInf;
-        const bool is_inner = table.as_node.cost < as_leaf;
-        table.slots[0] = is_inner ? table.as_node : Sub{as_leaf, packs, 0, 1, refs};
+        const bool is_inner = table.as_node < as_leaf;
+        table.slots[0] = is_inner ? table.as_node : as_leaf;
         info.refs = refs;
-        info.packs = table.slots[0].packs;
-        info.wides = table.slots[0].wides;
-        info.split[0] = uint8_t((is_inner ? 1u : 0u) | (unsigned(k) << 1));
+        info.split[0] = uint8_t((is_inner ? 1u : 0u) | (unsigned(dist_k[N - 1]) << 1));
         uint8_t split = 0;
         for (int i = 2; i <= N; ++i) {
-            if (dist[i - 1] < table.slots[i - 2].cost) {
-                const int a = dist_k[i - 1];
-                table.slots[i - 1] = join(left.slots[a - 1], right.slots[i - a - 1]);
-                table.slots[i - 1].cost = dist[i - 1];
-                split = uint8_t(a | ((i - a) << 4));
-            } else {
-                table.slots[i - 1] = table.slots[i - 2];
-            }
+            const bool better = dist[i - 1] < table.slots[i - 2];
+            table.slots[i - 1] = better ? dist[i - 1] : table.slots[i - 2];
+            const int a = dist_k[i - 1];
+            split = better ? uint8_t(a | ((i - a) << 4)) : split;
             info.split[i - 1] = split;
         }
         return table;
+    }
+
+    // Counts what slot b produces under the chosen assignment and records
+    // its packs and wide nodes for the layout.
+    Counts count_slot(uint32_t b, int depth) {
+        NodeInfo& info = info_[b];
+        const Counts c = inner(b) ? count_wide(b, depth) : Counts{pack_count(info.refs), 0, 1, info.refs};
+        info.packs = c.packs;
+        info.wides = c.wides;
+        return c;
+    }
+
+    // Counts binary node b expanded into a wide node: the node and its slots.
+    Counts count_wide(uint32_t b, int depth) {
+        uint32_t slots[N];
+        const int used = node_slots(b, slots);
+        Counts child[N];
+        auto count = [&](int c) { child[c] = count_slot(slots[c], depth + 1); };
+        if (depth < kParallelCountDepth) {
+            parallel::for_range(0, used, 1, [&](int lo, int hi) {
+                for (int c = lo; c < hi; ++c) count(c);
+            });
+        } else {
+            for (int c = 0; c < used; ++c) count(c);
+        }
+        Counts total{0, 1, 0, 0};
+        for (int c = 0; c < used; ++c) total += child[c];
+        return total;
+    }
+
+    // The slots of binary node b as a wide node, left to right; returns their number.
+    int node_slots(uint32_t b, uint32_t* slots) const {
+        int used = 0;
+        const uint32_t left = bvh_.nodes[b].first;
+        const int k = node_split(b);
+        gather_slots(left, k, slots, used);
+        gather_slots(left + 1, N - k, slots, used);
+        return used;
     }
 
     // Appends the slots that cover binary subtree n with at most i slots.
@@ -312,11 +342,7 @@ private:
     // as a sequential top-down pass would place them.
     void build_node(uint32_t b, uint32_t w, uint32_t next_node, uint32_t next_pack) {
         uint32_t slots[N];
-        int used = 0;
-        const uint32_t left = bvh_.nodes[b].first;
-        const int k = node_split(b);
-        gather_slots(left, k, slots, used);
-        gather_slots(left + 1, N - k, slots, used);
+        const int used = node_slots(b, slots);
         clear_node(w);
         uint32_t child_node[N], child_pack[N];
         const uint32_t first_pack = next_pack;
@@ -332,6 +358,11 @@ private:
                 out_->nodes[w].child[c] = wide_make_leaf(next_pack, info_[s].packs);
             }
             next_pack += info_[s].packs;
+        }
+        // The leaves' triangles are scattered: ask for all of them before
+        // packing any, so that their fetches overlap.
+        for (int c = 0; c < used; ++c) {
+            if (!inner(slots[c])) prefetch_leaf(slots[c]);
         }
         auto fill = [&](int c) {
             const uint32_t s = slots[c];
@@ -350,14 +381,9 @@ private:
         }
     }
 
-    // Gathers the references of binary subtree b (left to right) into packs
-    // of four from pack `first` on.
-    void pack_leaf(uint32_t b, uint32_t first) {
-        if (first >= (1u << 27)) {
-            too_many_packs_.store(true, std::memory_order_relaxed);
-            return;
-        }
-        uint32_t prims[kMaxLeafRefs];
+    // The triangle references of binary subtree b, left to right, into
+    // prims (at most kMaxLeafRefs, checked in run()); returns their number.
+    uint32_t gather_prims(uint32_t b, uint32_t* prims) const {
         uint32_t count = 0;
         // At most 64 references, so at most 64 binary leaves: the
         // depth-first stack never holds more than 64 entries.
@@ -373,8 +399,29 @@ private:
                 stack[top++] = node.first;
             }
         }
-        // The triangles are scattered: ask for all of them before using any.
-        for (uint32_t i = 0; i < count; ++i) __builtin_prefetch(&triangles_[prims[i]]);
+        return count;
+    }
+
+    // Starts fetching the triangles of binary subtree b (a wide leaf).
+    void prefetch_leaf(uint32_t b) const {
+        uint32_t prims[kMaxLeafRefs];
+        const uint32_t count = gather_prims(b, prims);
+        for (uint32_t i = 0; i < count; ++i) {
+            const Triangle& tri = triangles_[prims[i]];
+            __builtin_prefetch(&tri.v0);
+            __builtin_prefetch(&tri.v2.z);  // 36 bytes may span two lines
+        }
+    }
+
+    // Gathers the references of binary subtree b (left to right) into packs
+    // of four from pack `first` on.
+    void pack_leaf(uint32_t b, uint32_t first) {
+        if (first >= (1u << 27)) {
+            too_many_packs_.store(true, std::memory_order_relaxed);
+            return;
+        }
+        uint32_t prims[kMaxLeafRefs];
+        const uint32_t count = gather_prims(b, prims);
         const uint32_t packs = pack_count(count);
         const float nan = std::numeric_limits<float>::quiet_NaN();
         for (uint32_t p = 0; p < packs; ++p) {

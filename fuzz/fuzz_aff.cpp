@@ -1,0 +1,12 @@
+// BART AFF parser (rf::load_aff): keywords, meshes, transforms, keyframes.
+// Includes resolve next to the scratch file, so fuzzed include names mostly
+// exercise the "no such file" path; the include logic has its own tests.
+#include "fuzz_common.h"
+#include "rayforge/io/scene_io.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+    rf::fuzz::init_once();
+    const std::string path = rf::fuzz::write_scratch("input.aff", data, size);
+    rf::fuzz::expect_success_or_rf_error([&] { (void)rf::load_aff(path); });
+    return 0;
+}
