@@ -343,6 +343,25 @@ TEST(Sbvh, SameTreeForEveryThreadCount) {
     EXPECT_TRUE(identical(one, all));
 }
 
+// Long thin triangles among a dense soup: the spare references go mostly to
+// the subtrees of the long ones and flow on from left to right subtrees in
+// the sequential part; the tree must not depend on the thread count, and the
+// budget must hold.
+TEST(Sbvh, BudgetSharingIsDeterministicAndBounded) {
+    SceneGeometry mixed = test::make_triangle_soup(8000, 11, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f);
+    const SceneGeometry diagonals = make_thin_diagonals(600, 12);
+    mixed.triangles.insert(mixed.triangles.end(), diagonals.triangles.begin(), diagonals.triangles.end());
+    const Bvh one = build_sbvh(mixed.triangles, BuildOptions{.threads = 1});
+    const Bvh two = build_sbvh(mixed.triangles, BuildOptions{.threads = 2});
+    const Bvh all = build_sbvh(mixed.triangles, BuildOptions{.threads = 0});
+    EXPECT_TRUE(identical(one, two));
+    EXPECT_TRUE(identical(one, all));
+    check_bvh(one, mixed.triangles, 4, true);
+    EXPECT_GT(one.prim_indices.size(), mixed.triangles.size());
+    EXPECT_LE(one.prim_indices.size(), 2 * mixed.triangles.size());
+    EXPECT_LT(one.sah_cost(), build_sweep_sah(mixed.triangles, BuildOptions{}).sah_cost());
+}
+
 TEST(Sbvh, LowestSahWhereSpatialSplitsMatter) {
     const SceneGeometry diagonals = make_thin_diagonals(3000, 8);
     const double binned = build_binned_sah(diagonals.triangles, BuildOptions{}).sah_cost();

@@ -13,12 +13,21 @@
 //    boundaries evaluates the SAH with entry/exit counts;
 //  - reference unsplitting (section 4.3): a straddling reference is kept whole
 //    on one side where that is cheaper than splitting it.
-// Leaves are made by SAH (traversal_cost, intersection_cost) within
-// max_leaf_size. Memory stays bounded by a reference budget: at most
-// kReferenceBudget (2) times the triangle count. A node gets a share of the spare
-// references and hands what its split does not use to its children in
-// proportion to their sizes, so the tree does not depend on the order in
-// which tasks run.
+// The best spatial candidate is applied (with unsplitting) and chosen where
+// the SAH of the children it really produces, A_L N_L + A_R N_R, is below the
+// best object split's: the binned estimate counts every straddling reference
+// on both sides, and unsplitting often makes a candidate that looked worse
+// the cheaper split.
+// Leaves are made by SAH (traversal_cost, intersection_cost, compared with the
+// chosen split's cost) within max_leaf_size. Memory stays bounded by a
+// reference budget: at most kReferenceBudget (2) times the triangle count. A
+// node gets a share of the spare references and hands what its split does not
+// use to its children in proportion to their SAH weights (box area times
+// references): subtrees of large triangles, where spatial splits pay off,
+// get more than their count alone would give. Below the parallel subtree size
+// children are built one after the other, and what the left subtree leaves
+// unused goes on to the right one. Neither depends on the order in which
+// tasks run, so neither does the tree.
 //
 // Parallelism (TBB via core/parallel.h): subtrees above a size threshold are
 // built as tasks, and large nodes evaluate the three axes as tasks. Nodes and
@@ -460,12 +469,16 @@ private:
         return depth + 1 + sweep::median_levels(larger, max_leaf_size_) <= kBvhMaxDepth;
     }
 
-    void build_node(uint32_t node, std::vector<Ref> refs, const Box3f& bounds, int depth, uint64_t spare) {
+    // Chooses the split of a node of n >= 2 references and distributes its
+    // references; returns the split's SAH (A_L N_L + A_R N_R of the children
+    // as built), or infinity where the node can only be a leaf (the depth
+    // bound with n <= max_leaf_size). A spatial candidate is applied, with
+    // reference unsplitting, and kept where its cost after unsplitting is
+    // below the best object split's, so both are compared on the children
+    // they really produce.
+    float split_node(const std::vector<Ref>& refs, const Box3f& bounds, int depth, uint64_t spare,
+                     std::vector<Ref>& left, std::vector<Ref>& right, Box3f& left_box, Box3f& right_box) const {
         const auto n = static_cast<uint32_t>(refs.size());
-        ScratchNode& out = scratch_[node];
-        out.bounds = bounds;
-        if (n == 1) return make_leaf(out, refs);
-
         SortedAxes sorted;
         ObjectSplit object = find_object_split(refs, sorted);
         SpatialSplit spatial;
@@ -475,58 +488,81 @@ private:
                 spatial = find_spatial_split(refs, bounds, spare);
             }
         }
-        bool use_spatial = spatial.valid() && spatial.cost < object.cost;
-
-        const float area = bounds.surface_area();
-        const float best_cost = use_spatial ? spatial.cost : object.cost;
-        const float leaf_cost = intersection_cost_ * area * static_cast<float>(n);
-        if (n <= max_leaf_size_ && traversal_cost_ * area + intersection_cost_ * best_cost >= leaf_cost) {
-            return make_leaf(out, refs);
-        }
         // Deep in the tree a lopsided split could exceed kBvhMaxDepth; from
         // there on, object medians reach leaves in time.
-        if (use_spatial && !depth_ok(depth, std::max(spatial.left_count, spatial.right_count))) use_spatial = false;
+        if (spatial.valid() && depth_ok(depth, std::max(spatial.left_count, spatial.right_count)) &&
+            apply_spatial_split(refs, bounds, spatial, left, right, left_box, right_box)) {
+            const float cost = left_box.surface_area() * static_cast<float>(left.size()) +
+                               right_box.surface_area() * static_cast<float>(right.size());
+            if (cost < object.cost) return cost;
+        }
+        left.clear();
+        right.clear();
+        if (!depth_ok(depth, std::max(object.position, n - object.position))) {
+            if (n <= max_leaf_size_) return kInfinity;
+            object = median_split(refs, sorted);  // n > max_leaf_size: the cost is not looked at
+        }
+        apply_object_split(refs, sorted, object, left, right);
+        left_box = object.left;
+        right_box = object.right;
+        return object.cost;
+    }
+
+    // The spare references a split leaves over go to its children in
+    // proportion to their SAH weights (area times references): spatial
+    // splits pay off, and use references, where triangles are large for
+    // their node, and a share by reference count alone starves those
+    // subtrees while most of the budget goes unused in dense ones.
+    static std::pair<uint64_t, uint64_t> share_spare(uint64_t rest, size_t left, size_t right,
+                                                     const Box3f& left_box, const Box3f& right_box) {
+        const double wl = static_cast<double>(left_box.surface_area()) * static_cast<double>(left);
+        const double wr = static_cast<double>(right_box.surface_area()) * static_cast<double>(right);
+        const double f = (wl + wr > 0.0 && std::isfinite(wl + wr))
+                             ? wl / (wl + wr)
+                             : static_cast<double>(left) / static_cast<double>(left + right);
+        const uint64_t left_spare = std::min<uint64_t>(rest, static_cast<uint64_t>(f * static_cast<double>(rest)));
+        return {left_spare, rest - left_spare};
+    }
+
+    // Returns the spare references the subtree did not use.
+    uint64_t build_node(uint32_t node, std::vector<Ref> refs, const Box3f& bounds, int depth, uint64_t spare) {
+        const auto n = static_cast<uint32_t>(refs.size());
+        ScratchNode& out = scratch_[node];
+        out.bounds = bounds;
+        if (n == 1) {
+            make_leaf(out, refs);
+            return spare;
+        }
 
         std::vector<Ref> left, right;
         Box3f left_box, right_box;
-        if (use_spatial) {
-            use_spatial = apply_spatial_split(refs, bounds, spatial, left, right, left_box, right_box);
-            if (!use_spatial) {
-                left.clear();
-                right.clear();
-            }
+        const float split_cost = split_node(refs, bounds, depth, spare, left, right, left_box, right_box);
+        const float area = bounds.surface_area();
+        const float leaf_cost = intersection_cost_ * area * static_cast<float>(n);
+        if (n <= max_leaf_size_ && traversal_cost_ * area + intersection_cost_ * split_cost >= leaf_cost) {
+            make_leaf(out, refs);
+            return spare;
         }
-        if (!use_spatial) {
-            if (!depth_ok(depth, std::max(object.position, n - object.position))) {
-                if (n <= max_leaf_size_) return make_leaf(out, refs);
-                object = median_split(refs, sorted);
-            }
-            apply_object_split(refs, sorted, object, left, right);
-            left_box = object.left;
-            right_box = object.right;
-        }
-        sorted = SortedAxes{};
         const uint64_t used = left.size() + right.size() - n;
         if (used > spare) throw Error("SBVH build: reference budget exceeded (internal error)");
         std::vector<Ref>().swap(refs);
-
-        // The spare references left go to the children in proportion to their sizes.
-        const uint64_t rest = spare - used;
-        const uint64_t left_spare = rest * left.size() / (left.size() + right.size());
-        const uint64_t right_spare = rest - left_spare;
+        const auto [left_spare, right_spare] = share_spare(spare - used, left.size(), right.size(), left_box, right_box);
 
         const uint32_t pair = next_node_.fetch_add(2, std::memory_order_relaxed);
         out.a = pair;
         out.b = pair + 1;
         out.leaf = false;
         if (n > kParallelSubtreeSize) {
+            uint64_t left_rest = 0, right_rest = 0;
             parallel::invoke(
-                [&] { build_node(pair, std::move(left), left_box, depth + 1, left_spare); },
-                [&] { build_node(pair + 1, std::move(right), right_box, depth + 1, right_spare); });
-        } else {
-            build_node(pair, std::move(left), left_box, depth + 1, left_spare);
-            build_node(pair + 1, std::move(right), right_box, depth + 1, right_spare);
+                [&] { left_rest = build_node(pair, std::move(left), left_box, depth + 1, left_spare); },
+                [&] { right_rest = build_node(pair + 1, std::move(right), right_box, depth + 1, right_spare); });
+            return left_rest + right_rest;
         }
+        // Small nodes build their children one after the other (whatever the
+        // thread count), so what the left subtree leaves over goes on to the right.
+        const uint64_t left_rest = build_node(pair, std::move(left), left_box, depth + 1, left_spare);
+        return build_node(pair + 1, std::move(right), right_box, depth + 1, right_spare + left_rest);
     }
 
     void make_leaf(ScratchNode& out, std::vector<Ref>& refs) {
