@@ -39,10 +39,10 @@
 #include <unordered_map>
 #include <vector>
 
-#include "core/parallel.h"
 #include "io/file_reader.h"
 #include "io/number_parsing.h"
 #include "io/path_utils.h"
+#include "io/texture_batch.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 #include "rayforge/io/image_io.h"
@@ -1170,17 +1170,7 @@ private:
         std::map<std::string, size_t> slot;
         for (const std::string& p : material_texture_)
             if (!p.empty() && slot.emplace(p, paths.size()).second) paths.push_back(p);
-        std::vector<std::optional<Texture>> decoded(paths.size());
-        std::vector<std::string> failures(paths.size());
-        parallel::for_each_index(size_t(0), paths.size(), [&](size_t i) {
-            try {
-                decoded[i] = load_texture(paths[i], TextureEncoding::Srgb8);
-            } catch (const Error& e) {
-                failures[i] = e.what();
-            }
-        });
-        for (const std::string& failure : failures)
-            if (!failure.empty()) warn(failure + "; using the material's color");
+        std::vector<std::optional<Texture>> decoded = decode_textures(paths, "the material's color");
         std::vector<int32_t> scene_index(paths.size(), kNoTexture);
         for (size_t m = 0; m < scene.materials.size() && m < material_texture_.size(); ++m) {
             const std::string& p = material_texture_[m];

@@ -24,8 +24,8 @@
 #include <unordered_map>
 #include <vector>
 
-#include "core/parallel.h"
 #include "io/file_reader.h"
+#include "io/texture_batch.h"
 #include "io/number_parsing.h"
 #include "io/path_utils.h"
 #include "rayforge/core/error.h"
@@ -392,17 +392,7 @@ public:
 
     // Decodes every requested file, in parallel; failures become warnings.
     void decode_all() {
-        decoded_.resize(paths_.size());
-        std::vector<std::string> failures(paths_.size());  // one slot per task: no sharing
-        parallel::for_each_index(size_t(0), paths_.size(), [&](size_t i) {
-            try {
-                decoded_[i] = load_texture(paths_[i], TextureEncoding::Srgb8);
-            } catch (const Error& e) {
-                failures[i] = e.what();
-            }
-        });
-        for (const std::string& failure : failures)
-            if (!failure.empty()) warn(failure + "; using the material's factor");
+        decoded_ = decode_textures(paths_, "the material's factor");
     }
 
     const Texture* decoded(const std::string& path) const {
