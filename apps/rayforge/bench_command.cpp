@@ -148,7 +148,7 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
         config.ray_sets = preset->ray_sets;
         if (scenes.empty()) {
             scenes = config.scenes_dir.empty() ? preset->fallback_scenes : preset->scenes;
-            config.skip_unloadable = true;  // e.g. BART .aff scenes until their loader exists
+            config.skip_unloadable = true;  // a preset's scene missing from this checkout of ../shared
         }
     } else {
         config.candidates = bench::select_candidates(
