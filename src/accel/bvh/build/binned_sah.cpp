@@ -46,10 +46,8 @@
 #include <immintrin.h>
 #define RF_BINNED_SSE 1
 #endif
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
 
+#include "core/huge_pages.h"
 #include "core/parallel.h"
 #include "rayforge/core/memory_budget.h"
 
@@ -176,13 +174,7 @@ template <class T>
 std::unique_ptr<T[]> scratch_array(size_t count, std::string_view what) {
     checked_array_bytes(what, count, sizeof(T));
     std::unique_ptr<T[]> a(new T[count]);
-#if defined(__linux__)
-    constexpr uintptr_t kHugePage = uintptr_t(2) << 20;
-    const auto begin = reinterpret_cast<uintptr_t>(a.get());
-    const uintptr_t lo = (begin + kHugePage - 1) & ~(kHugePage - 1);
-    const uintptr_t hi = (begin + count * sizeof(T)) & ~(kHugePage - 1);
-    if (hi > lo) (void)madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);  // a hint only
-#endif
+    hint_huge_pages(a.get(), count * sizeof(T));
     return a;
 }
 
@@ -411,18 +403,6 @@ public:
     }
 
 private:
-    static void hint_huge_pages(void* data, size_t bytes) {
-#if defined(__linux__)
-        constexpr uintptr_t kHugePage = uintptr_t(2) << 20;
-        const auto begin = reinterpret_cast<uintptr_t>(data);
-        const uintptr_t lo = (begin + kHugePage - 1) & ~(kHugePage - 1);
-        const uintptr_t hi = (begin + bytes) & ~(kHugePage - 1);
-        if (hi > lo) (void)madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
-#else
-        (void)data;
-        (void)bytes;
-#endif
-    }
 
     RangeBounds make_prim_refs(uint32_t count) {
         return parallel::reduce(

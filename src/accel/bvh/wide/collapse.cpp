@@ -26,11 +26,9 @@
 #include <utility>
 #include <vector>
 
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
 
 #include "accel/bvh/wide/wide_bvh.h"
+#include "core/huge_pages.h"
 #include "core/parallel.h"
 #include "rayforge/core/error.h"
 
@@ -122,13 +120,7 @@ private:
     template <class T>
     static void sized(std::vector<T>& v, size_t count) {
         v.reserve(count);
-#if defined(__linux__)
-        constexpr uintptr_t kHugePage = uintptr_t(2) << 20;
-        const auto begin = reinterpret_cast<uintptr_t>(v.data());
-        const uintptr_t lo = (begin + kHugePage - 1) & ~(kHugePage - 1);
-        const uintptr_t hi = (begin + count * sizeof(T)) & ~(kHugePage - 1);
-        if (hi > lo) (void)madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);  // a hint only
-#endif
+        hint_huge_pages(v.data(), count * sizeof(T));
         v.resize(count);
     }
 
