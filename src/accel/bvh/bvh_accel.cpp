@@ -42,21 +42,13 @@ void BvhAccel::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) 
 
 bool BvhAccel::count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const {
     const BvhView bvh = view();
-    const TraversalTotals sum = parallel::reduce(
-        size_t(0), rays.size(), kRayGrainSize, TraversalTotals{},
-        [&](size_t lo, size_t hi, TraversalTotals acc) {
-            for (size_t i = lo; i != hi; ++i) {
-                TraversalCounters counters;
-                if (any_hit) (void)bvh_occluded_counted(bvh, rays[i], counters);
-                else (void)bvh_intersect_counted(bvh, rays[i], counters);
-                acc.steps += counters.nodes_visited;
-                acc.prim_tests += counters.prims_tested;
-            }
-            acc.rays += hi - lo;
-            return acc;
-        },
-        [](TraversalTotals a, const TraversalTotals& b) { return a += b; });
-    totals += sum;
+    totals += sum_traversal_counts(rays, [&](const Ray& ray, TraversalTotals& acc) {
+        TraversalCounters counters;
+        if (any_hit) (void)bvh_occluded_counted(bvh, ray, counters);
+        else (void)bvh_intersect_counted(bvh, ray, counters);
+        acc.steps += counters.nodes_visited;
+        acc.prim_tests += counters.prims_tested;
+    });
     return true;
 }
 

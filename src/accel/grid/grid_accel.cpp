@@ -70,21 +70,13 @@ void GridAccel::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded)
 
 bool GridAccel::count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const {
     const GridView grid = view();
-    const TraversalTotals sum = parallel::reduce(
-        size_t(0), rays.size(), kRayGrainSize, TraversalTotals{},
-        [&](size_t lo, size_t hi, TraversalTotals acc) {
-            for (size_t i = lo; i != hi; ++i) {
-                GridTraversalCounters counters;
-                if (any_hit) (void)grid_occluded_counted(grid, rays[i], counters);
-                else (void)grid_intersect_counted(grid, rays[i], counters);
-                acc.steps += counters.cells_visited;
-                acc.prim_tests += counters.prims_tested;
-            }
-            acc.rays += hi - lo;
-            return acc;
-        },
-        [](TraversalTotals a, const TraversalTotals& b) { return a += b; });
-    totals += sum;
+    totals += sum_traversal_counts(rays, [&](const Ray& ray, TraversalTotals& acc) {
+        GridTraversalCounters counters;
+        if (any_hit) (void)grid_occluded_counted(grid, ray, counters);
+        else (void)grid_intersect_counted(grid, ray, counters);
+        acc.steps += counters.cells_visited;
+        acc.prim_tests += counters.prims_tested;
+    });
     return true;
 }
 

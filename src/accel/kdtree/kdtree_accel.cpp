@@ -63,24 +63,16 @@ void KdTreeAccel::occluded(std::span<const Ray> rays, std::span<uint8_t> occlude
 
 bool KdTreeAccel::count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const {
     const KdTreeView tree = view();
-    const TraversalTotals sum = with_traversal(traversal_, [&](auto mode) {
-        return parallel::reduce(
-            size_t(0), rays.size(), kRayGrainSize, TraversalTotals{},
-            [&](size_t lo, size_t hi, TraversalTotals acc) {
-                for (size_t i = lo; i != hi; ++i) {
-                    KdTraversalCounters counters;
-                    if (any_hit) (void)kdtree_occluded_counted<decltype(mode)::value>(tree, rays[i], counters);
-                    else (void)kdtree_intersect_counted<decltype(mode)::value>(tree, rays[i], counters);
-                    acc.steps += counters.nodes_visited;
-                    acc.prim_tests += counters.prims_tested;
-                    acc.restarts += counters.restarts;
-                }
-                acc.rays += hi - lo;
-                return acc;
-            },
-            [](TraversalTotals a, const TraversalTotals& b) { return a += b; });
+    totals += with_traversal(traversal_, [&](auto mode) {
+        return sum_traversal_counts(rays, [&](const Ray& ray, TraversalTotals& acc) {
+            KdTraversalCounters counters;
+            if (any_hit) (void)kdtree_occluded_counted<decltype(mode)::value>(tree, ray, counters);
+            else (void)kdtree_intersect_counted<decltype(mode)::value>(tree, ray, counters);
+            acc.steps += counters.nodes_visited;
+            acc.prim_tests += counters.prims_tested;
+            acc.restarts += counters.restarts;
+        });
     });
-    totals += sum;
     return true;
 }
 

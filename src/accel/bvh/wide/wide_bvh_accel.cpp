@@ -84,21 +84,13 @@ public:
 
     bool count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const override {
         const WideBvhView<N> bvh = view();
-        const TraversalTotals sum = parallel::reduce(
-            size_t(0), rays.size(), kRayGrainSize, TraversalTotals{},
-            [&](size_t lo, size_t hi, TraversalTotals acc) {
-                for (size_t i = lo; i != hi; ++i) {
-                    TraversalCounters counters;
-                    if (any_hit) (void)wide_bvh_occluded_counted(bvh, rays[i], counters);
-                    else (void)wide_bvh_intersect_counted(bvh, rays[i], counters);
-                    acc.steps += counters.nodes_visited;
-                    acc.prim_tests += counters.prims_tested;
-                }
-                acc.rays += hi - lo;
-                return acc;
-            },
-            [](TraversalTotals a, const TraversalTotals& b) { return a += b; });
-        totals += sum;
+        totals += sum_traversal_counts(rays, [&](const Ray& ray, TraversalTotals& acc) {
+            TraversalCounters counters;
+            if (any_hit) (void)wide_bvh_occluded_counted(bvh, ray, counters);
+            else (void)wide_bvh_intersect_counted(bvh, ray, counters);
+            acc.steps += counters.nodes_visited;
+            acc.prim_tests += counters.prims_tested;
+        });
         return true;
     }
 
