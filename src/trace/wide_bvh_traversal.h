@@ -2,7 +2,7 @@
 // (accel/bvh/wide/wide_bvh.h), after Wald, Benthin and Boulos 2008 and
 // Fuetterling et al. 2017 ("Accelerated single ray tracing for wide vector
 // units"): one SIMD slab test checks all N child boxes of a node, the hit
-// children are visited nearest first, the others wait on a stack together
+// children are visited nearest first (closest hit; any hit orders only pairs), the others wait on a stack together
 // with their entry distance so that they are skipped once a closer hit is
 // known. Leaf triangles are tested four at a time with a vectorised copy of
 // the watertight test (Woop, Benthin and Wald 2013) that performs exactly the
@@ -335,6 +335,16 @@ inline Hit traverse(const WideBvhView<N>& bvh, const Ray& ray, TraversalCounters
                     stack[size++] = {node.child[c1], near[c1]};
                 }
                 if constexpr (kPrefetch) prefetch_ref(bvh, stack[size - 1].ref);
+                continue;
+            }
+            if constexpr (kAnyHit) {
+                // Any hit ends the search, wherever it is: no ordering.
+                stack[size++] = {node.child[c1], near[c1]};
+                for (; mask; mask &= mask - 1) {
+                    const int c = first_bit(mask);
+                    stack[size++] = {node.child[c], near[c]};
+                }
+                ref = node.child[c0];
                 continue;
             }
             // Three or more: sort by entry distance, push all but the nearest far
