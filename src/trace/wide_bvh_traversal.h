@@ -2,9 +2,9 @@
 // (accel/bvh/wide/wide_bvh.h), after Wald, Benthin and Boulos 2008 and
 // Fuetterling et al. 2017 ("Accelerated single ray tracing for wide vector
 // units"): one SIMD slab test checks all N child boxes of a node, the hit
-// children are visited nearest first (closest hit; any hit orders only pairs), the others wait on a stack together
-// with their entry distance so that they are skipped once a closer hit is
-// known. Leaf triangles are tested four at a time with a vectorised copy of
+// children are visited nearest first (closest hit; any hit orders only
+// pairs), the others wait on a stack together with their entry distance so
+// that they are skipped once a closer hit is known. Leaf triangles are tested four at a time with a vectorised copy of
 // the watertight test (Woop, Benthin and Wald 2013) that performs exactly the
 // operations of trace/triangle_intersect.h, so t, u and v are bit-identical
 // to the scalar test.
