@@ -12,6 +12,7 @@
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 #include "rayforge/io/scene_io.h"
+#include "scene_load_error.h"
 #include "test_paths.h"
 
 namespace rf {
@@ -29,15 +30,7 @@ void expect_near3(Vec3f actual, Vec3f expected, float tolerance = 1e-4f) {
 
 Vec3f translation_of(const Affine3f& a) { return {a.m[0][3], a.m[1][3], a.m[2][3]}; }
 
-// The error message of loading `path`, or "" when it loads.
-std::string load_error(const std::string& path) {
-    try {
-        load_scene(path);
-    } catch (const Error& e) {
-        return e.what();
-    }
-    return "";
-}
+using test::load_error;
 
 void write_file(const fs::path& path, const std::string& text) {
     std::ofstream out(path, std::ios::binary);

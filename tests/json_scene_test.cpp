@@ -9,6 +9,7 @@
 
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
+#include "scene_load_error.h"
 #include "test_paths.h"
 
 namespace rf {
@@ -24,14 +25,7 @@ void expect_vec(Vec3f actual, Vec3f expected, float eps = kEps) {
 
 std::string json_fixture(const std::string& name) { return test::data_path("json/" + name); }
 
-std::string load_error(const std::string& path) {
-    try {
-        load_scene(path);
-    } catch (const Error& e) {
-        return e.what();
-    }
-    return "";
-}
+using test::load_error;
 
 // Writes `text` to a fresh file and returns its path.
 std::string write_scene(const std::string& test_name, const std::string& text) {
