@@ -2,18 +2,26 @@
 // sphere field have the geometry, materials, lights and cameras they promise,
 // the procedural benchmark scenes (sphereflake, terrain, instances) are large,
 // finite, lit and framed by their cameras, and generation is deterministic.
+// The path-tracing scenes (furnace, material-spheres, sky-sphere) have the
+// materials, emitters and environment they promise, and the procedural sky
+// is finite, positive, brightest at the sun and calibrated as documented.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <string>
+#include <vector>
 
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
 #include "rayforge/scene/camera.h"
 #include "rayforge/scene/scene_geometry.h"
+#include "io/procedural_sky.h"
+#include "render/color.h"
+#include "test_paths.h"
 
 namespace rf {
 namespace {
@@ -249,6 +257,322 @@ TEST(BuiltinBenchmarkScenes, CameraSeesTheFeaturedGeometry) {
         }
         EXPECT_GT(hits, kWidth * kHeight / 2) << b.name;
         EXPECT_GT(featured, kWidth * kHeight / 5) << b.name;
+    }
+}
+
+
+// ---- Path-tracing scenes --------------------------------------------------
+
+const Material* find_material(const Scene& scene, const std::string& name) {
+    for (const Material& m : scene.materials)
+        if (m.name == name) return &m;
+    return nullptr;
+}
+
+// The mesh (by name) that the first hit of the ray from the camera's eye
+// towards `point` belongs to; "" on a miss.
+std::string first_mesh_seen(const Scene& scene, const SceneGeometry& geometry, const Accel& accel, Vec3f point) {
+    Ray ray;
+    ray.org = scene.camera->eye;
+    ray.dir = point - scene.camera->eye;
+    const Hit hit = accel.intersect(ray);
+    if (!hit.found()) return "";
+    return scene.meshes[scene.instances[geometry.triangle_instance[hit.prim]].mesh].name;
+}
+
+// Centre of a mesh's bounds (its instances here are the identity).
+Vec3f mesh_centre(const Mesh& mesh) {
+    Box3f b;
+    for (const Vec3f& p : mesh.positions) b.extend(p);
+    return (b.lo + b.hi) * 0.5f;
+}
+
+const Mesh* find_mesh(const Scene& scene, const std::string& name) {
+    for (const Mesh& m : scene.meshes)
+        if (m.name == name) return &m;
+    return nullptr;
+}
+
+TEST(PathTracingScenes, AreListed) {
+    const auto names = builtin_scene_names();
+    for (const char* name : {"furnace", "material-spheres", "sky-sphere"})
+        EXPECT_NE(std::find(names.begin(), names.end(), name), names.end()) << name;
+}
+
+TEST(PathTracingScenes, FurnaceIsAWhiteLambertSphereInAUniformEnvironment) {
+    const Scene scene = load_scene("builtin:furnace");  // finalized
+    EXPECT_EQ(scene.triangle_count(), 64u * (2u * 32u - 2u));
+    ASSERT_EQ(scene.materials.size(), 1u);
+    const Material& m = scene.materials[0];
+    EXPECT_EQ(m.base_color, Vec3f(1.0f));
+    EXPECT_EQ(m.metallic, 0.0f);
+    EXPECT_EQ(m.roughness, 1.0f);
+    EXPECT_EQ(m.ior, 1.0f);
+    EXPECT_EQ(m.transmission, 0.0f);
+    EXPECT_FALSE(m.is_emissive());
+    EXPECT_EQ(m.base_color_texture, kNoTexture);
+    EXPECT_TRUE(scene.lights.empty());
+    EXPECT_EQ(scene.environment.color, Vec3f(1.0f));
+    EXPECT_EQ(scene.environment.strength, 1.0f);
+    EXPECT_EQ(scene.environment.texture, -1);
+    // A unit sphere with smooth normals equal to the positions.
+    ASSERT_EQ(scene.meshes.size(), 1u);
+    const Mesh& sphere = scene.meshes[0];
+    ASSERT_EQ(sphere.normals.size(), sphere.positions.size());
+    for (size_t i = 0; i < sphere.positions.size(); ++i) {
+        ASSERT_NEAR(length(sphere.positions[i]), 1.0f, 1e-5f) << i;
+        ASSERT_NEAR(length(sphere.normals[i] - sphere.positions[i]), 0.0f, 1e-5f) << i;
+    }
+    // The camera frames the whole sphere: the centre ray hits it, the corners miss.
+    const SceneGeometry geometry = SceneGeometry::build(scene);
+    const auto accel = build_accel(geometry, BuildOptions{});
+    const CameraFrame frame = CameraFrame::make(*scene.camera, 64, 64);
+    EXPECT_TRUE(accel->intersect(frame.generate(32.0f, 32.0f, 64, 64)).found());
+    EXPECT_FALSE(accel->intersect(frame.generate(0.5f, 0.5f, 64, 64)).found());
+    EXPECT_FALSE(accel->intersect(frame.generate(63.5f, 63.5f, 64, 64)).found());
+}
+
+TEST(PathTracingScenes, MaterialSpheresHasGlassMetalsPlasticAnAreaLightAndTheSky) {
+    const Scene scene = load_scene("builtin:material-spheres");
+    struct Expected {
+        const char* name;
+        float metallic, roughness, transmission;
+    };
+    const Expected expected[] = {{"smooth_glass", 0, 0.0f, 1},  {"rough_glass", 0, 0.3f, 1},
+                                 {"gold", 1, 0.05f, 0},          {"brushed_copper", 1, 0.4f, 0},
+                                 {"glossy_plastic", 0, 0.3f, 0}, {"diffuse", 0, 1.0f, 0}};
+    for (const Expected& e : expected) {
+        const Material* m = find_material(scene, e.name);
+        ASSERT_NE(m, nullptr) << e.name;
+        EXPECT_EQ(m->metallic, e.metallic) << e.name;
+        EXPECT_FLOAT_EQ(m->roughness, e.roughness) << e.name;
+        EXPECT_EQ(m->transmission, e.transmission) << e.name;
+        if (e.transmission > 0) EXPECT_EQ(m->ior, 1.5f) << e.name;
+        EXPECT_FALSE(m->is_emissive()) << e.name;
+    }
+    expect_vec(find_material(scene, "gold")->base_color, {1.0f, 0.78f, 0.34f});
+
+    // Exactly one emitter: a quad above the spheres, facing down, strength 10..20.
+    const SceneGeometry geometry = SceneGeometry::build(scene);
+    int emissive_triangles = 0;
+    for (size_t t = 0; t < geometry.size(); ++t) {
+        const Material& m = scene.materials[geometry.material[t]];
+        if (!m.is_emissive()) continue;
+        ++emissive_triangles;
+        EXPECT_GE(m.emission_strength, 10.0f);
+        EXPECT_LE(m.emission_strength, 20.0f);
+        EXPECT_FALSE(m.double_sided);
+        const Mesh& mesh = scene.meshes[scene.instances[geometry.triangle_instance[t]].mesh];
+        ASSERT_EQ(mesh.name, "area_light");
+        const uint32_t local = geometry.local_triangle[t];
+        const Vec3f a = mesh.positions[mesh.indices[3 * local]], b = mesh.positions[mesh.indices[3 * local + 1]],
+                    c = mesh.positions[mesh.indices[3 * local + 2]];
+        EXPECT_LT(cross(b - a, c - a).y, 0.0f) << "the light must face down";
+        EXPECT_GT(a.y, 2.0f);
+    }
+    EXPECT_EQ(emissive_triangles, 2);
+    EXPECT_TRUE(scene.lights.empty());
+
+    ASSERT_GE(scene.environment.texture, 0);
+    ASSERT_LT(size_t(scene.environment.texture), scene.textures.size());
+    const Texture& sky = scene.textures[size_t(scene.environment.texture)];
+    EXPECT_EQ(sky.name, "builtin:sky");
+    EXPECT_EQ(sky.encoding, TextureEncoding::LinearFloat);
+    EXPECT_FLOAT_EQ(scene.environment.strength, 0.5f);
+
+    // The floor is a checkerboard of two materials and every sphere is in view.
+    const Mesh* floor = find_mesh(scene, "floor");
+    ASSERT_NE(floor, nullptr);
+    std::vector<uint32_t> floor_materials = floor->material_ids;
+    std::sort(floor_materials.begin(), floor_materials.end());
+    floor_materials.erase(std::unique(floor_materials.begin(), floor_materials.end()), floor_materials.end());
+    EXPECT_EQ(floor_materials.size(), 2u);
+    const auto accel = build_accel(geometry, BuildOptions{});
+    for (const Expected& e : expected) {
+        const Mesh* sphere = find_mesh(scene, e.name);
+        ASSERT_NE(sphere, nullptr) << e.name;
+        EXPECT_EQ(first_mesh_seen(scene, geometry, *accel, mesh_centre(*sphere)), e.name);
+    }
+}
+
+TEST(PathTracingScenes, SkySphereIsLitOnlyByTheProceduralSky) {
+    const Scene scene = load_scene("builtin:sky-sphere");
+    EXPECT_TRUE(scene.lights.empty());
+    for (const Material& m : scene.materials) EXPECT_FALSE(m.is_emissive()) << m.name;
+    ASSERT_GE(scene.environment.texture, 0);
+    ASSERT_LT(size_t(scene.environment.texture), scene.textures.size());
+    const Texture& sky = scene.textures[size_t(scene.environment.texture)];
+    EXPECT_EQ(sky.name, "builtin:sky");
+    EXPECT_EQ(sky.encoding, TextureEncoding::LinearFloat);
+    EXPECT_EQ(sky.channels, 3);
+    EXPECT_GT(scene.environment.strength, 0.0f);
+    // Everything rests on the ground y = 0 and each object is in view.
+    const SceneGeometry geometry = SceneGeometry::build(scene);
+    EXPECT_NEAR(geometry.bounds.lo.y, 0.0f, 1e-4f);
+    const auto accel = build_accel(geometry, BuildOptions{});
+    for (const char* name : {"white_sphere", "metal_sphere", "glossy_sphere"})
+        EXPECT_EQ(first_mesh_seen(scene, geometry, *accel, mesh_centre(*find_mesh(scene, name))), name);
+    EXPECT_EQ(first_mesh_seen(scene, geometry, *accel, scene.instances.back().transform.transform_point(Vec3f(0.0f))),
+              "cube");
+}
+
+TEST(PathTracingScenes, GenerationIsDeterministic) {
+    for (const char* name : {"furnace", "material-spheres", "sky-sphere"}) {
+        const Scene a = make_builtin_scene(name), b = make_builtin_scene(name);
+        const SceneGeometry ga = SceneGeometry::build(a), gb = SceneGeometry::build(b);
+        ASSERT_EQ(ga.size(), gb.size()) << name;
+        EXPECT_EQ(std::memcmp(ga.triangles.data(), gb.triangles.data(), ga.size() * sizeof(Triangle)), 0) << name;
+        ASSERT_EQ(a.textures.size(), b.textures.size()) << name;
+        for (size_t t = 0; t < a.textures.size(); ++t) EXPECT_EQ(a.textures[t].texels_f, b.textures[t].texels_f) << name;
+    }
+}
+
+// ---- Procedural sky -------------------------------------------------------
+
+constexpr double kPiD = 3.14159265358979323846;
+
+Vec3f texel(const Texture& t, int i, int j) {
+    const float* p = &t.texels_f[(size_t(j) * size_t(t.width) + size_t(i)) * 3];
+    return {p[0], p[1], p[2]};
+}
+
+// Irradiance on a horizontal plane facing +y from the map as a piecewise
+// constant function, split into the sun texels (luminance above `sun_threshold`)
+// and the rest; per-texel weight = exact integral of max(cos, 0) over its solid angle.
+void horizontal_irradiance(const Texture& t, float sun_threshold, double& sky, double& sun, double& sun_solid_angle) {
+    sky = sun = sun_solid_angle = 0.0;
+    for (int j = 0; j < t.height; ++j) {
+        const double c0 = std::fmax(std::cos(kPiD * j / t.height), 0.0);
+        const double c1 = std::fmax(std::cos(kPiD * (j + 1) / t.height), 0.0);
+        const double weight = (2.0 * kPiD / t.width) * 0.5 * (c0 * c0 - c1 * c1);
+        const double solid_angle = (2.0 * kPiD / t.width) * (std::cos(kPiD * j / t.height) - std::cos(kPiD * (j + 1) / t.height));
+        for (int i = 0; i < t.width; ++i) {
+            const float l = luminance(texel(t, i, j));
+            if (l > sun_threshold) {
+                sun += l * weight;
+                sun_solid_angle += solid_angle;
+            } else {
+                sky += l * weight;
+            }
+        }
+    }
+}
+
+TEST(ProceduralSky, TexelsAreFiniteAndPositive) {
+    const Texture sky = make_sky_texture();
+    EXPECT_EQ(sky.width, 512);
+    EXPECT_EQ(sky.height, 256);
+    EXPECT_EQ(sky.channels, 3);
+    EXPECT_EQ(sky.encoding, TextureEncoding::LinearFloat);
+    ASSERT_EQ(sky.texels_f.size(), size_t(512) * 256 * 3);
+    for (size_t k = 0; k < sky.texels_f.size(); ++k) {
+        ASSERT_TRUE(std::isfinite(sky.texels_f[k])) << k;
+        ASSERT_GT(sky.texels_f[k], 0.0f) << k;
+    }
+}
+
+TEST(ProceduralSky, DirectionConventionMatchesTheMapping) {
+    expect_vec(equirect_direction(0.5f, 0.0f), {0, 1, 0});
+    expect_vec(equirect_direction(0.5f, 0.5f), {0, 0, -1});
+    expect_vec(equirect_direction(0.75f, 0.5f), {1, 0, 0});
+    expect_vec(equirect_direction(0.25f, 0.5f), {-1, 0, 0});
+    expect_vec(sky_sun_direction(90.0f, 0.0f), {0, 1, 0});
+    expect_vec(sky_sun_direction(0.0f, 0.0f), {0, 0, -1});
+    expect_vec(sky_sun_direction(0.0f, 90.0f), {1, 0, 0});
+    // u = 0.5 + atan2(x, -z) / 2pi, v = acos(y) / pi invert equirect_direction.
+    for (float u : {0.1f, 0.37f, 0.5f, 0.8f})
+        for (float v : {0.05f, 0.3f, 0.5f, 0.9f}) {
+            const Vec3f d = equirect_direction(u, v);
+            EXPECT_NEAR(0.5f + std::atan2(d.x, -d.z) / (2.0f * float(kPiD)), u, 1e-5f);
+            EXPECT_NEAR(std::acos(d.y) / float(kPiD), v, 1e-5f);
+        }
+}
+
+TEST(ProceduralSky, BrightestAroundTheSunAndBlueOverhead) {
+    for (const auto& [elevation, azimuth] : {std::pair{35.0f, 30.0f}, std::pair{10.0f, -120.0f}, std::pair{70.0f, 200.0f}}) {
+        const Texture sky = make_sky_texture(256, 128, elevation, azimuth);
+        const Vec3f sun = sky_sun_direction(elevation, azimuth);
+        int best_i = 0, best_j = 0;
+        float best = -1.0f;
+        for (int j = 0; j < sky.height; ++j)
+            for (int i = 0; i < sky.width; ++i)
+                if (luminance(texel(sky, i, j)) > best) {
+                    best = luminance(texel(sky, i, j));
+                    best_i = i;
+                    best_j = j;
+                }
+        const Vec3f d = equirect_direction((best_i + 0.5f) / sky.width, (best_j + 0.5f) / sky.height);
+        // Within the disk plus half a texel diagonal (1.4 x 0.7 degrees here).
+        const float angle_deg = std::acos(std::fmin(dot(d, sun), 1.0f)) * 180.0f / float(kPiD);
+        EXPECT_LT(angle_deg, kSkySunAngularRadiusDegrees + 1.0f) << elevation << " " << azimuth;
+        EXPECT_GT(best, 100.0f) << "the sun is very bright";
+        // Sky: the zenith is bluer than the horizon; the ground is darker than the sky.
+        const Vec3f zenith = texel(sky, sky.width / 4, 0);
+        const Vec3f horizon = texel(sky, sky.width / 4, sky.height / 2 - 1);
+        const Vec3f ground = texel(sky, sky.width / 4, sky.height - 1);
+        EXPECT_GT(zenith.z / zenith.x, horizon.z / horizon.x);
+        EXPECT_LT(luminance(ground), 0.5f * luminance(horizon));
+        EXPECT_LT(luminance(ground), 0.5f * luminance(zenith));
+    }
+}
+
+TEST(ProceduralSky, SunGivesThreeTimesTheSkyIrradiance) {
+    const float elevation = 35.0f;
+    const Texture sky = make_sky_texture(512, 256, elevation, 30.0f);
+    double e_sky = 0, e_sun = 0, sun_solid_angle = 0;
+    horizontal_irradiance(sky, 100.0f, e_sky, e_sun, sun_solid_angle);
+    // Exact on the texture (calibrated on it), up to float sums.
+    EXPECT_NEAR(e_sun / e_sky, double(kSkySunToSkyIrradiance), 1e-3);
+    // The sky alone is a plausible daylight sky: between a uniform 0.3 and 1 (pi * L).
+    EXPECT_GT(e_sky, 0.3 * kPiD);
+    EXPECT_LT(e_sky, 1.0 * kPiD);
+    // The texels approximate the analytic disk: solid angle 2 pi (1 - cos r)
+    // within 25% (a disk about 4 texels across).
+    const double r = kSkySunAngularRadiusDegrees * kPiD / 180.0;
+    const double disk = 2.0 * kPiD * (1.0 - std::cos(r));
+    EXPECT_NEAR(sun_solid_angle / disk, 1.0, 0.25);
+    // A tiny map keeps a (one-texel) sun even at a grazing elevation, still calibrated.
+    const Texture tiny = make_sky_texture(16, 8, 1.0f, 0.0f);
+    horizontal_irradiance(tiny, 100.0f, e_sky, e_sun, sun_solid_angle);
+    EXPECT_GT(sun_solid_angle, 0.0);
+    EXPECT_NEAR(e_sun / e_sky, double(kSkySunToSkyIrradiance), 1e-3);
+}
+
+TEST(ProceduralSky, InvalidParametersAreErrors) {
+    EXPECT_THROW((void)make_sky_texture(4, 2), Error);
+    EXPECT_THROW((void)make_sky_texture(512, 256, 0.0f, 0.0f), Error);
+    EXPECT_THROW((void)make_sky_texture(512, 256, 91.0f, 0.0f), Error);
+    EXPECT_THROW((void)make_sky_texture(512, 256, NAN, 0.0f), Error);
+    EXPECT_THROW((void)make_sky_texture(512, 256, 30.0f, INFINITY), Error);
+}
+
+std::string write_json(const std::string& dir, const std::string& text) {
+    const std::string path = dir + "/scene.json";
+    std::ofstream(path) << text;
+    return path;
+}
+
+TEST(ProceduralSky, JsonEnvironmentMapBuiltinSky) {
+    const std::string dir = test::temp_dir("procedural_sky_json");
+    const std::string mesh = R"("meshes": [{"file": "builtin:triangle"}])";
+    Scene scene = load_scene(write_json(
+        dir, "{" + mesh + R"(, "environment": {"map": "builtin:sky", "strength": 0.5, "sun_elevation_deg": 60, "sun_azimuth_deg": -45}})"));
+    ASSERT_GE(scene.environment.texture, 0);
+    const Texture& sky = scene.textures[size_t(scene.environment.texture)];
+    EXPECT_EQ(sky.name, "builtin:sky");
+    EXPECT_FLOAT_EQ(scene.environment.strength, 0.5f);
+    EXPECT_EQ(sky.texels_f, make_sky_texture(512, 256, 60.0f, -45.0f).texels_f);
+    // Defaults: elevation 35, azimuth 30.
+    scene = load_scene(write_json(dir, "{" + mesh + R"(, "environment": {"map": "builtin:sky"}})"));
+    ASSERT_GE(scene.environment.texture, 0);
+    EXPECT_EQ(scene.textures[size_t(scene.environment.texture)].texels_f, make_sky_texture().texels_f);
+    // Sun keys need the procedural sky; a bad elevation is an error naming its key.
+    EXPECT_THROW(load_scene(write_json(dir, "{" + mesh + R"(, "environment": {"sun_elevation_deg": 30}})")), Error);
+    try {
+        load_scene(write_json(dir, "{" + mesh + R"(, "environment": {"map": "builtin:sky", "sun_elevation_deg": -5}})"));
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("sun_elevation_deg"), std::string::npos) << e.what();
     }
 }
 

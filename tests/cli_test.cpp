@@ -68,7 +68,8 @@ TEST(Cli, HelpForEveryVerbAndVersion) {
     }
     CliResult render_help = run_cli("render --help");
     for (const char* option : {"--res", "--spp", "--integrator", "--camera", "--threads", "--max-depth", "--ao-radius",
-                               "--exposure", "--seed"})
+                               "--exposure", "--seed", "--rr-depth", "--light-sampling", "--tonemap", "--aov",
+                               "--time-budget", "--env-map", "--reflection-depth", "--refraction-depth", "--shading"})
         EXPECT_NE(render_help.out.find(option), std::string::npos) << option;
     CliResult version = run_cli("--version");
     EXPECT_EQ(version.exit_code, 0);
@@ -108,6 +109,35 @@ TEST(Cli, RenderWritesThePngAndOneSummaryLine) {
     EXPECT_EQ(read_image(exr).width, 16);
 }
 
+TEST(Cli, PathRenderWritesEveryOutputAndTheAovs) {
+    const std::string dir = test::temp_dir("cli_path");
+    CliResult r = run_cli("render builtin:material-spheres -o '" + dir + "/spheres.png' -o '" + dir +
+                          "/spheres.exr' --integrator path --res 24x18 --spp 2 --max-depth 3 --tonemap aces "
+                          "--aov albedo,normal --aov depth --threads 2 -q");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.out.find("path 2 spp"), std::string::npos) << r.out;
+    for (const char* name : {"spheres.png", "spheres.exr", "spheres.albedo.exr", "spheres.normal.exr", "spheres.depth.exr"}) {
+        ASSERT_TRUE(std::filesystem::exists(dir + "/" + name)) << name;
+        EXPECT_EQ(read_image(dir + "/" + name).width, 24) << name;
+    }
+    // An environment map from the command line and a time budget.
+    r = run_cli("render builtin:furnace -o '" + dir + "/sky.pfm' --integrator path --res 8x6 --spp 100000 "
+                "--time-budget 0.2 --env-map builtin:sky --env-strength 0.5 -q");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_EQ(r.out.find("100000 spp"), std::string::npos) << "the budget should stop the render: " << r.out;
+    EXPECT_EQ(read_image(dir + "/sky.pfm").height, 6);
+}
+
+TEST(Cli, BenchMeasuresRenderingThroughput) {
+    CliResult r = run_cli("bench --scene builtin:cornell --integrator path,whitted --res 32x24 --reps 1 --max-depth 2 "
+                          "--threads 2 -q");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.out.find("rendering throughput"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("path"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("whitted"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("shading"), std::string::npos) << r.out;
+}
+
 TEST(Cli, RuntimeErrorsAreOneLineAndExitOne) {
     expect_one_error_line(run_cli("info /no/such/scene.obj"));
     expect_one_error_line(run_cli("render /no/such/scene.obj -o /tmp/x.png"));
@@ -122,7 +152,9 @@ TEST(Cli, RuntimeErrorsAreOneLineAndExitOne) {
 
 TEST(Cli, UsageErrorsExitTwo) {
     for (const char* args : {"", "bogus-verb", "render", "render builtin:cornell", "render builtin:cornell -o x.png --spp 0",
-                             "render builtin:cornell -o x.png --res 640", "render builtin:cornell -o x.png --integrator path",
+                             "render builtin:cornell -o x.png --res 640", "render builtin:cornell -o x.png --integrator bidir",
+                             "render builtin:cornell -o x.png --light-sampling all", "render builtin:cornell -o x.png --tonemap filmic",
+                             "render builtin:cornell -o x.png --aov speed",
                              "render builtin:cornell -o x.png --camera 1,2,3", "info builtin:cornell --no-such-flag"}) {
         CliResult r = run_cli(args);
         EXPECT_EQ(r.exit_code, 2) << "'" << args << "': " << r.err;

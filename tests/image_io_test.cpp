@@ -1,4 +1,5 @@
-// Writing and reading back rendered images: PNG (8-bit sRGB), EXR and PFM (float).
+// Writing and reading back rendered images: PNG (8-bit sRGB), EXR and PFM (float),
+// and the tone curves applied to PNG output (clamp, Reinhard, ACES).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -134,6 +135,123 @@ TEST(ImageIo, ReadingMissingOrTruncatedFilesIsAnError) {
         out << "definitely not an exr";
     }
     EXPECT_THROW((void)read_image(dir + "/garbage.exr"), Error);
+}
+
+
+// ---- Tone mapping --------------------------------------------------------
+
+constexpr ToneCurve kAllCurves[] = {ToneCurve::Clamp, ToneCurve::Reinhard, ToneCurve::Aces};
+
+TEST(ToneMapping, CurveNamesRoundTripAndUnknownNamesAreErrors) {
+    for (ToneCurve curve : kAllCurves) EXPECT_EQ(parse_tone_curve(to_string(curve)), curve);
+    EXPECT_EQ(parse_tone_curve("ACES"), ToneCurve::Aces);
+    EXPECT_EQ(parse_tone_curve("Reinhard"), ToneCurve::Reinhard);
+    try {
+        (void)parse_tone_curve("filmic");
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("filmic"), std::string::npos) << e.what();
+    }
+    EXPECT_THROW((void)parse_tone_curve(""), Error);
+}
+
+TEST(ToneMapping, EveryCurveMapsZeroToZeroAndIsMonotonicOnGrey) {
+    for (ToneCurve curve : kAllCurves) {
+        EXPECT_EQ(apply_tone_curve(Vec3f(0.0f), curve), Vec3f(0.0f)) << to_string(curve);
+        float previous = 0.0f;
+        // 1e-4 .. 1e4 in steps of 1.5%.
+        for (float x = 1e-4f; x < 1e4f; x *= 1.015f) {
+            const Vec3f y = apply_tone_curve(Vec3f(x), curve);
+            ASSERT_GE(y.x, previous) << to_string(curve) << " at " << x;
+            ASSERT_LE(y.x, 1.0f) << to_string(curve) << " at " << x;
+            ASSERT_EQ(y.x, y.y) << to_string(curve);  // grey stays grey
+            ASSERT_EQ(y.x, y.z) << to_string(curve);
+            previous = y.x;
+        }
+    }
+}
+
+TEST(ToneMapping, ClampIsTheIdentityOnTheUnitInterval) {
+    const Vec3f c(0.25f, 0.5f, 0.75f);
+    EXPECT_EQ(apply_tone_curve(c, ToneCurve::Clamp), c);
+    EXPECT_EQ(apply_tone_curve(Vec3f(3.0f, -2.0f, NAN), ToneCurve::Clamp), Vec3f(1.0f, 0.0f, 0.0f));
+}
+
+TEST(ToneMapping, ReinhardHalvesUnitGreyAndKeepsHue) {
+    EXPECT_FLOAT_EQ(apply_tone_curve(Vec3f(1.0f), ToneCurve::Reinhard).x, 0.5f);
+    EXPECT_FLOAT_EQ(apply_tone_curve(Vec3f(3.0f), ToneCurve::Reinhard).x, 0.75f);
+    // A color below the clipping point keeps its channel ratios; its
+    // luminance L becomes L / (1 + L).
+    const Vec3f c(0.8f, 0.4f, 0.1f);
+    const Vec3f mapped = apply_tone_curve(c, ToneCurve::Reinhard);
+    EXPECT_NEAR(mapped.y / mapped.x, c.y / c.x, 1e-6f);
+    EXPECT_NEAR(mapped.z / mapped.x, c.z / c.x, 1e-6f);
+    const float l = luminance(c);
+    EXPECT_NEAR(luminance(mapped), l / (1.0f + l), 1e-6f);
+    // +inf is very bright, not NaN.
+    const Vec3f inf = apply_tone_curve(Vec3f(INFINITY, 0.0f, 0.0f), ToneCurve::Reinhard);
+    EXPECT_EQ(inf.x, 1.0f);
+    EXPECT_EQ(inf.y, 0.0f);
+}
+
+TEST(ToneMapping, AcesMatchesNarkowiczAndSaturates) {
+    // (2.51 + 0.03) / (2.43 + 0.59 + 0.14) at 1.
+    EXPECT_NEAR(apply_tone_curve(Vec3f(1.0f), ToneCurve::Aces).x, 2.54f / 3.16f, 1e-6f);
+    EXPECT_NEAR(apply_tone_curve(Vec3f(0.18f), ToneCurve::Aces).x,
+                0.18f * (2.51f * 0.18f + 0.03f) / (0.18f * (2.43f * 0.18f + 0.59f) + 0.14f), 1e-6f);
+    EXPECT_GT(apply_tone_curve(Vec3f(5.0f), ToneCurve::Aces).x, 0.98f);
+    EXPECT_EQ(apply_tone_curve(Vec3f(8.0f), ToneCurve::Aces).x, 1.0f);
+    EXPECT_EQ(apply_tone_curve(Vec3f(1e6f), ToneCurve::Aces).x, 1.0f);
+    EXPECT_EQ(apply_tone_curve(Vec3f(INFINITY), ToneCurve::Aces).x, 1.0f);
+    // Per channel: a saturated color stays ordered.
+    const Vec3f c = apply_tone_curve(Vec3f(2.0f, 0.5f, 0.05f), ToneCurve::Aces);
+    EXPECT_GT(c.x, c.y);
+    EXPECT_GT(c.y, c.z);
+}
+
+// HDR values spanning the curves' interesting range.
+Image hdr_image() {
+    Image image(6, 4);
+    for (int y = 0; y < image.height; ++y)
+        for (int x = 0; x < image.width; ++x)
+            image.at(x, y) = Vec3f(0.05f * float(x + 1) * float(y + 1), 0.3f * float(x), 4.0f / float(x + y + 1));
+    return image;
+}
+
+TEST(ToneMapping, PngWithEachCurveReadsBackAsTheCurve) {
+    const std::string dir = test::temp_dir("image_io_tone_png");
+    const Image image = hdr_image();
+    for (ToneCurve curve : kAllCurves) {
+        const ToneMapping tone{0.7f, curve};
+        const std::string path = dir + "/" + to_string(curve) + ".png";
+        write_image(path, image, tone);
+        const Image back = read_image(path);
+        ASSERT_EQ(back.width, image.width);
+        ASSERT_EQ(back.height, image.height);
+        for (size_t i = 0; i < image.pixels.size(); ++i) {
+            const Vec3f expected = linear_to_srgb(apply_tone_curve(image.pixels[i] * tone.exposure, curve));
+            const Vec3f got = linear_to_srgb(back.pixels[i]);
+            for (int k = 0; k < 3; ++k)
+                EXPECT_NEAR(got[k], expected[k], 0.5f / 255.0f + 1e-5f) << to_string(curve) << " pixel " << i;
+        }
+    }
+    // The float overload is the Clamp curve.
+    write_image(dir + "/float.png", image, 0.7f);
+    const Image clamp = read_image(dir + "/clamp.png"), by_float = read_image(dir + "/float.png");
+    for (size_t i = 0; i < image.pixels.size(); ++i) EXPECT_EQ(clamp.pixels[i], by_float.pixels[i]) << i;
+}
+
+TEST(ToneMapping, HdrFormatsIgnoreTheCurveAndApplyOnlyExposure) {
+    const std::string dir = test::temp_dir("image_io_tone_hdr");
+    const Image image = hdr_image();
+    for (const char* ext : {".exr", ".pfm"}) {
+        const std::string path = dir + "/aces" + ext;
+        write_image(path, image, ToneMapping{2.0f, ToneCurve::Aces});
+        const Image back = read_image(path);
+        ASSERT_EQ(back.pixels.size(), image.pixels.size());
+        for (size_t i = 0; i < image.pixels.size(); ++i) EXPECT_EQ(back.pixels[i], image.pixels[i] * 2.0f) << ext << i;
+    }
+    EXPECT_THROW(write_image(dir + "/bad.exr", image, ToneMapping{-1.0f, ToneCurve::Reinhard}), Error);
 }
 
 }  // namespace

@@ -10,80 +10,10 @@
 #include "rayforge/core/error.h"
 #include "rayforge/render/render.h"
 #include "render/integrators/whitted.h"
+#include "render_test_scene.h"
 
 namespace rf {
 namespace {
-
-constexpr float kPiF = 3.14159265358979f;
-
-// A scene under construction plus what render() needs once it is done.
-struct TestScene {
-    Scene scene;
-    SceneGeometry geometry;
-    std::unique_ptr<Accel> accel;
-
-    uint32_t add_material(const Material& m) {
-        scene.materials.push_back(m);
-        return uint32_t(scene.materials.size() - 1);
-    }
-    // A rectangle centred at c spanning c +- u +- v; its normal is along cross(u, v).
-    void add_quad(Vec3f c, Vec3f u, Vec3f v, uint32_t material) {
-        Mesh mesh;
-        mesh.name = "quad" + std::to_string(scene.meshes.size());
-        mesh.positions = {c - u - v, c + u - v, c + u + v, c - u + v};
-        mesh.indices = {0, 1, 2, 0, 2, 3};
-        mesh.material_ids = {material, material};
-        scene.meshes.push_back(mesh);
-    }
-    // An axis-aligned box of half size h around c, normals pointing outwards.
-    void add_box(Vec3f c, float h, uint32_t material) {
-        Vec3f x(h, 0, 0), y(0, h, 0), z(0, 0, h);
-        add_quad(c + z, x, y, material);
-        add_quad(c - z, y, x, material);
-        add_quad(c + x, y, z, material);
-        add_quad(c - x, z, y, material);
-        add_quad(c + y, z, x, material);
-        add_quad(c - y, x, z, material);
-    }
-    void finish(Structure structure = Structure::BruteForce) {
-        scene.finalize();
-        geometry = SceneGeometry::build(scene);
-        accel = build_accel(geometry, {.structure = structure});
-    }
-    Image render_with(const Camera& camera, const RenderOptions& options) const {
-        return render(scene, geometry, *accel, camera, options);
-    }
-};
-
-Material diffuse(Vec3f albedo) {
-    Material m;
-    m.base_color = albedo;
-    return m;
-}
-
-Material emitter(Vec3f radiance) {
-    Material m;
-    m.base_color = Vec3f(0.0f);
-    m.emission = radiance;
-    return m;
-}
-
-Camera looking_at(Vec3f eye, Vec3f target, float fov = 40.0f) {
-    Camera c;
-    c.eye = eye;
-    c.target = target;
-    c.up = std::fabs(target.x - eye.x) + std::fabs(target.z - eye.z) < 1e-6f ? Vec3f(0, 0, -1) : Vec3f(0, 1, 0);
-    c.vfov_degrees = fov;
-    return c;
-}
-
-RenderOptions options_for(IntegratorKind kind, int w = 9, int h = 9) {
-    RenderOptions o;
-    o.width = w;
-    o.height = h;
-    o.integrator = kind;
-    return o;
-}
 
 // Where the centre ray of pixel (x, y) meets the plane z = 0.
 Vec3f hit_on_ground(const Camera& camera, int x, int y, int w, int h) {
@@ -304,13 +234,14 @@ TEST(RenderWhitted, GlassSlabAtNormalIncidenceTransmitsFresnelSquared) {
     t.add_quad({0, 0, -5}, {20, 0, 0}, {0, 20, 0}, t.add_material(emitter(Vec3f(1.0f))));
     t.finish();
     RenderOptions o = options_for(IntegratorKind::Whitted, 3, 3);
-    o.max_depth = 8;
+    o.refraction_depth = 8;
+    o.reflection_depth = 8;
     Image image = t.render_with(looking_at({0, 0, 5}, {0, 0, 0}, 1.0f), o);
     // F = ((n-1)/(n+1))^2 = 0.04 per face; the inter-reflections between the
     // faces sum the series (1-F)^2 (1 + F^2 + F^4 ...) = (1-F)^2 / (1-F^2).
     const float f = 0.04f;
     EXPECT_NEAR(image.at(1, 1).x, (1 - f) * (1 - f) / (1 - f * f), 2e-3f);
-    o.max_depth = 1;  // enters the glass but cannot leave it
+    o.refraction_depth = 1;  // enters the glass but cannot leave it
     Image shallow = t.render_with(looking_at({0, 0, 5}, {0, 0, 0}, 1.0f), o);
     EXPECT_LT(shallow.at(1, 1).x, 0.01f);
 }
@@ -369,13 +300,25 @@ TEST(Render, InvalidOptionsAndIntegratorNamesAreErrors) {
     EXPECT_THROW(attempt([](RenderOptions& o) { o.width = 65536; o.height = 65536; }), Error);  // 48 GiB
     EXPECT_THROW(attempt([](RenderOptions& o) { o.spp = 0; }), Error);
     EXPECT_THROW(attempt([](RenderOptions& o) { o.max_depth = -1; }), Error);
+    EXPECT_THROW(attempt([](RenderOptions& o) { o.rr_depth = -1; }), Error);
+    EXPECT_THROW(attempt([](RenderOptions& o) { o.reflection_depth = 31; }), Error);
+    EXPECT_THROW(attempt([](RenderOptions& o) { o.refraction_depth = -1; }), Error);
+    EXPECT_THROW(attempt([](RenderOptions& o) { o.time_budget_s = -1.0; }), Error);
+    EXPECT_THROW(attempt([](RenderOptions& o) { o.max_sample_value = NAN; }), Error);
     EXPECT_THROW(attempt([](RenderOptions& o) { o.ao_samples = 0; }), Error);
     EXPECT_THROW(attempt([](RenderOptions& o) { o.ao_radius = NAN; }), Error);
 
-    for (IntegratorKind k : {IntegratorKind::Normals, IntegratorKind::AmbientOcclusion, IntegratorKind::Whitted})
+    for (IntegratorKind k :
+         {IntegratorKind::Normals, IntegratorKind::AmbientOcclusion, IntegratorKind::Whitted, IntegratorKind::Path})
         EXPECT_EQ(parse_integrator(integrator_name(k)), k);
     EXPECT_EQ(integrator_name(IntegratorKind::AmbientOcclusion), "ao");
-    EXPECT_THROW((void)parse_integrator("path"), Error);
+    EXPECT_THROW((void)parse_integrator("bidir"), Error);
+    for (LightSampling l : {LightSampling::Mis, LightSampling::Nee, LightSampling::Bsdf})
+        EXPECT_EQ(parse_light_sampling(to_string(l)), l);
+    EXPECT_THROW((void)parse_light_sampling("mixed"), Error);
+    for (WhittedShading w : {WhittedShading::Lambert, WhittedShading::Phong, WhittedShading::Blinn})
+        EXPECT_EQ(parse_whitted_shading(to_string(w)), w);
+    EXPECT_THROW((void)parse_whitted_shading("gouraud"), Error);
 }
 
 }  // namespace

@@ -11,6 +11,7 @@
 #include "bench_runner.h"
 #include "commands.h"
 #include "presets.h"
+#include "render_bench.h"
 #include "stage_breakdown.h"
 #include "rayforge/core/error.h"
 
@@ -86,6 +87,30 @@ void print_list(const std::string& scenes_dir) {
               << '\n';
 }
 
+// `--integrator`: rendering throughput of each scene's first view.
+int run_render_bench(const BenchArgs& a, const bench::BenchConfig& config) {
+    bench::RenderBenchConfig render;
+    render.integrators = a.integrators;
+    const bench::Resolution res = config.resolutions.empty() ? bench::Resolution{1024, 768} : config.resolutions.front();
+    render.width = res.width;
+    render.height = res.height;
+    render.max_depth = a.max_depth;
+    render.repetitions = a.repetitions;
+    render.threads = a.threads;
+    BuildOptions build = config.candidates.front().options;
+    if (a.layouts.empty() && build.structure == Structure::Bvh) build.layout = BuildOptions{}.layout;
+    render.build = build;
+    std::vector<bench::RenderBenchRecord> records;
+    for (const std::string& name : config.scenes) {
+        const bench::LoadedScene scene = bench::load_bench_scene(bench::resolve_scene(name, config.scenes_dir));
+        std::ostringstream sink;
+        for (bench::RenderBenchRecord& r : bench::run_render_bench(scene, render, a.quiet ? sink : std::cerr))
+            records.push_back(std::move(r));
+    }
+    bench::print_render_table(std::cout, records);
+    return 0;
+}
+
 }  // namespace
 
 // Without --builder: the default BVH builder, and every "builder" of the
@@ -121,6 +146,15 @@ CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
         ->check(CLI::Range(1, 1000));
     cmd->add_flag("--no-counts", a.no_counts, "Skip the instrumented pass (node visits and tests per ray)");
     cmd->add_option("--json", a.json, "Write one JSON record per (scene, structure, builder, layout, ray set)");
+    cmd->add_option("--integrator", a.integrators,
+                    "Measure rendering instead of the ray sets: normals, ao, whitted, path (comma list): passes/s, "
+                    "samples/s and rays/s of all bounces next to the same rays traced without shading. Uses the "
+                    "first --structure/--builder/--layout combination (default bvh/binned/bvh8), --res (first), "
+                    "--reps, --threads; view 0 of each scene")
+        ->check(CLI::IsMember({"normals", "ao", "whitted", "path"}))
+        ->delimiter(',');
+    cmd->add_option("--max-depth", a.max_depth, "Path bounces for --integrator path (default 4)")
+        ->check(CLI::Range(0, 1024));
     cmd->add_flag("--list", a.list, "List scenes, structures, presets and the Embree peer, then exit");
     cmd->add_flag("-q,--quiet", a.quiet, "No progress lines on stderr");
     return cmd;
@@ -214,6 +248,7 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
     if (config.candidates.empty())
         throw Error("nothing to run: no implemented combination matches --structure, --builder and --layout "
                     "(see --list)");
+    if (!a.integrators.empty()) return run_render_bench(a, config);
 
     const std::vector<bench::BenchRecord> records =
         bench::run_bench(config, std::cerr, [&](const std::vector<bench::BenchRecord>& scene_records) {

@@ -22,28 +22,46 @@ int run_info(const InfoArgs& args);
 
 struct RenderArgs {
     std::string scene;  // a file or builtin:NAME (e.g. builtin:cornell)
-    std::string output;
+    std::vector<std::string> outputs;  // one or more images; the format follows each extension
     std::string resolution;   // "WxH"
     int spp = 1;
     std::string integrator;
     std::string camera;       // "ex,ey,ez,tx,ty,tz,ux,uy,uz,fov"
     int threads = 0;
-    int max_depth = 5;
+    int max_depth = 8;
+    int rr_depth = 3;
+    std::string light_sampling = "mis";
+    float clamp = 0.0f;
+    int reflection_depth = 1;
+    int refraction_depth = 2;
+    std::string shading = "lambert";
+    double time_budget_s = 0.0;
+    int save_every = 0;       // write the outputs every N passes (0 = only at the end)
     float ao_radius = 0.0f;
     int ao_samples = 16;
     float exposure = 1.0f;
+    std::string tonemap = "clamp";
+    std::vector<std::string> aovs;    // albedo, normal, depth
     unsigned seed = 0;
     AccelArgs accel;
     std::vector<std::string> lights;  // "x,y,z[,intensity]" point lights added to the scene
     std::string environment;          // "r,g,b" constant environment radiance
+    std::string environment_map;      // an equirectangular image, or builtin:sky
+    float environment_strength = 1.0f;
     bool no_headlight = false;
     bool quiet = false;
-    // Which options were given, so that they override the scene's settings.
+    // Options whose presence overrides the scene file's render settings.
     CLI::Option* resolution_opt = nullptr;
     CLI::Option* spp_opt = nullptr;
     CLI::Option* integrator_opt = nullptr;
     CLI::Option* max_depth_opt = nullptr;
     CLI::Option* ao_radius_opt = nullptr;
+    CLI::Option* environment_strength_opt = nullptr;
+    CLI::Option* rr_depth_opt = nullptr;
+    CLI::Option* light_sampling_opt = nullptr;
+    CLI::Option* reflection_depth_opt = nullptr;
+    CLI::Option* refraction_depth_opt = nullptr;
+    CLI::Option* shading_opt = nullptr;
 };
 CLI::App* add_render_command(CLI::App& app, RenderArgs& args);
 int run_render(const RenderArgs& args);
@@ -66,6 +84,8 @@ struct BenchArgs {
     std::string json;
     bool list = false;
     bool quiet = false;
+    std::vector<std::string> integrators;  // render throughput instead of the ray sets
+    int max_depth = 4;
 };
 CLI::App* add_bench_command(CLI::App& app, BenchArgs& args);
 int run_bench(const BenchArgs& args, const std::string& command_line);

@@ -15,6 +15,7 @@
 #include "rayforge/io/scene_io.h"
 #include "rayforge/render/render.h"
 #include "rayforge/scene/scene_geometry.h"
+#include "io/procedural_sky.h"
 
 namespace rf::cli {
 namespace {
@@ -82,7 +83,7 @@ bool has_no_light(const Scene& scene, const SceneGeometry& geometry) {
     return true;
 }
 
-// Point lights from --light and the environment from --env.
+// Point lights from --light and the environment from --env / --env-map.
 void apply_light_options(const RenderArgs& a, Scene& scene, const SceneGeometry& geometry) {
     const float diagonal = length(geometry.bounds.extent());
     for (const std::string& text : a.lights) {
@@ -102,14 +103,49 @@ void apply_light_options(const RenderArgs& a, Scene& scene, const SceneGeometry&
         scene.environment.texture = -1;
         scene.environment.strength = 1.0f;
     }
+    if (!a.environment_map.empty()) {
+        Texture map = a.environment_map == "builtin:sky" ? make_sky_texture()
+                                                         : load_texture(a.environment_map, TextureEncoding::Srgb8);
+        map.wrap_s = TextureWrap::Repeat;
+        map.wrap_t = TextureWrap::ClampToEdge;
+        scene.textures.push_back(std::move(map));
+        scene.environment.texture = int32_t(scene.textures.size() - 1);
+        scene.environment.strength = 1.0f;
+    }
+    if (a.environment_strength_opt->count() > 0) scene.environment.strength = a.environment_strength;
+}
+
+// "out.png" + "albedo" -> "out.albedo.exr" (".pfm" when the main output is a PFM).
+std::string aov_path(const std::string& output, const std::string& aov) {
+    const size_t dot = output.find_last_of('.');
+    const size_t slash = output.find_last_of('/');
+    const bool has_extension = dot != std::string::npos && (slash == std::string::npos || dot > slash);
+    const std::string stem = has_extension ? output.substr(0, dot) : output;
+    const std::string extension = has_extension ? output.substr(dot) : "";
+    const bool pfm = extension == ".pfm" || extension == ".PFM";
+    return stem + "." + aov + (pfm ? ".pfm" : ".exr");
+}
+
+void write_outputs(const RenderArgs& a, const ProgressiveRenderer& renderer, const ToneMapping& tone) {
+    const Image image = renderer.image();
+    for (const std::string& output : a.outputs) {
+        write_image(output, image, tone);
+        for (const std::string& aov : a.aovs) {
+            const Image layer = aov == "albedo" ? renderer.albedo() : aov == "normal" ? renderer.normal()
+                                                                                        : renderer.depth();
+            write_image(aov_path(output, aov), layer, 1.0f);
+        }
+    }
 }
 
 }  // namespace
 
 CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
     CLI::App* cmd = app.add_subcommand("render", "Render a scene to an image (.png, .exr or .pfm)");
-    cmd->add_option("scene", a.scene, "Scene file (.obj, .gltf, .glb, .ply, .json) or builtin:NAME")->required();
-    cmd->add_option("-o,--output", a.output, "Output image; the format follows the extension (.png, .exr, .pfm)")
+    cmd->add_option("scene", a.scene, "Scene file (.obj, .gltf, .glb, .ply, .aff, .json) or builtin:NAME")->required();
+    cmd->add_option("-o,--output", a.outputs,
+                    "Output image; the format follows the extension: .png (tone-mapped 8-bit sRGB), .exr or "
+                    ".pfm (linear float). Repeatable, e.g. -o out.png -o out.exr")
         ->required();
     a.resolution_opt = cmd->add_option("--res", a.resolution, "Image size WxH (default 640x480)")
                            ->check(CLI::Validator(
@@ -119,9 +155,10 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
                                                                     : "expected WxH, e.g. 640x480, got '" + s + "'";
                                },
                                "WxH"));
-    a.spp_opt = cmd->add_option("--spp", a.spp, "Samples per pixel (default 1)")->check(CLI::PositiveNumber);
-    a.integrator_opt = cmd->add_option("--integrator", a.integrator, "normals | ao | whitted (default whitted)")
-                           ->check(CLI::IsMember({"normals", "ao", "whitted"}));
+    a.spp_opt = cmd->add_option("--spp", a.spp, "Samples per pixel = progressive passes (default 1)")
+                    ->check(CLI::Range(1, 1 << 20));
+    a.integrator_opt = cmd->add_option("--integrator", a.integrator, "normals | ao | whitted | path (default whitted)")
+                           ->check(CLI::IsMember({"normals", "ao", "whitted", "path"}));
     cmd->add_option("--camera", a.camera, "Camera override: ex,ey,ez,tx,ty,tz,ux,uy,uz,fov (fov in degrees)")
         ->check(CLI::Validator(
             [](std::string& s) {
@@ -130,21 +167,51 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
             },
             "EYE,TARGET,UP,FOV"));
     cmd->add_option("--threads", a.threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
-    a.max_depth_opt = cmd->add_option("--max-depth", a.max_depth, "Whitted recursion limit (default 5)")
-                          ->check(CLI::Range(0, 30));
-    a.ao_radius_opt = cmd->add_option("--ao-radius", a.ao_radius, "AO ray length (0 = 10% of the scene diagonal)")
+    cmd->add_option("--time-budget", a.time_budget_s,
+                    "Stop after the pass that ends past this many seconds (--spp is then a cap; default: none)")
+        ->check(CLI::NonNegativeNumber);
+    cmd->add_option("--save-every", a.save_every, "Also write the outputs every N passes (progressive preview)")
+        ->check(CLI::NonNegativeNumber);
+    a.max_depth_opt = cmd->add_option("--max-depth", a.max_depth, "path: bounces after the camera ray (default 8)")
+                          ->check(CLI::Range(0, 1024));
+    a.rr_depth_opt = cmd->add_option("--rr-depth", a.rr_depth, "path: Russian roulette from this bounce on (default 3)")
+        ->check(CLI::Range(0, 1024));
+    a.light_sampling_opt = cmd->add_option("--light-sampling", a.light_sampling,
+                    "path: mis (light and BSDF sampling combined, default) | nee (light sampling only) | bsdf")
+        ->check(CLI::IsMember({"mis", "nee", "bsdf"}));
+    cmd->add_option("--clamp", a.clamp, "path: clamp each sample's radiance to this (0 = off; biased)")
+        ->check(CLI::NonNegativeNumber);
+    a.reflection_depth_opt = cmd->add_option("--reflection-depth", a.reflection_depth, "whitted: reflections per path (default 1, as seed 001)")
+        ->check(CLI::Range(0, 30));
+    a.refraction_depth_opt = cmd->add_option("--refraction-depth", a.refraction_depth, "whitted: refractions per path (default 2, as seed 001)")
+        ->check(CLI::Range(0, 30));
+    a.shading_opt = cmd->add_option("--shading", a.shading, "whitted: lambert (default) | phong | blinn highlights")
+        ->check(CLI::IsMember({"lambert", "phong", "blinn"}));
+    a.ao_radius_opt = cmd->add_option("--ao-radius", a.ao_radius, "ao: ray length (0 = 10% of the scene diagonal)")
                           ->check(CLI::NonNegativeNumber);
-    cmd->add_option("--ao-samples", a.ao_samples, "AO rays per sample (default 16)")->check(CLI::Range(1, 65536));
+    cmd->add_option("--ao-samples", a.ao_samples, "ao: rays per sample (default 16)")->check(CLI::Range(1, 65536));
     cmd->add_option("--exposure", a.exposure, "Linear scale applied before writing (default 1)")
         ->check(CLI::NonNegativeNumber);
+    cmd->add_option("--tonemap", a.tonemap, "PNG tone curve: clamp (default) | reinhard | aces; EXR/PFM stay linear")
+        ->check(CLI::IsMember({"clamp", "reinhard", "aces"}));
+    cmd->add_option("--aov", a.aovs,
+                    "Also write first-hit AOVs for denoisers: albedo, normal, depth (comma list or repeated); "
+                    "written next to each output as NAME.albedo.exr etc.")
+        ->delimiter(',')
+        ->check(CLI::IsMember({"albedo", "normal", "depth"}));
     cmd->add_option("--seed", a.seed, "Random seed (default 0)");
     add_accel_options(cmd, a.accel);
     cmd->add_option("--light", a.lights,
                      "Add a point light at x,y,z with optional intensity (W/sr; default: the squared scene "
                      "diagonal / 4); repeatable");
     cmd->add_option("--env", a.environment, "Constant environment radiance r,g,b (replaces the scene's)");
+    cmd->add_option("--env-map", a.environment_map,
+                    "Equirectangular environment image (.hdr, .exr, .png, ...) or builtin:sky (replaces the scene's)");
+    a.environment_strength_opt =
+        cmd->add_option("--env-strength", a.environment_strength, "Multiplies the environment's radiance")
+            ->check(CLI::NonNegativeNumber);
     cmd->add_flag("--no-headlight", a.no_headlight,
-                  "Do not add a light at the camera when a whitted render would have no light at all");
+                  "Do not add a light at the camera when a whitted or path render would have no light at all");
     cmd->add_flag("-q,--quiet", a.quiet, "No progress bar");
     return cmd;
 }
@@ -169,12 +236,28 @@ int run_render(const RenderArgs& a) {
     if (a.integrator_opt->count() > 0) options.integrator = parse_integrator(a.integrator);
     if (a.max_depth_opt->count() > 0) options.max_depth = a.max_depth;
     if (a.ao_radius_opt->count() > 0) options.ao_radius = a.ao_radius;
+    options.rr_depth = a.rr_depth_opt->count() > 0 ? a.rr_depth : file.rr_depth.value_or(options.rr_depth);
+    options.reflection_depth = a.reflection_depth_opt->count() > 0
+                                   ? a.reflection_depth
+                                   : file.reflection_depth.value_or(options.reflection_depth);
+    options.refraction_depth = a.refraction_depth_opt->count() > 0
+                                   ? a.refraction_depth
+                                   : file.refraction_depth.value_or(options.refraction_depth);
+    if (a.light_sampling_opt->count() > 0) options.light_sampling = parse_light_sampling(a.light_sampling);
+    else if (file.light_sampling) options.light_sampling = parse_light_sampling(*file.light_sampling);
+    if (a.shading_opt->count() > 0) options.whitted_shading = parse_whitted_shading(a.shading);
+    else if (file.shading) options.whitted_shading = parse_whitted_shading(*file.shading);
+    options.max_sample_value = a.clamp;
+    options.time_budget_s = a.time_budget_s;
+    options.aovs = !a.aovs.empty();
     options.ao_samples = a.ao_samples;
     options.threads = a.threads;
     options.seed = a.seed;
+    const ToneMapping tone{.exposure = a.exposure, .curve = parse_tone_curve(a.tonemap)};
     Camera camera = a.camera.empty() ? scene.camera_or_default() : parse_camera(a.camera);
     apply_light_options(a, scene, geometry);
-    if (options.integrator == IntegratorKind::Whitted && !a.no_headlight && has_no_light(scene, geometry)) {
+    const bool lit_integrator = options.integrator == IntegratorKind::Whitted || options.integrator == IntegratorKind::Path;
+    if (lit_integrator && !a.no_headlight && has_no_light(scene, geometry)) {
         // Many OBJ/PLY files carry no light; a black image helps nobody. A
         // headlight lights a surface at the target distance with irradiance pi,
         // so a white diffuse surface there renders at about 1.
@@ -191,24 +274,31 @@ int run_render(const RenderArgs& a) {
     std::unique_ptr<Accel> accel = build_accel(geometry, build_options);
     AccelStats stats = accel->stats();
 
-    Image image;
-    double render_ms = 0.0;
+    Clock::time_point setup_start = Clock::now();
+    ProgressiveRenderer renderer(scene, geometry, *accel, camera, options);
+    const double setup_ms = ms_since(setup_start);
     {
         ProgressBar bar("render");
         ProgressCallback progress;
         if (!a.quiet) progress = [&bar](double fraction) { bar.update(fraction); };
-        Clock::time_point render_start = Clock::now();
-        image = render(scene, geometry, *accel, camera, options, progress);
-        render_ms = ms_since(render_start);
+        PassCallback after_pass;
+        if (a.save_every > 0)
+            after_pass = [&](const ProgressiveRenderer& r) {
+                if (r.passes() % a.save_every == 0 && r.passes() < options.spp) write_outputs(a, r, tone);
+                return true;
+            };
+        render_progressive(renderer, after_pass, progress);
     }
-    write_image(a.output, image, a.exposure);
+    write_outputs(a, renderer, tone);
 
-    double samples = double(options.width) * double(options.height) * double(options.spp);
-    std::printf("%s: %dx%d %s %d spp, %zu triangles | load %.1f ms | build %.1f ms (%s) | render %.1f ms "
-                "(%.2f Msamples/s)\n",
-                a.output.c_str(), options.width, options.height, integrator_name(options.integrator).c_str(),
-                options.spp, geometry.size(), load_ms, stats.build_ms, stats.name.c_str(), render_ms,
-                render_ms > 0.0 ? samples / (render_ms * 1e3) : 0.0);
+    const RenderStats rs = renderer.stats();
+    const double render_ms = rs.seconds * 1e3;
+    std::printf("%s: %dx%d %s %d spp, %zu triangles | load %.1f ms | build %.1f ms (%s) | setup %.1f ms | render %.1f ms "
+                "(%.2f Msamples/s, %.2f Mrays/s)\n",
+                a.outputs.front().c_str(), options.width, options.height, integrator_name(options.integrator).c_str(),
+                renderer.passes(), geometry.size(), load_ms, stats.build_ms, stats.name.c_str(), setup_ms, render_ms,
+                render_ms > 0.0 ? double(rs.samples) / (render_ms * 1e3) : 0.0,
+                render_ms > 0.0 ? double(rs.rays()) / (render_ms * 1e3) : 0.0);
     return 0;
 }
 

@@ -3,7 +3,10 @@
 // sphere), "spheres" (100 instanced spheres over a ground plane, > 100k
 // triangles), the procedural benchmark scenes "sphereflake", "terrain" and
 // "instances" (100k-400k triangles each, standing in for real scenes when the
-// external scene folder is absent), and the tiny "triangle", "plane" and "cube".
+// external scene folder is absent), the tiny "triangle", "plane" and "cube",
+// and the path-tracing test scenes "furnace" (white furnace test),
+// "material-spheres" (glass, metal, plastic under an area light and the
+// procedural sky) and "sky-sphere" (lit only by the procedural sky).
 //
 // Every random choice comes from fixed seeds through integer hashes or integer
 // generators (never std:: distributions, whose output is implementation-
@@ -17,6 +20,7 @@
 #include <vector>
 
 #include "rayforge/core/error.h"
+#include "io/procedural_sky.h"
 #include "rayforge/io/scene_io.h"
 #include "render/random.h"
 
@@ -585,10 +589,143 @@ Scene make_cube_scene() {
     return scene;
 }
 
+// The white furnace test: a closed, white, energy-conserving Lambertian
+// sphere inside a uniform environment of radiance 1 must render as radiance 1
+// everywhere (every bounce reflects all the light), so any gain or loss in
+// the integrator or the BSDF sampling shows up as a visible deviation. ior 1
+// removes the dielectric specular layer of the glTF model, leaving pure Lambert.
+Scene make_furnace() {
+    Scene scene;
+    Material white = diffuse("white_lambert", {1.0f, 1.0f, 1.0f});
+    white.ior = 1.0f;
+    const uint32_t material = add_material(scene, white);
+    // 64 slices x 32 stacks: smooth normals make the faceting invisible.
+    scene.instances.push_back(
+        {add_mesh(scene, make_sphere("sphere", Vec3f(0.0f), 1.0f, 32, 64, material)), Affine3f::identity()});
+    scene.environment.color = {1.0f, 1.0f, 1.0f};
+    scene.environment.strength = 1.0f;
+    scene.camera = Camera{.eye = {0, 0, 4}, .target = {0, 0, 0}, .up = {0, 1, 0}, .vfov_degrees = 40.0f};
+    return scene;
+}
+
+// A ground checkerboard of 1 x 1 quads alternating two materials, in y = 0,
+// `cells` x `cells` centred on the origin; facing +y.
+Mesh make_checker_floor(const std::string& name, int cells, uint32_t light, uint32_t dark) {
+    Mesh mesh;
+    mesh.name = name;
+    const float half = 0.5f * float(cells);
+    for (int k = 0; k < cells; ++k)
+        for (int i = 0; i < cells; ++i)
+            add_quad(mesh, {-half + float(i), 0.0f, -half + float(k + 1)}, {1, 0, 0}, {0, 0, -1},
+                     (i + k) % 2 == 0 ? light : dark);
+    return mesh;
+}
+
+// Glass and metal: two rows of three unit-diameter spheres on a checkerboard,
+// under a square area light and the procedural sky at half strength. Front:
+// smooth glass, rough glass, glossy red plastic; back: polished gold, brushed
+// copper, diffuse blue. No analytic lights (the quad is the light).
+Scene make_material_spheres() {
+    Scene scene;
+    const uint32_t floor_light = add_material(scene, diffuse("floor_light", {0.75f, 0.75f, 0.75f}));
+    const uint32_t floor_dark = add_material(scene, diffuse("floor_dark", {0.15f, 0.15f, 0.15f}));
+    Material glass;
+    glass.name = "smooth_glass";
+    glass.base_color = {1.0f, 1.0f, 1.0f};
+    glass.metallic = 0.0f;
+    glass.roughness = 0.0f;
+    glass.transmission = 1.0f;
+    glass.ior = 1.5f;
+    Material rough_glass = glass;
+    rough_glass.name = "rough_glass";
+    rough_glass.roughness = 0.3f;
+    Material gold;
+    gold.name = "gold";
+    gold.base_color = {1.0f, 0.78f, 0.34f};
+    gold.metallic = 1.0f;
+    gold.roughness = 0.05f;
+    Material copper;
+    copper.name = "brushed_copper";
+    copper.base_color = {0.95f, 0.64f, 0.54f};
+    copper.metallic = 1.0f;
+    copper.roughness = 0.4f;
+    Material plastic = diffuse("glossy_plastic", {0.7f, 0.08f, 0.06f});
+    plastic.roughness = 0.3f;
+    const Material matte = diffuse("diffuse", {0.2f, 0.35f, 0.7f});
+
+    const Material sphere_materials[6] = {glass, rough_glass, plastic, gold, copper, matte};
+    for (int n = 0; n < 6; ++n) {
+        const uint32_t material = add_material(scene, sphere_materials[n]);
+        const float x = 1.3f * float(n % 3 - 1);
+        const float z = n < 3 ? 0.8f : -0.8f;
+        scene.instances.push_back({add_mesh(scene, make_sphere(sphere_materials[n].name, {x, 0.5f, z}, 0.5f, 32, 64,
+                                                               material)),
+                                   Affine3f::identity()});
+    }
+    scene.instances.push_back(
+        {add_mesh(scene, make_checker_floor("floor", 12, floor_light, floor_dark)), Affine3f::identity()});
+
+    Material lamp = diffuse("area_light", {0.8f, 0.8f, 0.8f});
+    lamp.emission = {1.0f, 0.95f, 0.88f};
+    lamp.emission_strength = 15.0f;
+    lamp.double_sided = false;  // emits downwards only
+    const uint32_t lamp_material = add_material(scene, lamp);
+    Mesh light;
+    light.name = "area_light";
+    add_quad(light, {-0.75f, 4.0f, -0.75f}, {1.5f, 0, 0}, {0, 0, 1.5f}, lamp_material);  // faces -y
+    scene.instances.push_back({add_mesh(scene, std::move(light)), Affine3f::identity()});
+
+    scene.textures.push_back(make_sky_texture());
+    scene.environment.texture = int32_t(scene.textures.size() - 1);
+    scene.environment.strength = 0.5f;
+    // High enough that the front row hides only the feet of the back row.
+    scene.camera = Camera{.eye = {0, 3.2f, 5.2f}, .target = {0, 0.4f, 0}, .up = {0, 1, 0}, .vfov_degrees = 40.0f};
+    return scene;
+}
+
+// Lit only by the procedural sky (no lights, no emitters): a white diffuse,
+// a mirror-like metal and a glossy sphere and a rotated cube on a grey
+// ground, for environment importance sampling. The sun is behind the camera's
+// right shoulder so the visible faces are sunlit and the shadows fall away.
+Scene make_sky_sphere() {
+    Scene scene;
+    const uint32_t ground = add_material(scene, diffuse("ground", {0.5f, 0.5f, 0.5f}));
+    const uint32_t white = add_material(scene, diffuse("white", {0.8f, 0.8f, 0.8f}));
+    Material metal;
+    metal.name = "metal";
+    metal.base_color = {0.9f, 0.9f, 0.9f};
+    metal.metallic = 1.0f;
+    metal.roughness = 0.1f;
+    const uint32_t metal_id = add_material(scene, metal);
+    Material glossy = diffuse("glossy", {0.2f, 0.6f, 0.3f});
+    glossy.roughness = 0.25f;
+    const uint32_t glossy_id = add_material(scene, glossy);
+    const uint32_t orange = add_material(scene, diffuse("orange", {0.8f, 0.4f, 0.1f}));
+
+    scene.instances.push_back({add_mesh(scene, make_ground("ground", 10.0f, 0.0f, ground)), Affine3f::identity()});
+    scene.instances.push_back(
+        {add_mesh(scene, make_sphere("white_sphere", {-1.2f, 0.5f, 0.0f}, 0.5f, 32, 64, white)), Affine3f::identity()});
+    scene.instances.push_back(
+        {add_mesh(scene, make_sphere("metal_sphere", {0.0f, 0.5f, -0.6f}, 0.5f, 32, 64, metal_id)), Affine3f::identity()});
+    scene.instances.push_back(
+        {add_mesh(scene, make_sphere("glossy_sphere", {1.2f, 0.5f, 0.0f}, 0.5f, 32, 64, glossy_id)), Affine3f::identity()});
+    scene.instances.push_back({add_mesh(scene, make_cube("cube", orange)),
+                               Affine3f::translation({-0.55f, 0.3f, 1.1f}) *
+                                   Affine3f::rotation({0, 1, 0}, radians(30.0f)) * Affine3f::scale(Vec3f(0.6f))});
+
+    // Azimuth 150: towards +z and +x, i.e. behind the camera (which looks down -z).
+    scene.textures.push_back(make_sky_texture(512, 256, 40.0f, 150.0f));
+    scene.environment.texture = int32_t(scene.textures.size() - 1);
+    scene.environment.strength = 1.0f;
+    scene.camera = Camera{.eye = {0, 1.8f, 5.0f}, .target = {0, 0.4f, 0}, .up = {0, 1, 0}, .vfov_degrees = 40.0f};
+    return scene;
+}
+
 }  // namespace
 
 std::vector<std::string> builtin_scene_names() {
-    return {"cornell", "spheres", "sphereflake", "terrain", "instances", "triangle", "plane", "cube"};
+    return {"cornell",  "spheres", "sphereflake", "terrain",          "instances",
+            "triangle", "plane",   "cube",        "furnace", "material-spheres", "sky-sphere"};
 }
 
 Scene make_builtin_scene(const std::string& name) {
@@ -601,6 +738,9 @@ Scene make_builtin_scene(const std::string& name) {
     else if (name == "triangle") scene = make_triangle();
     else if (name == "plane") scene = make_plane();
     else if (name == "cube") scene = make_cube_scene();
+    else if (name == "furnace") scene = make_furnace();
+    else if (name == "material-spheres") scene = make_material_spheres();
+    else if (name == "sky-sphere") scene = make_sky_sphere();
     else {
         std::string known;
         for (const auto& n : builtin_scene_names()) known += (known.empty() ? "" : ", ") + n;

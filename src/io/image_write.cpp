@@ -1,5 +1,10 @@
 // Writing rendered images (.png, .exr, .pfm) and reading them back.
-//  - PNG: 8-bit sRGB of exposure * radiance, clamped to [0, 1] (stb_image_write).
+//  - PNG: 8-bit sRGB of tone_curve(exposure * radiance) (stb_image_write).
+//    Curves: clamp; Reinhard, Stark, Shirley, Ferwerda 2002, "Photographic Tone
+//    Reproduction for Digital Images", the global operator L / (1 + L) applied
+//    to luminance and the color scaled by L'/L (keeps hue and saturation);
+//    ACES: Krzysztof Narkowicz 2015, "ACES Filmic Tone Mapping Curve", a
+//    rational fit of the ACES RRT+ODT, applied per channel.
 //  - EXR: 32-bit float RGB (tinyexr), exposure applied as a plain scale.
 //  - PFM: the Portable Float Map ("PF", little endian, rows stored bottom to
 //    top as the format specifies), exposure applied as a plain scale.
@@ -64,15 +69,29 @@ std::vector<float> scaled_rgb(const Image& image, float exposure) {
     return rgb;
 }
 
-void write_png(const std::string& path, const Image& image, float exposure) {
+// Display value in [0, 1] -> 8-bit sRGB code.
+uint8_t encode_srgb8(float display) { return uint8_t(std::lround(linear_to_srgb(display) * 255.0f)); }
+
+// Narkowicz's fit; 2.51 / 2.43 > 1, so it reaches 1 at a finite input (about 7.24)
+// and the clamp makes it saturate there.
+float aces_narkowicz(float x) {
+    x = std::fmin(x, 100.0f);  // already 1 there; keeps x * x from overflowing to inf / inf
+    const float mapped = (x * (2.51f * x + 0.03f)) / (x * (2.43f * x + 0.59f) + 0.14f);
+    return std::clamp(mapped, 0.0f, 1.0f);
+}
+
+// NaN and negatives (from filtering or a broken sample) are black; +inf is
+// replaced by a huge finite value so the curves treat it as very bright.
+float sanitize(float v) {
+    if (!(v > 0.0f)) return 0.0f;  // also NaN
+    return std::fmin(v, 1e30f);
+}
+
+void write_png(const std::string& path, const Image& image, const ToneMapping& tone) {
     std::vector<uint8_t> bytes(image.pixels.size() * 3);
     for (size_t i = 0; i < image.pixels.size(); ++i) {
-        Vec3f c = image.pixels[i] * exposure;
-        for (int k = 0; k < 3; ++k) {
-            float v = c[k];
-            if (!std::isfinite(v)) v = v > 0.0f ? 1.0f : 0.0f;  // +inf is bright, NaN black
-            bytes[3 * i + size_t(k)] = uint8_t(std::lround(linear_to_srgb(v) * 255.0f));
-        }
+        const Vec3f display = apply_tone_curve(image.pixels[i] * tone.exposure, tone.curve);
+        for (int k = 0; k < 3; ++k) bytes[3 * i + size_t(k)] = encode_srgb8(display[k]);
     }
     if (!stbi_write_png(path.c_str(), image.width, image.height, 3, bytes.data(), image.width * 3))
         throw file_error(path, 0, "cannot write PNG file");
@@ -169,7 +188,45 @@ Image read_pfm(const std::string& path) {
 
 }  // namespace
 
+ToneCurve parse_tone_curve(const std::string& name) {
+    std::string lower = name;
+    std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    if (lower == "clamp") return ToneCurve::Clamp;
+    if (lower == "reinhard") return ToneCurve::Reinhard;
+    if (lower == "aces") return ToneCurve::Aces;
+    throw Error("unknown tone curve '" + name + "' (expected clamp, reinhard or aces)");
+}
+
+std::string to_string(ToneCurve curve) {
+    switch (curve) {
+        case ToneCurve::Clamp: return "clamp";
+        case ToneCurve::Reinhard: return "reinhard";
+        case ToneCurve::Aces: return "aces";
+    }
+    return "unknown";
+}
+
+Vec3f apply_tone_curve(Vec3f color, ToneCurve curve) {
+    const Vec3f c(sanitize(color.x), sanitize(color.y), sanitize(color.z));
+    switch (curve) {
+        case ToneCurve::Clamp: break;
+        case ToneCurve::Reinhard: {
+            const float l = luminance(c);
+            if (!(l > 0.0f)) return Vec3f(0.0f);  // pure black (a pure blue of tiny luminance still has l > 0)
+            const Vec3f scaled = c * (1.0f / (1.0f + l));  // = c * (l / (1 + l)) / l
+            return {std::fmin(scaled.x, 1.0f), std::fmin(scaled.y, 1.0f), std::fmin(scaled.z, 1.0f)};
+        }
+        case ToneCurve::Aces: return {aces_narkowicz(c.x), aces_narkowicz(c.y), aces_narkowicz(c.z)};
+    }
+    return {std::fmin(c.x, 1.0f), std::fmin(c.y, 1.0f), std::fmin(c.z, 1.0f)};
+}
+
 void write_image(const std::string& path, const Image& image, float exposure) {
+    write_image(path, image, ToneMapping{exposure, ToneCurve::Clamp});
+}
+
+void write_image(const std::string& path, const Image& image, const ToneMapping& tone) {
+    const float exposure = tone.exposure;
     ImageFormat format = format_of(path);
     if (image.width <= 0 || image.height <= 0 ||
         image.pixels.size() != size_t(image.width) * size_t(image.height))
@@ -178,8 +235,8 @@ void write_image(const std::string& path, const Image& image, float exposure) {
     if (!std::isfinite(exposure) || exposure < 0.0f)
         throw file_error(path, 0, "exposure must be finite and >= 0");
     switch (format) {
-        case ImageFormat::Png: write_png(path, image, exposure); break;
-        case ImageFormat::Exr: write_exr(path, image, exposure); break;
+        case ImageFormat::Png: write_png(path, image, tone); break;
+        case ImageFormat::Exr: write_exr(path, image, exposure); break;  // linear: the curve is for display only
         case ImageFormat::Pfm: write_pfm(path, image, exposure); break;
     }
 }

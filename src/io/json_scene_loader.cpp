@@ -21,6 +21,7 @@
 #include "rayforge/core/error.h"
 #include "rayforge/io/image_io.h"
 #include "rayforge/io/scene_io.h"
+#include "io/procedural_sky.h"
 
 namespace rf {
 namespace {
@@ -399,7 +400,7 @@ Light JsonSceneReader::light(const Json& value, const std::string& where) const 
 
 void JsonSceneReader::read_environment(const Json& value, const std::string& where, Scene& scene) const {
     expect_object(value, where);
-    expect_keys(value, where, {"color", "map", "strength", "rotation_deg"});
+    expect_keys(value, where, {"color", "map", "strength", "rotation_deg", "sun_elevation_deg", "sun_azimuth_deg"});
     Environment& env = scene.environment;
     if (value.contains("color")) env.color = vec3(value["color"], where + ".color");
     if (value.contains("strength")) {
@@ -407,18 +408,62 @@ void JsonSceneReader::read_environment(const Json& value, const std::string& whe
         if (env.strength < 0.0f) fail(where + ".strength", "must not be negative");
     }
     if (value.contains("rotation_deg")) env.rotation_radians = radians(number(value["rotation_deg"], where + ".rotation_deg"));
-    if (value.contains("map")) env.texture = load_texture_file(value["map"], where + ".map", TextureEncoding::Srgb8, scene);
+    // "builtin:sky" is the procedural sky (io/procedural_sky.h), not a file;
+    // only it takes the sun keys.
+    const bool builtin_sky = value.contains("map") && value["map"].is_string() && value["map"] == "builtin:sky";
+    for (const char* key : {"sun_elevation_deg", "sun_azimuth_deg"})
+        if (value.contains(key) && !builtin_sky) fail(where + "." + key, "only allowed with \"map\": \"builtin:sky\"");
+    if (builtin_sky) {
+        float elevation = 35.0f, azimuth = 30.0f;
+        if (value.contains("sun_elevation_deg")) {
+            elevation = number(value["sun_elevation_deg"], where + ".sun_elevation_deg");
+            if (!(elevation >= 1.0f && elevation <= 90.0f))
+                fail(where + ".sun_elevation_deg", "must be in [1, 90]");
+        }
+        if (value.contains("sun_azimuth_deg")) azimuth = number(value["sun_azimuth_deg"], where + ".sun_azimuth_deg");
+        if (options_.load_textures) {
+            try {
+                scene.textures.push_back(make_sky_texture(512, 256, elevation, azimuth));
+            } catch (const Error& e) {
+                fail(where + ".map", e.what());
+            }
+            env.texture = int32_t(scene.textures.size() - 1);
+        }
+    } else if (value.contains("map")) {
+        env.texture = load_texture_file(value["map"], where + ".map", TextureEncoding::Srgb8, scene);
+    }
 }
 
 RenderSettings JsonSceneReader::render_settings(const Json& value, const std::string& where) const {
     expect_object(value, where);
-    expect_keys(value, where, {"width", "height", "spp", "integrator", "max_depth", "ao_radius"});
+    expect_keys(value, where,
+                {"width", "height", "spp", "integrator", "max_depth", "rr_depth", "light_sampling", "reflection_depth",
+                 "refraction_depth", "shading", "ao_radius"});
     RenderSettings r;
     if (value.contains("width")) r.width = integer(value["width"], where + ".width", 1);
     if (value.contains("height")) r.height = integer(value["height"], where + ".height", 1);
     if (value.contains("spp")) r.spp = integer(value["spp"], where + ".spp", 1);
     if (value.contains("max_depth")) r.max_depth = integer(value["max_depth"], where + ".max_depth", 0);
-    if (value.contains("integrator")) r.integrator = string(value["integrator"], where + ".integrator");
+    if (value.contains("rr_depth")) r.rr_depth = integer(value["rr_depth"], where + ".rr_depth", 0);
+    if (value.contains("reflection_depth"))
+        r.reflection_depth = integer(value["reflection_depth"], where + ".reflection_depth", 0);
+    if (value.contains("refraction_depth"))
+        r.refraction_depth = integer(value["refraction_depth"], where + ".refraction_depth", 0);
+    // Names are checked here so that a typo is reported with its JSON path.
+    auto one_of = [&](const char* key, std::initializer_list<const char*> names) -> std::optional<std::string> {
+        if (!value.contains(key)) return std::nullopt;
+        std::string name = string(value[key], where + "." + key);
+        std::string known;
+        for (const char* n : names) {
+            if (name == n) return name;
+            known += (known.empty() ? "" : ", ") + std::string(n);
+        }
+        fail(where + "." + key, "unknown value '" + name + "' (expected " + known + ")");
+        return std::nullopt;
+    };
+    r.integrator = one_of("integrator", {"normals", "ao", "whitted", "path"});
+    r.light_sampling = one_of("light_sampling", {"mis", "nee", "bsdf"});
+    r.shading = one_of("shading", {"lambert", "phong", "blinn"});
     if (value.contains("ao_radius")) {
         r.ao_radius = number(value["ao_radius"], where + ".ao_radius");
         if (!(*r.ao_radius > 0.0f)) fail(where + ".ao_radius", "must be positive");

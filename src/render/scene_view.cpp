@@ -2,46 +2,53 @@
 
 #include <cmath>
 
-#include "render/color.h"
-#include "render/sampling.h"
+#include "core/parallel.h"
 
 namespace rf {
+namespace {
+
+std::vector<ShadingMaterial> shading_materials(const Scene& scene) {
+    std::vector<ShadingMaterial> materials;
+    materials.reserve(scene.materials.size() + 1);
+    for (const Material& m : scene.materials) materials.push_back(ShadingMaterial::from(m));
+    if (materials.empty()) materials.push_back(ShadingMaterial::from(Material{}));
+    return materials;
+}
+
+// Textures some material samples with a footprint (the environment map is
+// looked up at full resolution and needs no chain).
+std::vector<uint8_t> textures_needing_mips(const Scene& scene) {
+    std::vector<uint8_t> used(scene.textures.size(), 0);
+    auto mark = [&](int32_t id) {
+        if (id >= 0 && size_t(id) < used.size()) used[size_t(id)] = 1;
+    };
+    for (const Material& m : scene.materials) {
+        mark(m.base_color_texture);
+        mark(m.metallic_roughness_texture);
+        mark(m.normal_texture);
+        mark(m.emission_texture);
+    }
+    return used;
+}
+
+}  // namespace
 
 HostSceneView::HostSceneView(const Scene& scene, const SceneGeometry& geometry)
-    : scene_(&scene), geometry_(&geometry) {
-    materials_.reserve(scene.materials.size() + 1);
-    for (const Material& m : scene.materials) materials_.push_back(ShadingMaterial::from(m));
-    if (materials_.empty()) materials_.push_back(ShadingMaterial::from(Material{}));
-
+    : scene_(&scene),
+      geometry_(&geometry),
+      materials_(shading_materials(scene)),
+      lights_(scene, geometry, materials_) {
+    const std::vector<uint8_t> needs_mips = textures_needing_mips(scene);
+    mip_chains_.resize(scene.textures.size());
+    parallel::for_each_index(0, int(scene.textures.size()), [&](int i) {
+        if (needs_mips[size_t(i)]) mip_chains_[size_t(i)] = std::make_unique<MipChain>(scene.textures[size_t(i)]);
+    });
     textures_.reserve(scene.textures.size());
-    for (const Texture& t : scene.textures) textures_.push_back(make_texture_view(t));
+    for (size_t i = 0; i < scene.textures.size(); ++i)
+        textures_.push_back(make_mip_view(scene.textures[i], mip_chains_[i].get()));
 
-    // Emitters weighted by power; emissive textures are not integrated, only
-    // the factor counts, which keeps the table exact for untextured lights.
-    double total = 0.0;
-    std::vector<double> power;
-    for (uint32_t prim : geometry.emissive_triangles) {
-        if (prim >= geometry.triangles.size()) continue;
-        uint32_t material_id = prim < geometry.material.size() ? geometry.material[prim] : 0;
-        double p = double(geometry.triangles[prim].area()) * double(luminance(material(material_id).emission));
-        if (!(p > 0.0) || !std::isfinite(p)) continue;
-        emitter_triangles_.push_back(prim);
-        power.push_back(p);
-        total += p;
-    }
-    double running = 0.0;
-    for (double p : power) {
-        running += p;
-        emitter_cdf_.push_back(float(running / total));
-    }
-    if (!emitter_cdf_.empty()) emitter_cdf_.back() = 1.0f;
-    emitter_table_ = {emitter_triangles_.data(), emitter_cdf_.data(), uint32_t(emitter_triangles_.size())};
-
-    if (const TextureView* t = texture(scene.environment.texture)) {
-        environment_texture_ = *t;
-        environment_texture_.wrap_s = TextureWrap::Repeat;      // around the horizon
-        environment_texture_.wrap_t = TextureWrap::ClampToEdge; // no bleeding across the poles
-    }
+    for (const ShadingMaterial& m : materials_)
+        if (m.alpha_mode != AlphaMode::Opaque) has_transparent_materials_ = true;
 
     if (!geometry.bounds.is_empty()) {
         float d = length(geometry.bounds.extent());
@@ -52,6 +59,13 @@ HostSceneView::HostSceneView(const Scene& scene, const SceneGeometry& geometry)
     Vec3f far_corner = geometry.bounds.is_empty() ? Vec3f(0.0f) : max(abs(geometry.bounds.lo), abs(geometry.bounds.hi));
     ray_epsilon_ = std::fmax(1e-4f * diagonal_, 1e-5f * max_component(far_corner));
     if (!(ray_epsilon_ > 0.0f)) ray_epsilon_ = 1e-4f;
+}
+
+size_t HostSceneView::mip_bytes() const {
+    size_t bytes = 0;
+    for (const auto& chain : mip_chains_)
+        if (chain) bytes += chain->memory_bytes();
+    return bytes;
 }
 
 SurfaceHit HostSceneView::emitter_surface(const AreaLightSample& s) const {
@@ -66,17 +80,6 @@ SurfaceHit HostSceneView::emitter_surface(const AreaLightSample& s) const {
     hit.v = s.b2;
     hit.prim = s.prim;
     return surface(ray, hit);
-}
-
-Vec3f HostSceneView::environment(Vec3f dir) const {
-    const Environment& env = scene_->environment;
-    if (!environment_texture_.valid()) return env.color * env.strength;
-    // Equirectangular, +y up: u = 0.5 looks down -z, v = 0 is straight up.
-    float phi = std::atan2(dir.x, -dir.z) + env.rotation_radians;
-    float u = 0.5f + phi * (0.5f * kInvPi);
-    float v = std::acos(std::fmax(-1.0f, std::fmin(1.0f, dir.y))) * kInvPi;
-    Vec4f c = sample_texture(environment_texture_, Vec2f{u, v});
-    return Vec3f(c.x, c.y, c.z) * env.strength;
 }
 
 }  // namespace rf

@@ -78,8 +78,41 @@ SurfaceHit surface_at(const Scene& scene, const SceneGeometry& geometry, const R
         float nl = length(n);
         if (nl > 0.0f && std::isfinite(nl)) s.shading_normal = n / nl;
     }
-    if (!mesh.uvs.empty()) s.uv = mesh.uvs[idx[0]] * w + mesh.uvs[idx[1]] * hit.u + mesh.uvs[idx[2]] * hit.v;
     s.material = geometry.material[prim];
+    if (mesh.uvs.empty()) return s;
+    const Vec2f t0 = mesh.uvs[idx[0]], t1 = mesh.uvs[idx[1]], t2 = mesh.uvs[idx[2]];
+    s.uv = t0 * w + t1 * hit.u + t2 * hit.v;
+
+    const Vec2f duv1 = t1 - t0, duv2 = t2 - t0;
+    const float uv_cross = duv1.x * duv2.y - duv1.y * duv2.x;  // twice the signed uv area
+    if (len > 0.0f && std::isfinite(uv_cross)) s.uv_area_ratio = std::fabs(uv_cross) / len;
+    // Only normal maps need the tangent frame.
+    if (s.material >= scene.materials.size() || scene.materials[s.material].normal_texture == kNoTexture) return s;
+    if (!mesh.tangents.empty()) {
+        const Vec4f& a = mesh.tangents[idx[0]];
+        const Vec4f& b = mesh.tangents[idx[1]];
+        const Vec4f& c = mesh.tangents[idx[2]];
+        Vec3f t = Vec3f(a.x, a.y, a.z) * w + Vec3f(b.x, b.y, b.z) * hit.u + Vec3f(c.x, c.y, c.z) * hit.v;
+        t = scene.instances[inst_id].transform.transform_vector(t);
+        const float tl = length(t);
+        if (tl > 0.0f && std::isfinite(tl)) {
+            s.tangent = t / tl;
+            s.tangent_sign = a.w < 0.0f ? -1.0f : 1.0f;
+        }
+    } else if (uv_cross != 0.0f && std::isfinite(uv_cross)) {
+        // dp/du and dp/dv from the triangle's edges (Lengyel's construction).
+        // glTF's v grows downwards while normal maps have +y up, so the
+        // bitangent follows -dp/dv.
+        const Vec3f e1 = tri.v1 - tri.v0, e2 = tri.v2 - tri.v0;
+        const float inv = 1.0f / uv_cross;
+        const Vec3f dpdu = (e1 * duv2.y - e2 * duv1.y) * inv;
+        const Vec3f dpdv = (e2 * duv1.x - e1 * duv2.x) * inv;
+        const float tl = length(dpdu);
+        if (tl > 0.0f && std::isfinite(tl)) {
+            s.tangent = dpdu / tl;
+            s.tangent_sign = dot(cross(s.shading_normal, s.tangent), -dpdv) < 0.0f ? -1.0f : 1.0f;
+        }
+    }
     return s;
 }
 

@@ -22,8 +22,8 @@ struct Instance {
 
 // Settings a scene file may carry; command-line options override them.
 struct RenderSettings {
-    std::optional<int> width, height, spp, max_depth;
-    std::optional<std::string> integrator;
+    std::optional<int> width, height, spp, max_depth, rr_depth, reflection_depth, refraction_depth;
+    std::optional<std::string> integrator, light_sampling, shading;
     std::optional<float> ao_radius;
 };
 

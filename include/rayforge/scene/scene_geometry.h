@@ -47,6 +47,15 @@ struct SurfaceHit {
     Vec3f shading_normal;    // unit, interpolated vertex normal (or geometric)
     Vec2f uv;
     uint32_t material = 0;
+    // Tangent frame for normal maps (filled only where the material has one):
+    // unit world tangent (dp/du) and the bitangent's handedness (bitangent =
+    // w * cross(shading_normal, tangent)); w == 0 when there is no normal
+    // map or the mesh has neither tangents nor usable uvs.
+    Vec3f tangent{0.0f, 0.0f, 0.0f};
+    float tangent_sign = 0.0f;
+    // Texture-space area over world-space area of the triangle (0 without
+    // uvs): how many texels a unit of surface covers, for mip selection.
+    float uv_area_ratio = 0.0f;
 };
 
 // Interpolates the hit's attributes; `hit` must be found().

@@ -1,12 +1,18 @@
 // Finding the surface a ray sees, shared by every integrator: the closest hit,
-// its shading attributes and material, with alpha-masked (cut-out) surfaces
-// skipped, as glTF's alpha_mode MASK asks.
+// its shading attributes and material (textures filtered at the level of
+// detail the ray's footprint asks for, normal map applied), with alpha-masked
+// (cut-out) surfaces skipped, as glTF's alpha_mode MASK asks; and the
+// matching visibility test for shadow rays.
 #pragma once
+
+#include <cmath>
 
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/ray.h"
 #include "rayforge/scene/scene_geometry.h"
 #include "render/material_eval.h"
+#include "render/random.h"
+#include "render/texture_lod.h"
 
 namespace rf {
 
@@ -18,48 +24,106 @@ struct SurfaceInteraction {
     Hit hit;
     SurfaceHit surface;
     MaterialSample material;
+    float distance = 0.0f;   // from the ray's origin (the ray as given, |dir| units removed)
+    float lod_base = -kInfinity;  // texture level of detail before the texture's own size (texture_lod.h)
     bool double_sided = true;
     AlphaMode alpha_mode = AlphaMode::Opaque;
     bool front_face = true;  // the ray arrived on the side the geometric normal points to
     Vec3f facing_geometric;  // geometric normal flipped towards the ray's origin
-    Vec3f facing_shading;    // shading normal flipped to the same side
+    Vec3f facing_shading;    // shading normal (normal map applied) flipped to the same side
 };
 
+// The shading normal bent by the material's normal map, in the frame of the
+// hit's tangent (Gram-Schmidt against the interpolated normal); unchanged when
+// there is no map or no tangent frame.
+template <class View>
+RF_HD Vec3f apply_normal_map(const View& view, const ShadingMaterial& m, const SurfaceHit& s, float lod_base) {
+    if (m.normal_texture == kNoTexture || s.tangent_sign == 0.0f) return s.shading_normal;
+    const Vec3f n = s.shading_normal;
+    Vec3f t = s.tangent - n * dot(n, s.tangent);
+    float tl = length(t);
+    if (!(tl > 1e-6f)) return n;
+    t = t / tl;
+    const Vec3f b = cross(n, t) * s.tangent_sign;
+    const Vec3f local = sample_normal_map(view, m, s.uv, lod_base);
+    Vec3f mapped = t * local.x + b * local.y + n * local.z;
+    float ml = length(mapped);
+    return (ml > 0.0f && is_finite(ml)) ? mapped / ml : n;
+}
+
 // The first non-cut-out surface along `ray`; false on a miss. `epsilon` is
-// how far past a cut-out the search resumes.
+// how far past a cut-out the search resumes; `cone` is the ray's footprint
+// at its origin (width 0, spread 0: finest texture level everywhere).
 template <class Tracer, class View>
-RF_HD bool trace_surface(const Tracer& tracer, const View& view, Ray ray, float epsilon,
-                         SurfaceInteraction& out) {
+RF_HD bool trace_surface(const Tracer& tracer, const View& view, Ray ray, float epsilon, SurfaceInteraction& out,
+                         RayCone cone = RayCone{}) {
+    const float dir_length = length(ray.dir);
+    float travelled = 0.0f;  // distance skipped past cut-outs
     for (int skip = 0; skip <= kMaxAlphaSkips; ++skip) {
         Hit hit = tracer.intersect(ray);
         if (!hit.found()) return false;
         SurfaceHit surface = view.surface(ray, hit);
         const ShadingMaterial& m = view.material(surface.material);
-        MaterialSample sample = evaluate_material(view, m, surface.uv);
-        bool front = dot(surface.geometric_normal, ray.dir) < 0.0f;
+        const float distance = travelled + hit.t * dir_length;
+        const float cos_incidence = dot(surface.geometric_normal, ray.dir) / dir_length;
+        float lod_base = -kInfinity;
+        if (surface.uv_area_ratio > 0.0f && cone.width + cone.spread > 0.0f)
+            lod_base = texture_lod_base(0.5f * log2f(surface.uv_area_ratio), cone.propagate(distance).width,
+                                        cos_incidence);
+        MaterialSample sample = evaluate_material(view, m, surface.uv, lod_base);
+        bool front = cos_incidence < 0.0f;
         Vec3f ng = front ? surface.geometric_normal : -surface.geometric_normal;
         bool cut_out = m.alpha_mode == AlphaMode::Mask && sample.alpha < m.alpha_cutoff;
         if (cut_out) {
             // Resume just behind the surface; tmax keeps its meaning in t units.
             Vec3f next = surface.position - ng * epsilon;
             float advanced = dot(next - ray.org, ray.dir) / dot(ray.dir, ray.dir);
+            travelled += advanced * dir_length;
             ray.org = next;
             ray.tmax = ray.tmax - advanced;
             ray.tmin = 0.0f;
             if (!(ray.tmax > 0.0f)) return false;
             continue;
         }
-        Vec3f ns = surface.shading_normal;
+        Vec3f ns = apply_normal_map(view, m, surface, lod_base);
         if (dot(ns, ng) < 0.0f) ns = -ns;
         out.hit = hit;
         out.surface = surface;
         out.material = sample;
+        out.distance = distance;
+        out.lod_base = lod_base;
         out.double_sided = m.double_sided;
         out.alpha_mode = m.alpha_mode;
         out.front_face = front;
         out.facing_geometric = ng;
         out.facing_shading = ns;
         return true;
+    }
+    return false;
+}
+
+// Whether a shadow ray reaches its tmax. Opaque geometry blocks it; in scenes
+// with cut-outs or blended surfaces the ray walks from hit to hit so that a
+// leaf's alpha mask casts a leaf-shaped shadow (a BLEND surface lets the ray
+// through with probability 1 - alpha).
+template <class Tracer, class View>
+RF_HD bool unoccluded(const Tracer& tracer, const View& view, Ray ray, float epsilon, RandomStream& rng) {
+    if (!view.has_transparent_materials()) return !tracer.occluded(ray);
+    for (int skip = 0; skip <= kMaxAlphaSkips; ++skip) {
+        Hit hit = tracer.intersect(ray);
+        if (!hit.found()) return true;
+        SurfaceHit surface = view.surface(ray, hit);
+        const ShadingMaterial& m = view.material(surface.material);
+        if (m.alpha_mode == AlphaMode::Opaque) return false;
+        MaterialSample sample = evaluate_material(view, m, surface.uv);
+        bool passes = m.alpha_mode == AlphaMode::Mask ? sample.alpha < m.alpha_cutoff : rng.next() >= sample.alpha;
+        if (!passes) return false;
+        // Move just past the surface along the ray; tmax stays in t units.
+        float advanced = hit.t + epsilon / length(ray.dir);
+        ray.org = ray.org + ray.dir * advanced;
+        ray.tmax -= advanced;
+        ray.tmin = 0.0f;
+        if (!(ray.tmax > 0.0f)) return true;
     }
     return false;
 }

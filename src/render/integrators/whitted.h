@@ -10,6 +10,13 @@
 //   mirror lobe        M = metallic * (1 - roughness): perfect reflection tinted by base_color;
 //   diffuse lobe       D = 1 - T - M: Lambert with base_color (rough metal falls
 //                      here too, a crude stand-in for a glossy lobe).
+// Local shading of the diffuse lobe: Lambert, or (for the seeds' look) Lambert
+// plus a Phong or Blinn-Phong highlight per light with specular colour F0 =
+// mix(0.04, base_color, metallic) and exponent 2 / alpha^2 - 2 (alpha =
+// roughness^2; Walter et al. 2007's Beckmann-Phong correspondence, halved for
+// Phong's reflected-vector form).
+// Reflections and refractions have separate depth limits (seed 001 traces one
+// reflection and two refractions by default).
 // Light reaches diffuse surfaces only directly (point, spot, directional
 // lights and area_light_samples points on emissive triangles); emission is
 // added where a ray sees an emitter. Shadow rays treat every surface as
@@ -27,14 +34,22 @@
 
 namespace rf {
 
+// Values of WhittedSettings::shading (rf::WhittedShading as integers).
+inline constexpr int kWhittedLambert = 0;
+inline constexpr int kWhittedPhong = 1;
+inline constexpr int kWhittedBlinn = 2;
+
 struct WhittedSettings {
-    int max_depth = 5;              // reflection/refraction bounces after the camera ray
+    int reflection_depth = 1;       // mirror and Fresnel reflections along one path
+    int refraction_depth = 2;       // refractions (and blended pass-throughs) along one path
+    int shading = kWhittedLambert;
     int area_light_samples = 4;     // shadow rays towards area lights per shading point
     float min_weight = 1e-3f;       // branches contributing less than this are not traced
 };
 
 // Work items pending beyond this many are dropped (their energy is lost);
-// a DFS with two branches per bounce needs about 2 * max_depth entries.
+// a DFS with two branches per bounce needs about 2 * (reflection + refraction
+// depth) entries.
 inline constexpr int kWhittedStackSize = 64;
 inline constexpr int kWhittedMaxDepth = 30;
 
@@ -70,12 +85,33 @@ RF_HDI float spot_attenuation(const Light& light, float cos_angle) {
     return t * t;
 }
 
+// Highlight of one light for the Phong / Blinn-Phong options: the lobe value
+// times cos(theta_i), relative to the light's incident radiance or irradiance.
+RF_HDI float whitted_highlight(int shading, Vec3f n, Vec3f wo, Vec3f wi, float roughness) {
+    if (shading == kWhittedLambert) return 0.0f;
+    float alpha = fmaxf(roughness * roughness, 1e-3f);
+    float exponent = fminf(2.0f / (alpha * alpha) - 2.0f, 1e4f);
+    if (!(exponent > 0.0f)) return 0.0f;
+    float cos_lobe;
+    if (shading == kWhittedPhong) {
+        exponent *= 0.25f;
+        cos_lobe = dot(reflect(-wo, n), wi);
+    } else {
+        cos_lobe = dot(n, normalize(wo + wi));
+    }
+    if (cos_lobe <= 0.0f) return 0.0f;
+    // Normalised so the lobe reflects about the same energy at any exponent.
+    return (exponent + 2.0f) * (0.5f * kInvPi) * powf(cos_lobe, exponent) * fmaxf(dot(n, wi), 0.0f);
+}
+
 // Irradiance-like sum over lights of L_i * cos(theta_i) at a point with
 // facing shading normal n and facing geometric normal ng (the integrand of
-// the Lambert reflection without the albedo / pi).
+// the Lambert reflection without the albedo / pi); with the Phong or Blinn
+// options `highlight` receives the sum of L_i times the specular lobe.
 template <class Tracer, class View>
-RF_HD Vec3f direct_lighting(const Tracer& tracer, const View& view, const SurfaceInteraction& si,
-                            RandomStream& rng, const WhittedSettings& settings) {
+RF_HD Vec3f direct_lighting(const Tracer& tracer, const View& view, const SurfaceInteraction& si, Vec3f wo,
+                            RandomStream& rng, const WhittedSettings& settings, Vec3f& highlight) {
+    highlight = Vec3f(0.0f);
     const Vec3f n = si.facing_shading;
     const Vec3f ng = si.facing_geometric;
     const float epsilon = view.ray_epsilon();
@@ -107,12 +143,15 @@ RF_HD Vec3f direct_lighting(const Tracer& tracer, const View& view, const Surfac
         shadow.dir = wi;
         shadow.tmin = 0.0f;
         shadow.tmax = distance < kInfinity ? distance * (1.0f - 1e-4f) : kInfinity;
-        if (!tracer.occluded(shadow)) sum += incident * cos_theta;
+        if (unoccluded(tracer, view, shadow, epsilon, rng)) {
+            sum += incident * cos_theta;
+            highlight += incident * whitted_highlight(settings.shading, n, wo, wi, si.material.roughness);
+        }
     }
 
     const EmitterTable& emitters = view.emitters();
     if (emitters.count > 0 && settings.area_light_samples > 0) {
-        Vec3f area_sum(0.0f);
+        Vec3f area_sum(0.0f), area_highlight(0.0f);
         const float inv_samples = 1.0f / float(settings.area_light_samples);
         for (int s = 0; s < settings.area_light_samples; ++s) {
             // Stratified choice of the emitter: equal-power lights get equal shares.
@@ -137,11 +176,14 @@ RF_HD Vec3f direct_lighting(const Tracer& tracer, const View& view, const Surfac
             shadow.dir = d;               // t = 1 at the light
             shadow.tmin = 0.0f;
             shadow.tmax = 1.0f - epsilon / dist;
-            if (tracer.occluded(shadow)) continue;
+            if (!unoccluded(tracer, view, shadow, epsilon, rng)) continue;
             Vec3f emitted = evaluate_material(view, lm, light_surface.uv).emission;
-            area_sum += emitted * (cos_theta * cos_light / (d2 * ls.pdf_area));
+            Vec3f incident = emitted * (cos_light / (d2 * ls.pdf_area));
+            area_sum += incident * cos_theta;
+            area_highlight += incident * whitted_highlight(settings.shading, n, wo, wi, si.material.roughness);
         }
         sum += area_sum * inv_samples;
+        highlight += area_highlight * inv_samples;
     }
     return sum;
 }
@@ -152,21 +194,22 @@ RF_HD Vec3f whitted_radiance(const Tracer& tracer, const View& view, const Ray& 
     struct WorkItem {
         Ray ray;
         Vec3f weight;
-        int depth;
+        int reflections, refractions;
     };
     WorkItem stack[kWhittedStackSize];
     int top = 0;
-    stack[top++] = {camera_ray, Vec3f(1.0f), 0};
+    stack[top++] = {camera_ray, Vec3f(1.0f), 0, 0};
     const float epsilon = view.ray_epsilon();
-    const int max_depth = settings.max_depth < kWhittedMaxDepth ? settings.max_depth : kWhittedMaxDepth;
+    const int max_reflections = settings.reflection_depth < kWhittedMaxDepth ? settings.reflection_depth : kWhittedMaxDepth;
+    const int max_refractions = settings.refraction_depth < kWhittedMaxDepth ? settings.refraction_depth : kWhittedMaxDepth;
     Vec3f radiance(0.0f);
 
-    auto push = [&](Vec3f org, Vec3f dir, Vec3f weight, int depth) {
+    auto push = [&](Vec3f org, Vec3f dir, Vec3f weight, int reflections, int refractions) {
         if (top >= kWhittedStackSize || max_component(weight) < settings.min_weight) return;
         Ray r;
         r.org = org;
         r.dir = dir;
-        stack[top++] = {r, weight, depth};
+        stack[top++] = {r, weight, reflections, refractions};
     };
 
     while (top > 0) {
@@ -180,10 +223,13 @@ RF_HD Vec3f whitted_radiance(const Tracer& tracer, const View& view, const Ray& 
         const Vec3f p = si.surface.position;
         const Vec3f ng = si.facing_geometric;
         const Vec3f d = normalize(item.ray.dir);
+        const bool may_reflect = item.reflections < max_reflections;
+        const bool may_refract = item.refractions < max_refractions;
         Vec3f weight = item.weight;
 
         if (si.alpha_mode == AlphaMode::Blend && m.alpha < 1.0f) {
-            if (item.depth < max_depth) push(p - ng * epsilon, d, weight * (1.0f - m.alpha), item.depth + 1);
+            if (may_refract)
+                push(p - ng * epsilon, d, weight * (1.0f - m.alpha), item.reflections, item.refractions + 1);
             weight *= m.alpha;
         }
         if (si.front_face || si.double_sided) radiance += weight * m.emission;
@@ -192,30 +238,39 @@ RF_HD Vec3f whitted_radiance(const Tracer& tracer, const View& view, const Ray& 
         float mirror = m.metallic * (1.0f - m.roughness);
         float diffuse = fmaxf(0.0f, 1.0f - transmission - mirror);
         if (diffuse > 0.0f && max_component(m.base_color) > 0.0f) {
-            Vec3f lighting = direct_lighting(tracer, view, si, rng, settings);
+            Vec3f highlight;
+            Vec3f lighting = direct_lighting(tracer, view, si, -d, rng, settings, highlight);
             radiance += weight * m.base_color * (diffuse * kInvPi) * lighting;
+            if (settings.shading != kWhittedLambert) {
+                Vec3f specular_color = lerp(Vec3f(0.04f), m.base_color, m.metallic);
+                radiance += weight * specular_color * diffuse * highlight;
+            }
         }
-        if (item.depth >= max_depth) continue;
 
         // Specular directions use the shading normal; origins move off the
         // surface on the side the new ray travels to.
         const Vec3f n = si.facing_shading;
         auto offset_towards = [&](Vec3f dir) { return p + ng * (dot(dir, ng) >= 0.0f ? epsilon : -epsilon); };
-        if (mirror > 0.0f) {
+        if (mirror > 0.0f && may_reflect) {
             Vec3f r = reflect(d, n);
-            push(offset_towards(r), r, weight * m.base_color * mirror, item.depth + 1);
+            push(offset_towards(r), r, weight * m.base_color * mirror, item.reflections + 1, item.refractions);
         }
         if (transmission > 0.0f) {
             float eta = si.front_face ? 1.0f / m.ior : m.ior;
             float cos_i = fminf(1.0f, fmaxf(0.0f, -dot(d, n)));
             float fresnel = fresnel_dielectric(cos_i, eta);
             Vec3f t;
-            if (fresnel < 1.0f && refract(d, n, eta, t))
-                push(offset_towards(t), t, weight * m.base_color * (transmission * (1.0f - fresnel)), item.depth + 1);
-            else
+            if (fresnel < 1.0f && refract(d, n, eta, t)) {
+                if (may_refract)
+                    push(offset_towards(t), t, weight * m.base_color * (transmission * (1.0f - fresnel)),
+                         item.reflections, item.refractions + 1);
+            } else {
                 fresnel = 1.0f;  // total internal reflection
-            Vec3f r = reflect(d, n);
-            push(offset_towards(r), r, weight * (transmission * fresnel), item.depth + 1);
+            }
+            if (may_reflect) {
+                Vec3f r = reflect(d, n);
+                push(offset_towards(r), r, weight * (transmission * fresnel), item.reflections + 1, item.refractions);
+            }
         }
     }
     return radiance;

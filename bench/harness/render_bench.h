@@ -1,0 +1,47 @@
+// Rendering throughput for `rayforge bench --integrator path|whitted|...`:
+// how fast the integrators turn rays into pixels, next to how fast the same
+// rays are traced without any shading. A pass of the integrator is recorded
+// (every closest-hit and any-hit query in the order each tile made it) and
+// replayed through the same single-ray calls on the same threads, so the
+// difference between the two times is what shading, sampling, texture
+// filtering and light selection cost.
+#pragma once
+
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "bench_scenes.h"
+#include "rayforge/accel/accel.h"
+#include "rayforge/render/render.h"
+
+namespace rf::bench {
+
+struct RenderBenchConfig {
+    std::vector<std::string> integrators;  // normals | ao | whitted | path
+    int width = 1024, height = 768;
+    int max_depth = 4;                     // path bounces
+    int repetitions = 5;                   // timed passes after one warm-up; medians reported
+    int threads = 0;
+    BuildOptions build;                    // the structure traced
+    bool add_sky = true;                   // scenes without an environment get the procedural sky
+};
+
+struct RenderBenchRecord {
+    std::string scene, integrator, accel;
+    int view = 0, width = 0, height = 0, max_depth = 0, threads = 0;
+    double pass_ms = 0.0;            // median wall time of one pass (1 sample per pixel)
+    double samples_per_s = 0.0;      // camera samples
+    double rays_per_sample = 0.0;    // closest + any-hit queries per camera sample
+    double rays_per_s = 0.0;         // all queries, all bounces
+    double trace_ms = 0.0;           // median: the recorded queries, single-ray calls, no shading
+    double batch_trace_ms = 0.0;     // median: the same queries through the batch interface
+    double shading_fraction = 0.0;   // 1 - trace_ms / pass_ms
+};
+
+// Renders view 0 (or each of `views`) of `scene` with each integrator.
+std::vector<RenderBenchRecord> run_render_bench(const LoadedScene& scene, const RenderBenchConfig& config,
+                                                std::ostream& progress);
+void print_render_table(std::ostream& out, const std::vector<RenderBenchRecord>& records);
+
+}  // namespace rf::bench

@@ -1,0 +1,330 @@
+// BSDF of the glTF 2.0 metallic-roughness material (glTF 2.0 specification,
+// Appendix B "BRDF implementation") with KHR_materials_transmission and
+// KHR_materials_ior, for the path tracer on both backends:
+//
+//   material   = mix(dielectric, metal, metallic)
+//   metal      = GGX reflection, Schlick Fresnel with F0 = base_color
+//   dielectric = fresnel_mix(ior, base, GGX reflection)
+//   base       = mix(Lambert(base_color), GGX transmission * base_color, transmission)
+//
+// Lobes, each sampled on its own and combined by one-sample MIS (eval and
+// pdf sum over every non-delta lobe, so a non-delta sample's weight is
+// exactly eval / pdf):
+//   metal       metallic * GGX reflection * Schlick(base_color, wo.h)
+//   dielectric  (1 - metallic) * rough dielectric interface (Walter, Marschner,
+//               Li, Torrance 2007, "Microfacet Models for Refraction through
+//               Rough Surfaces"): reflection weighted by F_R(wo.h) and
+//               transmission weighted by transmission * (1 - F(wo.h)) * base_color;
+//               h is drawn from the visible normals (Heitz 2018) and
+//               reflection / refraction is chosen by that microfacet's Fresnel.
+//   diffuse     (1 - metallic)(1 - transmission) Lambert(base_color)
+//               * (1 - F_o(n.wo)) (1 - F_o(n.wi)).
+// With roughness below kSmoothRoughness the metal and dielectric lobes are
+// delta lobes (mirror; smooth reflect / refract chosen by exact Fresnel).
+//
+// Energy: each microfacet lobe's VNDF-sampled weight is at most
+// F * G2 / G1(wo) <= F, and reflection + transmission share one microfacet
+// (F + (1 - F) = 1). The diffuse base only receives the light the interface
+// lets through on both crossings, (1 - F_o(n.wo))(1 - F_o(n.wi)), which is
+// also reciprocal (Kelemen & Szirmay-Kalos 2001 style coupling); light that
+// would re-reflect inside the layer is dropped, so albedo <= 1 holds with
+// margin (checked over a grid of materials in tests/bsdf_test.cpp).
+//
+// Transmitted radiance is NOT scaled by 1 / eta^2: every ray that enters a
+// closed object also leaves it, so the two factors cancel along the path,
+// and without them every lobe's throughput stays <= 1. The consequence is
+// that the transmission lobe is not reciprocal (it is the adjoint/importance
+// form); the reflection part of every material is.
+//
+// Opaque parts have no inside: their Fresnel (F_o, and the opaque share of
+// F_R) always uses the entering relative IOR min(eta, 1/eta), so a back face
+// seen through a double-sided opaque surface does not show total internal
+// reflection. F_R = (1 - transmission) F_o + transmission F(eta).
+#pragma once
+
+#include <cmath>
+
+#include "rayforge/core/host_device.h"
+#include "rayforge/math/vec.h"
+#include "render/material_eval.h"
+#include "render/microfacet.h"
+#include "render/sampling.h"
+
+namespace rf {
+
+// Roughness below which the specular lobes become delta lobes (alpha < 9e-4).
+inline constexpr float kSmoothRoughness = 0.03f;
+// Directions this close to the shading horizon carry no usable energy.
+inline constexpr float kBsdfMinCos = 1e-6f;
+
+struct BsdfSample {
+    Vec3f wi;                  // unit, world space
+    Vec3f weight;              // f(wo,wi) * |dot(n,wi)| / pdf : the path-throughput multiplier
+    float pdf = 0.0f;          // solid-angle density over all non-delta lobes (== pdf(wo, wi));
+                               // for a delta lobe: the probability of this discrete choice
+                               // (lobe selection times reflect/refract choice)
+    bool delta = false;        // chosen from a perfectly smooth (delta) lobe
+    bool transmission = false; // wi on the other side of the geometric surface than wo
+};
+
+class Bsdf {
+public:
+    // m: material at the point. n: unit shading normal, ng: unit geometric
+    // normal, both already flipped to wo's side. eta = IOR on wo's side / IOR
+    // on the other side (1/ior entering the object, ior leaving it).
+    RF_HD static Bsdf make(const MaterialSample& m, Vec3f n, Vec3f ng, float eta) {
+        Bsdf b;
+        b.frame_ = Frame::from_normal(n);
+        b.ng_ = ng;
+        // Energy conservation needs reflectances <= 1; glTF factors and
+        // textures are in [0, 1] anyway.
+        b.base_ = min(max(m.base_color, Vec3f(0.0f)), Vec3f(1.0f));
+        b.metal_weight_ = saturate(m.metallic);
+        b.dielectric_weight_ = 1.0f - b.metal_weight_;
+        b.transmission_ = saturate(m.transmission);
+        b.eta_ = (eta > 0.0f && is_finite(eta)) ? eta : 1.0f;
+        b.eta_opaque_ = b.eta_ > 1.0f ? 1.0f / b.eta_ : b.eta_;
+        b.alpha_ = ggx_alpha_from_roughness(saturate(m.roughness));
+        b.smooth_ = !(m.roughness >= kSmoothRoughness);
+        // An index-matched interface does not deflect light: straight
+        // transmission is a delta whatever the roughness (the rough
+        // refraction half vector is undefined there).
+        b.index_matched_ = fabsf(b.eta_ - 1.0f) < 1e-3f;
+        return b;
+    }
+
+    // f(wo,wi) * |dot(n,wi)| summed over the non-delta lobes.
+    RF_HD Vec3f eval(Vec3f wo, Vec3f wi) const {
+        Vec3f o = to_local(wo), i = to_local(wi);
+        if (!(o.z > kBsdfMinCos)) return Vec3f(0.0f);
+        float geometric_cos = dot(ng_, wi);
+        Vec3f f(0.0f);
+        if (i.z > kBsdfMinCos && geometric_cos > 0.0f) {
+            if (!smooth_) {
+                Vec3f h = normalize(o + i);
+                float cos_oh = fmaxf(dot(o, h), 0.0f);
+                // D G2 / (4 o.z i.z) times the cosine i.z.
+                float spec = ggx_d(h, alpha_) * ggx_g2(o, i, alpha_) / (4.0f * o.z);
+                if (metal_weight_ > 0.0f) f += schlick_fresnel(base_, cos_oh) * (metal_weight_ * spec);
+                // (An index-matched interface is a delta lobe: its tiny reflection is sampled there.)
+                if (dielectric_weight_ > 0.0f && !index_matched_)
+                    f += Vec3f(dielectric_weight_ * reflect_fresnel(cos_oh) * spec);
+            }
+            float diffuse = diffuse_weight();
+            if (diffuse > 0.0f) {
+                float through = (1.0f - opaque_fresnel(o.z)) * (1.0f - opaque_fresnel(i.z));
+                f += base_ * (diffuse * through * kInvPi * i.z);
+            }
+        } else if (i.z < -kBsdfMinCos && geometric_cos < 0.0f && rough_transmission()) {
+            Vec3f h;
+            float jacobian;
+            if (transmission_half_vector(o, i, h, jacobian)) {
+                float cos_oh = dot(o, h);
+                float fresnel = dielectric_fresnel_exact(cos_oh, eta_);
+                // D G2 |o.h| |i.h| / (o.z |i.z| (eta o.h + i.h)^2) times |i.z|;
+                // `jacobian` is |i.h| / (eta o.h + i.h)^2.
+                float t = ggx_d(h, alpha_) * ggx_g2(o, i, alpha_) * cos_oh * jacobian / o.z;
+                f += base_ * (dielectric_weight_ * transmission_ * (1.0f - fresnel) * t);
+            }
+        }
+        return f;
+    }
+
+    // Solid-angle density with which sample() draws wi from the non-delta
+    // lobes, lobe selection included.
+    RF_HD float pdf(Vec3f wo, Vec3f wi) const {
+        Vec3f o = to_local(wo), i = to_local(wi);
+        if (!(o.z > kBsdfMinCos)) return 0.0f;
+        float p[kLobeCount];
+        if (!lobe_probabilities(o.z, p)) return 0.0f;
+        float geometric_cos = dot(ng_, wi);
+        float density = 0.0f;
+        if (i.z > kBsdfMinCos && geometric_cos > 0.0f) {
+            if (!smooth_) {
+                Vec3f h = normalize(o + i);
+                float cos_oh = dot(o, h);
+                if (cos_oh > 0.0f) {
+                    float reflect_pdf = ggx_vndf_pdf(o, h, alpha_) / (4.0f * cos_oh);
+                    density += p[kMetal] * reflect_pdf;
+                    if (!index_matched_) density += p[kDielectric] * reflect_probability(cos_oh) * reflect_pdf;
+                }
+            }
+            density += p[kDiffuse] * i.z * kInvPi;
+        } else if (i.z < -kBsdfMinCos && geometric_cos < 0.0f && rough_transmission()) {
+            Vec3f h;
+            float jacobian;
+            if (transmission_half_vector(o, i, h, jacobian)) {
+                float cos_oh = dot(o, h);
+                density += p[kDielectric] * (1.0f - reflect_probability(cos_oh)) * ggx_vndf_pdf(o, h, alpha_) *
+                           jacobian;
+            }
+        }
+        return is_finite(density) ? density : 0.0f;
+    }
+
+    // u_lobe picks the lobe (and, rescaled, reflection vs refraction), u the
+    // direction. False: absorbed or invalid (out is then unspecified).
+    RF_HD bool sample(Vec3f wo, float u_lobe, Vec2f u, BsdfSample& out) const {
+        Vec3f o = to_local(wo);
+        if (!(o.z > kBsdfMinCos)) return false;
+        float p[kLobeCount];
+        if (!lobe_probabilities(o.z, p)) return false;
+
+        // Pick a lobe; u_lobe is rescaled to [0, 1) within the chosen interval.
+        int lobe = -1;
+        float cdf = 0.0f;
+        for (int k = 0; k < kLobeCount; ++k) {
+            if (p[k] <= 0.0f) continue;
+            lobe = k;  // also the fallback when rounding leaves u_lobe past the last cdf
+            if (u_lobe < cdf + p[k]) break;
+            cdf += p[k];
+        }
+        if (lobe < 0) return false;
+        float u_choice = fminf(fmaxf((u_lobe - cdf) / p[lobe], 0.0f), 0.99999994f);
+
+        Vec3f i;
+        if (lobe == kDiffuse) {
+            i = sample_cosine_hemisphere(u);
+        } else if (lobe == kMetal) {
+            if (smooth_) {
+                i = Vec3f(-o.x, -o.y, o.z);
+                Vec3f weight = schlick_fresnel(base_, o.z) * (metal_weight_ / p[kMetal]);
+                return finish_delta(i, weight, p[kMetal], out);
+            }
+            Vec3f h = ggx_sample_vndf(o, alpha_, u);
+            i = reflect_about(o, h);
+        } else {  // kDielectric
+            bool delta = smooth_ || index_matched_;
+            Vec3f h = delta ? Vec3f(0.0f, 0.0f, 1.0f) : ggx_sample_vndf(o, alpha_, u);
+            float cos_oh = dot(o, h);
+            if (!(cos_oh > 0.0f)) return false;
+            float p_reflect = reflect_probability(cos_oh);
+            if (u_choice < p_reflect) {
+                i = reflect_about(o, h);
+                if (delta) {
+                    float weight = dielectric_weight_ * reflect_fresnel(cos_oh) / (p[kDielectric] * p_reflect);
+                    return finish_delta(i, Vec3f(weight), p[kDielectric] * p_reflect, out);
+                }
+            } else {
+                if (!refract_about(o, h, eta_, i)) return false;
+                if (delta) {
+                    float p_refract = p[kDielectric] * (1.0f - p_reflect);
+                    float fresnel = dielectric_fresnel_exact(cos_oh, eta_);
+                    Vec3f weight = base_ * (dielectric_weight_ * transmission_ * (1.0f - fresnel) / p_refract);
+                    return finish_delta(i, weight, p_refract, out);
+                }
+            }
+        }
+
+        out.wi = frame_.to_world(i);
+        out.pdf = pdf(wo, out.wi);
+        if (!(out.pdf > 0.0f)) return false;
+        Vec3f f = eval(wo, out.wi);
+        if (!(max_component(f) > 0.0f)) return false;
+        out.weight = f / out.pdf;
+        out.delta = false;
+        out.transmission = dot(ng_, out.wi) < 0.0f;
+        return is_finite(out.weight);
+    }
+
+    // Every lobe that can be chosen is a delta lobe: light sampling cannot help.
+    RF_HD bool is_delta() const {
+        if (diffuse_weight() > 0.0f && max_component(base_) > 0.0f) return false;
+        if (smooth_) return true;
+        // Rough: only an index-matched dielectric without metal stays delta.
+        return index_matched_ && metal_weight_ <= 0.0f;
+    }
+
+    // Denoiser albedo AOV: the color every lobe is tinted by (diffuse and
+    // transmission: base_color; metal: F0 = base_color); white for clear glass.
+    RF_HD Vec3f albedo() const { return base_; }
+
+private:
+    enum { kMetal = 0, kDielectric = 1, kDiffuse = 2, kLobeCount = 3 };
+
+    RF_HD Vec3f to_local(Vec3f w) const { return {dot(w, frame_.t), dot(w, frame_.b), dot(w, frame_.n)}; }
+
+    RF_HD float diffuse_weight() const { return dielectric_weight_ * (1.0f - transmission_); }
+    RF_HD bool rough_transmission() const {
+        return !smooth_ && !index_matched_ && transmission_ > 0.0f && dielectric_weight_ > 0.0f;
+    }
+
+    // Fresnel of the opaque parts, always as if entering the denser medium.
+    RF_HD float opaque_fresnel(float cos_theta) const { return dielectric_fresnel_exact(cos_theta, eta_opaque_); }
+    // Reflectance of the dielectric interface: opaque share plus transmissive share.
+    RF_HD float reflect_fresnel(float cos_oh) const {
+        float opaque = transmission_ < 1.0f ? opaque_fresnel(cos_oh) : 0.0f;
+        float clear = transmission_ > 0.0f ? dielectric_fresnel_exact(cos_oh, eta_) : 0.0f;
+        return (1.0f - transmission_) * opaque + transmission_ * clear;
+    }
+    // Within the dielectric lobe: P(reflect) = F_R / (F_R + t (1 - F)), which
+    // is the exact Fresnel F for clear glass (t = 1).
+    RF_HD float reflect_probability(float cos_oh) const {
+        float reflect = reflect_fresnel(cos_oh);
+        float transmit = transmission_ > 0.0f ? transmission_ * (1.0f - dielectric_fresnel_exact(cos_oh, eta_)) : 0.0f;
+        float total = reflect + transmit;
+        return total > 0.0f ? reflect / total : 1.0f;
+    }
+
+    // Lobe selection probabilities, proportional to each lobe's weight
+    // estimated from the Fresnel at n.wo. Every lobe that can contribute
+    // anywhere gets a nonzero share (otherwise the estimator is biased):
+    // Schlick's F is >= F0 but also rises above a black F0 off normal
+    // incidence, hence the floor on the metal estimate.
+    RF_HD bool lobe_probabilities(float cos_o, float p[kLobeCount]) const {
+        float mean_base = (base_.x + base_.y + base_.z) * (1.0f / 3.0f);
+        Vec3f metal_f = schlick_fresnel(base_, cos_o);
+        p[kMetal] = metal_weight_ * fmaxf((metal_f.x + metal_f.y + metal_f.z) * (1.0f / 3.0f), 0.02f);
+        float transmit = transmission_ * (1.0f - dielectric_fresnel_exact(cos_o, eta_)) * mean_base;
+        p[kDielectric] = dielectric_weight_ * (reflect_fresnel(cos_o) + transmit);
+        p[kDiffuse] = diffuse_weight() * (1.0f - opaque_fresnel(cos_o)) * mean_base;
+        float total = p[kMetal] + p[kDielectric] + p[kDiffuse];
+        if (!(total > 0.0f) || !is_finite(total)) return false;
+        for (int k = 0; k < kLobeCount; ++k) p[k] /= total;
+        return true;
+    }
+
+    // Generalised half vector of a refraction (Walter et al. 2007, eq. 16):
+    // h ~ eta wo + wi, oriented to the macro normal, and the Jacobian
+    // |dh/dwi| = |wi.h| / (eta wo.h + wi.h)^2. False when the pair is not a
+    // refraction through a front-facing microfacet.
+    RF_HD bool transmission_half_vector(Vec3f o, Vec3f i, Vec3f& h, float& jacobian) const {
+        Vec3f sum = o * eta_ + i;
+        float len2 = dot(sum, sum);
+        if (!(len2 > 1e-12f)) return false;
+        h = sum * (1.0f / sqrtf(len2));
+        if (h.z < 0.0f) h = -h;
+        float cos_oh = dot(o, h), cos_ih = dot(i, h);
+        if (!(cos_oh > 0.0f) || !(cos_ih < 0.0f)) return false;
+        float denom = eta_ * cos_oh + cos_ih;
+        jacobian = -cos_ih / (denom * denom);
+        return is_finite(jacobian);
+    }
+
+    RF_HD bool finish_delta(Vec3f local_wi, Vec3f weight, float probability, BsdfSample& out) const {
+        out.wi = frame_.to_world(local_wi);
+        bool through = local_wi.z < 0.0f;
+        // The direction must leave on the matching side of the geometric surface.
+        float geometric_cos = dot(ng_, out.wi);
+        if (through ? !(geometric_cos < 0.0f) : !(geometric_cos > 0.0f)) return false;
+        out.weight = weight;
+        out.pdf = probability;
+        out.delta = true;
+        out.transmission = through;
+        return is_finite(weight) && max_component(weight) > 0.0f;
+    }
+
+    Frame frame_{};
+    Vec3f ng_;
+    Vec3f base_;
+    float metal_weight_ = 0.0f;
+    float dielectric_weight_ = 1.0f;
+    float transmission_ = 0.0f;
+    float eta_ = 1.0f;
+    float eta_opaque_ = 1.0f;
+    float alpha_ = 1.0f;
+    bool smooth_ = false;
+    bool index_matched_ = false;
+};
+
+}  // namespace rf

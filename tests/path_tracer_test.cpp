@@ -1,0 +1,299 @@
+// The path tracer against answers known in closed form: furnaces (a surface
+// inside a uniform environment, or a closed box of emitting walls), a mirror,
+// a glass sphere, a Lambert plane under a point light; the three
+// light-sampling strategies against each other; determinism; the
+// progressive renderer's passes, budgets and AOVs.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "rayforge/render/render.h"
+#include "render_test_scene.h"
+
+namespace rf {
+namespace {
+
+// Mean of the pixels selected by `use` and the standard error of that mean,
+// treating each pixel as an independent estimate (which it is: every pixel
+// has its own random streams).
+struct MeanEstimate {
+    double mean = 0.0, standard_error = 0.0;
+    size_t count = 0;
+};
+
+template <class Use>
+MeanEstimate mean_of(const Image& image, int channel, Use use) {
+    MeanEstimate e;
+    double sum = 0.0, sum2 = 0.0;
+    for (int y = 0; y < image.height; ++y)
+        for (int x = 0; x < image.width; ++x) {
+            if (!use(x, y)) continue;
+            double v = image.at(x, y)[channel];
+            sum += v;
+            sum2 += v * v;
+            ++e.count;
+        }
+    if (e.count < 2) return e;
+    e.mean = sum / double(e.count);
+    double variance = std::max(0.0, (sum2 - sum * e.mean) / double(e.count - 1));
+    e.standard_error = std::sqrt(variance / double(e.count));
+    return e;
+}
+
+auto everywhere = [](int, int) { return true; };
+
+Material lambert(float albedo) {
+    Material m;
+    m.base_color = Vec3f(albedo);
+    m.roughness = 1.0f;
+    m.ior = 1.0f;  // no specular layer: a pure Lambert surface
+    return m;
+}
+
+RenderOptions path_options(int w, int h, int spp) {
+    RenderOptions o = options_for(IntegratorKind::Path, w, h);
+    o.spp = spp;
+    o.max_depth = 16;
+    return o;
+}
+
+// A sphere of radius 1 at the origin in a uniform environment of radiance 1.
+TestScene furnace_sphere(const Material& m) {
+    TestScene t;
+    t.add_sphere(Vec3f(0.0f), 1.0f, t.add_material(m));
+    t.scene.environment.color = Vec3f(1.0f);
+    t.finish(Structure::Bvh);
+    return t;
+}
+
+TEST(PathTracer, WhiteFurnaceDiffuseSphereRendersOne) {
+    TestScene t = furnace_sphere(lambert(1.0f));
+    Image image = t.render_with(looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), path_options(24, 24, 32));
+    for (int c = 0; c < 3; ++c) {
+        MeanEstimate e = mean_of(image, c, everywhere);
+        EXPECT_NEAR(e.mean, 1.0, 5.0 * e.standard_error + 2e-3) << "channel " << c;
+    }
+    MeanEstimate e = mean_of(image, 0, everywhere);
+    EXPECT_GT(e.standard_error, 0.0);  // the sphere's pixels are Monte Carlo estimates
+}
+
+TEST(PathTracer, DarkerAlbedoIsNeverBrighterThanTheEnvironment) {
+    TestScene t = furnace_sphere(lambert(0.5f));
+    Image image = t.render_with(looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), path_options(24, 24, 32));
+    // Centre pixels see the sphere: a convex Lambert sphere reflects exactly
+    // its albedo times the environment.
+    auto centre = [](int x, int y) { return std::abs(x - 12) < 5 && std::abs(y - 12) < 5; };
+    MeanEstimate e = mean_of(image, 1, centre);
+    EXPECT_NEAR(e.mean, 0.5, 5.0 * e.standard_error + 2e-3);
+    MeanEstimate whole = mean_of(image, 1, everywhere);
+    EXPECT_LT(whole.mean, 1.0);  // background pixels are exactly 1, the sphere's about 0.5
+}
+
+TEST(PathTracer, SmoothGlassSphereIsInvisibleInAFurnace) {
+    Material glass;
+    glass.base_color = Vec3f(1.0f);
+    glass.transmission = 1.0f;
+    glass.roughness = 0.0f;
+    glass.ior = 1.5f;
+    TestScene t = furnace_sphere(glass);
+    RenderOptions o = path_options(16, 16, 8);
+    o.max_depth = 64;
+    o.rr_depth = 64;
+    Image image = t.render_with(looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), o);
+    // Lossless: every path leaves with throughput 1 unless it is cut at
+    // max_depth inside the sphere (total internal reflection loops are rare).
+    for (const Vec3f& p : image.pixels) {
+        EXPECT_LE(p.x, 1.0f + 1e-4f);
+        EXPECT_GE(p.x, 0.97f);
+    }
+}
+
+TEST(PathTracer, RoughGlassAndMetalsConserveEnergyInAFurnace) {
+    for (float roughness : {0.2f, 0.6f}) {
+        for (int kind = 0; kind < 2; ++kind) {
+            Material m;
+            m.base_color = Vec3f(1.0f);
+            m.roughness = roughness;
+            if (kind == 0) m.transmission = 1.0f;
+            else m.metallic = 1.0f;
+            TestScene t = furnace_sphere(m);
+            RenderOptions o = path_options(16, 16, 16);
+            o.max_depth = 32;
+            Image image = t.render_with(looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), o);
+            MeanEstimate e = mean_of(image, 0, everywhere);
+            EXPECT_LE(e.mean, 1.0 + 5.0 * e.standard_error + 1e-3) << "kind " << kind << " roughness " << roughness;
+            // Single-scattering microfacet models lose the energy of light that
+            // would scatter between microfacets: a few per cent for a rough
+            // conductor, more for rough glass, where light crosses two rough
+            // interfaces. The bounds catch a missing lobe, not that loss.
+            EXPECT_GT(e.mean, kind == 0 ? 0.6 : 0.75) << "kind " << kind << " roughness " << roughness;
+        }
+    }
+}
+
+// Inside a closed box whose walls all emit Le and reflect with albedo rho,
+// radiance is Le / (1 - rho) everywhere: every bounce, every light sample
+// and Russian roulette take part.
+TEST(PathTracer, ClosedEmittingBoxReachesTheInfiniteBounceLimit) {
+    for (int strategy = 0; strategy < 3; ++strategy) {
+        TestScene t;
+        Material wall = lambert(0.5f);
+        wall.emission = Vec3f(1.0f);
+        uint32_t m = t.add_material(wall);
+        Vec3f x(1, 0, 0), y(0, 1, 0), z(0, 0, 1);
+        // Normals point inwards.
+        t.add_quad(z, y, x, m);
+        t.add_quad(-z, x, y, m);
+        t.add_quad(x, z, y, m);
+        t.add_quad(-x, y, z, m);
+        t.add_quad(y, x, z, m);
+        t.add_quad(-y, z, x, m);
+        t.finish(Structure::Bvh);
+        RenderOptions o = path_options(12, 12, 16);
+        o.max_depth = 64;
+        o.rr_depth = 1;
+        o.light_sampling = LightSampling(strategy);
+        Image image = t.render_with(looking_at({0, 0, 0.5f}, {0, 0, -1}, 60.0f), o);
+        MeanEstimate e = mean_of(image, 0, everywhere);
+        EXPECT_NEAR(e.mean, 2.0, 5.0 * e.standard_error + 5e-3) << "strategy " << strategy;
+    }
+}
+
+TEST(PathTracer, MirrorShowsWhatItFacesTintedByItsColor) {
+    TestScene t;
+    Material mirror;
+    mirror.base_color = Vec3f(0.9f, 0.8f, 0.7f);
+    mirror.metallic = 1.0f;
+    mirror.roughness = 0.0f;
+    t.add_quad(Vec3f(0.0f), {10, 0, 0}, {0, 10, 0}, t.add_material(mirror));
+    Vec3f sky(1.0f, 0.5f, 0.25f);
+    t.add_quad({0, 0, 10}, {0, 20, 0}, {20, 0, 0}, t.add_material(emitter(sky)));  // faces -z
+    t.finish();
+    Image image = t.render_with(looking_at({0, 0, 5}, {0, 0, 0}), path_options(5, 5, 4));
+    for (const Vec3f& p : image.pixels)
+        for (int c = 0; c < 3; ++c) EXPECT_NEAR(p[c], sky[c] * mirror.base_color[c], 2e-3f);
+}
+
+TEST(PathTracer, LambertPlaneUnderPointLight) {
+    TestScene t;
+    t.add_quad(Vec3f(0.0f), {10, 0, 0}, {0, 10, 0}, t.add_material(lambert(0.5f)));
+    Light light;
+    light.position = {0, 0, 2};
+    light.intensity = 8.0f;
+    t.scene.lights.push_back(light);
+    t.finish();
+    RenderOptions o = path_options(3, 3, 4);
+    Image image = t.render_with(looking_at({0, 0, 5}, {0, 0, 0}, 0.5f), o);
+    // L = albedo / pi * I cos / d^2 at the point below the light.
+    const float expected = 0.5f / kPiF * 8.0f / 4.0f;
+    EXPECT_NEAR(image.at(1, 1).x, expected, 1e-3f * expected * 10.0f);
+}
+
+// A diffuse floor and a glossy sphere lit by a quad light and a dim
+// environment: light sampling only, BSDF sampling only and their MIS
+// combination estimate the same image.
+TEST(PathTracer, NeeBsdfAndMisEstimatesAgree) {
+    TestScene t;
+    t.add_quad(Vec3f(0.0f), {3, 0, 0}, {0, 3, 0}, t.add_material(lambert(0.7f)));
+    Material glossy;
+    glossy.base_color = Vec3f(0.9f, 0.6f, 0.3f);
+    glossy.metallic = 1.0f;
+    glossy.roughness = 0.35f;
+    t.add_sphere({0, 0, 0.6f}, 0.6f, t.add_material(glossy), 32);
+    t.add_quad({0.5f, 0.5f, 2.5f}, {0, 0.6f, 0}, {0.6f, 0, 0}, t.add_material(emitter(Vec3f(6.0f))));  // faces -z
+    t.scene.environment.color = Vec3f(0.2f);
+    t.finish(Structure::Bvh);
+    Camera camera = looking_at({0, -4, 2.5f}, {0, 0, 0.4f}, 45.0f);
+    std::vector<Image> images;
+    for (LightSampling s : {LightSampling::Mis, LightSampling::Nee, LightSampling::Bsdf}) {
+        RenderOptions o = path_options(32, 24, 24);
+        o.max_depth = 4;
+        o.light_sampling = s;
+        images.push_back(t.render_with(camera, o));
+    }
+    for (int a = 0; a < 3; ++a) {
+        for (int b = a + 1; b < 3; ++b) {
+            Image difference(images[a].width, images[a].height);
+            for (size_t i = 0; i < difference.pixels.size(); ++i)
+                difference.pixels[i] = images[a].pixels[i] - images[b].pixels[i];
+            for (int c = 0; c < 3; ++c) {
+                MeanEstimate e = mean_of(difference, c, everywhere);
+                EXPECT_NEAR(e.mean, 0.0, 5.0 * e.standard_error) << "strategies " << a << " vs " << b << " channel " << c;
+            }
+        }
+    }
+    EXPECT_GT(mean_of(images[0], 0, everywhere).mean, 0.05);  // the scene is lit
+}
+
+TEST(PathTracer, IdenticalWhateverTheThreadCountButSeedMatters) {
+    TestScene t = furnace_sphere(lambert(0.7f));
+    RenderOptions o = path_options(20, 20, 3);
+    Camera camera = looking_at({0, 0, 3}, {0, 0, 0}, 30.0f);
+    o.threads = 1;
+    Image one = t.render_with(camera, o);
+    o.threads = 2;
+    Image two = t.render_with(camera, o);
+    EXPECT_EQ(one.pixels, two.pixels);
+    o.seed = 7;
+    Image other = t.render_with(camera, o);
+    EXPECT_NE(one.pixels, other.pixels);
+}
+
+TEST(ProgressiveRenderer, PassesAccumulateAndCallbacksCanStop) {
+    TestScene t = furnace_sphere(lambert(0.7f));
+    Camera camera = looking_at({0, 0, 3}, {0, 0, 0}, 30.0f);
+    RenderOptions o = path_options(16, 16, 8);
+    ProgressiveRenderer renderer(t.scene, t.geometry, *t.accel, camera, o);
+    EXPECT_EQ(renderer.passes(), 0);
+    int calls = 0;
+    render_progressive(renderer, [&](const ProgressiveRenderer& r) {
+        ++calls;
+        EXPECT_EQ(r.passes(), calls);
+        return calls < 3;
+    });
+    EXPECT_EQ(renderer.passes(), 3);
+    EXPECT_EQ(renderer.stats().samples, 3u * 16u * 16u);
+    EXPECT_GT(renderer.stats().closest_rays, renderer.stats().samples);
+    // The mean of three passes equals three passes rendered in one go.
+    o.spp = 3;
+    Image direct = render(t.scene, t.geometry, *t.accel, camera, o);
+    EXPECT_EQ(renderer.image().pixels, direct.pixels);
+}
+
+TEST(ProgressiveRenderer, TimeBudgetStopsEarly) {
+    TestScene t = furnace_sphere(lambert(0.7f));
+    RenderOptions o = path_options(8, 8, 1 << 20);
+    o.time_budget_s = 0.05;
+    ProgressiveRenderer renderer(t.scene, t.geometry, *t.accel, looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), o);
+    render_progressive(renderer);
+    EXPECT_GE(renderer.passes(), 1);
+    EXPECT_LT(renderer.passes(), 1 << 20);
+}
+
+TEST(ProgressiveRenderer, AovsDescribeTheFirstHit) {
+    TestScene t;
+    Material m = lambert(0.25f);
+    m.base_color = Vec3f(0.25f, 0.5f, 0.75f);
+    t.add_quad(Vec3f(0.0f), {10, 0, 0}, {0, 10, 0}, t.add_material(m));
+    t.finish();
+    for (IntegratorKind k : {IntegratorKind::Path, IntegratorKind::Whitted}) {
+        RenderOptions o = path_options(3, 3, 2);
+        o.integrator = k;
+        o.aovs = true;
+        ProgressiveRenderer renderer(t.scene, t.geometry, *t.accel, looking_at({0, 0, 5}, {0, 0, 0}, 1.0f), o);
+        render_progressive(renderer);
+        const Vec3f albedo = renderer.albedo().at(1, 1), normal = renderer.normal().at(1, 1);
+        EXPECT_NEAR(albedo.x, 0.25f, 1e-4f);
+        EXPECT_NEAR(albedo.z, 0.75f, 1e-4f);
+        EXPECT_NEAR(normal.z, 1.0f, 1e-4f);
+        EXPECT_NEAR(renderer.depth().at(1, 1).x, 5.0f, 1e-3f);
+    }
+    RenderOptions o = path_options(3, 3, 1);
+    ProgressiveRenderer plain(t.scene, t.geometry, *t.accel, looking_at({0, 0, 5}, {0, 0, 0}, 1.0f), o);
+    plain.render_pass();
+    EXPECT_EQ(plain.albedo().width, 0);  // AOVs off: nothing accumulated
+}
+
+}  // namespace
+}  // namespace rf
