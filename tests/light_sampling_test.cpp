@@ -628,8 +628,10 @@ TEST(EnvironmentMap, SamplePdfMatchesPdfOnARandomMap) {
             if (std::fabs(d.y) > 0.999f) continue;
             ASSERT_NEAR(length(d), 1.0f, 1e-5f);
             ASSERT_NEAR(env.pdf(d), pdf, 1e-3f * pdf) << "sample " << i;
+            // sample() looks the map up at the sampled (u, v) directly; the
+            // round trip through the direction differs by float error only.
             Vec3f expected = env.radiance(d);
-            for (int k = 0; k < 3; ++k) ASSERT_EQ(radiance[k], expected[k]);
+            for (int k = 0; k < 3; ++k) ASSERT_NEAR(radiance[k], expected[k], 1e-3f * std::fmax(expected[k], 1.0f));
             ++checked;
         }
         EXPECT_GT(checked, 19000);

@@ -92,62 +92,64 @@ public:
         b.index_matched_ = fabsf(b.eta_ - 1.0f) < 1e-3f;
         return b;
     }
+    // The same, with the terms that depend only on wo (local direction, lobe
+    // probabilities, Fresnel at n.wo) computed once: a path vertex evaluates
+    // its BSDF for the light sample and again for the sampled direction.
+    RF_HD static Bsdf make(const MaterialSample& m, Vec3f n, Vec3f ng, float eta, Vec3f wo) {
+        Bsdf b = make(m, n, ng, eta);
+        b.cached_wo_ = wo;
+        b.cached_valid_ = b.compute_view_terms(wo, b.cached_o_, b.cached_p_, b.cached_fresnel_o_);
+        b.cached_ = true;
+        return b;
+    }
 
     // f(wo,wi) * |dot(n,wi)| summed over the non-delta lobes.
     RF_HD Vec3f eval(Vec3f wo, Vec3f wi) const {
-        Vec3f o = to_local(wo), i = to_local(wi);
-        if (!(o.z > kBsdfMinCos)) return Vec3f(0.0f);
-        float geometric_cos = dot(ng_, wi);
-        Vec3f f(0.0f);
-        if (i.z > kBsdfMinCos && geometric_cos > 0.0f) {
-            if (!smooth_) {
-                Vec3f h = normalize(o + i);
-                float cos_oh = fmaxf(dot(o, h), 0.0f);
-                // D G2 / (4 o.z i.z) times the cosine i.z.
-                float spec = ggx_d(h, alpha_) * ggx_g2(o, i, alpha_) / (4.0f * o.z);
-                if (metal_weight_ > 0.0f) f += schlick_fresnel(base_, cos_oh) * (metal_weight_ * spec);
-                // (An index-matched interface is a delta lobe: its tiny reflection is sampled there.)
-                if (dielectric_weight_ > 0.0f && !index_matched_)
-                    f += Vec3f(dielectric_weight_ * reflect_fresnel(cos_oh) * spec);
-            }
-            float diffuse = diffuse_weight();
-            if (diffuse > 0.0f) {
-                float through = (1.0f - opaque_fresnel(o.z)) * (1.0f - opaque_fresnel(i.z));
-                f += base_ * (diffuse * through * kInvPi * i.z);
-            }
-        } else if (i.z < -kBsdfMinCos && geometric_cos < 0.0f && rough_transmission()) {
-            Vec3f h;
-            float jacobian;
-            if (transmission_half_vector(o, i, h, jacobian)) {
-                float cos_oh = dot(o, h);
-                float fresnel = dielectric_fresnel_exact(cos_oh, eta_);
-                // D G2 |o.h| |i.h| / (o.z |i.z| (eta o.h + i.h)^2) times |i.z|;
-                // `jacobian` is |i.h| / (eta o.h + i.h)^2.
-                float t = ggx_d(h, alpha_) * ggx_g2(o, i, alpha_) * cos_oh * jacobian / o.z;
-                f += base_ * (dielectric_weight_ * transmission_ * (1.0f - fresnel) * t);
-            }
-        }
-        return f;
+        float unused;
+        return evaluate(wo, wi, unused);
     }
 
     // Solid-angle density with which sample() draws wi from the non-delta
     // lobes, lobe selection included.
     RF_HD float pdf(Vec3f wo, Vec3f wi) const {
-        Vec3f o = to_local(wo), i = to_local(wi);
-        if (!(o.z > kBsdfMinCos)) return 0.0f;
-        float p[kLobeCount];
-        if (!lobe_probabilities(o.z, p)) return 0.0f;
+        float density;
+        evaluate(wo, wi, density);
+        return density;
+    }
+
+    // eval() and pdf() together: they share the half vector, the Fresnel
+    // terms and the lobe probabilities, and light sampling needs both.
+    RF_HD Vec3f evaluate(Vec3f wo, Vec3f wi, float& density) const {
+        density = 0.0f;
+        Vec3f o;
+        float p[kLobeCount], fresnel_o;
+        if (!view_terms(wo, o, p, fresnel_o)) return Vec3f(0.0f);
+        Vec3f i = to_local(wi);
         float geometric_cos = dot(ng_, wi);
-        float density = 0.0f;
+        Vec3f f(0.0f);
         if (i.z > kBsdfMinCos && geometric_cos > 0.0f) {
             if (!smooth_) {
                 Vec3f h = normalize(o + i);
                 float cos_oh = dot(o, h);
                 if (cos_oh > 0.0f) {
-                    float reflect_pdf = ggx_vndf_pdf(o, h, alpha_) / (4.0f * cos_oh);
+                    // D G2 / (4 o.z i.z) times the cosine i.z.
+                    float d = ggx_d(h, alpha_);
+                    float spec = d * ggx_g2(o, i, alpha_) / (4.0f * o.z);
+                    // The visible-normal density D_v(h) / (4 o.h) of the reflected direction.
+                    float reflect_pdf = ggx_g1(o, alpha_) * d / (4.0f * o.z);
+                    if (metal_weight_ > 0.0f) f += schlick_fresnel(base_, cos_oh) * (metal_weight_ * spec);
                     density += p[kMetal] * reflect_pdf;
-                    if (!index_matched_) density += p[kDielectric] * reflect_probability(cos_oh) * reflect_pdf;
+                    // (An index-matched interface is a delta lobe: its tiny reflection is sampled there.)
+                    if (!index_matched_) {
+                        if (dielectric_weight_ > 0.0f) f += Vec3f(dielectric_weight_ * reflect_fresnel(cos_oh) * spec);
+                        density += p[kDielectric] * reflect_probability(cos_oh) * reflect_pdf;
+                    }
                 }
+            }
+            float diffuse = diffuse_weight();
+            if (diffuse > 0.0f) {
+                float through = (1.0f - fresnel_o) * (1.0f - opaque_fresnel(i.z));
+                f += base_ * (diffuse * through * kInvPi * i.z);
             }
             density += p[kDiffuse] * i.z * kInvPi;
         } else if (i.z < -kBsdfMinCos && geometric_cos < 0.0f && rough_transmission()) {
@@ -155,20 +157,26 @@ public:
             float jacobian;
             if (transmission_half_vector(o, i, h, jacobian)) {
                 float cos_oh = dot(o, h);
+                float fresnel = dielectric_fresnel_exact(cos_oh, eta_);
+                float d = ggx_d(h, alpha_);
+                // D G2 |o.h| |i.h| / (o.z |i.z| (eta o.h + i.h)^2) times |i.z|;
+                // `jacobian` is |i.h| / (eta o.h + i.h)^2.
+                float t = d * ggx_g2(o, i, alpha_) * cos_oh * jacobian / o.z;
+                f += base_ * (dielectric_weight_ * transmission_ * (1.0f - fresnel) * t);
                 density += p[kDielectric] * (1.0f - reflect_probability(cos_oh)) * ggx_vndf_pdf(o, h, alpha_) *
                            jacobian;
             }
         }
-        return is_finite(density) ? density : 0.0f;
+        if (!is_finite(density)) density = 0.0f;
+        return f;
     }
 
     // u_lobe picks the lobe (and, rescaled, reflection vs refraction), u the
     // direction. False: absorbed or invalid (out is then unspecified).
     RF_HD bool sample(Vec3f wo, float u_lobe, Vec2f u, BsdfSample& out) const {
-        Vec3f o = to_local(wo);
-        if (!(o.z > kBsdfMinCos)) return false;
-        float p[kLobeCount];
-        if (!lobe_probabilities(o.z, p)) return false;
+        Vec3f o;
+        float p[kLobeCount], fresnel_o;
+        if (!view_terms(wo, o, p, fresnel_o)) return false;
 
         // Pick a lobe; u_lobe is rescaled to [0, 1) within the chosen interval.
         int lobe = -1;
@@ -217,9 +225,8 @@ public:
         }
 
         out.wi = frame_.to_world(i);
-        out.pdf = pdf(wo, out.wi);
+        Vec3f f = evaluate(wo, out.wi, out.pdf);
         if (!(out.pdf > 0.0f)) return false;
-        Vec3f f = eval(wo, out.wi);
         if (!(max_component(f) > 0.0f)) return false;
         out.weight = f / out.pdf;
         out.delta = false;
@@ -243,6 +250,23 @@ private:
     enum { kMetal = 0, kDielectric = 1, kDiffuse = 2, kLobeCount = 3 };
 
     RF_HD Vec3f to_local(Vec3f w) const { return {dot(w, frame_.t), dot(w, frame_.b), dot(w, frame_.n)}; }
+
+    // wo in the local frame, the lobe probabilities and the opaque Fresnel at
+    // n.wo; false when wo grazes or is below the shading hemisphere.
+    RF_HD bool compute_view_terms(Vec3f wo, Vec3f& o, float p[kLobeCount], float& fresnel_o) const {
+        o = to_local(wo);
+        if (!(o.z > kBsdfMinCos)) return false;
+        if (!lobe_probabilities(o.z, p)) return false;
+        fresnel_o = opaque_fresnel(o.z);
+        return true;
+    }
+    RF_HD bool view_terms(Vec3f wo, Vec3f& o, float p[kLobeCount], float& fresnel_o) const {
+        if (!(cached_ && wo == cached_wo_)) return compute_view_terms(wo, o, p, fresnel_o);
+        o = cached_o_;
+        for (int k = 0; k < kLobeCount; ++k) p[k] = cached_p_[k];
+        fresnel_o = cached_fresnel_o_;
+        return cached_valid_;
+    }
 
     RF_HD float diffuse_weight() const { return dielectric_weight_ * (1.0f - transmission_); }
     RF_HD bool rough_transmission() const {
@@ -325,6 +349,11 @@ private:
     float alpha_ = 1.0f;
     bool smooth_ = false;
     bool index_matched_ = false;
+    // View terms for the wo given to make() (see there).
+    Vec3f cached_wo_, cached_o_;
+    float cached_p_[kLobeCount] = {0.0f, 0.0f, 0.0f};
+    float cached_fresnel_o_ = 0.0f;
+    bool cached_ = false, cached_valid_ = false;
 };
 
 }  // namespace rf

@@ -102,7 +102,9 @@ struct EnvironmentLight {
             return Vec3f(0.0f);
         }
         pdf_solid_angle = pdf_uv / (2.0f * kPi * kPi * sin_theta);
-        return radiance(dir);
+        // radiance(dir) would map dir back to (tex_u, tex_v); look it up directly.
+        Vec4f c = sample_texture(map, Vec2f{tex_u, tex_v});
+        return Vec3f(c.x, c.y, c.z) * strength;
     }
 
     // Solid-angle density with which sample() returns unit direction `dir`.

@@ -37,6 +37,7 @@ HostSceneView::HostSceneView(const Scene& scene, const SceneGeometry& geometry)
     : scene_(&scene),
       geometry_(&geometry),
       materials_(shading_materials(scene)),
+      shading_triangles_(build_shading_triangles(scene, geometry)),
       lights_(scene, geometry, materials_) {
     const std::vector<uint8_t> needs_mips = textures_needing_mips(scene);
     mip_chains_.resize(scene.textures.size());

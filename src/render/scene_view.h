@@ -16,6 +16,7 @@
 #include "render/area_lights.h"
 #include "render/light_set.h"
 #include "render/material_eval.h"
+#include "render/shading_triangles.h"
 #include "render/texture_mip.h"
 #include "render/texture_sampling.h"
 
@@ -28,8 +29,10 @@ public:
     HostSceneView(const Scene& scene, const SceneGeometry& geometry);
 
     [[nodiscard]] SurfaceHit surface(const Ray& ray, const Hit& hit) const {
-        return surface_at(*scene_, *geometry_, ray, hit);
+        return shading_surface(shading_triangles_[hit.prim], ray, hit);
     }
+    // The material of triangle `prim`, without interpolating anything.
+    [[nodiscard]] uint32_t material_id(uint32_t prim) const { return shading_triangles_[prim].material; }
     [[nodiscard]] const ShadingMaterial& material(uint32_t id) const {
         return materials_[id < materials_.size() ? id : 0];
     }
@@ -56,13 +59,15 @@ public:
     [[nodiscard]] float diagonal() const { return diagonal_; }
     // How far secondary rays start off a surface: relative to the scene size.
     [[nodiscard]] float ray_epsilon() const { return ray_epsilon_; }
-    // Memory of the mip chains built for this view.
+    // Memory of the mip chains and shading records built for this view.
     [[nodiscard]] size_t mip_bytes() const;
+    [[nodiscard]] size_t shading_bytes() const { return shading_triangles_.size() * sizeof(ShadingTriangle); }
 
 private:
     const Scene* scene_;
     const SceneGeometry* geometry_;
     std::vector<ShadingMaterial> materials_;
+    std::vector<ShadingTriangle> shading_triangles_;
     std::vector<std::unique_ptr<MipChain>> mip_chains_;  // parallel to scene.textures; null for unused textures
     std::vector<MipTextureView> textures_;
     HostLightSet lights_;

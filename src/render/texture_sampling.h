@@ -63,6 +63,8 @@ RF_HDI int wrap_texel(int i, int size, TextureWrap wrap) {
         }
         case TextureWrap::Repeat:
         default: {
+            // Power-of-two sizes (most textures) wrap with a mask instead of a division.
+            if ((size & (size - 1)) == 0) return i & (size - 1);
             int m = i % size;
             return m < 0 ? m + size : m;
         }

@@ -121,16 +121,17 @@ RF_HD Vec3f path_radiance(const Tracer& tracer, const View& view, Ray ray, Rando
         }
 
         const float eta = si.front_face ? 1.0f / si.material.ior : si.material.ior;
-        const Bsdf bsdf = Bsdf::make(si.material, si.facing_shading, ng, eta);
-        if (depth == 0 && aovs) aovs->albedo = bsdf.albedo();
         const Vec3f wo = -dir;
+        const Bsdf bsdf = Bsdf::make(si.material, si.facing_shading, ng, eta, wo);
+        if (depth == 0 && aovs) aovs->albedo = bsdf.albedo();
 
         if (use_nee && !bsdf.is_delta()) {
             const float u_select = rng.next();
             const Vec2f u_light = rng.next2();
             LightSample ls;
             if (sample_light(view, lights, p, u_select, u_light, ls) && ls.pdf > 0.0f) {
-                const Vec3f f = bsdf.eval(wo, ls.wi);
+                float bsdf_pdf = 0.0f;
+                const Vec3f f = bsdf.evaluate(wo, ls.wi, bsdf_pdf);
                 if (max_component(f) > 0.0f) {
                     Ray shadow;
                     shadow.org = offset_origin(p, ng, ls.wi, epsilon);
@@ -138,7 +139,7 @@ RF_HD Vec3f path_radiance(const Tracer& tracer, const View& view, Ray ray, Rando
                     shadow.tmin = 0.0f;
                     shadow.tmax = ls.distance < kInfinity ? ls.distance - 2.0f * epsilon : kInfinity;
                     if (shadow.tmax > 0.0f && unoccluded(tracer, view, shadow, epsilon, rng)) {
-                        const float weight = (ls.delta || !mis) ? 1.0f : power_heuristic(ls.pdf, bsdf.pdf(wo, ls.wi));
+                        const float weight = (ls.delta || !mis) ? 1.0f : power_heuristic(ls.pdf, bsdf_pdf);
                         radiance += throughput * f * ls.radiance * (weight / ls.pdf);
                     }
                 }

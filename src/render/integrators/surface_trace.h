@@ -112,9 +112,9 @@ RF_HD bool unoccluded(const Tracer& tracer, const View& view, Ray ray, float eps
     for (int skip = 0; skip <= kMaxAlphaSkips; ++skip) {
         Hit hit = tracer.intersect(ray);
         if (!hit.found()) return true;
-        SurfaceHit surface = view.surface(ray, hit);
-        const ShadingMaterial& m = view.material(surface.material);
+        const ShadingMaterial& m = view.material(view.material_id(hit.prim));
         if (m.alpha_mode == AlphaMode::Opaque) return false;
+        SurfaceHit surface = view.surface(ray, hit);
         MaterialSample sample = evaluate_material(view, m, surface.uv);
         bool passes = m.alpha_mode == AlphaMode::Mask ? sample.alpha < m.alpha_cutoff : rng.next() >= sample.alpha;
         if (!passes) return false;
