@@ -127,6 +127,22 @@ TEST(JsonScene, CameraLightsEnvironmentAndRenderSettings) {
     EXPECT_FLOAT_EQ(*scene.render_settings.ao_radius, 0.5f);
 }
 
+TEST(JsonScene, PathAndWhittedRenderSettings) {
+    const std::string path = write_scene("json_scene_render_settings", R"({
+        "meshes": [{"file": "builtin:triangle"}],
+        "render": {"integrator": "path", "max_depth": 5, "rr_depth": 2, "light_sampling": "nee",
+                   "reflection_depth": 3, "refraction_depth": 4, "shading": "blinn"}})");
+    const Scene scene = load_scene(path);
+    const RenderSettings& r = scene.render_settings;
+    EXPECT_EQ(r.integrator, "path");
+    EXPECT_EQ(r.max_depth, 5);
+    EXPECT_EQ(r.rr_depth, 2);
+    EXPECT_EQ(r.light_sampling, "nee");
+    EXPECT_EQ(r.reflection_depth, 3);
+    EXPECT_EQ(r.refraction_depth, 4);
+    EXPECT_EQ(r.shading, "blinn");
+}
+
 TEST(JsonScene, LightsAndCameraOfReferencedFilesAreTransformed) {
     const std::string gltf = test::data_path("gltf/hierarchy.gltf");
     const std::string path = write_scene(
@@ -189,6 +205,10 @@ TEST(JsonScene, TypeErrorsNameTheirPath) {
         {R"({"meshes": [{"file": "builtin:triangle", "transform": {"matrix": [1, 2]}}]})",
          "meshes[0].transform.matrix: expected an array of 16 numbers"},
         {R"({"environment": {"strength": -1}})", "environment.strength"},
+        {R"({"render": {"integrator": "pathtracer"}})", "render.integrator: unknown value 'pathtracer'"},
+        {R"({"render": {"light_sampling": "all"}})", "render.light_sampling: unknown value"},
+        {R"({"render": {"shading": "gouraud"}})", "render.shading: unknown value"},
+        {R"({"render": {"rr_depth": -1}})", "render.rr_depth: expected an integer"},
         {R"([1, 2, 3])", "top level"},
     };
     int n = 0;
