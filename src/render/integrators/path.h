@@ -70,6 +70,7 @@ RF_HD Vec3f path_radiance(const Tracer& tracer, const View& view, Ray ray, Rando
     bool previous_delta = true;  // the camera ray counts as delta: emitters seen directly are never weighted
     RayCone cone{0.0f, settings.pixel_spread};
     int pass_throughs = 0;
+    float passed_distance = 0.0f;  // along the camera ray, through blended surfaces (depth AOV)
 
     for (int depth = 0;;) {
         SurfaceInteraction si;
@@ -93,6 +94,7 @@ RF_HD Vec3f path_radiance(const Tracer& tracer, const View& view, Ray ray, Rando
         if (si.alpha_mode == AlphaMode::Blend && si.material.alpha < 1.0f && pass_throughs < kMaxPassThroughs &&
             rng.next() >= si.material.alpha) {
             ++pass_throughs;
+            if (depth == 0) passed_distance += si.distance;
             cone = cone.propagate(si.distance);
             ray.org = p - ng * epsilon;
             ray.tmin = 0.0f;
@@ -101,7 +103,7 @@ RF_HD Vec3f path_radiance(const Tracer& tracer, const View& view, Ray ray, Rando
         }
         if (depth == 0 && aovs) {
             aovs->normal = si.facing_shading;
-            aovs->depth = si.distance;
+            aovs->depth = passed_distance + si.distance;
         }
 
         const Vec3f emission = si.material.emission;
