@@ -17,6 +17,7 @@
 #include "render/environment_map.h"
 #include "render/light_sampling.h"
 #include "render/light_set.h"
+#include "render_test_scene.h"
 
 namespace rf {
 namespace {
@@ -35,17 +36,11 @@ struct Uniform {
 };
 
 // A scene built in code that also acts as the View sample_light expects.
-struct TestWorld {
-    Scene scene;
-    SceneGeometry geometry;
+struct TestWorld : TestScene {
     std::vector<ShadingMaterial> materials;
     std::vector<TextureView> textures;
     std::unique_ptr<HostLightSet> light_set;
 
-    uint32_t add_material(const Material& m) {
-        scene.materials.push_back(m);
-        return uint32_t(scene.materials.size() - 1);
-    }
     uint32_t add_emitter(Vec3f radiance, bool double_sided = false, int32_t texture = kNoTexture) {
         Material m;
         m.base_color = Vec3f(0.0f);
@@ -53,15 +48,6 @@ struct TestWorld {
         m.emission_texture = texture;
         m.double_sided = double_sided;
         return add_material(m);
-    }
-    // Rectangle centred at c spanning c +- u +- v; it faces along cross(u, v).
-    void add_quad(Vec3f c, Vec3f u, Vec3f v, uint32_t material) {
-        Mesh mesh;
-        mesh.name = "quad" + std::to_string(scene.meshes.size());
-        mesh.positions = {c - u - v, c + u - v, c + u + v, c - u + v};
-        mesh.indices = {0, 1, 2, 0, 2, 3};
-        mesh.material_ids = {material, material};
-        scene.meshes.push_back(mesh);
     }
     void add_triangle(Vec3f a, Vec3f b, Vec3f c, uint32_t material) {
         Mesh mesh;
@@ -99,13 +85,8 @@ struct TestWorld {
     }
     SurfaceHit emitter_surface(const AreaLightSample& s) const {
         Ray ray;
-        ray.org = s.position - s.normal;
-        ray.dir = s.normal;
         Hit hit;
-        hit.t = 1.0f;
-        hit.u = s.b1;
-        hit.v = s.b2;
-        hit.prim = s.prim;
+        emitter_ray_hit(s, ray, hit);
         return surface_at(scene, geometry, ray, hit);
     }
 };

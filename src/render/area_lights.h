@@ -40,6 +40,18 @@ struct AreaLightSample {
     float pdf_area = 0.0f;       // probability density per unit area
 };
 
+// A ray and hit that reach the sampled point at t = 1, so that a scene view
+// interpolates the emitter's attributes there (material, uv for emission
+// textures) the way it does at any hit.
+RF_HDI void emitter_ray_hit(const AreaLightSample& s, Ray& ray, Hit& hit) {
+    ray.org = s.position - s.normal;
+    ray.dir = s.normal;
+    hit.t = 1.0f;
+    hit.u = s.b1;
+    hit.v = s.b2;
+    hit.prim = s.prim;
+}
+
 // A point on an emitter for the random numbers u_select, u_point; pdf_area is
 // 0 when the table is empty or the chosen triangle is degenerate.
 RF_HD inline AreaLightSample sample_area_light(const EmitterTable& table, const Triangle* triangles,

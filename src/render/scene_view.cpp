@@ -70,16 +70,9 @@ size_t HostSceneView::mip_bytes() const {
 }
 
 SurfaceHit HostSceneView::emitter_surface(const AreaLightSample& s) const {
-    // surface_at interpolates from the hit's barycentrics; the ray only has to
-    // reach the sampled point at t = 1.
     Ray ray;
-    ray.org = s.position - s.normal;
-    ray.dir = s.normal;
     Hit hit;
-    hit.t = 1.0f;
-    hit.u = s.b1;
-    hit.v = s.b2;
-    hit.prim = s.prim;
+    emitter_ray_hit(s, ray, hit);
     return surface(ray, hit);
 }
 

@@ -43,13 +43,8 @@ struct DeviceSceneView {
     RF_HD const Triangle* triangles() const { return lights.triangles; }
     RF_HD SurfaceHit emitter_surface(const AreaLightSample& s) const {
         Ray ray;
-        ray.org = s.position - s.normal;
-        ray.dir = s.normal;
         Hit hit;
-        hit.t = 1.0f;
-        hit.u = s.b1;
-        hit.v = s.b2;
-        hit.prim = s.prim;
+        emitter_ray_hit(s, ray, hit);
         return surface(ray, hit);
     }
     RF_HD Vec3f environment(Vec3f dir) const { return lights.environment.radiance(dir); }

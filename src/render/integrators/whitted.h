@@ -29,6 +29,7 @@
 #include "rayforge/scene/light.h"
 #include "render/area_lights.h"
 #include "render/integrators/surface_trace.h"
+#include "render/light_sampling.h"
 #include "render/random.h"
 #include "render/sampling.h"
 
@@ -73,16 +74,6 @@ RF_HDI bool refract(Vec3f d, Vec3f n, float eta, Vec3f& out) {
     float cos_t = sqrtf(1.0f - sin2_t);
     out = normalize(d * eta + n * (eta * cos_i - cos_t));
     return true;
-}
-
-// Angular falloff of a glTF spot light for the cosine between its axis and
-// the direction to the shaded point.
-RF_HDI float spot_attenuation(const Light& light, float cos_angle) {
-    float cos_outer = cosf(light.outer_cone_radians);
-    float cos_inner = cosf(light.inner_cone_radians);
-    if (cos_inner - cos_outer <= 1e-6f) return cos_angle >= cos_outer ? 1.0f : 0.0f;
-    float t = fminf(fmaxf((cos_angle - cos_outer) / (cos_inner - cos_outer), 0.0f), 1.0f);
-    return t * t;
 }
 
 // Highlight of one light for the Phong / Blinn-Phong options: the lobe value
@@ -134,7 +125,7 @@ RF_HD Vec3f direct_lighting(const Tracer& tracer, const View& view, const Surfac
             wi = to_light / distance;
             incident = light.color * (light.intensity / d2);
             if (light.type == LightType::Spot)
-                incident *= spot_attenuation(light, dot(-wi, normalize(light.direction)));
+                incident *= spot_falloff(light, dot(-wi, normalize(light.direction)));
         }
         float cos_theta = dot(n, wi);
         if (cos_theta <= 0.0f || dot(ng, wi) <= 0.0f || max_component(incident) <= 0.0f) continue;
