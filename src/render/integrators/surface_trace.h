@@ -67,7 +67,9 @@ RF_HD bool trace_surface(const Tracer& tracer, const View& view, Ray ray, float 
         const float distance = travelled + hit.t * dir_length;
         const float cos_incidence = dot(surface.geometric_normal, ray.dir) / dir_length;
         float lod_base = -kInfinity;
-        if (surface.uv_area_ratio > 0.0f && cone.width + cone.spread > 0.0f)
+        const bool textured = m.base_color_texture != kNoTexture || m.metallic_roughness_texture != kNoTexture ||
+                              m.normal_texture != kNoTexture || m.emission_texture != kNoTexture;
+        if (textured && surface.uv_area_ratio > 0.0f && cone.width + cone.spread > 0.0f)
             lod_base = texture_lod_base(0.5f * log2f(surface.uv_area_ratio), cone.propagate(distance).width,
                                         cos_incidence);
         MaterialSample sample = evaluate_material(view, m, surface.uv, lod_base);
