@@ -162,17 +162,11 @@ TEST(PathTracer, ClosedEmittingBoxReachesTheInfiniteBounceLimit) {
 
 TEST(PathTracer, MirrorShowsWhatItFacesTintedByItsColor) {
     TestScene t;
-    Material mirror;
-    mirror.base_color = Vec3f(0.9f, 0.8f, 0.7f);
-    mirror.metallic = 1.0f;
-    mirror.roughness = 0.0f;
-    t.add_quad(Vec3f(0.0f), {10, 0, 0}, {0, 10, 0}, t.add_material(mirror));
-    Vec3f sky(1.0f, 0.5f, 0.25f);
-    t.add_quad({0, 0, 10}, {0, 20, 0}, {20, 0, 0}, t.add_material(emitter(sky)));  // faces -z
-    t.finish();
+    const Vec3f tint(0.9f, 0.8f, 0.7f), sky(1.0f, 0.5f, 0.25f);
+    add_mirror_facing_sky(t, tint, sky);
     Image image = t.render_with(looking_at({0, 0, 5}, {0, 0, 0}), path_options(5, 5, 4));
     for (const Vec3f& p : image.pixels)
-        for (int c = 0; c < 3; ++c) EXPECT_NEAR(p[c], sky[c] * mirror.base_color[c], 2e-3f);
+        for (int c = 0; c < 3; ++c) EXPECT_NEAR(p[c], sky[c] * tint[c], 2e-3f);
 }
 
 TEST(PathTracer, LambertPlaneUnderPointLight) {

@@ -92,6 +92,19 @@ inline Material emitter(Vec3f radiance) {
     return m;
 }
 
+// A polished metal quad at z = 0 facing +z, tinted `tint`, and behind a
+// camera on the +z axis an emitting quad of radiance `sky` facing it: the
+// mirror must show sky * tint. Finishes the scene.
+inline void add_mirror_facing_sky(TestScene& t, Vec3f tint, Vec3f sky) {
+    Material mirror;
+    mirror.base_color = tint;
+    mirror.metallic = 1.0f;
+    mirror.roughness = 0.0f;
+    t.add_quad(Vec3f(0.0f), {10, 0, 0}, {0, 10, 0}, t.add_material(mirror));
+    t.add_quad({0, 0, 10}, {0, 20, 0}, {20, 0, 0}, t.add_material(emitter(sky)));  // faces -z
+    t.finish();
+}
+
 inline Camera looking_at(Vec3f eye, Vec3f target, float fov = 40.0f) {
     Camera c;
     c.eye = eye;

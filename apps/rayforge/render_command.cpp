@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <sstream>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "commands.h"
@@ -174,19 +175,23 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
         ->check(CLI::NonNegativeNumber);
     a.max_depth_opt = cmd->add_option("--max-depth", a.max_depth, "path: bounces after the camera ray (default 8)")
                           ->check(CLI::Range(0, 1024));
-    a.rr_depth_opt = cmd->add_option("--rr-depth", a.rr_depth, "path: Russian roulette from this bounce on (default 3)")
-        ->check(CLI::Range(0, 1024));
-    a.light_sampling_opt = cmd->add_option("--light-sampling", a.light_sampling,
-                    "path: mis (light and BSDF sampling combined, default) | nee (light sampling only) | bsdf")
-        ->check(CLI::IsMember({"mis", "nee", "bsdf"}));
+    a.rr_depth_opt =
+        cmd->add_option("--rr-depth", a.rr_depth, "path: Russian roulette from this bounce on (default 3)")
+            ->check(CLI::Range(0, 1024));
+    a.light_sampling_opt =
+        cmd->add_option("--light-sampling", a.light_sampling,
+                        "path: mis (light and BSDF sampling combined, default) | nee (light sampling only) | bsdf")
+            ->check(CLI::IsMember({"mis", "nee", "bsdf"}));
     cmd->add_option("--clamp", a.clamp, "path: clamp each sample's radiance to this (0 = off; biased)")
         ->check(CLI::NonNegativeNumber);
-    a.reflection_depth_opt = cmd->add_option("--reflection-depth", a.reflection_depth, "whitted: reflections per path (default 1, as seed 001)")
-        ->check(CLI::Range(0, 30));
-    a.refraction_depth_opt = cmd->add_option("--refraction-depth", a.refraction_depth, "whitted: refractions per path (default 2, as seed 001)")
-        ->check(CLI::Range(0, 30));
+    a.reflection_depth_opt =
+        cmd->add_option("--reflection-depth", a.reflection_depth, "whitted: reflections per path (default 1, as seed 001)")
+            ->check(CLI::Range(0, 30));
+    a.refraction_depth_opt =
+        cmd->add_option("--refraction-depth", a.refraction_depth, "whitted: refractions per path (default 2, as seed 001)")
+            ->check(CLI::Range(0, 30));
     a.shading_opt = cmd->add_option("--shading", a.shading, "whitted: lambert (default) | phong | blinn highlights")
-        ->check(CLI::IsMember({"lambert", "phong", "blinn"}));
+                        ->check(CLI::IsMember({"lambert", "phong", "blinn"}));
     a.ao_radius_opt = cmd->add_option("--ao-radius", a.ao_radius, "ao: ray length (0 = 10% of the scene diagonal)")
                           ->check(CLI::NonNegativeNumber);
     cmd->add_option("--ao-samples", a.ao_samples, "ao: rays per sample (default 16)")->check(CLI::Range(1, 65536));
@@ -222,31 +227,31 @@ int run_render(const RenderArgs& a) {
     SceneGeometry geometry = SceneGeometry::build(scene);
     double load_ms = ms_since(start);
 
-    // Scene file settings first, then whatever the command line says.
+    // A command-line option when given, else the scene file's setting, else the default.
+    auto pick = [](const CLI::Option* option, const auto& cli, const auto& file, const auto& fallback) {
+        using T = std::decay_t<decltype(fallback)>;
+        return option->count() > 0 ? T(cli) : T(file.value_or(fallback));
+    };
     const RenderSettings& file = scene.render_settings;
+    const RenderOptions defaults;
     RenderOptions options;
-    options.width = file.width.value_or(options.width);
-    options.height = file.height.value_or(options.height);
-    options.spp = file.spp.value_or(options.spp);
-    options.max_depth = file.max_depth.value_or(options.max_depth);
-    options.ao_radius = file.ao_radius.value_or(options.ao_radius);
-    if (file.integrator) options.integrator = parse_integrator(*file.integrator);
+    options.width = file.width.value_or(defaults.width);
+    options.height = file.height.value_or(defaults.height);
     if (a.resolution_opt->count() > 0) parse_resolution(a.resolution, options.width, options.height);
-    if (a.spp_opt->count() > 0) options.spp = a.spp;
-    if (a.integrator_opt->count() > 0) options.integrator = parse_integrator(a.integrator);
-    if (a.max_depth_opt->count() > 0) options.max_depth = a.max_depth;
-    if (a.ao_radius_opt->count() > 0) options.ao_radius = a.ao_radius;
-    options.rr_depth = a.rr_depth_opt->count() > 0 ? a.rr_depth : file.rr_depth.value_or(options.rr_depth);
-    options.reflection_depth = a.reflection_depth_opt->count() > 0
-                                   ? a.reflection_depth
-                                   : file.reflection_depth.value_or(options.reflection_depth);
-    options.refraction_depth = a.refraction_depth_opt->count() > 0
-                                   ? a.refraction_depth
-                                   : file.refraction_depth.value_or(options.refraction_depth);
-    if (a.light_sampling_opt->count() > 0) options.light_sampling = parse_light_sampling(a.light_sampling);
-    else if (file.light_sampling) options.light_sampling = parse_light_sampling(*file.light_sampling);
-    if (a.shading_opt->count() > 0) options.whitted_shading = parse_whitted_shading(a.shading);
-    else if (file.shading) options.whitted_shading = parse_whitted_shading(*file.shading);
+    options.spp = pick(a.spp_opt, a.spp, file.spp, defaults.spp);
+    options.max_depth = pick(a.max_depth_opt, a.max_depth, file.max_depth, defaults.max_depth);
+    options.rr_depth = pick(a.rr_depth_opt, a.rr_depth, file.rr_depth, defaults.rr_depth);
+    options.reflection_depth = pick(a.reflection_depth_opt, a.reflection_depth, file.reflection_depth,
+                                    defaults.reflection_depth);
+    options.refraction_depth = pick(a.refraction_depth_opt, a.refraction_depth, file.refraction_depth,
+                                    defaults.refraction_depth);
+    options.ao_radius = pick(a.ao_radius_opt, a.ao_radius, file.ao_radius, defaults.ao_radius);
+    options.integrator =
+        parse_integrator(pick(a.integrator_opt, a.integrator, file.integrator, integrator_name(defaults.integrator)));
+    options.light_sampling = parse_light_sampling(
+        pick(a.light_sampling_opt, a.light_sampling, file.light_sampling, to_string(defaults.light_sampling)));
+    options.whitted_shading =
+        parse_whitted_shading(pick(a.shading_opt, a.shading, file.shading, to_string(defaults.whitted_shading)));
     options.max_sample_value = a.clamp;
     options.time_budget_s = a.time_budget_s;
     options.aovs = !a.aovs.empty();
