@@ -9,7 +9,8 @@ packages=(
   libtbb-dev                     # task-parallel builds and rendering
   libtinyobjloader-dev           # OBJ + MTL
   libtinygltf-dev                # glTF 2.0 / GLB
-  libstb-dev                     # PNG/JPEG/TGA/HDR decoding, PNG writing
+  libstb-dev                     # PNG/TGA/BMP/HDR decoding, PNG writing
+  libjpeg62-turbo-dev            # JPEG decoding (libjpeg-turbo)
   libtinyexr-dev                 # EXR
   nlohmann-json3-dev             # JSON scene files
   libcli11-dev                   # command line

@@ -38,6 +38,13 @@ bool same_bits(const Vec3f& a, float x, float y, float z) {
 // components and [tmin, tmax] limits (as in bvh_traversal_test.cpp).
 using test::make_rays;
 
+// A warp whose other rays never find a leaf: the ray postpones its first leaf
+// and walks on until its stack is empty or a second leaf stops it, the most
+// speculation the device traversal can ever do.
+struct NeverReadyWarp {
+    static bool any_searching(bool) { return true; }
+};
+
 void expect_same_closest(const Hit& got, const Hit& brute, const Ray& ray) {
     ASSERT_EQ(got.found(), brute.found());
     if (!brute.found()) return;
@@ -163,6 +170,10 @@ void compare_with_brute_force(const SceneGeometry& g, const BuildOptions& option
         EXPECT_EQ(counted.prim, got.prim);
         EXPECT_EQ(counted.t, got.t);
         EXPECT_EQ(aila_laine_occluded_counted(view, ray, counters), expected.found());
+        const Hit speculative = detail::aila_laine_traverse<false, false, NeverReadyWarp>(view, ray, nullptr);
+        expect_same_closest(speculative, expected, ray);
+        const bool speculative_any = detail::aila_laine_traverse<true, false, NeverReadyWarp>(view, ray, nullptr).found();
+        EXPECT_EQ(speculative_any, expected.found());
         hits += expected.found();
     }
     // The rays must exercise both outcomes.

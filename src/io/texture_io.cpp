@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "io/file_reader.h"
+#include "io/jpeg_decode.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 #include "rayforge/io/image_io.h"
@@ -224,8 +225,47 @@ void check_png_chunks(const unsigned char* data, size_t size, const std::string&
     }
 }
 
+// stb_image's GIF, PSD and PIC decoders in Debian 12's libstb (2022-09) have
+// known out-of-bounds bugs (CVE-2023-45661 to -45667 among them), and no
+// scene format uses these for textures: they are refused by their signature.
+void refuse_unsafe_formats(const unsigned char* data, size_t size, const std::string& name) {
+    auto starts_with = [&](const char* magic, size_t n) { return size >= n && std::memcmp(data, magic, n) == 0; };
+    const char* format = starts_with("GIF8", 4)                 ? "GIF"
+                         : starts_with("8BPS", 4)               ? "PSD"
+                         : starts_with("\x53\x80\xF6\x34", 4) ? "Softimage PIC"
+                                                                : nullptr;
+    if (format)
+        throw file_error(name, 0, std::string(format) + " images are not supported as textures (use PNG, JPEG, TGA, BMP, HDR or EXR)");
+}
+
+Texture decode_jpeg_texture(const unsigned char* data, size_t size, const std::string& name,
+                            TextureEncoding encoding8) {
+    // Every coded 8x8 block costs at least one bit (its DC code), and a 4:2:0
+    // chroma block covers 256 pixels, so even a progressive file that stops
+    // after one chroma scan holds under 4096 pixels per byte beyond its
+    // headers: a tiny file declaring a huge image is refused before the
+    // decoder allocates for it.
+    DecodedJpeg jpeg = decode_jpeg(data, size, name, [&](long long width, long long height, int channels) {
+        check_dimensions(width, height, name);
+        if (uint64_t(width) * uint64_t(height) > uint64_t(size) * 4096 + 65536)
+            throw file_error(name, 0, "image declares " + std::to_string(width) + "x" + std::to_string(height) +
+                                          " pixels but the file has only " + std::to_string(size) +
+                                          " bytes (truncated or corrupt)");
+        check_budget(width, height, channels, 1, name);
+    });
+    Texture tex;
+    tex.name = name;
+    tex.width = jpeg.width;
+    tex.height = jpeg.height;
+    tex.channels = jpeg.channels;
+    tex.encoding = encoding8 == TextureEncoding::LinearFloat ? TextureEncoding::Linear8 : encoding8;
+    tex.texels8 = std::move(jpeg.texels);
+    return tex;
+}
+
 Texture decode_stb(const unsigned char* data, size_t size, const std::string& name, TextureEncoding encoding8) {
     if (size > size_t(std::numeric_limits<int>::max())) throw file_error(name, 0, "image file too large");
+    refuse_unsafe_formats(data, size, name);
     check_png_chunks(data, size, name);
     const int len = int(size);
     int width = 0, height = 0, channels = 0;
@@ -269,6 +309,7 @@ Texture load_texture_from_memory(const unsigned char* data, size_t size, const s
                                  TextureEncoding encoding8) {
     if (data == nullptr || size == 0) throw file_error(name, 0, "empty image data");
     if (is_exr(data, size)) return decode_exr(data, size, name);
+    if (is_jpeg(data, size)) return decode_jpeg_texture(data, size, name, encoding8);
     return decode_stb(data, size, name, encoding8);
 }
 

@@ -3,10 +3,10 @@
 // (accel/bvh/wide/aila_laine_layout.h), written once for the host and the
 // CUDA backend: plain pointers in, no std containers, no exceptions.
 //
-// The loop structure is the paper's "while-while": an inner loop walks node
-// pairs until the next node is a leaf (or the stack is empty), then a leaf
-// loop tests the leaf's triangles up to its sentinel and pops, and the outer
-// loop repeats; on a GPU this keeps a warp's rays in the same phase longer
+// The loop structure is the paper's speculative "while-while": an inner loop
+// walks node pairs, postponing the first leaf it meets, until the warp's rays
+// all hold a leaf (or the stack is empty), then a leaf loop tests the leaves'
+// triangles up to their sentinels, and the outer loop repeats; on a GPU this keeps a warp's rays in the same phase longer
 // than one loop that does either per iteration. Both children's boxes come
 // from the one 64-byte node; when both are entered the nearer is taken and
 // the farther pushed. As in the paper the stack holds links only (no entry
@@ -52,8 +52,26 @@ RF_HDI Box3f aila_laine_child_box(const AilaLaineNode& n, int side) {
     return box;
 }
 
+// Speculative traversal (Aila and Laine 2009, sec. 4): when the inner loop
+// reaches a leaf, the leaf is postponed and the ray keeps walking node pairs
+// until every ray of its warp holds a leaf, so that the warp enters the leaf
+// loop together instead of serialising node and leaf phases. The vote is a
+// policy: on the device a warp vote; on the host one ray is its own warp, so
+// it stops at the first leaf (the plain while-while order).
+struct AilaLaineWarpVote {
+    // True while some ray of the warp has not found a leaf yet.
+    RF_HDI static bool any_searching(bool searching) {
+#if defined(__CUDA_ARCH__)
+        return __any_sync(__activemask(), searching);
+#else
+        return searching;
+#endif
+    }
+};
+
 // Shared loop: closest hit (kAnyHit = false) or first hit (kAnyHit = true).
-template <bool kAnyHit, bool kCount>
+// Vote decides when the inner loop hands its postponed leaf to the leaf loop.
+template <bool kAnyHit, bool kCount, class Vote = AilaLaineWarpVote>
 RF_HDI Hit aila_laine_traverse(const AilaLaineView& bvh, const Ray& ray, TraversalCounters* counters) {
     Hit hit;
     if (bvh.root == kAilaLaineEntrySentinel) return hit;  // empty BVH
@@ -68,6 +86,8 @@ RF_HDI Hit aila_laine_traverse(const AilaLaineView& bvh, const Ray& ray, Travers
     stack[0] = kAilaLaineEntrySentinel;
     int top = 0;
     int32_t node = bvh.root;
+    // The postponed leaf; any non-negative value means "none" (the paper's leafAddr).
+    int32_t postponed = 0;
 
     while (node != kAilaLaineEntrySentinel) {
         // Inner loop: node >= 0 and below the sentinel is a node pair (a
@@ -80,23 +100,34 @@ RF_HDI Hit aila_laine_traverse(const AilaLaineView& bvh, const Ray& ray, Travers
             if constexpr (kCount) counters->nodes_visited += 2;
             if (!hit0 && !hit1) {
                 node = stack[top--];
-                continue;
-            }
-            int32_t near_link = hit0 ? pair.link[0] : pair.link[1];
-            if (hit0 && hit1) {
-                int32_t far_link = pair.link[1];
-                if (entry1 < entry0) {  // ties go to child 0, as in the canonical traversal
-                    far_link = near_link;
-                    near_link = pair.link[1];
+            } else {
+                int32_t near_link = hit0 ? pair.link[0] : pair.link[1];
+                if (hit0 && hit1) {
+                    int32_t far_link = pair.link[1];
+                    if (entry1 < entry0) {  // ties go to child 0, as in the canonical traversal
+                        far_link = near_link;
+                        near_link = pair.link[1];
+                    }
+                    stack[++top] = far_link;
                 }
-                stack[++top] = far_link;
+                node = near_link;
             }
-            node = near_link;
+            // Postpone the first leaf met and keep descending; a second leaf ends the loop.
+            if (node < 0 && postponed >= 0) {
+                postponed = node;
+                node = stack[top--];
+            }
+            if (!Vote::any_searching(postponed >= 0)) break;
         }
-        // Leaf loop: test each leaf's list up to its sentinel, then pop
-        // (which may give another leaf, a node pair or the end).
-        while (node < 0) {
-            for (int32_t i = ~node;; i += kAilaLaineTriangleStride) {
+        // Leaf loop: the postponed leaf, then any leaf the inner loop stopped
+        // on, each tested up to its sentinel. (A root that is itself a leaf
+        // never enters the inner loop: it is taken here.)
+        if (postponed >= 0 && node < 0) {
+            postponed = node;
+            node = stack[top--];
+        }
+        while (postponed < 0) {
+            for (int32_t i = ~postponed;; i += kAilaLaineTriangleStride) {
                 const AilaLaineFloat4 a = bvh.triangles[i];
                 const uint32_t prim = aila_laine_bits(a.w);
                 if (prim == kAilaLaineLeafEndW) break;
@@ -114,7 +145,8 @@ RF_HDI Hit aila_laine_traverse(const AilaLaineView& bvh, const Ray& ray, Travers
                     tmax = candidate.t;                 // later boxes and triangles must beat it
                 }
             }
-            node = stack[top--];
+            postponed = node;  // a leaf the inner loop stopped on, or ">= 0": done
+            if (node < 0) node = stack[top--];
         }
     }
     return hit;
