@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -17,7 +18,11 @@
 #include "bench_scenes.h"
 #include "candidates.h"
 #include "core/parallel.h"
+#include "bench_report.h"
 #include "embree_peer.h"
+#include "gpu_bench.h"
+#include "gpu_candidates.h"
+#include "presets.h"
 #include "ray_sets.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
@@ -111,6 +116,91 @@ TEST(BenchRaySets, RaysFollowTheProtocol) {
         EXPECT_NEAR(dot(reflection.dir, n), -dot(primary[p].dir, n), 1e-4f);  // mirror angle
         ++slot;
     }
+}
+
+// The protocol's GPU rule: spp jittered camera samples per pixel, sample-major,
+// sample 0 at the pixel centre, so the first pixel-count rays (and the
+// secondary rays derived from them) are exactly the one-sample sets.
+TEST(BenchRaySets, SamplesPerPixelExtendTheOneSampleSets) {
+    CornellFixture f;
+    const auto accel = build_accel(f.geometry);
+    bench::ViewSetup view = small_view(f.scene);
+    const std::vector<RaySetKind> kinds(std::begin(bench::kAllRaySets), std::end(bench::kAllRaySets));
+    const auto one = bench::make_ray_sets(f.geometry, *accel, view, kinds);
+    view.samples_per_pixel = 4;
+    const auto four = bench::make_ray_sets(f.geometry, *accel, view, kinds);
+    ASSERT_EQ(four.size(), kinds.size());
+    const size_t pixels = size_t(view.width) * size_t(view.height);
+    ASSERT_EQ(four[0].rays.size(), 4 * pixels);
+    ASSERT_EQ(one[0].rays.size(), pixels);
+
+    // Hits among the 4-sample primaries decide the secondary sizes.
+    std::vector<Hit> hits(four[0].rays.size());
+    accel->intersect(four[0].rays, hits);
+    size_t hit_count = 0, hits_of_sample0 = 0;
+    for (size_t i = 0; i < hits.size(); ++i) {
+        hit_count += hits[i].found() ? 1 : 0;
+        if (i < pixels) hits_of_sample0 += hits[i].found() ? 1 : 0;
+    }
+    ASSERT_GT(hits_of_sample0, pixels / 2);  // the camera looks into the box
+    for (size_t k = 0; k < kinds.size(); ++k) {
+        const size_t per_hit = (kinds[k] == RaySetKind::Ao || kinds[k] == RaySetKind::Diffuse) ? bench::kAoSamplesPerHit : 1;
+        const size_t expected = kinds[k] == RaySetKind::Primary ? 4 * pixels : per_hit * hit_count;
+        EXPECT_EQ(four[k].rays.size(), expected) << bench::ray_set_name(kinds[k]);
+        // Sample 0 comes first and is bit for bit the one-sample set.
+        ASSERT_LE(one[k].rays.size(), four[k].rays.size());
+        const std::vector<Ray> prefix(four[k].rays.begin(), four[k].rays.begin() + std::ptrdiff_t(one[k].rays.size()));
+        EXPECT_TRUE(same_bits(prefix, one[k].rays)) << bench::ray_set_name(kinds[k]);
+    }
+    // Every jittered secondary ray differs from the one-sample rays (new samples, new directions).
+    const std::vector<Ray>& ao = four[2].rays;
+    const size_t first_jittered = one[2].rays.size();
+    ASSERT_GT(ao.size(), first_jittered);
+    EXPECT_FALSE(std::memcmp(&ao[first_jittered], &ao[0], sizeof(Ray)) == 0);
+}
+
+TEST(BenchRaySets, JitteredSamplesStayInsideTheirPixel) {
+    CornellFixture f;
+    bench::ViewSetup view = small_view(f.scene);
+    view.samples_per_pixel = 4;
+    const bench::RaySet primary = bench::make_primary_rays(view);
+    const CameraFrame frame = CameraFrame::make(view.camera, view.width, view.height);
+    const size_t pixels = size_t(view.width) * size_t(view.height);
+    ASSERT_EQ(primary.rays.size(), 4 * pixels);
+    // Inverts CameraFrame::generate: the film position the ray passes through.
+    const float tolerance = 1e-3f;  // pixels; float rounding of the direction
+    size_t off_centre = 0;
+    double sum_u = 0.0;
+    for (size_t i = 0; i < primary.rays.size(); ++i) {
+        const size_t sample = i / pixels, pixel = i % pixels;
+        const int x = int(pixel % size_t(view.width)), y = int(pixel / size_t(view.width));
+        const Ray& ray = primary.rays[i];
+        const float along = dot(ray.dir, frame.forward);
+        ASSERT_GT(along, 0.0f);
+        const float ndc_x = dot(ray.dir, frame.right) / along, ndc_y = dot(ray.dir, frame.up) / along;
+        const float px = (ndc_x / (frame.tan_half_fov * frame.aspect) + 1.0f) * 0.5f * float(view.width);
+        const float py = (1.0f - ndc_y / frame.tan_half_fov) * 0.5f * float(view.height);
+        ASSERT_GE(px, float(x) - tolerance) << "sample " << sample << " pixel " << pixel;
+        ASSERT_LE(px, float(x + 1) + tolerance) << "sample " << sample << " pixel " << pixel;
+        ASSERT_GE(py, float(y) - tolerance) << "sample " << sample << " pixel " << pixel;
+        ASSERT_LE(py, float(y + 1) + tolerance) << "sample " << sample << " pixel " << pixel;
+        const Vec2f at = bench::pixel_sample_position(uint32_t(pixel), uint32_t(sample));
+        ASSERT_TRUE(at.x >= 0.0f && at.x < 1.0f && at.y >= 0.0f && at.y < 1.0f);
+        if (sample == 0) {
+            EXPECT_NEAR(px, float(x) + 0.5f, tolerance);
+            EXPECT_NEAR(py, float(y) + 0.5f, tolerance);
+        } else {
+            EXPECT_NEAR(px, float(x) + at.x, tolerance);
+            off_centre += (std::fabs(at.x - 0.5f) > 1e-3f || std::fabs(at.y - 0.5f) > 1e-3f) ? 1 : 0;
+            sum_u += at.x;
+        }
+    }
+    // The jitter is spread over the pixel: nearly every sample is off centre,
+    // and the mean offset of 3 x pixels uniform numbers is 1/2 within 5 sigma
+    // (sigma = sqrt(1/12 / n)).
+    const double n = 3.0 * double(pixels);
+    EXPECT_GT(double(off_centre), 0.99 * n);
+    EXPECT_NEAR(sum_u / n, 0.5, 5.0 * std::sqrt(1.0 / 12.0 / n));
 }
 
 TEST(BenchRaySets, NamesRoundTrip) {
@@ -333,6 +423,120 @@ TEST(BenchRunner, RecordsEveryRaySetAndAgreesWithThePeer) {
             EXPECT_GE(r.embree[0].agreement, 0.99) << bench::ray_set_name(r.ray_set);
         }
     }
+}
+
+std::vector<std::string> labels_of(const std::vector<bench::GpuCandidate>& rows) {
+    std::vector<std::string> labels;
+    for (const auto& row : rows) labels.push_back(row.label());
+    return labels;
+}
+
+TEST(BenchGpuCandidates, PresetStructuresMapToTheirKernels) {
+    const bench::Preset& seed002 = bench::find_preset("seed002");
+    const auto rows002 = bench::gpu_candidates(seed002.gpu_kernels, bench::candidates_by_label(seed002.candidates, nullptr));
+    EXPECT_EQ(labels_of(rows002),
+              (std::vector<std::string>{"grid/uniform-auto/grid", "kdtree/sah/kd-short-stack", "kdtree/sah/kd-restart",
+                                        "bvh/binned/aila-laine", "bvh/binned/cwbvh"}));
+    const bench::Preset& seed001 = bench::find_preset("seed001");
+    const auto rows001 = bench::gpu_candidates(seed001.gpu_kernels, bench::candidates_by_label(seed001.candidates, nullptr));
+    EXPECT_EQ(labels_of(rows001),
+              (std::vector<std::string>{"grid/uniform-32/grid", "grid/uniform-64/grid", "grid/uniform-128/grid",
+                                        "grid-proximity/uniform-32/grid-proximity",
+                                        "grid-proximity/uniform-64/grid-proximity",
+                                        "grid-proximity/uniform-128/grid-proximity", "bvh/binned/aila-laine",
+                                        "bvh/binned/cwbvh"}));
+    // The grids keep the preset's resolutions and structures.
+    EXPECT_EQ(rows001[1].build.options.grid_resolution, 64);
+    EXPECT_EQ(rows001[1].kernel, GpuKernel::Grid);
+    EXPECT_EQ(rows001[4].build.options.structure, Structure::ProximityGrid);
+    EXPECT_EQ(rows001[4].kernel, GpuKernel::ProximityGrid);
+    const auto rows000 = bench::gpu_candidates(bench::find_preset("seed000").gpu_kernels,
+                                               bench::candidates_by_label(bench::find_preset("seed000").candidates, nullptr));
+    EXPECT_EQ(rows000.size(), 2u * 8u);  // eight builders, each traced by aila-laine and cwbvh
+}
+
+TEST(BenchGpuCandidates, EveryKernelGetsABuildAndBuildersMultiplyRows) {
+    const auto bvh = bench::select_candidates({"bvh"}, {"binned", "sbvh"}, {"all"}, nullptr);
+    const auto rows = bench::gpu_candidates(all_gpu_kernels(), bvh);
+    // Three BVH kernels x two builders, then the default kd-tree and grids.
+    EXPECT_EQ(labels_of(rows),
+              (std::vector<std::string>{"bvh/binned/bvh2", "bvh/sbvh/bvh2", "bvh/binned/aila-laine",
+                                        "bvh/sbvh/aila-laine", "bvh/binned/cwbvh", "bvh/sbvh/cwbvh",
+                                        "kdtree/sah/kd-short-stack", "kdtree/sah/kd-restart", "grid/uniform-auto/grid",
+                                        "grid-proximity/uniform-auto/grid-proximity"}));
+    EXPECT_EQ(rows[1].build.options.builder, Builder::Sbvh);
+    for (GpuKernel kernel : all_gpu_kernels())
+        EXPECT_NE(bench::gpu_kernel_structure(kernel), "?") << to_string(kernel);
+}
+
+TEST(BenchGpu, RowsWithoutTheBackendFailWithOneReason) {
+    if (bench::gpu_bench_available()) GTEST_SKIP() << "the CUDA backend is built";
+    bench::BenchConfig config;
+    config.scenes = {"builtin:cube"};
+    config.resolutions = {{8, 8}};
+    config.candidates = bench::select_candidates({"bvh"}, {"binned"}, {"bvh2"}, nullptr);
+    config.gpu = bench::gpu_candidates({GpuKernel::Cwbvh}, config.candidates);
+    config.progress = false;
+    std::ostringstream log;
+    try {
+        bench::run_bench(config, log);
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("built without the CUDA backend"), std::string::npos) << e.what();
+    }
+    const SceneGeometry geometry = SceneGeometry::build(make_builtin_scene("cube"));
+    EXPECT_THROW(bench::GpuTracer(geometry, GpuKernel::Cwbvh, BuildOptions{}, 0), Error);
+    EXPECT_EQ(bench::gpu_device_name(0), "");
+}
+
+// GPU rows as the runner makes them, printed and written next to a CPU row.
+TEST(BenchReport, GpuRowsNameTheirDeviceSamplesAndAgreement) {
+    bench::BenchRecord cpu;
+    cpu.scene = "builtin:cube";
+    cpu.triangles = 12;
+    cpu.width = 32;
+    cpu.height = 24;
+    cpu.candidate = bench::select_candidates({"bvh"}, {"binned"}, {"bvh2"}, nullptr).front();
+    cpu.rays = 768;
+    cpu.mrays_per_s = 10.0;
+    cpu.trace_ms = 0.0768;
+    bench::BenchRecord gpu = cpu;
+    gpu.device = "cuda:0";
+    gpu.gpu = "Test GPU";
+    gpu.candidate = bench::gpu_candidates({GpuKernel::Cwbvh}, {cpu.candidate}).front().build;
+    gpu.samples_per_pixel = 4;
+    gpu.rays = 4 * 768;
+    gpu.mrays_per_s = 1000.0;
+    gpu.device_bytes = 3u << 20;
+    gpu.reference = bench::ReferenceAgreement{cpu.candidate.label(), 0.995, 1e-6};
+    std::ostringstream table;
+    bench::print_scene_tables(table, {cpu, gpu}, 2, 5, 3);
+    const std::string text = table.str();
+    EXPECT_NE(text.find("cpu 1 (centre)"), std::string::npos) << text;
+    EXPECT_NE(text.find("cuda:0 4 (jittered) on Test GPU"), std::string::npos) << text;
+    EXPECT_NE(text.find("cuda:0 bvh/binned/cwbvh"), std::string::npos) << text;
+    EXPECT_NE(text.find("99.5000%"), std::string::npos) << text;
+    EXPECT_NE(text.find("3,072"), std::string::npos) << text;
+
+    const std::string path = test::temp_dir("bench_report_gpu") + "/out.json";
+    bench::RunInfo info;
+    info.devices = {"cpu", "cuda:0"};
+    info.gpu = "Test GPU";
+    bench::write_json(path, {cpu, gpu}, info);
+    std::ifstream in(path);
+    const nlohmann::json root = nlohmann::json::parse(in);
+    EXPECT_EQ(root["machine"]["gpu"], "Test GPU");
+    ASSERT_EQ(root["records"].size(), 2u);
+    const auto& cpu_json = root["records"][0];
+    const auto& gpu_json = root["records"][1];
+    EXPECT_EQ(cpu_json["device"], "cpu");
+    EXPECT_TRUE(cpu_json["gpu"].is_null());
+    EXPECT_EQ(cpu_json["samples_per_pixel"], 1);
+    EXPECT_EQ(gpu_json["device"], "cuda:0");
+    EXPECT_EQ(gpu_json["gpu"], "Test GPU");
+    EXPECT_EQ(gpu_json["gpu_kernel"], "cwbvh");
+    EXPECT_EQ(gpu_json["samples_per_pixel"], 4);
+    EXPECT_DOUBLE_EQ(gpu_json["reference"]["agreement"].get<double>(), 0.995);
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "rayforge/backend/device.h"
 #include "rayforge/io/image_io.h"
 #include "test_paths.h"
 
@@ -69,8 +70,12 @@ TEST(Cli, HelpForEveryVerbAndVersion) {
     CliResult render_help = run_cli("render --help");
     for (const char* option : {"--res", "--spp", "--integrator", "--camera", "--threads", "--max-depth", "--ao-radius",
                                "--exposure", "--seed", "--rr-depth", "--light-sampling", "--tonemap", "--aov",
-                               "--time-budget", "--env-map", "--reflection-depth", "--refraction-depth", "--shading"})
+                               "--time-budget", "--env-map", "--reflection-depth", "--refraction-depth", "--shading",
+                               "--device", "--gpu-kernel", "--wavefront", "--sort-rays"})
         EXPECT_NE(render_help.out.find(option), std::string::npos) << option;
+    for (const char* option : {"--device", "--gpu-kernel", "--spp"})
+        EXPECT_NE(run_cli("bench --help").out.find(option), std::string::npos) << option;
+    EXPECT_NE(run_cli("info --help").out.find("--devices"), std::string::npos);
     CliResult version = run_cli("--version");
     EXPECT_EQ(version.exit_code, 0);
     EXPECT_EQ(version.out.rfind("rayforge ", 0), 0u) << version.out;
@@ -155,7 +160,13 @@ TEST(Cli, UsageErrorsExitTwo) {
                              "render builtin:cornell -o x.png --res 640", "render builtin:cornell -o x.png --integrator bidir",
                              "render builtin:cornell -o x.png --light-sampling all", "render builtin:cornell -o x.png --tonemap filmic",
                              "render builtin:cornell -o x.png --aov speed",
-                             "render builtin:cornell -o x.png --camera 1,2,3", "info builtin:cornell --no-such-flag"}) {
+                             "render builtin:cornell -o x.png --camera 1,2,3", "info builtin:cornell --no-such-flag",
+                             "info", "info -v",
+                             "render builtin:cornell -o x.png --device bogus",
+                             "render builtin:cornell -o x.png --device cuda:x",
+                             "render builtin:cornell -o x.png --gpu-kernel bogus",
+                             "bench --device gpu", "bench --device cpu,bogus", "bench --gpu-kernel cwbvh,bogus",
+                             "bench --spp 0"}) {
         CliResult r = run_cli(args);
         EXPECT_EQ(r.exit_code, 2) << "'" << args << "': " << r.err;
     }
@@ -203,6 +214,87 @@ TEST(Cli, BenchErrorsAreOneLine) {
     expect_one_error_line(run_cli("bench --preset seed999"));
     expect_one_error_line(run_cli("bench --scene builtin:cube --structure octree"));
     expect_one_error_line(run_cli("bench --scene builtin:cube --structure grid --builder binned"));
+}
+
+TEST(Cli, InfoDevicesSaysWhatThisBuildCanUse) {
+    CliResult r = run_cli("info --devices");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_EQ(r.out.rfind("CUDA devices: ", 0), 0u) << r.out;
+    if (!cuda_backend_built()) {
+        EXPECT_NE(r.out.find("built without the CUDA backend"), std::string::npos) << r.out;
+    } else if (r.out.find("CUDA devices: none") == std::string::npos) {
+        // Each device: name, compute capability, memory, versions.
+        for (const char* field : {"cuda:0", "compute capability", "SMs", "MiB total", "L2", "driver", "runtime"})
+            EXPECT_NE(r.out.find(field), std::string::npos) << field << " missing in\n" << r.out;
+    } else {
+        EXPECT_NE(r.out.find("("), std::string::npos) << "the reason: " << r.out;
+    }
+    // With a scene, the devices and then the scene.
+    CliResult both = run_cli("info --devices builtin:cube");
+    ASSERT_EQ(both.exit_code, 0) << both.err;
+    EXPECT_NE(both.out.find("CUDA devices: "), std::string::npos);
+    EXPECT_NE(both.out.find("triangles:  12"), std::string::npos) << both.out;
+}
+
+TEST(Cli, RenderOnCudaNamesWhyItCannot) {
+    const std::string out = test::temp_dir("cli_cuda") + "/x.png";
+    CliResult r = run_cli("render builtin:cornell --res 16x16 -o '" + out + "' --device cuda --gpu-kernel grid -q");
+    if (cuda_backend_built() && r.exit_code == 0) {
+        // A device is present: the render ran there.
+        EXPECT_TRUE(std::filesystem::exists(out));
+        EXPECT_NE(r.out.find("cuda:0"), std::string::npos) << r.out;
+        return;
+    }
+    expect_one_error_line(r);
+    if (!cuda_backend_built()) {
+        EXPECT_NE(r.err.find("--device cuda: this rayforge was built without the CUDA backend (nvcc was not found at "
+                             "configure time)"),
+                  std::string::npos)
+            << r.err;
+    } else {
+        EXPECT_NE(r.err.find("--device cuda: "), std::string::npos) << r.err;
+        EXPECT_EQ(r.err.find("built without"), std::string::npos) << r.err;
+    }
+    // Validated and then given up on before anything is written.
+    EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+TEST(Cli, RenderWavefrontWithSortedRaysOnTheCpu) {
+    const std::string dir = test::temp_dir("cli_wavefront");
+    CliResult r = run_cli("render builtin:cornell -o '" + dir + "/w.png' --res 32x32 --integrator path --spp 2 "
+                          "--wavefront --sort-rays --device cpu --gpu-kernel cwbvh --threads 2 -q");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.out.find("path 2 spp"), std::string::npos) << r.out;
+    EXPECT_EQ(read_image(dir + "/w.png").width, 32);
+}
+
+TEST(Cli, BenchOnCudaWithoutTheBackendIsOneError) {
+    if (cuda_backend_built()) GTEST_SKIP() << "the CUDA backend is built";
+    for (const char* args : {"bench --scene builtin:cube --device cuda --res 8x8 -q",
+                             "bench --scene builtin:cube --device cpu,cuda:1 --res 8x8 -q",
+                             "bench --scene builtin:cube --device cuda --integrator path --res 8x8 -q",
+                             "bench --preset seed001 --scene builtin:cube --device cuda -q"}) {
+        CliResult r = run_cli(args);
+        expect_one_error_line(r);
+        EXPECT_NE(r.err.find("built without the CUDA backend"), std::string::npos) << args << ": " << r.err;
+    }
+    // --gpu-kernel asks for a device.
+    expect_one_error_line(run_cli("bench --scene builtin:cube --gpu-kernel cwbvh --res 8x8 -q"));
+}
+
+TEST(Cli, BenchSppMultipliesTheCameraRays) {
+    const std::string json = test::temp_dir("cli_bench_spp") + "/out.json";
+    CliResult r = run_cli("bench --scene builtin:cube --layout bvh2 --rays primary --res 16x8 --spp 3 --reps 1 "
+                          "--build-reps 1 --embree none --threads 2 -q --json '" + json + "'");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.out.find("cpu 3 (jittered)"), std::string::npos) << r.out;
+    std::ifstream in(json);
+    const nlohmann::json root = nlohmann::json::parse(in);
+    ASSERT_EQ(root["records"].size(), 1u);
+    EXPECT_EQ(root["records"][0]["rays"], 3u * 16u * 8u);
+    EXPECT_EQ(root["records"][0]["samples_per_pixel"], 3);
+    EXPECT_EQ(root["records"][0]["device"], "cpu");
+    EXPECT_EQ(root["devices"], nlohmann::json::array({"cpu"}));
 }
 
 }  // namespace

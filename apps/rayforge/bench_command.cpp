@@ -1,6 +1,7 @@
 // `rayforge bench`: every performance figure of the project comes from here
 // (protocol: ../shared/docs/BENCHMARK-PROTOCOL.md, harness: bench/harness/).
-// Tables on stdout, progress on stderr, records in --json FILE.
+// Tables on stdout, progress on stderr, records in --json FILE. `--device
+// cuda` adds GPU rows (bench/harness/gpu_bench.h).
 #include <iostream>
 #include <set>
 #include <sstream>
@@ -10,6 +11,7 @@
 #include "bench_report.h"
 #include "bench_runner.h"
 #include "commands.h"
+#include "gpu_bench.h"
 #include "presets.h"
 #include "render_bench.h"
 #include "stage_breakdown.h"
@@ -72,6 +74,41 @@ std::vector<bench::EmbreeQuality> parse_embree(const std::vector<std::string>& n
     return qualities;
 }
 
+// --device: the CPU rows and at most one CUDA device.
+struct DeviceSelection {
+    bool cpu = false;
+    bool gpu = false;
+    int gpu_index = 0;
+    std::string gpu_text;  // as given, for messages
+};
+
+DeviceSelection parse_devices(const std::vector<std::string>& names) {
+    DeviceSelection selection;
+    for (const std::string& name : names) {
+        const Device device = parse_device(name);
+        if (!device.is_cuda()) {
+            selection.cpu = true;
+            continue;
+        }
+        if (selection.gpu && selection.gpu_index != device.index)
+            throw Error("--device: one CUDA device at a time (got cuda:" + std::to_string(selection.gpu_index) +
+                        " and " + name + ")");
+        selection.gpu = true;
+        selection.gpu_index = device.index;
+        selection.gpu_text = name;
+    }
+    return selection;
+}
+
+std::vector<GpuKernel> parse_gpu_kernels(const std::vector<std::string>& names) {
+    std::vector<GpuKernel> kernels;
+    for (const std::string& name : names) {
+        if (name == "all") return all_gpu_kernels();
+        kernels.push_back(parse_gpu_kernel(name));
+    }
+    return kernels;
+}
+
 void print_list(const std::string& scenes_dir) {
     std::cout << "scenes (views.json in " << (scenes_dir.empty() ? "<not found>" : scenes_dir) << "):\n";
     for (const std::string& name : bench::views_json_scene_names(scenes_dir)) std::cout << "  " << name << '\n';
@@ -85,11 +122,23 @@ void print_list(const std::string& scenes_dir) {
     std::cout << "\nembree peer: "
               << (bench::embree_available() ? "Embree " + bench::embree_version() : std::string("not built in"))
               << '\n';
+    std::cout << "\nGPU kernels (--device cuda; CUDA backend " << (cuda_backend_built() ? "built" : "not built")
+              << "):\n";
+    for (GpuKernel kernel : all_gpu_kernels())
+        std::cout << "  " << to_string(kernel) << "  (traces " << bench::gpu_kernel_structure(kernel) << ")\n";
 }
 
 // `--integrator`: rendering throughput of each scene's first view.
 int run_render_bench(const BenchArgs& a, const bench::BenchConfig& config) {
     bench::RenderBenchConfig render;
+    render.cpu = config.cpu;
+    if (!config.gpu.empty()) {
+        // One renderer per kernel named; the default kernel unless --gpu-kernel says otherwise.
+        const std::vector<GpuKernel> kernels =
+            a.gpu_kernels.empty() ? std::vector<GpuKernel>{kDefaultGpuKernel} : parse_gpu_kernels(split_list(a.gpu_kernels));
+        render.gpu = bench::gpu_candidates(kernels, config.candidates);
+        render.gpu_device = config.gpu_device;
+    }
     render.integrators = a.integrators;
     const bench::Resolution res = config.resolutions.empty() ? bench::Resolution{1024, 768} : config.resolutions.front();
     render.width = res.width;
@@ -155,6 +204,21 @@ CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
         ->delimiter(',');
     cmd->add_option("--max-depth", a.max_depth, "Path bounces for --integrator path (default 4)")
         ->check(CLI::Range(0, 1024));
+    cmd->add_option("--device", a.devices,
+                    "Where to trace: cpu, cuda (= cuda:0), cuda:N, comma-separated (default cpu); cuda adds one row "
+                    "per GPU kernel, on its own ray sets (--spp)")
+        ->delimiter(',')
+        ->check(device_validator());
+    cmd->add_option("--gpu-kernel", a.gpu_kernels,
+                    "GPU kernels for --device cuda: bvh2, aila-laine, cwbvh, kd-short-stack, kd-restart, grid, "
+                    "grid-proximity, or all (default all; a preset's for its structures; with --integrator " +
+                        to_string(kDefaultGpuKernel) + ")")
+        ->delimiter(',')
+        ->check(gpu_kernel_validator(true));
+    cmd->add_option("--spp", a.spp,
+                    "Camera rays per pixel of the ray sets, sample 0 at the pixel centre and the others jittered "
+                    "(default: 1 for cpu rows, 4 for cuda rows, the protocol's GPU rule)")
+        ->check(CLI::Range(1, 64));
     cmd->add_flag("--list", a.list, "List scenes, structures, presets and the Embree peer, then exit");
     cmd->add_flag("-q,--quiet", a.quiet, "No progress lines on stderr");
     return cmd;
@@ -169,6 +233,18 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
     }
     bench::RunInfo info;
     info.command = command_line;
+    const DeviceSelection devices = parse_devices(a.devices.empty() ? std::vector<std::string>{"cpu"}
+                                                                    : split_list(a.devices));
+    if (devices.gpu && !bench::gpu_bench_available())
+        throw Error("--device " + devices.gpu_text + ": " + kNoCudaBackend);
+    if (devices.gpu) {
+        try {
+            bench::require_gpu_device(devices.gpu_index);
+        } catch (const Error& e) {
+            throw Error("--device " + devices.gpu_text + ": " + e.what());
+        }
+    }
+    if (!devices.gpu && !a.gpu_kernels.empty()) throw Error("--gpu-kernel: needs --device cuda");
     std::vector<bench::Candidate> unimplemented;
 
     std::vector<std::string> scenes = split_list(a.scenes);
@@ -219,11 +295,26 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
     }
     const std::vector<std::string> embree_names = a.embree.empty() ? std::vector<std::string>{"all"} : split_list(a.embree);
     config.embree = parse_embree(embree_names);
+    if (!devices.cpu) config.embree.clear();  // the peer is a CPU column
     if (!config.embree.empty() && !bench::embree_available()) {
         if (!a.embree.empty()) throw Error("--embree: this rayforge was built without Embree (Debian: libembree-dev)");
         info.notes.push_back("built without Embree; no peer columns (Debian: apt-get install libembree-dev)");
         config.embree.clear();
     }
+    config.cpu = devices.cpu;
+    if (devices.gpu) {
+        const std::vector<GpuKernel> kernels = !a.gpu_kernels.empty() ? parse_gpu_kernels(split_list(a.gpu_kernels))
+                                               : preset                ? preset->gpu_kernels
+                                                                       : all_gpu_kernels();
+        config.gpu = bench::gpu_candidates(kernels, config.candidates);
+        config.gpu_device = devices.gpu_index;
+        info.gpu = bench::gpu_device_name(devices.gpu_index);
+    }
+    config.cpu_samples_per_pixel = a.spp > 0 ? a.spp : 1;
+    config.gpu_samples_per_pixel = a.spp > 0 ? a.spp : 4;
+    info.devices.clear();
+    if (devices.cpu) info.devices.push_back("cpu");
+    if (devices.gpu) info.devices.push_back("cuda:" + std::to_string(devices.gpu_index));
     config.threads = a.threads;
     config.repetitions = a.repetitions;
     config.build_repetitions = a.build_repetitions;
@@ -236,6 +327,9 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
     // Notes go to stdout (and the JSON): stderr carries progress and at most one error line.
     if (a.repetitions < 5)
         info.notes.push_back("--reps " + std::to_string(a.repetitions) + " is below the protocol's 5 timed runs");
+    if (devices.gpu && a.spp > 0 && a.spp < 4)
+        info.notes.push_back("--spp " + std::to_string(a.spp) +
+                             " is below the protocol's 4 jittered samples per pixel for GPU sets");
     if (a.build_repetitions < 3)
         info.notes.push_back("--build-reps " + std::to_string(a.build_repetitions) + " is below the protocol's 3 builds");
     if (preset) std::cout << "preset " << preset->name << ": " << preset->description << '\n';
@@ -256,7 +350,7 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
                                       a.repetitions, a.build_repetitions);
         });
     if (preset && preset->configuration_table) bench::print_configuration_table(std::cout, records);
-    if (preset && preset->stage_breakdown) {
+    if (preset && preset->stage_breakdown && devices.cpu) {
         std::vector<bench::StageBreakdown> stages;
         for (const std::string& name : scenes) {
             try {

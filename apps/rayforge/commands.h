@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include "accel_options.h"
+#include "device_options.h"
 
 #include <string>
 #include <vector>
@@ -14,8 +15,9 @@ namespace rf::cli {
 inline constexpr const char* kVersion = RAYFORGE_VERSION;  // project(VERSION) in CMakeLists.txt
 
 struct InfoArgs {
-    std::string scene;  // a file or builtin:NAME (e.g. builtin:cornell)
+    std::string scene;  // a file or builtin:NAME (e.g. builtin:cornell); optional with --devices
     bool verbose = false;
+    bool devices = false;  // list the CUDA devices
 };
 CLI::App* add_info_command(CLI::App& app, InfoArgs& args);
 int run_info(const InfoArgs& args);
@@ -50,6 +52,10 @@ struct RenderArgs {
     float environment_strength = 1.0f;
     bool no_headlight = false;
     bool quiet = false;
+    std::string device = "cpu";       // cpu | cuda | cuda:N
+    std::string gpu_kernel;           // "" = rf::kDefaultGpuKernel
+    bool wavefront = false;           // CPU path tracer: wavefront passes
+    bool sort_rays = false;           // CPU wavefront: sort rays before tracing
     // Options whose presence overrides the scene file's render settings.
     CLI::Option* resolution_opt = nullptr;
     CLI::Option* spp_opt = nullptr;
@@ -86,6 +92,10 @@ struct BenchArgs {
     bool quiet = false;
     std::vector<std::string> integrators;  // render throughput instead of the ray sets
     int max_depth = 4;
+    std::vector<std::string> devices;      // cpu, cuda, cuda:N (default cpu)
+    std::vector<std::string> gpu_kernels;  // GPU kernel names or all (default: all, a preset's, or for
+                                           // --integrator the default kernel)
+    int spp = 0;                           // camera rays per pixel of the sets; 0 = 1 on the CPU, 4 on a GPU
 };
 CLI::App* add_bench_command(CLI::App& app, BenchArgs& args);
 int run_bench(const BenchArgs& args, const std::string& command_line);

@@ -1,16 +1,53 @@
-// `rayforge info SCENE`: what a scene holds and what it costs in memory.
+// `rayforge info SCENE`: what a scene holds and what it costs in memory;
+// `rayforge info --devices`: the CUDA devices this build can use.
 #include <chrono>
 #include <cstdio>
 #include <string>
 
 #include "commands.h"
+#include "rayforge/backend/device.h"
 #include "rayforge/io/scene_io.h"
 #include "rayforge/scene/scene_geometry.h"
+
+#ifdef RAYFORGE_HAS_CUDA
+#include "rayforge/backend/cuda.h"
+#endif
 
 namespace rf::cli {
 namespace {
 
 double mib(size_t bytes) { return double(bytes) / (1024.0 * 1024.0); }
+
+#ifdef RAYFORGE_HAS_CUDA
+// "13.0" from the driver's 13000.
+std::string cuda_version(int version) {
+    return std::to_string(version / 1000) + "." + std::to_string((version % 1000) / 10);
+}
+#endif
+
+void print_devices() {
+#ifdef RAYFORGE_HAS_CUDA
+    const std::vector<cuda::DeviceInfo> devices = cuda::list_devices();
+    if (devices.empty()) {
+        const std::string reason = cuda::device_unavailable_reason();
+        std::printf("CUDA devices: none (%s)\n", reason.empty() ? "the driver reports no device" : reason.c_str());
+        return;
+    }
+    std::printf("CUDA devices: %zu\n", devices.size());
+    for (const cuda::DeviceInfo& d : devices) {
+        std::printf("cuda:%d  %s\n", d.index, d.name.c_str());
+        std::printf("  compute capability %d.%d, %d SMs at %d MHz\n", d.compute_major, d.compute_minor,
+                    d.multiprocessors, d.clock_mhz);
+        std::printf("  memory %.0f MiB total, %.0f MiB free; L2 %.1f MiB; %d-bit memory bus\n", mib(d.total_memory),
+                    mib(d.free_memory), mib(d.l2_bytes), d.memory_bus_bits);
+        std::printf("  driver %s, runtime %s\n", cuda_version(d.driver_version).c_str(),
+                    cuda_version(d.runtime_version).c_str());
+    }
+#else
+    std::printf("CUDA devices: none (this rayforge was built without the CUDA backend; nvcc was not found at "
+                "configure time)\n");
+#endif
+}
 
 std::string format_vec(Vec3f v) {
     char buf[96];
@@ -22,13 +59,24 @@ std::string format_vec(Vec3f v) {
 
 CLI::App* add_info_command(CLI::App& app, InfoArgs& args) {
     CLI::App* cmd = app.add_subcommand("info", "Print the contents and memory footprint of a scene");
-    cmd->add_option("scene", args.scene, "Scene file (.obj, .gltf, .glb, .ply, .json) or builtin:NAME")
-        ->required();
+    cmd->add_option("scene", args.scene, "Scene file (.obj, .gltf, .glb, .ply, .json) or builtin:NAME");
     cmd->add_flag("-v,--verbose", args.verbose, "Also list every material and texture");
+    cmd->add_flag("--devices", args.devices,
+                  "List the CUDA devices (name, compute capability, SMs, clock, memory, L2, driver and runtime); "
+                  "the scene is then optional");
+    // The scene is required unless --devices is given: a usage error otherwise.
+    cmd->callback([&args] {
+        if (args.scene.empty() && !args.devices) throw CLI::RequiredError("scene (or --devices)");
+    });
     return cmd;
 }
 
 int run_info(const InfoArgs& args) {
+    if (args.devices) {
+        print_devices();
+        if (args.scene.empty()) return 0;
+        std::printf("\n");
+    }
     const auto start = std::chrono::steady_clock::now();
     Scene scene = load_scene(args.scene);
     const double load_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();

@@ -1,8 +1,12 @@
 // `rayforge render SCENE -o OUT`: load, build the acceleration structure,
-// render, write; one summary line on stdout, progress on stderr.
+// render, write; one summary line on stdout, progress on stderr. With
+// `--device cuda` the progressive renderer runs on the CUDA backend
+// (rf::cuda::Renderer), with the same outputs, progress and budgets.
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <functional>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <type_traits>
@@ -17,6 +21,10 @@
 #include "rayforge/render/render.h"
 #include "rayforge/scene/scene_geometry.h"
 #include "io/procedural_sky.h"
+
+#ifdef RAYFORGE_HAS_CUDA
+#include "rayforge/backend/cuda.h"
+#endif
 
 namespace rf::cli {
 namespace {
@@ -127,7 +135,9 @@ std::string aov_path(const std::string& output, const std::string& aov) {
     return stem + "." + aov + (pfm ? ".pfm" : ".exr");
 }
 
-void write_outputs(const RenderArgs& a, const ProgressiveRenderer& renderer, const ToneMapping& tone) {
+// Either renderer: rf::ProgressiveRenderer or rf::cuda::Renderer (same image accessors).
+template <class Renderer>
+void write_outputs(const RenderArgs& a, const Renderer& renderer, const ToneMapping& tone) {
     const Image image = renderer.image();
     for (const std::string& output : a.outputs) {
         write_image(output, image, tone);
@@ -137,6 +147,34 @@ void write_outputs(const RenderArgs& a, const ProgressiveRenderer& renderer, con
             write_image(aov_path(output, aov), layer, 1.0f);
         }
     }
+}
+
+// What a render reports in its summary line.
+struct RenderSummary {
+    int passes = 0;
+    RenderStats stats;
+    std::string accel;  // the structure's name
+    double build_ms = 0.0;
+};
+
+// The progressive loop of either renderer: progress bar, --save-every
+// previews, the final outputs. `run_passes(renderer, after_pass, progress)`
+// is that renderer's render_progressive.
+template <class Renderer, class RunPasses>
+void render_and_write(const RenderArgs& a, Renderer& renderer, const ToneMapping& tone, RunPasses&& run_passes) {
+    {
+        ProgressBar bar("render");
+        ProgressCallback progress;
+        if (!a.quiet) progress = [&bar](double fraction) { bar.update(fraction); };
+        std::function<bool(const Renderer&)> after_pass;
+        if (a.save_every > 0)
+            after_pass = [&](const Renderer& r) {
+                if (r.passes() % a.save_every == 0 && r.passes() < r.options().spp) write_outputs(a, r, tone);
+                return true;
+            };
+        run_passes(renderer, after_pass, progress);
+    }
+    write_outputs(a, renderer, tone);
 }
 
 }  // namespace
@@ -217,11 +255,27 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
             ->check(CLI::NonNegativeNumber);
     cmd->add_flag("--no-headlight", a.no_headlight,
                   "Do not add a light at the camera when a whitted or path render would have no light at all");
+    cmd->add_option("--device", a.device, "Where to render: cpu (default), cuda (= cuda:0) or cuda:N")
+        ->check(device_validator());
+    cmd->add_option("--gpu-kernel", a.gpu_kernel,
+                    "GPU traversal kernel with --device cuda: bvh2 | aila-laine | cwbvh | kd-short-stack | kd-restart | "
+                    "grid | grid-proximity (default " + to_string(kDefaultGpuKernel) + "); the structure is built "
+                    "with the --builder / --grid-res options")
+        ->check(gpu_kernel_validator());
+    cmd->add_flag("--wavefront", a.wavefront,
+                  "path on the CPU: run the path tracer stage by stage over queues of paths (a wavefront, as the "
+                  "GPU does; same image)");
+    cmd->add_flag("--sort-rays", a.sort_rays,
+                  "path on the CPU with --wavefront: sort the active rays by an origin/direction key before each "
+                  "extension");
     cmd->add_flag("-q,--quiet", a.quiet, "No progress bar");
     return cmd;
 }
 
 int run_render(const RenderArgs& a) {
+    const Device device = parse_device(a.device);
+    const GpuKernel kernel = a.gpu_kernel.empty() ? kDefaultGpuKernel : parse_gpu_kernel(a.gpu_kernel);
+    require_usable(device, "--device " + a.device);  // before the scene loads: fail fast
     Clock::time_point start = Clock::now();
     Scene scene = load_scene(a.scene);
     SceneGeometry geometry = SceneGeometry::build(scene);
@@ -258,6 +312,8 @@ int run_render(const RenderArgs& a) {
     options.ao_samples = a.ao_samples;
     options.threads = a.threads;
     options.seed = a.seed;
+    options.wavefront = a.wavefront;
+    options.sort_rays = a.sort_rays;
     const ToneMapping tone{.exposure = a.exposure, .curve = parse_tone_curve(a.tonemap)};
     Camera camera = a.camera.empty() ? scene.camera_or_default() : parse_camera(a.camera);
     apply_light_options(a, scene, geometry);
@@ -276,32 +332,41 @@ int run_render(const RenderArgs& a) {
     }
 
     const BuildOptions build_options = to_build_options(a.accel, a.threads);
-    std::unique_ptr<Accel> accel = build_accel(geometry, build_options);
-    AccelStats stats = accel->stats();
-
-    Clock::time_point setup_start = Clock::now();
-    ProgressiveRenderer renderer(scene, geometry, *accel, camera, options);
-    const double setup_ms = ms_since(setup_start);
-    {
-        ProgressBar bar("render");
-        ProgressCallback progress;
-        if (!a.quiet) progress = [&bar](double fraction) { bar.update(fraction); };
-        PassCallback after_pass;
-        if (a.save_every > 0)
-            after_pass = [&](const ProgressiveRenderer& r) {
-                if (r.passes() % a.save_every == 0 && r.passes() < options.spp) write_outputs(a, r, tone);
-                return true;
-            };
-        render_progressive(renderer, after_pass, progress);
+    RenderSummary summary;
+    double setup_ms = 0.0;
+    if (device.is_cuda()) {
+#ifdef RAYFORGE_HAS_CUDA
+        // The device renderer builds its own structure (on the CPU, then uploads it).
+        Clock::time_point setup_start = Clock::now();
+        cuda::Renderer renderer(scene, geometry, camera, options, kernel, build_options, device.index);
+        const AccelStats stats = renderer.tracer().stats();
+        setup_ms = ms_since(setup_start) - stats.build_ms;
+        render_and_write(a, renderer, tone, [](cuda::Renderer& r, const auto& after_pass, const auto& progress) {
+            cuda::render_progressive(r, after_pass, progress);
+        });
+        summary = {renderer.passes(), renderer.stats(), to_string(device) + " " + stats.name, stats.build_ms};
+#else
+        (void)kernel;
+        throw Error("--device " + a.device + ": " + kNoCudaBackend);
+#endif
+    } else {
+        std::unique_ptr<Accel> accel = build_accel(geometry, build_options);
+        const AccelStats stats = accel->stats();
+        Clock::time_point setup_start = Clock::now();
+        ProgressiveRenderer renderer(scene, geometry, *accel, camera, options);
+        setup_ms = ms_since(setup_start);
+        render_and_write(a, renderer, tone, [](ProgressiveRenderer& r, const auto& after_pass, const auto& progress) {
+            render_progressive(r, after_pass, progress);
+        });
+        summary = {renderer.passes(), renderer.stats(), stats.name, stats.build_ms};
     }
-    write_outputs(a, renderer, tone);
 
-    const RenderStats rs = renderer.stats();
+    const RenderStats& rs = summary.stats;
     const double render_ms = rs.seconds * 1e3;
     std::printf("%s: %dx%d %s %d spp, %zu triangles | load %.1f ms | build %.1f ms (%s) | setup %.1f ms | render %.1f ms "
                 "(%.2f Msamples/s, %.2f Mrays/s)\n",
                 a.outputs.front().c_str(), options.width, options.height, integrator_name(options.integrator).c_str(),
-                renderer.passes(), geometry.size(), load_ms, stats.build_ms, stats.name.c_str(), setup_ms, render_ms,
+                summary.passes, geometry.size(), load_ms, summary.build_ms, summary.accel.c_str(), setup_ms, render_ms,
                 render_ms > 0.0 ? double(rs.samples) / (render_ms * 1e3) : 0.0,
                 render_ms > 0.0 ? double(rs.rays()) / (render_ms * 1e3) : 0.0);
     return 0;

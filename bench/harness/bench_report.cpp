@@ -77,56 +77,103 @@ void print_scene_tables(std::ostream& out, const std::vector<BenchRecord>& recor
                         int build_repetitions) {
     if (records.empty()) return;
     const BenchRecord& first = records.front();
-    out << "\n== " << first.scene << " (" << thousands(first.triangles) << " triangles), " << threads
-        << " threads; medians of " << repetitions << " traces after a warm-up and " << build_repetitions
-        << " builds\n";
+    const BenchRecord* first_cpu = nullptr;
+    const BenchRecord* first_gpu = nullptr;
+    bool has_peer = false;
+    for (const BenchRecord& r : records) {
+        if (!r.is_gpu() && !first_cpu) first_cpu = &r;
+        if (r.is_gpu() && !first_gpu) first_gpu = &r;
+        has_peer = has_peer || !r.embree.empty();
+    }
+    out << "\n== " << first.scene << " (" << thousands(first.triangles) << " triangles)";
+    if (first_cpu) out << ", " << threads << " threads";
+    out << "; medians of " << repetitions << " traces after a warm-up and " << build_repetitions << " builds\n";
+    // The sets differ by device: the protocol's GPU rule traces jittered samples.
+    out << "camera rays per pixel:";
+    if (first_cpu) out << " cpu " << first_cpu->samples_per_pixel << (first_cpu->samples_per_pixel > 1 ? " (jittered)" : " (centre)");
+    if (first_gpu)
+        out << (first_cpu ? "," : "") << ' ' << first_gpu->device << ' ' << first_gpu->samples_per_pixel
+            << (first_gpu->samples_per_pixel > 1 ? " (jittered)" : " (centre)")
+            << (first_gpu->gpu.empty() ? "" : " on " + first_gpu->gpu)
+            << "; GPU Mrays/s from the kernel time of one launch, rays resident on the device";
+    out << '\n';
+    const auto row_label = [](const BenchRecord& r) {
+        return r.is_gpu() ? r.device + " " + r.candidate.label() : r.candidate.label();
+    };
+    const size_t label_width = first_gpu ? 32 : 22;
 
     // Builds: one row per candidate (from its first record) and per Embree quality.
-    out << pad("build", 22, true) << pad("ms", 10) << pad("layout ms", 11) << pad("SAH", 9) << pad("C(4.2)", 9)
-        << pad("nodes", 12) << pad("leaves", 12) << pad("MB", 9) << pad("ours/embree-M", 15) << '\n';
+    out << pad("build", label_width, true) << pad("ms", 10) << pad("layout ms", 11) << pad("SAH", 9) << pad("C(4.2)", 9)
+        << pad("nodes", 12) << pad("leaves", 12) << pad("MB", 9);
+    if (first_gpu) out << pad("dev MiB", 9);
+    out << pad("ours/embree-M", 15) << '\n';
     std::map<std::string, bool> shown;
     for (const BenchRecord& r : records) {
-        const std::string label = r.candidate.label();
+        const std::string label = row_label(r);
         if (shown[label]) continue;
         shown[label] = true;
         const PeerFigures* medium = peer(r, EmbreeQuality::Medium);
-        out << pad(label, 22, true) << pad(format("%.1f", r.build_ms), 10) << pad(format("%.1f", r.layout_ms), 11)
-            << pad(format("%.2f", r.stats.sah_cost), 9) << pad(format("%.2f", r.stats.quality_cost), 9)
-            << pad(thousands(r.stats.node_count), 12) << pad(thousands(r.stats.leaf_count), 12)
-            << pad(format("%.2f", double(r.stats.bytes) / 1e6), 9)
-            << pad(medium && medium->build_ms > 0 ? format("%.2f", r.build_ms / medium->build_ms) : "-", 15) << '\n';
+        out << pad(label, label_width, true) << pad(format("%.1f", r.build_ms), 10)
+            << pad(format("%.1f", r.layout_ms), 11) << pad(format("%.2f", r.stats.sah_cost), 9)
+            << pad(format("%.2f", r.stats.quality_cost), 9) << pad(thousands(r.stats.node_count), 12)
+            << pad(thousands(r.stats.leaf_count), 12) << pad(format("%.2f", double(r.stats.bytes) / 1e6), 9);
+        if (first_gpu)
+            out << pad(r.is_gpu() ? format("%.1f", double(r.device_bytes) / (1024.0 * 1024.0)) : "-", 9);
+        out << pad(medium && medium->build_ms > 0 ? format("%.2f", r.build_ms / medium->build_ms) : "-", 15) << '\n';
     }
-    for (const PeerFigures& f : first.embree) {
-        out << pad(std::string("embree/") + embree_quality_name(f.quality), 22, true)
-            << pad(format("%.1f", f.build_ms), 10) << pad("-", 11) << pad("-", 9) << pad("-", 9) << pad("-", 12)
-            << pad("-", 12) << pad(f.bytes ? format("%.2f", double(f.bytes) / 1e6) : "-", 9) << '\n';
+    if (first_cpu) {
+        for (const PeerFigures& f : first_cpu->embree) {
+            out << pad(std::string("embree/") + embree_quality_name(f.quality), label_width, true)
+                << pad(format("%.1f", f.build_ms), 10) << pad("-", 11) << pad("-", 9) << pad("-", 9) << pad("-", 12)
+                << pad("-", 12) << pad(f.bytes ? format("%.2f", double(f.bytes) / 1e6) : "-", 9);
+            if (first_gpu) out << pad("-", 9);
+            out << '\n';
+        }
     }
 
-    // Traces: Mrays/s; Embree columns and ratios when the peer ran.
-    const bool has_peer = !first.embree.empty();
-    out << '\n' << pad("trace", 11, true) << pad("res", 10, true) << pad("structure", 20, true) << pad("rays", 11)
-        << pad("Mrays/s", 9);
-    if (has_peer) {
-        for (const PeerFigures& f : first.embree) out << pad(std::string("E-") + embree_quality_name(f.quality), 9);
-        for (const PeerFigures& f : first.embree) out << pad(std::string("/E-") + embree_quality_name(f.quality), 10);
-        out << pad("agree(M)", 10) << pad("max dt(M)", 10);
-    }
+    // Traces: Mrays/s; Embree columns and ratios when the peer ran; the
+    // agreement of CPU rows with Embree medium, of GPU rows with the CPU reference.
+    const std::vector<PeerFigures> no_peers;
+    const std::vector<PeerFigures>& peer_columns = first_cpu ? first_cpu->embree : no_peers;
+    out << '\n' << pad("trace", 11, true) << pad("res", 10, true) << pad("structure", label_width, true)
+        << pad("rays", 12) << pad("Mrays/s", 9);
+    for (const PeerFigures& f : peer_columns) out << pad(std::string("E-") + embree_quality_name(f.quality), 9);
+    for (const PeerFigures& f : peer_columns) out << pad(std::string("/E-") + embree_quality_name(f.quality), 10);
+    const bool agreement_columns = has_peer || first_gpu;
+    if (agreement_columns) out << pad(first_gpu ? "agree" : "agree(M)", 10) << pad(first_gpu ? "max dt" : "max dt(M)", 10);
     out << pad("nodes/ray", 10) << pad("tris/ray", 9) << '\n';
     for (const BenchRecord& r : records) {
         const std::string res = std::to_string(r.width) + "x" + std::to_string(r.height) +
                                 (r.view ? "/v" + std::to_string(r.view) : "");
-        out << pad(ray_set_name(r.ray_set), 11, true) << pad(res, 10, true) << pad(r.candidate.label(), 20, true)
-            << pad(thousands(r.rays), 11) << pad(format("%.2f", r.mrays_per_s), 9);
-        if (has_peer) {
-            for (const PeerFigures& f : r.embree) out << pad(format("%.2f", f.mrays_per_s), 9);
-            for (const PeerFigures& f : r.embree)
-                out << pad(f.mrays_per_s > 0 ? format("%.2f", r.mrays_per_s / f.mrays_per_s) : "-", 10);
+        out << pad(ray_set_name(r.ray_set), 11, true) << pad(res, 10, true) << pad(row_label(r), label_width, true)
+            << pad(thousands(r.rays), 12) << pad(format("%.2f", r.mrays_per_s), 9);
+        for (size_t p = 0; p < peer_columns.size(); ++p)
+            out << pad(p < r.embree.size() ? format("%.2f", r.embree[p].mrays_per_s) : "-", 9);
+        for (size_t p = 0; p < peer_columns.size(); ++p)
+            out << pad(p < r.embree.size() && r.embree[p].mrays_per_s > 0
+                           ? format("%.2f", r.mrays_per_s / r.embree[p].mrays_per_s)
+                           : "-",
+                       10);
+        if (agreement_columns) {
             const PeerFigures* medium = peer(r, EmbreeQuality::Medium);
-            const PeerFigures* ref = medium ? medium : &r.embree.front();
-            out << pad(format("%.4f%%", 100.0 * ref->agreement), 10) << pad(format("%.1e", ref->max_rel_t_diff), 10);
+            const PeerFigures* ref = medium ? medium : r.embree.empty() ? nullptr : &r.embree.front();
+            if (r.reference) {
+                out << pad(format("%.4f%%", 100.0 * r.reference->agreement), 10)
+                    << pad(format("%.1e", r.reference->max_rel_t_diff), 10);
+            } else if (ref) {
+                out << pad(format("%.4f%%", 100.0 * ref->agreement), 10) << pad(format("%.1e", ref->max_rel_t_diff), 10);
+            } else {
+                out << pad("-", 10) << pad("-", 10);
+            }
         }
         out << pad(r.has_counts ? format("%.1f", r.steps_per_ray) : "-", 10)
             << pad(r.has_counts ? format("%.2f", r.prims_per_ray) : "-", 9) << '\n';
+    }
+    if (first_gpu) {
+        const BenchRecord& g = *first_gpu;
+        out << "agree: " << (has_peer ? "cpu rows with embree/medium, " : "") << g.device
+            << " rows with the CPU's " << (g.reference ? g.reference->reference : std::string("reference"))
+            << " on the same rays (hit/miss and primitive; any-hit sets: the answer)\n";
     }
     out.flush();
 }
@@ -141,7 +188,7 @@ void print_configuration_table(std::ostream& out, const std::vector<BenchRecord>
     std::vector<std::string> order;
     for (const BenchRecord& rec : records) {
         const std::string key = rec.scene + " " + std::to_string(rec.width) + "x" + std::to_string(rec.height) +
-                                " " + rec.candidate.label();
+                                " " + (rec.is_gpu() ? rec.device + " " : "") + rec.candidate.label();
         if (!rows.count(key)) order.push_back(key);
         Sums& s = rows[key];
         const int column = rec.ray_set == RaySetKind::Primary ? 0 : rec.ray_set == RaySetKind::Shadow ? 1
@@ -176,9 +223,9 @@ void write_json(const std::string& path, const std::vector<BenchRecord>& records
     root["date"] = iso_date_utc();
     root["command"] = info.command;
     root["preset"] = info.preset.empty() ? Json(nullptr) : Json(info.preset);
-    root["machine"] = {{"cpu", machine.cpu},
-                       {"cores", machine.cores},
-                       {"gpu", machine.gpu.empty() ? Json(nullptr) : Json(machine.gpu)}};
+    const std::string gpu = info.gpu.empty() ? machine.gpu : info.gpu;
+    root["machine"] = {{"cpu", machine.cpu}, {"cores", machine.cores}, {"gpu", gpu.empty() ? Json(nullptr) : Json(gpu)}};
+    root["devices"] = info.devices;
     root["threads"] = info.threads > 0 ? info.threads : machine.cores;
     root["repetitions"] = info.repetitions;
     root["build_repetitions"] = info.build_repetitions;
@@ -194,10 +241,14 @@ void write_json(const std::string& path, const std::vector<BenchRecord>& records
         rec["view"] = r.view;
         rec["width"] = r.width;
         rec["height"] = r.height;
+        rec["device"] = r.device;
+        rec["gpu"] = r.gpu.empty() ? Json(nullptr) : Json(r.gpu);
+        rec["gpu_kernel"] = r.is_gpu() ? Json(r.candidate.layout) : Json(nullptr);
         rec["structure"] = r.candidate.structure;
         rec["builder"] = r.candidate.builder;
         rec["layout"] = r.candidate.layout;
         rec["ray_set"] = ray_set_name(r.ray_set);
+        rec["samples_per_pixel"] = r.samples_per_pixel;
         rec["rays"] = r.rays;
         rec["mrays_per_s"] = r.mrays_per_s;
         rec["trace_ms"] = r.trace_ms;
@@ -211,6 +262,7 @@ void write_json(const std::string& path, const std::vector<BenchRecord>& records
         rec["leaves"] = r.stats.leaf_count;
         rec["bytes"] = r.stats.bytes;
         rec["triangle_bytes"] = r.triangle_bytes;
+        rec["device_bytes"] = r.is_gpu() ? Json(r.device_bytes) : Json(nullptr);
         rec["nodes_per_ray"] = r.has_counts ? Json(r.steps_per_ray) : Json(nullptr);
         rec["prims_per_ray"] = r.has_counts ? Json(r.prims_per_ray) : Json(nullptr);
         rec["restarts_per_ray"] = r.has_counts ? Json(r.restarts_per_ray) : Json(nullptr);
@@ -227,6 +279,12 @@ void write_json(const std::string& path, const std::vector<BenchRecord>& records
                 {"max_rel_t_diff", f.max_rel_t_diff}};
         }
         rec["embree"] = peers;
+        if (r.reference)
+            rec["reference"] = {{"structure", r.reference->reference},
+                                {"agreement", r.reference->agreement},
+                                {"max_rel_t_diff", r.reference->max_rel_t_diff}};
+        else
+            rec["reference"] = nullptr;
         list.push_back(rec);
     }
     root["records"] = list;

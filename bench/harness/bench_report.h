@@ -13,13 +13,14 @@ namespace rf::bench {
 struct MachineInfo {
     std::string cpu;     // /proc/cpuinfo model name
     int cores = 0;       // hardware threads
-    std::string gpu;     // "" when none is known
+    std::string gpu;     // "" when none is known (RunInfo::gpu names the one a run used)
 };
 MachineInfo machine_info();
 
-// The tables of one scene's records: builds (ours and Embree's), then one
-// row per (ray set, candidate) with Embree columns, ratios, agreement and
-// per-ray traversal counts.
+// The tables of one scene's records: builds (ours, Embree's, the GPU rows'),
+// then one row per (ray set, device, candidate) with Embree columns, ratios,
+// agreement (GPU rows: with the CPU reference) and per-ray traversal counts.
+// The header names the camera rays per pixel of each device's sets.
 void print_scene_tables(std::ostream& out, const std::vector<BenchRecord>& records, int threads, int repetitions,
                         int build_repetitions);
 
@@ -35,6 +36,8 @@ struct RunInfo {
     int build_repetitions = 0;
     std::vector<std::string> unimplemented;  // candidate labels asked for but not implemented
     std::vector<std::string> notes;
+    std::vector<std::string> devices{"cpu"};  // "cpu", "cuda:N"
+    std::string gpu;                          // name of the CUDA device used, "" for none
 };
 
 // Writes the JSON file; throws rf::Error when it cannot be written.

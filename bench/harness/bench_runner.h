@@ -2,17 +2,23 @@
 // once; every candidate and every Embree quality is built (median of
 // build_repetitions) and traces every set (one warm-up, then the median of
 // repetitions); an untimed instrumented pass counts traversal work; hits are
-// compared with Embree's.
+// compared with Embree's. GPU rows (BenchConfig::gpu) trace their own sets,
+// gpu_samples_per_pixel jittered camera rays per pixel so that a set fills
+// the device, resident on the device; a figure is the median kernel time of
+// repetitions launches after one warm-up, and hits are compared with the
+// first candidate's on the CPU.
 #pragma once
 
 #include <functional>
 #include <iosfwd>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "bench_scenes.h"
 #include "candidates.h"
 #include "embree_peer.h"
+#include "gpu_candidates.h"
 #include "ray_sets.h"
 
 namespace rf::bench {
@@ -28,7 +34,12 @@ struct BenchConfig {
     std::vector<int> views;                  // view indices; empty = every view
     std::vector<Resolution> resolutions{Resolution{}};
     std::vector<RaySetKind> ray_sets{std::begin(kAllRaySets), std::end(kAllRaySets)};
-    std::vector<Candidate> candidates;
+    std::vector<Candidate> candidates;       // CPU rows; the first is also the reference of the GPU rows
+    bool cpu = true;                         // false: the candidates are not traced (GPU rows only)
+    std::vector<GpuCandidate> gpu;           // GPU rows; empty = none
+    int gpu_device = 0;                      // CUDA device ordinal of the GPU rows
+    int cpu_samples_per_pixel = 1;           // camera rays per pixel of the CPU rows' sets
+    int gpu_samples_per_pixel = 4;           //   and of the GPU rows' (the protocol's GPU rule)
     std::vector<EmbreeQuality> embree;       // peer qualities; empty = no peer
     int threads = 0;                         // 0 = all cores
     int repetitions = 5;                     // timed traces (after one warm-up)
@@ -52,27 +63,40 @@ struct PeerFigures {
     double max_rel_t_diff = 0.0;
 };
 
-// One (scene, view, resolution, candidate, ray set).
+// Hits of a GPU row compared with the CPU reference's on the same rays.
+struct ReferenceAgreement {
+    std::string reference;        // label of the CPU structure
+    double agreement = 0.0;       // as PeerFigures::agreement
+    double max_rel_t_diff = 0.0;
+};
+
+// One (scene, view, resolution, device, candidate, ray set).
 struct BenchRecord {
     std::string scene;
     size_t triangles = 0;
     double load_ms = 0.0;
     int view = 0;
     int width = 0, height = 0;
-    Candidate candidate;
+    std::string device = "cpu";          // "cpu" or "cuda:N"
+    std::string gpu;                     // GPU rows: the device's name
+    Candidate candidate;                 // GPU rows: layout = the kernel's name
+    int samples_per_pixel = 1;           // camera rays per pixel of the set
     RaySetKind ray_set = RaySetKind::Primary;
     size_t rays = 0;
     double mrays_per_s = 0.0;
-    double trace_ms = 0.0;               // median
+    double trace_ms = 0.0;               // median (GPU rows: kernel time of one launch)
     std::vector<double> trace_ms_runs;   // every timed run
     double build_ms = 0.0;               // median, layout conversion included
     std::vector<double> build_ms_runs;
     double layout_ms = 0.0;
     AccelStats stats;                    // of the last build
     size_t triangle_bytes = 0;
+    size_t device_bytes = 0;             // GPU rows: everything the tracer holds on the device
     bool has_counts = false;
     double steps_per_ray = 0.0, prims_per_ray = 0.0, restarts_per_ray = 0.0;
-    std::vector<PeerFigures> embree;
+    std::vector<PeerFigures> embree;     // CPU rows
+    std::optional<ReferenceAgreement> reference;  // GPU rows
+    [[nodiscard]] bool is_gpu() const { return device != "cpu"; }
 };
 
 double median(std::vector<double> values);

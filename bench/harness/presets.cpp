@@ -22,6 +22,7 @@ std::vector<Preset> make_presets() {
             p.candidates.push_back(std::string("grid-proximity/uniform-") + res + "/grid");
         }
         p.candidates.push_back("bvh/binned/bvh2");  // the reference every table is anchored to
+        p.gpu_kernels = {GpuKernel::Grid, GpuKernel::ProximityGrid, GpuKernel::AilaLaine, GpuKernel::Cwbvh};
         p.configuration_table = true;
         p.notes = {"seed001 reports frames per second as direct / direct+secondary; here: P+S and P+S+R trace ms"};
         all.push_back(p);
@@ -37,6 +38,8 @@ std::vector<Preset> make_presets() {
         p.ray_sets = {RaySetKind::Primary, RaySetKind::Shadow, RaySetKind::Reflection};
         p.candidates = {"grid/uniform-auto/grid", "kdtree/sah/short-stack", "kdtree/sah/restart",
                         "kdtree/sah/pushdown", "bvh/binned/bvh2"};
+        p.gpu_kernels = {GpuKernel::Grid, GpuKernel::KdShortStack, GpuKernel::KdRestart, GpuKernel::AilaLaine,
+                         GpuKernel::Cwbvh};
         p.configuration_table = true;
         p.notes = {"PSR here traces one reflection bounce per primary hit (the thesis allows up to 2)",
                    "single-object scenes use a fixed camera and light, not the thesis's 400-frame orbits",
@@ -54,6 +57,7 @@ std::vector<Preset> make_presets() {
         p.ray_sets = {RaySetKind::Primary, RaySetKind::Diffuse};
         p.candidates = {"bvh/binned/bvh2", "bvh/sweep/bvh2",  "bvh/sbvh/bvh2",         "bvh/lbvh30/bvh2",
                         "bvh/hlbvh2/bvh2", "bvh/gridbvh/bvh2", "bvh/gridbvh-split/bvh2", "bvh/ploc/bvh2"};
+        p.gpu_kernels = {GpuKernel::AilaLaine, GpuKernel::Cwbvh};
         p.stage_breakdown = true;
         p.notes = {"the dissertation's builds ran on a GTX 480; these are CPU builds on this machine",
                    "Fairy Forest, Turbine Blade and Power Plant are not in ../shared/scenes"};

@@ -7,12 +7,17 @@
 //           time and memory (tables 5.3-5.6);
 //  seed000: BVH builders' build time and quality (formula 4.2) on the
 //           dissertation's scenes (tables 4.1, 5.1).
+// With `--device cuda` each preset's structures are also traced by the GPU
+// kernels of the same structures (grid -> grid, grid-proximity ->
+// grid-proximity, kdtree -> kd-short-stack and kd-restart, bvh -> aila-laine
+// and cwbvh), built exactly as the preset's CPU candidates.
 #pragma once
 
 #include <string>
 #include <vector>
 
 #include "bench_runner.h"
+#include "rayforge/backend/device.h"
 
 namespace rf::bench {
 
@@ -24,6 +29,7 @@ struct Preset {
     std::vector<Resolution> resolutions;
     std::vector<RaySetKind> ray_sets;
     std::vector<std::string> candidates;      // labels, implemented or not
+    std::vector<GpuKernel> gpu_kernels;       // the kernels of `--device cuda`, for the candidates' structures
     bool configuration_table = false;         // print P / PS / PSR sums
     bool stage_breakdown = false;             // print GridBvh / HLBVH2 build stages per scene
     std::vector<std::string> notes;           // printed and stored in the JSON

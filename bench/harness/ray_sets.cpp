@@ -28,16 +28,31 @@ std::optional<RaySetKind> parse_ray_set(const std::string& name) {
 
 bool is_any_hit(RaySetKind kind) { return kind == RaySetKind::Shadow || kind == RaySetKind::Ao; }
 
+Vec2f pixel_sample_position(uint32_t pixel, uint32_t sample) {
+    if (sample == 0) return {0.5f, 0.5f};
+    RandomStream random(pixel, sample, kPixelJitterSeed);
+    return random.next2();
+}
+
 RaySet make_primary_rays(const ViewSetup& view) {
+    if (view.samples_per_pixel < 1) throw Error("ray sets: samples per pixel must be at least 1");
     const CameraFrame frame = CameraFrame::make(view.camera, view.width, view.height);
     RaySet set;
     set.kind = RaySetKind::Primary;
-    set.rays.resize(size_t(view.width) * size_t(view.height));
-    parallel::for_range(0, view.height, 8, [&](int y0, int y1) {
-        for (int y = y0; y < y1; ++y)
-            for (int x = 0; x < view.width; ++x)
-                set.rays[size_t(y) * size_t(view.width) + size_t(x)] =
-                    frame.generate(float(x) + 0.5f, float(y) + 0.5f, view.width, view.height);
+    const size_t pixels = size_t(view.width) * size_t(view.height);
+    set.rays.resize(pixels * size_t(view.samples_per_pixel));
+    // One task per (sample, row band); rows of every sample in parallel.
+    const int rows = view.height * view.samples_per_pixel;
+    parallel::for_range(0, rows, 8, [&](int r0, int r1) {
+        for (int r = r0; r < r1; ++r) {
+            const int sample = r / view.height, y = r % view.height;
+            for (int x = 0; x < view.width; ++x) {
+                const size_t pixel = size_t(y) * size_t(view.width) + size_t(x);
+                const Vec2f at = pixel_sample_position(uint32_t(pixel), uint32_t(sample));
+                set.rays[size_t(sample) * pixels + pixel] =
+                    frame.generate(float(x) + at.x, float(y) + at.y, view.width, view.height);
+            }
+        }
     });
     return set;
 }
@@ -81,6 +96,7 @@ std::vector<RaySet> make_ray_sets(const SceneGeometry& geometry, const Accel& re
         hit_count += hits[p].found() ? 1 : 0;
     }
     const float offset = 1e-4f * length(geometry.bounds.extent());
+    const size_t pixels = size_t(view.width) * size_t(view.height);
 
     std::vector<RaySet> sets;
     for (RaySetKind kind : kinds) {
@@ -111,8 +127,11 @@ std::vector<RaySet> make_ray_sets(const SceneGeometry& geometry, const Accel& re
                     case RaySetKind::Ao:
                     case RaySetKind::Diffuse: {
                         const Frame frame = Frame::from_normal(s.normal);
+                        // Primary p is sample p / pixels of pixel p % pixels.
+                        const uint32_t pixel = uint32_t(p % pixels);
+                        const uint32_t first = uint32_t(p / pixels) * uint32_t(kAoSamplesPerHit);
                         for (uint32_t sample = 0; sample < uint32_t(kAoSamplesPerHit); ++sample) {
-                            RandomStream random(uint32_t(p), sample, kRaySetSeed);
+                            RandomStream random(pixel, first + sample, kRaySetSeed);
                             out[sample].org = s.origin;
                             out[sample].dir = frame.to_world(sample_cosine_hemisphere(random.next2()));
                             out[sample].tmin = 0.0f;

@@ -32,6 +32,9 @@ struct ViewSetup {
     int height = 768;
     Vec3f light;            // point light of the shadow set
     float ao_radius = 1.0f; // tmax of the ao set
+    // Camera rays per pixel. The protocol's GPU rule is 4 jittered samples per
+    // pixel, so that one set fills the device; the CPU traces 1 (the centre).
+    int samples_per_pixel = 1;
 };
 
 struct RaySet {
@@ -42,10 +45,20 @@ struct RaySet {
 // Seed of the hash behind every random number of the ray sets. Changing it
 // changes every published figure, so it never changes.
 inline constexpr uint32_t kRaySetSeed = 0x5EED2014u;
+// Seed of the pixel jitter of samples s > 0 (a different seed, so the jitter
+// is not correlated with the ao directions, which use kRaySetSeed).
+inline constexpr uint32_t kPixelJitterSeed = 0x5EED2015u;
 // Cosine-weighted directions per primary hit in the ao and diffuse sets.
 inline constexpr int kAoSamplesPerHit = 8;
 
-// The primary set: one ray per pixel centre, pixels in row-major order.
+// Where camera sample `sample` of pixel `pixel` crosses that pixel, in
+// [0, 1)^2 from its top-left corner: the centre (0.5, 0.5) for sample 0, the
+// first two numbers of rf::RandomStream(pixel, sample, kPixelJitterSeed) otherwise.
+Vec2f pixel_sample_position(uint32_t pixel, uint32_t sample);
+
+// The primary set: view.samples_per_pixel rays per pixel, sample-major: ray
+// s * width * height + p is sample s of pixel p (pixels in row-major order),
+// so sample 0 is exactly the one-sample set of pixel centres.
 RaySet make_primary_rays(const ViewSetup& view);
 
 // The secondary sets, from the closest hits of the primary rays (found by
@@ -56,9 +69,11 @@ RaySet make_primary_rays(const ViewSetup& view);
 //  - ao: kAoSamplesPerHit cosine-weighted directions about that normal, any
 //    hit, tmax = view.ao_radius; diffuse: the same directions, closest hit;
 //  - reflection: the mirror direction about that normal, closest hit.
-// Sample s of pixel p takes its two numbers from rf::RandomStream(p, s,
-// kRaySetSeed) (PCG hash, src/render/random.h), so any run regenerates the
-// identical arrays. Only the kinds listed are produced (in that order).
+// Direction k of the primary ray of sample s of pixel p takes its two numbers
+// from rf::RandomStream(p, s * kAoSamplesPerHit + k, kRaySetSeed) (PCG hash,
+// src/render/random.h), so any run regenerates the identical arrays, and the
+// one-sample sets do not change with samples_per_pixel. Secondary rays follow
+// the order of their primaries. Only the kinds listed are produced (in that order).
 std::vector<RaySet> make_ray_sets(const SceneGeometry& geometry, const Accel& reference, const ViewSetup& view,
                                   const std::vector<RaySetKind>& kinds);
 

@@ -1,11 +1,13 @@
 #include "render_bench.h"
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <iomanip>
 
 #include "bench_runner.h"
 #include "core/parallel.h"
+#include "gpu_bench.h"
 #include "io/procedural_sky.h"
 #include "ray_sets.h"
 #include "rayforge/core/error.h"
@@ -69,10 +71,17 @@ std::vector<RenderBenchRecord> run_render_bench(const LoadedScene& loaded, const
         scene.environment.strength = 1.0f;
     }
 
-    BuildOptions build = config.build;
-    build.threads = config.threads;
-    std::unique_ptr<Accel> accel = build_accel(loaded.geometry, build);
-    const std::string accel_name = accel->stats().name;
+    std::unique_ptr<Accel> accel;
+    std::string accel_name;
+    if (config.cpu) {
+        BuildOptions build = config.build;
+        build.threads = config.threads;
+        accel = build_accel(loaded.geometry, build);
+        accel_name = accel->stats().name;
+    }
+    const double pixels = double(config.width) * double(config.height);
+    const std::string gpu_device = "cuda:" + std::to_string(config.gpu_device);
+    const std::string gpu_name = config.gpu.empty() ? std::string() : gpu_device_name(config.gpu_device);
 
     for (const std::string& integrator : config.integrators) {
         RenderOptions options;
@@ -82,6 +91,39 @@ std::vector<RenderBenchRecord> run_render_bench(const LoadedScene& loaded, const
         options.max_depth = config.max_depth;
         options.threads = config.threads;
         options.spp = 1 << 20;
+        for (const GpuCandidate& candidate : config.gpu) {
+            progress << "render bench: " << loaded.spec.name << ' ' << integrator << ' ' << config.width << 'x'
+                     << config.height << " depth " << config.max_depth << " on " << gpu_device << ' '
+                     << candidate.label() << '\n';
+            BuildOptions build = candidate.build.options;
+            build.threads = config.threads;
+            GpuRenderer renderer(scene, loaded.geometry, view.camera, options, candidate.kernel, build,
+                                 config.gpu_device);
+            renderer.render_pass();  // warm-up
+            std::vector<double> pass_ms;
+            uint64_t rays = 0;
+            for (int r = 0; r < config.repetitions; ++r) {
+                const GpuPass pass = renderer.render_pass();
+                pass_ms.push_back(pass.pass_ms);
+                rays += pass.closest_rays + pass.shadow_rays;
+            }
+            RenderBenchRecord rec;
+            rec.scene = loaded.spec.name;
+            rec.integrator = integrator;
+            rec.accel = renderer.accel_stats().name;
+            rec.device = gpu_device;
+            rec.gpu = gpu_name;
+            rec.width = config.width;
+            rec.height = config.height;
+            rec.max_depth = config.max_depth;
+            rec.pass_ms = median(pass_ms);
+            rec.samples_per_s = pixels / (rec.pass_ms * 1e-3);
+            rec.rays_per_sample = double(rays) / (pixels * double(config.repetitions));
+            rec.rays_per_s = rec.samples_per_s * rec.rays_per_sample;
+            rec.trace_ms = rec.batch_trace_ms = rec.shading_fraction = std::nan("");
+            records.push_back(rec);
+        }
+        if (!config.cpu) continue;
         progress << "render bench: " << loaded.spec.name << ' ' << integrator << ' ' << config.width << 'x'
                  << config.height << " depth " << config.max_depth << '\n';
         ProgressiveRenderer renderer(scene, loaded.geometry, *accel, view.camera, options);
@@ -112,7 +154,6 @@ std::vector<RenderBenchRecord> run_render_bench(const LoadedScene& loaded, const
         rec.max_depth = config.max_depth;
         rec.threads = config.threads;
         rec.pass_ms = median(pass_ms);
-        const double pixels = double(config.width) * double(config.height);
         rec.samples_per_s = pixels / (rec.pass_ms * 1e-3);
         rec.rays_per_sample = double(stats.rays()) / double(stats.samples);
         rec.rays_per_s = rec.samples_per_s * rec.rays_per_sample;
@@ -127,18 +168,30 @@ std::vector<RenderBenchRecord> run_render_bench(const LoadedScene& loaded, const
 void print_render_table(std::ostream& out, const std::vector<RenderBenchRecord>& records) {
     if (records.empty()) return;
     out << "\nrendering throughput (1 sample per pixel per pass; medians; trace = the pass's own queries replayed "
-           "without shading)\n";
+           "without shading, CPU only)\n";
+    const auto ms = [](double value, const char* fmt) {
+        char text[32];
+        if (std::isnan(value)) return std::string("-");
+        std::snprintf(text, sizeof text, fmt, value);
+        return std::string(text);
+    };
     char line[512];
-    std::snprintf(line, sizeof line, "%-14s %-8s %-14s %-10s %5s %10s %10s %9s %10s %10s %10s %8s\n", "scene",
-                  "integr.", "accel", "res", "depth", "pass ms", "Msamp/s", "rays/smp", "Mrays/s", "trace ms",
-                  "batch ms", "shading");
+    std::snprintf(line, sizeof line, "%-14s %-8s %-7s %-22s %-10s %5s %9s %10s %10s %9s %10s %10s %10s %8s\n",
+                  "scene", "integr.", "device", "accel", "res", "depth", "passes/s", "pass ms", "Msamp/s",
+                  "rays/smp", "Mrays/s", "trace ms", "batch ms", "shading");
     out << line;
     for (const RenderBenchRecord& r : records) {
-        std::snprintf(line, sizeof line, "%-14s %-8s %-14s %4dx%-5d %5d %10.1f %10.3f %9.2f %10.2f %10.1f %10.1f %7.1f%%\n",
-                      r.scene.c_str(), r.integrator.c_str(), r.accel.c_str(), r.width, r.height, r.max_depth,
-                      r.pass_ms, r.samples_per_s * 1e-6, r.rays_per_sample, r.rays_per_s * 1e-6, r.trace_ms,
-                      r.batch_trace_ms, 100.0 * r.shading_fraction);
+        std::snprintf(line, sizeof line, "%-14s %-8s %-7s %-22s %4dx%-5d %5d %9.2f %10.2f %10.3f %9.2f %10.2f %10s %10s %8s\n",
+                      r.scene.c_str(), r.integrator.c_str(), r.device.c_str(), r.accel.c_str(), r.width, r.height,
+                      r.max_depth, r.pass_ms > 0.0 ? 1e3 / r.pass_ms : 0.0, r.pass_ms, r.samples_per_s * 1e-6,
+                      r.rays_per_sample, r.rays_per_s * 1e-6, ms(r.trace_ms, "%.1f").c_str(),
+                      ms(r.batch_trace_ms, "%.1f").c_str(), ms(100.0 * r.shading_fraction, "%.1f%%").c_str());
         out << line;
+    }
+    for (const RenderBenchRecord& r : records) {
+        if (r.gpu.empty()) continue;
+        out << r.device << ": " << r.gpu << " (pass ms as the device renderer times a pass)\n";
+        break;
     }
 }
 

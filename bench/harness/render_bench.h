@@ -4,7 +4,9 @@
 // (every closest-hit and any-hit query in the order each tile made it) and
 // replayed through the same single-ray calls on the same threads, so the
 // difference between the two times is what shading, sampling, texture
-// filtering and light selection cost.
+// filtering and light selection cost. On a CUDA device (rf::cuda::Renderer,
+// a wavefront path tracer) a pass is timed as the device renderer reports it;
+// there is no replay there.
 #pragma once
 
 #include <ostream>
@@ -12,6 +14,7 @@
 #include <vector>
 
 #include "bench_scenes.h"
+#include "gpu_candidates.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/render/render.h"
 
@@ -25,15 +28,21 @@ struct RenderBenchConfig {
     int threads = 0;
     BuildOptions build;                    // the structure traced
     bool add_sky = true;                   // scenes without an environment get the procedural sky
+    bool cpu = true;                       // render on the CPU (ProgressiveRenderer over `build`)
+    std::vector<GpuCandidate> gpu;         // and on the device, once per kernel and build
+    int gpu_device = 0;
 };
 
 struct RenderBenchRecord {
     std::string scene, integrator, accel;
+    std::string device = "cpu";      // "cpu" or "cuda:N"
+    std::string gpu;                 // the device's name
     int view = 0, width = 0, height = 0, max_depth = 0, threads = 0;
     double pass_ms = 0.0;            // median wall time of one pass (1 sample per pixel)
     double samples_per_s = 0.0;      // camera samples
     double rays_per_sample = 0.0;    // closest + any-hit queries per camera sample
     double rays_per_s = 0.0;         // all queries, all bounces
+    // CPU only (NaN on a device):
     double trace_ms = 0.0;           // median: the recorded queries, single-ray calls, no shading
     double batch_trace_ms = 0.0;     // median: the same queries through the batch interface
     double shading_fraction = 0.0;   // 1 - trace_ms / pass_ms

@@ -16,9 +16,8 @@
 #include "rayforge/core/error.h"
 
 namespace rf {
-namespace {
 
-void validate(const BuildOptions& options) {
+void validate_build_options(const BuildOptions& options) {
     if (options.bin_count < 2 || options.bin_count > 256) {
         throw Error("build options: bin_count must be in [2, 256], got " + std::to_string(options.bin_count));
     }
@@ -63,12 +62,14 @@ void validate(const BuildOptions& options) {
     }
 }
 
+namespace {
+
 constexpr size_t kMaxTriangles = 0x7FFFFFFF;
 
 }  // namespace
 
 std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options) {
-    validate(options);
+    validate_build_options(options);
     // Node indices are 32-bit and a BVH over n triangles may need 2n - 1 nodes.
     if (geometry.triangles.size() > kMaxTriangles) {
         throw Error("build_accel: " + std::to_string(geometry.triangles.size()) +

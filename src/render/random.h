@@ -25,6 +25,8 @@ RF_HDI float hash_to_unit_float(uint32_t h) { return float(h >> 8) * (1.0f / 167
 
 class RandomStream {
 public:
+    // A placeholder (key 0) for arrays of per-path state; assign a real stream before use.
+    RandomStream() = default;
     RF_HDI RandomStream(uint32_t pixel, uint32_t sample, uint32_t seed)
         : key_(pcg_hash(pixel ^ pcg_hash(sample ^ pcg_hash(seed)))) {}
 
@@ -36,8 +38,19 @@ public:
     }
     [[nodiscard]] RF_HDI uint32_t dimension() const { return dimension_; }
 
+    // A new stream, independent of this one, keyed by this stream's key, its
+    // current dimension and `tag`; this stream is left as it is. A consumer
+    // that runs at another time than its place in the sample (a shadow ray
+    // tested after the next bounce was drawn, as a wavefront does) takes its
+    // numbers from such a stream, so they do not depend on when it runs.
+    [[nodiscard]] RF_HDI RandomStream derive(uint32_t tag) const {
+        return RandomStream(pcg_hash(key_ ^ pcg_hash(dimension_ ^ pcg_hash(tag ^ 0x9e3779b9u))));
+    }
+
 private:
-    uint32_t key_;
+    RF_HDI explicit RandomStream(uint32_t key) : key_(key) {}
+
+    uint32_t key_ = 0;
     uint32_t dimension_ = 0;
 };
 

@@ -23,6 +23,7 @@
 #include "render/random.h"
 #include "render/scene_view.h"
 #include "render/texture_lod.h"
+#include "render/wavefront_path.h"
 
 namespace rf {
 namespace {
@@ -41,7 +42,9 @@ static_assert(int(LightSampling::Mis) == kLightSamplingMis && int(LightSampling:
 static_assert(int(WhittedShading::Lambert) == kWhittedLambert && int(WhittedShading::Phong) == kWhittedPhong &&
               int(WhittedShading::Blinn) == kWhittedBlinn);
 
-void validate(const RenderOptions& o) {
+}  // namespace
+
+void validate_render_options(const RenderOptions& o) {
     auto in_range = [](int v, int lo, int hi) { return v >= lo && v <= hi; };
     if (!in_range(o.width, 1, kMaxImageSide) || !in_range(o.height, 1, kMaxImageSide))
         throw Error("render: image size " + std::to_string(o.width) + "x" + std::to_string(o.height) +
@@ -77,6 +80,8 @@ void validate(const RenderOptions& o) {
         throw Error("render: ao_radius must be finite and >= 0");
 }
 
+namespace {
+
 // A film: per-pixel sums, added to in pass order.
 std::vector<Vec3f> make_film(const RenderOptions& o, bool wanted) {
     return wanted ? std::vector<Vec3f>(size_t(o.width) * size_t(o.height), Vec3f(0.0f)) : std::vector<Vec3f>{};
@@ -103,6 +108,8 @@ struct ProgressiveRenderer::State {
     std::vector<Vec3f> color, albedo, normal, depth;
     int passes = 0;
     RenderStats stats;
+    Box3f sort_bounds;                // wavefront ray sorting: the scene and the camera
+    WavefrontStats wavefront_stats;   // queue sizes of the wavefront passes
 
     State(const Scene& scene, const SceneGeometry& geometry, const Accel& accel_, const Camera& camera,
           const RenderOptions& o)
@@ -122,12 +129,14 @@ struct ProgressiveRenderer::State {
         path.rr_depth = o.rr_depth;
         path.strategy = int(o.light_sampling);
         path.pixel_spread = pixel_spread_angle(camera.vfov_degrees * (kPi / 180.0f), o.height);
+        sort_bounds = geometry.bounds;
+        sort_bounds.extend(frame.eye);
     }
 };
 
 ProgressiveRenderer::ProgressiveRenderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
                                          const Camera& camera, const RenderOptions& options) {
-    validate(options);
+    validate_render_options(options);
     state_ = std::make_unique<State>(scene, geometry, accel, camera, options);
 }
 
@@ -148,6 +157,35 @@ void ProgressiveRenderer::render_pass_recorded(std::vector<TracedRay>& rays) {
 void ProgressiveRenderer::run_pass(const ProgressCallback& progress, std::vector<std::vector<TracedRay>>* tile_logs) {
     State& st = *state_;
     const RenderOptions& o = st.options;
+    // A recorded pass is traced path by path, so its log keeps tile order
+    // (the wavefront renders the same image).
+    if (o.integrator == IntegratorKind::Path && o.wavefront && !tile_logs) {
+        const Clock::time_point start = Clock::now();
+        WavefrontPass pass;
+        pass.accel = st.accel;
+        pass.view = &st.view;
+        pass.camera = st.frame;
+        pass.width = o.width;
+        pass.height = o.height;
+        pass.sample = uint32_t(st.passes);
+        pass.seed = o.seed;
+        pass.settings = st.path;
+        pass.max_sample_value = o.max_sample_value;
+        pass.sort_rays = o.sort_rays;
+        pass.sort_bounds = st.sort_bounds;
+        pass.progress = progress;
+        WavefrontFilms films{st.color.data(), nullptr, nullptr, nullptr};
+        if (o.aovs) films = {st.color.data(), st.albedo.data(), st.normal.data(), st.depth.data()};
+        WavefrontStats stats;
+        parallel::with_threads(o.threads, [&] { render_wavefront_pass(pass, films, stats); });
+        ++st.passes;
+        st.stats.samples += uint64_t(o.width) * uint64_t(o.height);
+        st.stats.closest_rays += stats.closest_rays;
+        st.stats.shadow_rays += stats.shadow_rays;
+        st.stats.seconds += std::chrono::duration<double>(Clock::now() - start).count();
+        st.wavefront_stats += stats;
+        return;
+    }
     const int width = o.width, height = o.height;
     const int tiles_x = (width + kTileSize - 1) / kTileSize;
     const int tiles_y = (height + kTileSize - 1) / kTileSize;

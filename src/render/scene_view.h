@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "rayforge/accel/accel.h"
@@ -59,6 +60,12 @@ public:
     [[nodiscard]] float diagonal() const { return diagonal_; }
     // How far secondary rays start off a surface: relative to the scene size.
     [[nodiscard]] float ray_epsilon() const { return ray_epsilon_; }
+    // The flat tables behind the view, for a backend that copies them (the CUDA backend).
+    [[nodiscard]] std::span<const ShadingMaterial> materials() const { return materials_; }
+    [[nodiscard]] std::span<const ShadingTriangle> shading_triangles() const { return shading_triangles_; }
+    [[nodiscard]] std::span<const MipTextureView> textures() const { return textures_; }
+    [[nodiscard]] uint32_t triangle_count() const { return uint32_t(geometry_->triangles.size()); }
+
     // Memory of the mip chains and shading records built for this view.
     [[nodiscard]] size_t mip_bytes() const;
     [[nodiscard]] size_t shading_bytes() const { return shading_triangles_.size() * sizeof(ShadingTriangle); }

@@ -41,6 +41,8 @@ struct RenderOptions {
     int rr_depth = 3;            // Russian roulette from this bounce on
     LightSampling light_sampling = LightSampling::Mis;
     float max_sample_value = 0.0f;  // > 0: clamp each sample's radiance to this (biased; removes fireflies)
+    bool wavefront = false;      // run the path tracer stage by stage over queues of paths (same image)
+    bool sort_rays = false;      // wavefront: sort the active rays by origin/direction key before each extension
 
     // whitted
     int reflection_depth = 1;    // seed 001's default: one reflection
@@ -116,6 +118,10 @@ Image render(const Scene& scene, const SceneGeometry& geometry, const Accel& acc
              const ProgressCallback& progress = {});
 void render_progressive(ProgressiveRenderer& renderer, const PassCallback& after_pass = {},
                         const ProgressCallback& progress = {});
+
+// Throws rf::Error naming the first option out of its range (sizes, spp,
+// depths, budgets); every renderer, CPU or GPU, checks its options with it.
+void validate_render_options(const RenderOptions& options);
 
 // Names for the CLI and scene files; parse_* throw rf::Error when unknown.
 IntegratorKind parse_integrator(const std::string& name);  // normals | ao | whitted | path

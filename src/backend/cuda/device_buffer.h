@@ -15,6 +15,7 @@ template <class T>
 class DeviceBuffer {
 public:
     DeviceBuffer() = default;
+    explicit DeviceBuffer(std::string name) : name_(std::move(name)) {}
     DeviceBuffer(std::string name, size_t count) : name_(std::move(name)) { allocate(count); }
     ~DeviceBuffer() { release(); }
     DeviceBuffer(const DeviceBuffer&) = delete;
@@ -36,6 +37,10 @@ public:
         }
         count_ = count;
     }
+    // Grows (never shrinks) to hold at least `count` elements; contents are lost when it grows.
+    void reserve(size_t count) {
+        if (count > count_) allocate(count);
+    }
     void upload(std::span<const T> host) {
         if (host.size() != count_) allocate(host.size());
         if (!host.empty()) RF_CUDA_CHECK(cudaMemcpy(data_, host.data(), host.size_bytes(), cudaMemcpyHostToDevice));
@@ -50,6 +55,7 @@ public:
         count_ = 0;
     }
     [[nodiscard]] T* data() const { return data_; }
+    [[nodiscard]] const std::string& name() const { return name_; }
     [[nodiscard]] size_t size() const { return count_; }
     [[nodiscard]] size_t bytes() const { return count_ * sizeof(T); }
 

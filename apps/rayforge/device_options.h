@@ -1,0 +1,28 @@
+// Where a command runs: the --device and --gpu-kernel options shared by
+// `render` and `bench` (names: rayforge/backend/device.h). Bad names are usage
+// errors in every build; asking for CUDA in a build without the backend is
+// a one-line runtime error.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <string>
+
+#include "rayforge/backend/device.h"
+
+namespace rf::cli {
+
+// The reason every CUDA request fails in a build without the backend.
+inline constexpr const char* kNoCudaBackend =
+    "this rayforge was built without the CUDA backend (nvcc was not found at configure time)";
+
+// Validators for one name (with ->delimiter(','), for each item of a list);
+// `allow_all` also accepts "all".
+CLI::Validator device_validator();
+CLI::Validator gpu_kernel_validator(bool allow_all = false);
+
+// Throws rf::Error "OPTION: <why>" when `device` is a CUDA device this
+// process cannot use (backend not built, no driver, no such device).
+void require_usable(const Device& device, const std::string& option);
+
+}  // namespace rf::cli

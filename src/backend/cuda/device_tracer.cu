@@ -1,0 +1,341 @@
+// rf::cuda::DeviceTracer: builds the structure a GPU kernel reads on the
+// CPU, converts it to that kernel's layout, uploads it, and traces batches
+// of rays in device memory. Per-ray traversal is the shared code of
+// src/trace; what is GPU-only here is scheduling:
+//  - one thread per ray (grid-stride loop) for every kernel;
+//  - for the node-pair BVH, the persistent threads of Aila and Laine 2009
+//    (sec. 3): just enough warps to fill the device, each fetching 32 rays at
+//    a time from a global counter with one atomic, so that warps finishing
+//    early take more work instead of idling while slow warps finish, with
+//    the speculative while-while traversal (trace/aila_laine_traversal.h).
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <limits>
+
+#include "accel/accel_factories.h"
+#include "accel/bvh/build/build_bvh.h"
+#include "accel/grid/uniform_grid.h"
+#include "accel/kdtree/kdtree_build.h"
+#include "backend/cuda/device_tracer_impl.h"
+
+namespace rf::cuda {
+
+namespace {
+
+constexpr int kBlockSize = 128;
+
+int grid_blocks(size_t count) {
+    const size_t blocks = (count + kBlockSize - 1) / kBlockSize;
+    return int(std::min<size_t>(std::max<size_t>(blocks, 1), 65535u * 32u));
+}
+
+template <class Tracer>
+__global__ void intersect_kernel(Tracer tracer, const Ray* rays, Hit* hits, uint32_t count) {
+    for (uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < count; i += gridDim.x * blockDim.x)
+        hits[i] = tracer.intersect(rays[i]);
+}
+
+template <class Tracer>
+__global__ void occluded_kernel(Tracer tracer, const Ray* rays, uint8_t* flags, uint32_t count) {
+    for (uint32_t i = blockIdx.x * blockDim.x + threadIdx.x; i < count; i += gridDim.x * blockDim.x)
+        flags[i] = tracer.occluded(rays[i]) ? 1 : 0;
+}
+
+// Persistent warps (Aila and Laine 2009): lane 0 takes the next 32 rays with
+// one atomicAdd and broadcasts the base; the warp loops until none are left.
+template <bool kAnyHit>
+__global__ void aila_laine_persistent_kernel(AilaLaineView bvh, const Ray* rays, Hit* hits, uint8_t* flags,
+                                             uint32_t count, uint32_t* next_ray) {
+    const uint32_t lane = threadIdx.x & 31u;
+    for (;;) {
+        uint32_t base = 0;
+        if (lane == 0) base = atomicAdd(next_ray, 32u);
+        base = __shfl_sync(0xFFFFFFFFu, base, 0);
+        if (base >= count) return;
+        const uint32_t i = base + lane;
+        if (i < count) {
+            if constexpr (kAnyHit) flags[i] = aila_laine_occluded(bvh, rays[i]) ? 1 : 0;
+            else hits[i] = aila_laine_intersect(bvh, rays[i]);
+        }
+    }
+}
+
+// Instrumented traversal: per-ray counters summed in a warp, one atomic per warp.
+template <class Tracer>
+__global__ void count_kernel(Tracer tracer, const Ray* rays, uint32_t count, bool any_hit,
+                             unsigned long long* totals) {
+    for (uint32_t base = blockIdx.x * blockDim.x; base < count; base += gridDim.x * blockDim.x) {
+        const uint32_t i = base + threadIdx.x;
+        RayCounters c;
+        if (i < count) (void)tracer.counted(rays[i], any_hit, c);
+        unsigned long long steps = c.steps, tests = c.prim_tests, restarts = c.restarts;
+        for (int offset = 16; offset > 0; offset >>= 1) {
+            steps += __shfl_down_sync(0xFFFFFFFFu, steps, offset);
+            tests += __shfl_down_sync(0xFFFFFFFFu, tests, offset);
+            restarts += __shfl_down_sync(0xFFFFFFFFu, restarts, offset);
+        }
+        if ((threadIdx.x & 31u) == 0) {
+            atomicAdd(&totals[0], steps);
+            atomicAdd(&totals[1], tests);
+            atomicAdd(&totals[2], restarts);
+        }
+    }
+}
+
+double ms_since(std::chrono::steady_clock::time_point start) {
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+// CUDA events around one launch; destroyed on every path.
+class EventTimer {
+public:
+    EventTimer() {
+        RF_CUDA_CHECK(cudaEventCreate(&start_));
+        if (cudaEventCreate(&stop_) != cudaSuccess) {
+            cudaEventDestroy(start_);
+            RF_CUDA_CHECK(cudaGetLastError());
+        }
+    }
+    ~EventTimer() {
+        cudaEventDestroy(start_);
+        cudaEventDestroy(stop_);
+    }
+    EventTimer(const EventTimer&) = delete;
+    EventTimer& operator=(const EventTimer&) = delete;
+    void start() { RF_CUDA_CHECK(cudaEventRecord(start_)); }
+    double stop_ms() {
+        RF_CUDA_CHECK(cudaEventRecord(stop_));
+        RF_CUDA_CHECK(cudaEventSynchronize(stop_));
+        float ms = 0.0f;
+        RF_CUDA_CHECK(cudaEventElapsedTime(&ms, start_, stop_));
+        return double(ms);
+    }
+
+private:
+    cudaEvent_t start_{}, stop_{};
+};
+
+// Launches the trace of `count` resident rays with the kernel's scheduling.
+void launch_trace(DeviceTracer::Impl& impl, bool any_hit, uint32_t count) {
+    if (impl.kernel == GpuKernel::AilaLaine) {
+        impl.work_counter.reserve(1);
+        RF_CUDA_CHECK(cudaMemset(impl.work_counter.data(), 0, sizeof(uint32_t)));
+        int per_sm = 0;
+        if (any_hit)
+            RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, aila_laine_persistent_kernel<true>,
+                                                                       kBlockSize, 0));
+        else
+            RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, aila_laine_persistent_kernel<false>,
+                                                                       kBlockSize, 0));
+        const int blocks = std::max(1, per_sm) * impl.multiprocessors;
+        if (any_hit)
+            aila_laine_persistent_kernel<true><<<blocks, kBlockSize>>>(impl.aila_laine.bvh, impl.rays.data(), nullptr,
+                                                                       impl.flags.data(), count,
+                                                                       impl.work_counter.data());
+        else
+            aila_laine_persistent_kernel<false><<<blocks, kBlockSize>>>(impl.aila_laine.bvh, impl.rays.data(),
+                                                                        impl.hits.data(), nullptr, count,
+                                                                        impl.work_counter.data());
+    } else {
+        impl.with_tracer([&](const auto& tracer) {
+            if (any_hit)
+                occluded_kernel<<<grid_blocks(count), kBlockSize>>>(tracer, impl.rays.data(), impl.flags.data(), count);
+            else
+                intersect_kernel<<<grid_blocks(count), kBlockSize>>>(tracer, impl.rays.data(), impl.hits.data(), count);
+        });
+    }
+    RF_CUDA_CHECK(cudaGetLastError());
+}
+
+uint32_t checked_ray_count(size_t count) {
+    if (count > 0xFFFFFFFFu - 64u) throw Error("cuda::DeviceTracer: " + std::to_string(count) + " rays in one batch exceed 2^32");
+    return uint32_t(count);
+}
+
+}  // namespace
+
+DeviceTracer::DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, const BuildOptions& build, int device)
+    : impl_(new Impl) {
+    validate_build_options(build);
+    require_device(device);
+    Impl& impl = *impl_;
+    impl.kernel = kernel;
+    impl.device = device;
+    RF_CUDA_CHECK(cudaSetDevice(device));
+    RF_CUDA_CHECK(cudaDeviceGetAttribute(&impl.multiprocessors, cudaDevAttrMultiProcessorCount, device));
+
+    const auto start = std::chrono::steady_clock::now();
+    const std::span<const Triangle> triangles(geometry.triangles);
+    AccelStats& stats = impl.stats;
+    stats.name = "cuda/" + to_string(kernel);
+    double layout_ms = 0.0;
+    size_t structure_bytes = 0;
+    impl.triangles.upload(triangles);
+    const Triangle* device_triangles = impl.triangles.data();
+
+    switch (kernel) {
+        case GpuKernel::Bvh2:
+        case GpuKernel::AilaLaine:
+        case GpuKernel::Cwbvh: {
+            const Bvh bvh = build_bvh(triangles, build);
+            stats.name += "/" + to_string(build.builder);
+            stats.sah_cost = bvh.sah_cost(1.0f, 1.0f);
+            stats.quality_cost = bvh.quality_cost(2.0);
+            stats.leaf_count = bvh.leaf_count();
+            const auto layout_start = std::chrono::steady_clock::now();
+            if (kernel == GpuKernel::Bvh2) {
+                impl.bvh_nodes.upload(bvh.nodes);
+                impl.prim_indices.upload(bvh.prim_indices);
+                impl.bvh2.bvh = {impl.bvh_nodes.data(), impl.prim_indices.data(), device_triangles,
+                                 uint32_t(bvh.nodes.size())};
+                stats.node_count = bvh.nodes.size();
+                structure_bytes = bvh.memory_bytes();
+            } else if (kernel == GpuKernel::AilaLaine) {
+                const AilaLaineBvh al = convert_to_aila_laine(bvh, triangles);
+                layout_ms = ms_since(layout_start);
+                impl.aila_laine_nodes.upload(al.nodes);
+                impl.aila_laine_triangles.upload(al.triangles);
+                impl.aila_laine.bvh = {impl.aila_laine_nodes.data(), impl.aila_laine_triangles.data(), al.root,
+                                       uint32_t(al.nodes.size())};
+                stats.node_count = al.nodes.size();
+                structure_bytes = al.memory_bytes();
+            } else {
+                const CwbvhBvh cw = build_cwbvh(bvh, geometry.triangles);
+                layout_ms = ms_since(layout_start);
+                impl.cwbvh_nodes.upload(cw.nodes);
+                impl.cwbvh_triangles.upload(cw.triangles);
+                CwbvhView view = cw.view();
+                view.nodes = impl.cwbvh_nodes.data();
+                view.triangles = impl.cwbvh_triangles.data();
+                impl.cwbvh.bvh = view;
+                stats.node_count = cw.nodes.size();
+                structure_bytes = cw.memory_bytes();
+            }
+            break;
+        }
+        case GpuKernel::KdShortStack:
+        case GpuKernel::KdRestart: {
+            const KdTree tree = build_kdtree(triangles, build);
+            impl.kd_nodes.upload(tree.nodes);
+            impl.prim_indices.upload(tree.prim_indices);
+            const KdTreeView kd{impl.kd_nodes.data(), impl.prim_indices.data(), device_triangles,
+                                uint32_t(tree.nodes.size()), tree.bounds, build.kd_short_stack_size};
+            impl.kd_short_stack.tree = kd;
+            impl.kd_restart.tree = kd;
+            stats.node_count = tree.nodes.size();
+            stats.leaf_count = tree.leaf_count();
+            stats.sah_cost = tree.sah_cost(build.traversal_cost, build.intersection_cost);
+            structure_bytes = tree.memory_bytes();
+            break;
+        }
+        case GpuKernel::Grid:
+        case GpuKernel::ProximityGrid: {
+            const UniformGrid grid =
+                build_uniform_grid(triangles, build.grid_resolution, kernel == GpuKernel::ProximityGrid);
+            impl.cell_start.upload(grid.cell_start);
+            impl.cell_prims.upload(grid.cell_prims);
+            impl.proximity.upload(grid.proximity);
+            GridView view = grid.view(device_triangles);
+            view.cell_start = impl.cell_start.data();
+            view.cell_prims = impl.cell_prims.data();
+            view.proximity = grid.proximity.empty() ? nullptr : impl.proximity.data();
+            impl.grid.grid = view;
+            stats.node_count = grid.cell_count();
+            structure_bytes = grid.memory_bytes();
+            stats.sah_cost = stats.quality_cost = std::numeric_limits<double>::quiet_NaN();
+            break;
+        }
+    }
+    RF_CUDA_CHECK(cudaDeviceSynchronize());
+    stats.build_ms = ms_since(start);
+    stats.layout_ms = layout_ms;
+    stats.bytes = structure_bytes;
+}
+
+DeviceTracer::~DeviceTracer() = default;
+
+void DeviceTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
+    if (rays.size() != hits.size()) throw Error("cuda::DeviceTracer::intersect: rays and hits differ in size");
+    if (rays.empty()) return;
+    auto& self = const_cast<DeviceTracer&>(*this);  // the ray buffers are scratch space
+    self.upload_rays(rays);
+    (void)self.trace_uploaded(false);
+    download_hits(hits);
+}
+
+void DeviceTracer::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const {
+    if (rays.size() != occluded.size()) throw Error("cuda::DeviceTracer::occluded: rays and flags differ in size");
+    if (rays.empty()) return;
+    auto& self = const_cast<DeviceTracer&>(*this);
+    self.upload_rays(rays);
+    (void)self.trace_uploaded(true);
+    download_occluded(occluded);
+}
+
+void DeviceTracer::upload_rays(std::span<const Ray> rays) {
+    (void)checked_ray_count(rays.size());
+    RF_CUDA_CHECK(cudaSetDevice(impl_->device));
+    impl_->rays.upload(rays);
+}
+
+KernelTiming DeviceTracer::trace_uploaded(bool any_hit) {
+    Impl& impl = *impl_;
+    RF_CUDA_CHECK(cudaSetDevice(impl.device));
+    const uint32_t count = checked_ray_count(impl.rays.size());
+    KernelTiming timing;
+    timing.rays = count;
+    if (count == 0) return timing;
+    if (any_hit) impl.flags.reserve(count);
+    else impl.hits.reserve(count);
+    EventTimer timer;
+    timer.start();
+    launch_trace(impl, any_hit, count);
+    timing.kernel_ms = timer.stop_ms();
+    return timing;
+}
+
+void DeviceTracer::download_hits(std::span<Hit> hits) const {
+    if (hits.size() > impl_->hits.size()) throw Error("cuda::DeviceTracer: no closest-hit results for that many rays");
+    impl_->hits.download(hits);
+}
+
+void DeviceTracer::download_occluded(std::span<uint8_t> flags) const {
+    if (flags.size() > impl_->flags.size()) throw Error("cuda::DeviceTracer: no any-hit results for that many rays");
+    impl_->flags.download(flags);
+}
+
+void DeviceTracer::count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const {
+    if (rays.empty()) return;
+    auto& impl = const_cast<Impl&>(*impl_);
+    const uint32_t count = checked_ray_count(rays.size());
+    RF_CUDA_CHECK(cudaSetDevice(impl.device));
+    impl.rays.upload(rays);
+    impl.totals.reserve(3);
+    RF_CUDA_CHECK(cudaMemset(impl.totals.data(), 0, 3 * sizeof(unsigned long long)));
+    impl.with_tracer([&](const auto& tracer) {
+        count_kernel<<<grid_blocks(count), kBlockSize>>>(tracer, impl.rays.data(), count, any_hit, impl.totals.data());
+    });
+    RF_CUDA_CHECK(cudaGetLastError());
+    unsigned long long sums[3] = {0, 0, 0};
+    RF_CUDA_CHECK(cudaMemcpy(sums, impl.totals.data(), sizeof sums, cudaMemcpyDeviceToHost));
+    totals.rays += count;
+    totals.steps += sums[0];
+    totals.prim_tests += sums[1];
+    totals.restarts += sums[2];
+}
+
+GpuKernel DeviceTracer::kernel() const { return impl_->kernel; }
+int DeviceTracer::device() const { return impl_->device; }
+AccelStats DeviceTracer::stats() const { return impl_->stats; }
+
+size_t DeviceTracer::device_bytes() const {
+    const Impl& i = *impl_;
+    return i.triangles.bytes() + i.bvh_nodes.bytes() + i.prim_indices.bytes() + i.aila_laine_nodes.bytes() +
+           i.aila_laine_triangles.bytes() + i.cwbvh_nodes.bytes() + i.cwbvh_triangles.bytes() + i.kd_nodes.bytes() +
+           i.cell_start.bytes() + i.cell_prims.bytes() + i.proximity.bytes();
+}
+
+}  // namespace rf::cuda

@@ -1,0 +1,63 @@
+// rf::cuda::DeviceTracer's state, shared by the trace kernels
+// (device_tracer.cu) and the renderer (renderer.cu): the structure's arrays
+// in device memory and, per GPU kernel, the tracer struct over them.
+#pragma once
+
+#include <cstdint>
+
+#include "backend/cuda/device_buffer.h"
+#include "backend/cuda/device_tracers.h"
+#include "rayforge/backend/cuda.h"
+
+namespace rf::cuda {
+
+struct DeviceTracer::Impl {
+    GpuKernel kernel = GpuKernel::Bvh2;
+    int device = 0;
+    AccelStats stats;
+    int multiprocessors = 1;
+
+    DeviceBuffer<Triangle> triangles{"triangles"};
+    // The arrays of whichever structure the kernel reads.
+    DeviceBuffer<BvhNode> bvh_nodes{"bvh nodes"};
+    DeviceBuffer<uint32_t> prim_indices{"primitive indices"};
+    DeviceBuffer<AilaLaineNode> aila_laine_nodes{"node pairs"};
+    DeviceBuffer<AilaLaineFloat4> aila_laine_triangles{"node-pair leaf triangles"};
+    DeviceBuffer<CwbvhNode> cwbvh_nodes{"cwbvh nodes"};
+    DeviceBuffer<CwbvhTriangle> cwbvh_triangles{"cwbvh leaf triangles"};
+    DeviceBuffer<KdNode> kd_nodes{"kd-tree nodes"};
+    DeviceBuffer<uint32_t> cell_start{"grid cell offsets"};
+    DeviceBuffer<uint32_t> cell_prims{"grid cell references"};
+    DeviceBuffer<uint8_t> proximity{"proximity distances"};
+
+    Bvh2Tracer bvh2{};
+    AilaLaineTracer aila_laine{};
+    CwbvhTracer cwbvh{};
+    KdTracer<KdTraversal::ShortStack> kd_short_stack{};
+    KdTracer<KdTraversal::Restart> kd_restart{};
+    GridTracer grid{};
+
+    // Rays resident on the device (the bench) and the answers.
+    DeviceBuffer<Ray> rays{"rays"};
+    DeviceBuffer<Hit> hits{"hits"};
+    DeviceBuffer<uint8_t> flags{"occlusion flags"};
+    DeviceBuffer<uint32_t> work_counter{"persistent-thread ray counter"};
+    DeviceBuffer<unsigned long long> totals{"traversal totals"};
+
+    // Calls f with the tracer struct of this kernel.
+    template <class F>
+    decltype(auto) with_tracer(F&& f) const {
+        switch (kernel) {
+            case GpuKernel::Bvh2: return f(bvh2);
+            case GpuKernel::AilaLaine: return f(aila_laine);
+            case GpuKernel::Cwbvh: return f(cwbvh);
+            case GpuKernel::KdShortStack: return f(kd_short_stack);
+            case GpuKernel::KdRestart: return f(kd_restart);
+            case GpuKernel::Grid:
+            case GpuKernel::ProximityGrid: return f(grid);
+        }
+        return f(bvh2);
+    }
+};
+
+}  // namespace rf::cuda

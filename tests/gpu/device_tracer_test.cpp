@@ -1,0 +1,222 @@
+// Every GPU traversal kernel (rf::GpuKernel) against the CPU: same hits
+// (hit or miss, primitive, t within 1e-5 relative) as the brute-force
+// reference for camera rays, diffuse bounce rays and random rays; any-hit
+// queries agree with closest-hit ones; the resident-ray path of the bench
+// and the instrumented traversal work; error paths give clean rf::Errors.
+// Skips with a message when no CUDA device is present.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "accel/brute_force.h"
+#include "backend/cuda/self_test.h"
+#include "rayforge/backend/cuda.h"
+#include "rayforge/core/error.h"
+#include "rayforge/io/scene_io.h"
+#include "rayforge/scene/camera.h"
+
+namespace rf {
+namespace {
+
+bool have_device() { return !cuda::list_devices().empty(); }
+
+#define RF_REQUIRE_DEVICE() \
+    if (!have_device()) GTEST_SKIP() << "no CUDA device: " << cuda::device_unavailable_reason()
+
+// Camera rays through a jittered 96x72 image, then one cosine-free diffuse
+// bounce from every hit (random directions in the facing hemisphere), then
+// rays between random points of the scene box: the protocol's primary and
+// diffuse sets in small, plus incoherent ones.
+std::vector<Ray> test_rays(const Scene& scene, const SceneGeometry& g, const Accel& reference, uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    const int w = 96, h = 72;
+    const CameraFrame camera = CameraFrame::make(scene.camera_or_default(), w, h);
+    std::vector<Ray> rays;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) rays.push_back(camera.generate(x + u(rng), y + u(rng), w, h, 0.5f, 0.5f));
+    const size_t primaries = rays.size();
+    const float eps = 1e-4f * length(g.bounds.extent());
+    for (size_t i = 0; i < primaries; ++i) {
+        const Hit hit = reference.intersect(rays[i]);
+        if (!hit.found()) continue;
+        const Triangle& t = g.triangles[hit.prim];
+        Vec3f n = normalize(cross(t.v1 - t.v0, t.v2 - t.v0));
+        if (dot(n, rays[i].dir) > 0.0f) n = -n;
+        Vec3f d;
+        do d = Vec3f(2 * u(rng) - 1, 2 * u(rng) - 1, 2 * u(rng) - 1);
+        while (dot(d, d) > 1.0f || dot(d, d) < 1e-4f);
+        d = normalize(d);
+        if (dot(d, n) < 0.0f) d = -d;
+        Ray bounce;
+        bounce.org = rays[i].org + rays[i].dir * hit.t + n * eps;
+        bounce.dir = d;
+        rays.push_back(bounce);
+    }
+    const Vec3f e = g.bounds.extent();
+    for (int i = 0; i < 20000; ++i) {
+        Ray r;
+        r.org = g.bounds.lo + Vec3f(u(rng) * e.x, u(rng) * e.y, u(rng) * e.z);
+        const Vec3f to = g.bounds.lo + Vec3f(u(rng) * e.x, u(rng) * e.y, u(rng) * e.z);
+        r.dir = normalize(to - r.org + Vec3f(1e-3f, 0.0f, 0.0f));
+        if (i % 3 == 0) r.tmax = 0.25f * length(e);
+        rays.push_back(r);
+    }
+    return rays;
+}
+
+void expect_same_hits(const std::vector<Ray>& rays, const std::vector<Hit>& expected, const std::vector<Hit>& got,
+                      const std::vector<uint8_t>& occluded, const std::string& what) {
+    size_t mismatches = 0, hits = 0;
+    for (size_t i = 0; i < rays.size(); ++i) {
+        hits += expected[i].found();
+        bool same = expected[i].found() == got[i].found();
+        if (same && expected[i].found()) {
+            const float tol = 1e-5f * std::fabs(expected[i].t);
+            // Another triangle at the same distance (shared edges) is the same answer.
+            same = std::fabs(expected[i].t - got[i].t) <= tol;
+        }
+        if (bool(occluded[i]) != expected[i].found()) same = false;
+        if (!same && ++mismatches <= 5)
+            ADD_FAILURE() << what << ": ray " << i << " cpu prim " << expected[i].prim << " t " << expected[i].t
+                          << ", gpu prim " << got[i].prim << " t " << got[i].t << " occluded "
+                          << int(occluded[i]);
+    }
+    EXPECT_EQ(mismatches, 0u) << what;
+    EXPECT_GT(hits, rays.size() / 10) << what;
+}
+
+TEST(GpuDeviceTracer, EveryKernelMatchesBruteForce) {
+    RF_REQUIRE_DEVICE();
+    for (const char* name : {"cornell", "spheres", "material-spheres"}) {
+        const Scene scene = make_builtin_scene(name);
+        const SceneGeometry g = SceneGeometry::build(scene);
+        const BruteForceAccel brute(g);
+        const std::vector<Ray> rays = test_rays(scene, g, brute, 7);
+        std::vector<Hit> expected(rays.size());
+        brute.intersect(rays, expected);
+        for (GpuKernel kernel : all_gpu_kernels()) {
+            const std::string what = std::string(name) + " / " + to_string(kernel);
+            SCOPED_TRACE(what);
+            cuda::DeviceTracer tracer(g, kernel);
+            std::vector<Hit> hits(rays.size());
+            std::vector<uint8_t> occluded(rays.size());
+            tracer.intersect(rays, hits);
+            tracer.occluded(rays, occluded);
+            expect_same_hits(rays, expected, hits, occluded, what);
+            EXPECT_GT(tracer.device_bytes(), 0u);
+            EXPECT_NE(tracer.stats().name.find(to_string(kernel)), std::string::npos);
+        }
+    }
+}
+
+TEST(GpuDeviceTracer, BuildersAndLeafSizesForTheBvhKernels) {
+    RF_REQUIRE_DEVICE();
+    const Scene scene = make_builtin_scene("spheres");
+    const SceneGeometry g = SceneGeometry::build(scene);
+    const BruteForceAccel brute(g);
+    const std::vector<Ray> rays = test_rays(scene, g, brute, 11);
+    std::vector<Hit> expected(rays.size());
+    brute.intersect(rays, expected);
+    for (Builder builder : {Builder::Sbvh, Builder::Lbvh30, Builder::Hlbvh2, Builder::Ploc})
+        for (GpuKernel kernel : {GpuKernel::Bvh2, GpuKernel::AilaLaine, GpuKernel::Cwbvh}) {
+            const std::string what = to_string(builder) + " / " + to_string(kernel);
+            BuildOptions build;
+            build.builder = builder;
+            build.max_leaf_size = 8;
+            cuda::DeviceTracer tracer(g, kernel, build);
+            std::vector<Hit> hits(rays.size());
+            std::vector<uint8_t> occluded(rays.size());
+            tracer.intersect(rays, hits);
+            tracer.occluded(rays, occluded);
+            expect_same_hits(rays, expected, hits, occluded, what);
+        }
+}
+
+TEST(GpuDeviceTracer, ResidentRaysAndCountersMatchTheOneShotPath) {
+    RF_REQUIRE_DEVICE();
+    const Scene scene = make_builtin_scene("cornell");
+    const SceneGeometry g = SceneGeometry::build(scene);
+    const BruteForceAccel brute(g);
+    const std::vector<Ray> rays = test_rays(scene, g, brute, 3);
+    for (GpuKernel kernel : all_gpu_kernels()) {
+        SCOPED_TRACE(to_string(kernel));
+        cuda::DeviceTracer tracer(g, kernel);
+        std::vector<Hit> once(rays.size()), resident(rays.size());
+        tracer.intersect(rays, once);
+        tracer.upload_rays(rays);
+        const cuda::KernelTiming timing = tracer.trace_uploaded(false);
+        EXPECT_EQ(timing.rays, rays.size());
+        EXPECT_GT(timing.kernel_ms, 0.0);
+        tracer.download_hits(resident);
+        for (size_t i = 0; i < rays.size(); ++i) {
+            ASSERT_EQ(once[i].prim, resident[i].prim) << i;
+            ASSERT_EQ(once[i].t, resident[i].t) << i;
+        }
+        TraversalTotals totals;
+        tracer.count_traversal(rays, false, totals);
+        EXPECT_EQ(totals.rays, rays.size());
+        EXPECT_GT(totals.steps, totals.rays);
+        EXPECT_GT(totals.prim_tests, 0u);
+    }
+}
+
+TEST(GpuDeviceTracer, EmptySceneAlwaysMisses) {
+    RF_REQUIRE_DEVICE();
+    const SceneGeometry g;
+    std::vector<Ray> rays(100);
+    for (Ray& r : rays) r.dir = Vec3f(0.0f, 0.0f, 1.0f);
+    for (GpuKernel kernel : all_gpu_kernels()) {
+        SCOPED_TRACE(to_string(kernel));
+        cuda::DeviceTracer tracer(g, kernel);
+        std::vector<Hit> hits(rays.size());
+        tracer.intersect(rays, hits);
+        for (const Hit& h : hits) EXPECT_FALSE(h.found());
+    }
+}
+
+TEST(GpuErrors, FailingAllocationNamesTheBufferAndSize) {
+    RF_REQUIRE_DEVICE();
+    try {
+        cuda::self_test::allocate_device_buffer(size_t(1) << 50);  // a petabyte
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        const std::string m = e.what();
+        EXPECT_NE(m.find("out of device memory: buffer 'self-test buffer' asked for 1125899906842624 bytes"),
+                  std::string::npos)
+            << m;
+    }
+    // The device is still usable afterwards.
+    EXPECT_NO_THROW(cuda::self_test::allocate_device_buffer(1 << 20));
+}
+
+TEST(GpuErrors, LaunchErrorNamesFileLineAndCudaError) {
+    RF_REQUIRE_DEVICE();
+    try {
+        cuda::self_test::launch_invalid_kernel();
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        const std::string m = e.what();
+        EXPECT_NE(m.find("CUDA error at"), std::string::npos) << m;
+        EXPECT_NE(m.find("self_test.cu:"), std::string::npos) << m;
+        EXPECT_NE(m.find("invalid configuration"), std::string::npos) << m;
+    }
+    EXPECT_NO_THROW(cuda::self_test::allocate_device_buffer(1 << 20));
+}
+
+TEST(GpuErrors, UnknownDeviceIsACleanError) {
+    RF_REQUIRE_DEVICE();
+    const SceneGeometry g = SceneGeometry::build(make_builtin_scene("cornell"));
+    try {
+        cuda::DeviceTracer tracer(g, GpuKernel::Cwbvh, {}, 99);
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("cuda:99: no such device"), std::string::npos) << e.what();
+    }
+}
+
+}  // namespace
+}  // namespace rf

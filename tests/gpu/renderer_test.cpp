@@ -1,0 +1,165 @@
+// The device renderer against the CPU renderer: Whitted, normals and AO
+// images equal within floating-point tolerance (same per-sample code, same
+// random streams; only FMA contraction differs between the compilers), path
+// traced images with the same mean within noise bounds, ray sorting that
+// changes nothing, a white furnace that renders 1, and AOVs. Skips with a
+// message when no CUDA device is present.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "rayforge/accel/accel.h"
+#include "rayforge/backend/cuda.h"
+#include "rayforge/io/scene_io.h"
+#include "rayforge/render/render.h"
+
+namespace rf {
+namespace {
+
+bool have_device() { return !cuda::list_devices().empty(); }
+
+#define RF_REQUIRE_DEVICE() \
+    if (!have_device()) GTEST_SKIP() << "no CUDA device: " << cuda::device_unavailable_reason()
+
+struct Rendered {
+    Image cpu, gpu;
+};
+
+Rendered render_both(const std::string& scene_name, const RenderOptions& options, GpuKernel kernel) {
+    const Scene scene = make_builtin_scene(scene_name);
+    const SceneGeometry g = SceneGeometry::build(scene);
+    const auto accel = build_accel(g);
+    ProgressiveRenderer cpu(scene, g, *accel, scene.camera_or_default(), options);
+    render_progressive(cpu);
+    cuda::Renderer gpu(scene, g, scene.camera_or_default(), options, kernel);
+    cuda::render_progressive(gpu);
+    EXPECT_EQ(gpu.passes(), options.spp);
+    return {cpu.image(), gpu.image()};
+}
+
+// Share of pixels (all channels) within `tol` of each other, and the largest difference.
+double share_within(const Image& a, const Image& b, float tol, float& worst) {
+    size_t close = 0;
+    worst = 0.0f;
+    for (size_t i = 0; i < a.pixels.size(); ++i) {
+        const Vec3f d = a.pixels[i] - b.pixels[i];
+        const float m = std::max({std::fabs(d.x), std::fabs(d.y), std::fabs(d.z)});
+        worst = std::max(worst, m);
+        close += m <= tol;
+    }
+    return double(close) / double(a.pixels.size());
+}
+
+TEST(GpuRenderer, WhittedNormalsAndAoMatchTheCpu) {
+    RF_REQUIRE_DEVICE();
+    for (IntegratorKind integrator : {IntegratorKind::Whitted, IntegratorKind::Normals, IntegratorKind::AmbientOcclusion})
+        for (GpuKernel kernel : {GpuKernel::Cwbvh, GpuKernel::AilaLaine, GpuKernel::KdShortStack, GpuKernel::Grid}) {
+            SCOPED_TRACE(integrator_name(integrator) + " / " + to_string(kernel));
+            RenderOptions o;
+            o.width = 96;
+            o.height = 72;
+            o.spp = integrator == IntegratorKind::AmbientOcclusion ? 4 : 1;
+            o.integrator = integrator;
+            const Rendered r = render_both("cornell", o, kernel);
+            float worst = 0.0f;
+            // A ray grazing an edge may go either way under a different rounding: a few pixels may differ.
+            EXPECT_GE(share_within(r.cpu, r.gpu, 1e-3f, worst), 0.995) << "worst " << worst;
+        }
+}
+
+TEST(GpuRenderer, PathTracedMeanAgreesWithTheCpu) {
+    RF_REQUIRE_DEVICE();
+    for (const char* scene : {"cornell", "material-spheres"}) {
+        SCOPED_TRACE(scene);
+        RenderOptions o;
+        o.width = 64;
+        o.height = 48;
+        o.spp = 32;
+        o.integrator = IntegratorKind::Path;
+        o.max_depth = 6;
+        const Rendered r = render_both(scene, o, GpuKernel::Cwbvh);
+        // Paired per-pixel differences: their mean must be 0 within 5 standard errors.
+        for (int c = 0; c < 3; ++c) {
+            double sum = 0.0, sum2 = 0.0;
+            const size_t n = r.cpu.pixels.size();
+            for (size_t i = 0; i < n; ++i) {
+                const double d = double(r.gpu.pixels[i][c]) - double(r.cpu.pixels[i][c]);
+                sum += d;
+                sum2 += d * d;
+            }
+            const double mean = sum / double(n);
+            const double stderr_mean = std::sqrt(std::max(0.0, sum2 / double(n) - mean * mean) / double(n));
+            EXPECT_LE(std::fabs(mean), 5.0 * stderr_mean + 1e-6) << "channel " << c;
+        }
+        float worst = 0.0f;
+        // Same random streams and stage code: most pixels are the CPU's exactly.
+        EXPECT_GE(share_within(r.cpu, r.gpu, 1e-3f, worst), 0.9);
+    }
+}
+
+TEST(GpuRenderer, RaySortingChangesNothing) {
+    RF_REQUIRE_DEVICE();
+    const Scene scene = make_builtin_scene("cornell");
+    const SceneGeometry g = SceneGeometry::build(scene);
+    RenderOptions o;
+    o.width = 64;
+    o.height = 48;
+    o.spp = 4;
+    o.integrator = IntegratorKind::Path;
+    cuda::Renderer plain(scene, g, scene.camera_or_default(), o);
+    cuda::render_progressive(plain);
+    o.sort_rays = true;
+    cuda::Renderer sorted(scene, g, scene.camera_or_default(), o);
+    cuda::render_progressive(sorted);
+    const Image a = plain.image(), b = sorted.image();
+    for (size_t i = 0; i < a.pixels.size(); ++i) {
+        ASSERT_EQ(a.pixels[i].x, b.pixels[i].x) << i;
+        ASSERT_EQ(a.pixels[i].y, b.pixels[i].y) << i;
+        ASSERT_EQ(a.pixels[i].z, b.pixels[i].z) << i;
+    }
+    EXPECT_FALSE(sorted.last_pass().paths_per_bounce.empty());
+    EXPECT_EQ(sorted.last_pass().paths_per_bounce[0], uint32_t(64 * 48));
+}
+
+TEST(GpuRenderer, WhiteFurnaceRendersOne) {
+    RF_REQUIRE_DEVICE();
+    const Scene scene = make_builtin_scene("furnace");
+    const SceneGeometry g = SceneGeometry::build(scene);
+    RenderOptions o;
+    o.width = 32;
+    o.height = 32;
+    o.spp = 64;
+    o.integrator = IntegratorKind::Path;
+    o.max_depth = 64;
+    o.rr_depth = 64;
+    cuda::Renderer gpu(scene, g, scene.camera_or_default(), o);
+    cuda::render_progressive(gpu);
+    const Image image = gpu.image();
+    double sum = 0.0;
+    for (const Vec3f& p : image.pixels) sum += p.x + p.y + p.z;
+    EXPECT_NEAR(sum / (3.0 * double(image.pixels.size())), 1.0, 0.01);
+}
+
+TEST(GpuRenderer, AovsAndCallbacks) {
+    RF_REQUIRE_DEVICE();
+    const Scene scene = make_builtin_scene("cornell");
+    const SceneGeometry g = SceneGeometry::build(scene);
+    RenderOptions o;
+    o.width = 32;
+    o.height = 24;
+    o.spp = 10;
+    o.integrator = IntegratorKind::Path;
+    o.aovs = true;
+    cuda::Renderer gpu(scene, g, scene.camera_or_default(), o);
+    int calls = 0;
+    cuda::render_progressive(gpu, [&](const cuda::Renderer& r) { return ++calls < 3 && r.passes() > 0; });
+    EXPECT_EQ(calls, 3);
+    EXPECT_EQ(gpu.passes(), 3);
+    EXPECT_EQ(gpu.albedo().pixels.size(), size_t(32 * 24));
+    EXPECT_GT(gpu.depth().pixels[size_t(12 * 32 + 16)].x, 0.0f);  // the centre sees the box
+}
+
+}  // namespace
+}  // namespace rf
