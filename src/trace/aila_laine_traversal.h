@@ -23,6 +23,7 @@
 #include <cstring>
 
 #include "accel/bvh/wide/aila_laine_layout.h"
+#include "rayforge/core/float_bits.h"
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/ray.h"
 #include "rayforge/scene/scene_geometry.h"
@@ -32,16 +33,6 @@
 namespace rf {
 
 namespace detail {
-
-RF_HDI uint32_t aila_laine_bits(float f) {
-#if defined(__CUDA_ARCH__)
-    return __float_as_uint(f);
-#else
-    uint32_t u;
-    std::memcpy(&u, &f, sizeof u);
-    return u;
-#endif
-}
 
 // Box of child `side` (0 or 1) of a node pair.
 RF_HDI Box3f aila_laine_child_box(const AilaLaineNode& n, int side) {
@@ -129,7 +120,7 @@ RF_HDI Hit aila_laine_traverse(const AilaLaineView& bvh, const Ray& ray, Travers
         while (postponed < 0) {
             for (int32_t i = ~postponed;; i += kAilaLaineTriangleStride) {
                 const AilaLaineFloat4 a = bvh.triangles[i];
-                const uint32_t prim = aila_laine_bits(a.w);
+                const uint32_t prim = float_to_bits(a.w);
                 if (prim == kAilaLaineLeafEndW) break;
                 const AilaLaineFloat4 b = bvh.triangles[i + 1];
                 const AilaLaineFloat4 c = bvh.triangles[i + 2];

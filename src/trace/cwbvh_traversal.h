@@ -31,6 +31,7 @@
 #include <cstring>
 
 #include "accel/bvh/wide/cwbvh_layout.h"
+#include "rayforge/core/float_bits.h"
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/ray.h"
 #include "rayforge/scene/scene_geometry.h"
@@ -69,16 +70,6 @@ RF_HDI int cwbvh_lowest_bit(uint32_t x) {
     return __ffs(x) - 1;
 #else
     return __builtin_ctz(x);
-#endif
-}
-
-RF_HDI uint32_t cwbvh_bits(float f) {
-#if defined(__CUDA_ARCH__)
-    return __float_as_uint(f);
-#else
-    uint32_t u;
-    std::memcpy(&u, &f, sizeof u);
-    return u;
 #endif
 }
 
@@ -182,7 +173,7 @@ RF_HDI Hit cwbvh_traverse(const CwbvhView& bvh, const Ray& ray, Counters* counte
                 hit.t = candidate.t;
                 hit.u = candidate.u;
                 hit.v = candidate.v;
-                hit.prim = cwbvh_bits(t.v0.w);
+                hit.prim = float_to_bits(t.v0.w);
                 if constexpr (kAnyHit) return hit;  // any hit: the first ends it
                 tmax = candidate.t;                 // later boxes and triangles must beat it
             }

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <vector>
 
+#include "rayforge/core/float_bits.h"
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/box.h"
 
@@ -28,15 +29,7 @@ struct KdNode {
 
     RF_HDI bool is_leaf() const { return (word1 & 3u) == 3u; }
     RF_HDI int axis() const { return static_cast<int>(word1 & 3u); }
-    RF_HDI float split() const {
-#if defined(__CUDA_ARCH__)
-        return __uint_as_float(word0);
-#else
-        float f;
-        std::memcpy(&f, &word0, sizeof f);
-        return f;
-#endif
-    }
+    RF_HDI float split() const { return bits_to_float(word0); }
     RF_HDI uint32_t first_child() const { return word1 >> 2; }
     RF_HDI uint32_t prim_count() const { return word0; }
     RF_HDI uint32_t prim_offset() const { return word1 >> 2; }

@@ -64,6 +64,7 @@
 #include <vector>
 
 #include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/core/float_bits.h"
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/box.h"
 #include "rayforge/scene/scene_geometry.h"
@@ -115,14 +116,7 @@ static_assert(sizeof(CwbvhTriangle) == 48, "CwbvhTriangle is three float4s");
 
 // The grid step 2^(e - 127) of an exponent byte (e >= 1: a normal float).
 RF_HDI float cwbvh_step(uint8_t e) {
-    const uint32_t bits = uint32_t(e) << 23;
-#if defined(__CUDA_ARCH__)
-    return __uint_as_float(bits);
-#else
-    float f;
-    std::memcpy(&f, &bits, sizeof f);
-    return f;
-#endif
+    return bits_to_float(uint32_t(e) << 23);
 }
 
 // The dequantised box of `slot`. q * step is exact (an 8-bit integer times a
