@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# On a CUDA machine without package access (the device machine): unpacks
+# .gpu-debs/ (made by scripts/gpu-bundle.sh) into a private prefix, builds
+# the CLI and the gpu tests, runs `ctest -L gpu`, then the GPU benchmarks of
+# issue 6, writing everything to $OUT (or ./gpu-out).
+#   scripts/gpu-run.sh [tests|bench|all]   (default all)
+set -uo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+what="${1:-all}"
+out="${OUT:-$ROOT/gpu-out}"
+mkdir -p "$out"
+prefix=/tmp/rayforge-debs
+mkdir -p "$prefix"
+for f in "$ROOT"/.gpu-debs/*.deb; do dpkg-deb -x "$f" "$prefix"; done
+lib="$prefix/usr/lib/x86_64-linux-gnu"
+export CMAKE_PREFIX_PATH="$prefix/usr:$lib/cmake${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
+export CPATH="$prefix/usr/include${CPATH:+:$CPATH}"
+export LIBRARY_PATH="$lib${LIBRARY_PATH:+:$LIBRARY_PATH}"
+export LD_LIBRARY_PATH="$lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+export PATH="$prefix/usr/bin:$PATH"
+# .pc files say prefix=/usr: the sysroot puts the unpacked tree in front.
+export PKG_CONFIG_PATH="$lib/pkgconfig:$prefix/usr/share/pkgconfig"
+export PKG_CONFIG_SYSROOT_DIR="$prefix"
+
+nvidia-smi > "$out/nvidia-smi.txt" 2>&1
+build="$ROOT/build-gpu"
+{
+  cmake -S "$ROOT" -B "$build" -DCMAKE_BUILD_TYPE=Release -DRAYFORGE_BUILD_BENCHMARKS=OFF \
+    -DCMAKE_CUDA_ARCHITECTURES=90 &&
+  cmake --build "$build" -j"$(nproc)" --target rayforge_cli rayforge_gpu_tests
+} > "$out/build.txt" 2>&1 || { tail -40 "$out/build.txt"; exit 1; }
+rf="$build/bin/rayforge"
+"$rf" info --devices | tee "$out/devices.txt"
+
+if [[ "$what" == all || "$what" == tests ]]; then
+  (cd "$build" && ctest -L gpu --output-on-failure) > "$out/gpu-tests.txt" 2>&1
+  echo "gpu tests: rc=$?"; tail -15 "$out/gpu-tests.txt"
+fi
+if [[ "$what" == all || "$what" == bench ]]; then
+  scenes=(--scene builtin:cornell)
+  [[ -d "$ROOT/shared/scenes" ]] && scenes=(--scenes-dir "$ROOT/shared/scenes" --scene sponza)
+  "$rf" bench "${scenes[@]}" --device cuda --gpu-kernel all --rays primary,diffuse,shadow,ao --embree none \
+    --reps 5 --json "$out/bench-rays.json" > "$out/bench-rays.txt" 2>&1
+  echo "bench rays: rc=$?"; tail -25 "$out/bench-rays.txt"
+  "$rf" bench "${scenes[@]}" --device cuda --integrator path --max-depth 4 --res 1024x768 --reps 20 \
+    > "$out/bench-path.txt" 2>&1
+  echo "bench path: rc=$?"; tail -8 "$out/bench-path.txt"
+fi
