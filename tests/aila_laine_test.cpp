@@ -43,7 +43,60 @@ using test::make_rays;
 // speculation the device traversal can ever do.
 struct NeverReadyWarp {
     static bool any_searching(bool) { return true; }
+    static bool yield_for_refill() { return false; }
 };
+
+// A warp whose refill vote fires after every leaf phase (the device's
+// dynamic fetch at its most eager) and one where it fires pseudo-randomly,
+// both with speculation, so that rays stop and resume mid-traversal.
+struct AlwaysRefillWarp {
+    static inline uint64_t yields = 0;
+    static bool any_searching(bool) { return true; }
+    static bool yield_for_refill() {
+        ++yields;
+        return true;
+    }
+};
+struct RandomRefillWarp {
+    static inline uint32_t step = 0;
+    static bool any_searching(bool searching) { return searching; }
+    static bool yield_for_refill() {
+        step = step * 1664525u + 1013904223u;
+        return (step >> 28) < 5;  // about a third of the leaf phases
+    }
+};
+
+// Traces `rays` the way the persistent kernel does, on one host "warp" of
+// 32 lanes: idle lanes take the next rays, every lane resumes, finished
+// lanes write their result; each ray's result is written exactly once.
+template <bool kAnyHit, class Vote>
+std::vector<Hit> trace_like_persistent_warp(const AilaLaineView& view, const std::vector<Ray>& rays,
+                                            std::vector<int>& writes) {
+    constexpr int kLanes = 32;
+    std::vector<Hit> out(rays.size());
+    writes.assign(rays.size(), 0);
+    std::vector<AilaLaineRayState> state(kLanes);
+    std::vector<int64_t> ray_of(kLanes, -1);
+    size_t next = 0;
+    for (;;) {
+        bool any = false;
+        for (int lane = 0; lane < kLanes; ++lane) {
+            if (ray_of[lane] < 0 && next < rays.size()) {
+                ray_of[lane] = int64_t(next);
+                aila_laine_begin(view, rays[next++], state[lane]);
+            }
+            if (ray_of[lane] < 0) continue;
+            any = true;
+            if (aila_laine_resume<kAnyHit, false, Vote>(view, state[lane], nullptr)) {
+                out[size_t(ray_of[lane])] = state[lane].hit;
+                ++writes[size_t(ray_of[lane])];
+                ray_of[lane] = -1;
+            }
+        }
+        if (!any) break;
+    }
+    return out;
+}
 
 void expect_same_closest(const Hit& got, const Hit& brute, const Ray& ray) {
     ASSERT_EQ(got.found(), brute.found());
@@ -176,6 +229,23 @@ void compare_with_brute_force(const SceneGeometry& g, const BuildOptions& option
         EXPECT_EQ(speculative_any, expected.found());
         hits += expected.found();
     }
+    // Stopping and resuming (dynamic fetch) must not change any result.
+    const std::vector<Ray> rays = make_rays(g, ray_count, seed);
+    std::vector<int> writes;
+    const uint64_t yields_before = AlwaysRefillWarp::yields;
+    const std::vector<Hit> closest = trace_like_persistent_warp<false, AlwaysRefillWarp>(view, rays, writes);
+    EXPECT_EQ(std::count(writes.begin(), writes.end(), 1), ptrdiff_t(rays.size()));
+    const std::vector<Hit> closest_random = trace_like_persistent_warp<false, RandomRefillWarp>(view, rays, writes);
+    EXPECT_EQ(std::count(writes.begin(), writes.end(), 1), ptrdiff_t(rays.size()));
+    const std::vector<Hit> any = trace_like_persistent_warp<true, RandomRefillWarp>(view, rays, writes);
+    EXPECT_EQ(std::count(writes.begin(), writes.end(), 1), ptrdiff_t(rays.size()));
+    for (size_t i = 0; i < rays.size(); ++i) {
+        const Hit expected = brute.intersect(rays[i]);
+        expect_same_closest(closest[i], expected, rays[i]);
+        expect_same_closest(closest_random[i], expected, rays[i]);
+        EXPECT_EQ(any[i].found(), expected.found());
+    }
+    if (!bvh.nodes.empty() && !bvh.nodes[0].is_leaf()) EXPECT_GT(AlwaysRefillWarp::yields, yields_before);
     // The rays must exercise both outcomes.
     EXPECT_GT(hits, ray_count / 5);
     EXPECT_LT(hits, ray_count);

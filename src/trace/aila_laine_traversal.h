@@ -11,7 +11,10 @@
 // from the one 64-byte node; when both are entered the nearer is taken and
 // the farther pushed. As in the paper the stack holds links only (no entry
 // distances), so a popped subtree's own boxes are re-tested against the
-// shrunken tmax, but a popped leaf is always tested.
+// shrunken tmax, but a popped leaf is always tested. The state lives in a
+// struct (AilaLaineRayState) so that a ray can leave the loop between leaf
+// phases and resume later: the 2012 addendum's dynamic fetch, which lets a
+// persistent warp refill its terminated lanes (backend/cuda/device_tracer.cu).
 //
 // Box tests are the canonical traversal's robust slab test (Ize 2013, see
 // trace/bvh_traversal.h) and triangles go through the scalar watertight test
@@ -43,12 +46,15 @@ RF_HDI Box3f aila_laine_child_box(const AilaLaineNode& n, int side) {
     return box;
 }
 
+}  // namespace detail
+
 // Speculative traversal (Aila and Laine 2009, sec. 4): when the inner loop
 // reaches a leaf, the leaf is postponed and the ray keeps walking node pairs
 // until every ray of its warp holds a leaf, so that the warp enters the leaf
 // loop together instead of serialising node and leaf phases. The vote is a
 // policy: on the device a warp vote; on the host one ray is its own warp, so
-// it stops at the first leaf (the plain while-while order).
+// it stops at the first leaf (the plain while-while order). This vote never
+// asks the traversal to yield (see AilaLaineDynamicFetchVote).
 struct AilaLaineWarpVote {
     // True while some ray of the warp has not found a leaf yet.
     RF_HDI static bool any_searching(bool searching) {
@@ -58,27 +64,72 @@ struct AilaLaineWarpVote {
         return searching;
 #endif
     }
+    RF_HDI static bool yield_for_refill() { return false; }
 };
 
-// Shared loop: closest hit (kAnyHit = false) or first hit (kAnyHit = true).
-// Vote decides when the inner loop hands its postponed leaf to the leaf loop.
-template <bool kAnyHit, bool kCount, class Vote = AilaLaineWarpVote>
-RF_HDI Hit aila_laine_traverse(const AilaLaineView& bvh, const Ray& ray, TraversalCounters* counters) {
-    Hit hit;
-    if (bvh.root == kAilaLaineEntrySentinel) return hit;  // empty BVH
-    const SlabRay slab = SlabRay::make(ray);
-    const WatertightRay tri_ray = WatertightRay::make(ray);
-    const float tmin = ray.tmin;
-    float tmax = ray.tmax;
+// Dynamic fetch (Aila, Laine and Karras 2012, "Understanding the Efficiency
+// of Ray Traversal on GPUs - Kepler and Fermi Addendum"): once most rays of
+// a warp have terminated, the few still traversing leave the loop after their
+// leaf phase, keeping their state, so that the terminated lanes can fetch new
+// rays and the warp runs full again; the survivors resume where they were.
+// The addendum's Kepler kernel used a threshold of 20 of 32 lanes.
+inline constexpr int kAilaLaineDynamicFetchThreshold = 20;
 
+struct AilaLaineDynamicFetchVote : AilaLaineWarpVote {
+    // True when fewer than the threshold of the warp's lanes are still
+    // traversing (the terminated ones wait at the loop's exit).
+    RF_HDI static bool yield_for_refill() {
+#if defined(__CUDA_ARCH__)
+        return __popc(__activemask()) < kAilaLaineDynamicFetchThreshold;
+#else
+        return false;
+#endif
+    }
+};
+
+// Everything one ray's traversal needs to stop and resume: the transformed
+// ray, the link stack, the current and postponed links and the hit so far.
+struct AilaLaineRayState {
+    detail::SlabRay slab;
+    WatertightRay tri_ray;
+    float tmin;
+    float tmax;
     // At most one far child per inner node on the current path, over the
     // sentinel that ends the traversal when popped.
     int32_t stack[kBvhMaxDepth + 1];
-    stack[0] = kAilaLaineEntrySentinel;
-    int top = 0;
-    int32_t node = bvh.root;
+    int top;
+    int32_t node;
     // The postponed leaf; any non-negative value means "none" (the paper's leafAddr).
-    int32_t postponed = 0;
+    int32_t postponed;
+    Hit hit;
+
+    RF_HDI bool finished() const { return node == kAilaLaineEntrySentinel && postponed >= 0; }
+};
+
+RF_HDI void aila_laine_begin(const AilaLaineView& bvh, const Ray& ray, AilaLaineRayState& s) {
+    s.slab = detail::SlabRay::make(ray);
+    s.tri_ray = WatertightRay::make(ray);
+    s.tmin = ray.tmin;
+    s.tmax = ray.tmax;
+    s.stack[0] = kAilaLaineEntrySentinel;
+    s.top = 0;
+    s.node = bvh.root;  // the sentinel for an empty BVH: finished at once
+    s.postponed = 0;
+    s.hit = Hit{};
+}
+
+// Runs the traversal in `s` until it is finished (returns true; s.hit is the
+// result) or Vote::yield_for_refill() asks it to stop after a leaf phase
+// (returns false; call again to resume). Closest hit (kAnyHit = false) or
+// first hit (kAnyHit = true); Vote::any_searching decides when the inner loop
+// hands its postponed leaf to the leaf loop.
+template <bool kAnyHit, bool kCount, class Vote = AilaLaineWarpVote>
+RF_HDI bool aila_laine_resume(const AilaLaineView& bvh, AilaLaineRayState& s, TraversalCounters* counters) {
+    int32_t* const stack = s.stack;
+    int top = s.top;
+    int32_t node = s.node;
+    int32_t postponed = s.postponed;
+    float tmax = s.tmax;
 
     while (node != kAilaLaineEntrySentinel) {
         // Inner loop: node >= 0 and below the sentinel is a node pair (a
@@ -86,8 +137,8 @@ RF_HDI Hit aila_laine_traverse(const AilaLaineView& bvh, const Ray& ray, Travers
         while (static_cast<uint32_t>(node) < static_cast<uint32_t>(kAilaLaineEntrySentinel)) {
             const AilaLaineNode& pair = bvh.nodes[node];
             float entry0, entry1;
-            const bool hit0 = slab_test(slab, aila_laine_child_box(pair, 0), tmin, tmax, entry0);
-            const bool hit1 = slab_test(slab, aila_laine_child_box(pair, 1), tmin, tmax, entry1);
+            const bool hit0 = detail::slab_test(s.slab, detail::aila_laine_child_box(pair, 0), s.tmin, tmax, entry0);
+            const bool hit1 = detail::slab_test(s.slab, detail::aila_laine_child_box(pair, 1), s.tmin, tmax, entry1);
             if constexpr (kCount) counters->nodes_visited += 2;
             if (!hit0 && !hit1) {
                 node = stack[top--];
@@ -127,20 +178,49 @@ RF_HDI Hit aila_laine_traverse(const AilaLaineView& bvh, const Ray& ray, Travers
                 const Triangle tri{Vec3f(a.x, a.y, a.z), Vec3f(b.x, b.y, b.z), Vec3f(c.x, c.y, c.z)};
                 if constexpr (kCount) ++counters->prims_tested;
                 TriangleHit candidate;
-                if (intersect_triangle(tri_ray, tri, tmin, tmax, candidate)) {
-                    hit.t = candidate.t;
-                    hit.u = candidate.u;
-                    hit.v = candidate.v;
-                    hit.prim = prim;
-                    if constexpr (kAnyHit) return hit;  // any-hit: the first hit ends it
-                    tmax = candidate.t;                 // later boxes and triangles must beat it
+                if (intersect_triangle(s.tri_ray, tri, s.tmin, tmax, candidate)) {
+                    s.hit.t = candidate.t;
+                    s.hit.u = candidate.u;
+                    s.hit.v = candidate.v;
+                    s.hit.prim = prim;
+                    if constexpr (kAnyHit) {  // any-hit: the first hit ends it
+                        s.node = kAilaLaineEntrySentinel;
+                        s.postponed = 0;
+                        return true;
+                    }
+                    tmax = candidate.t;  // later boxes and triangles must beat it
                 }
             }
             postponed = node;  // a leaf the inner loop stopped on, or ">= 0": done
             if (node < 0) node = stack[top--];
         }
+        // Dynamic fetch: between leaf phases (postponed >= 0 here) the state
+        // is complete, so the ray can step aside for the warp's refill.
+        if (node != kAilaLaineEntrySentinel && Vote::yield_for_refill()) {
+            s.top = top;
+            s.node = node;
+            s.postponed = postponed;
+            s.tmax = tmax;
+            return false;
+        }
     }
-    return hit;
+    s.top = top;
+    s.node = node;
+    s.postponed = postponed;
+    s.tmax = tmax;
+    return true;
+}
+
+namespace detail {
+
+// One ray from start to end (a vote that yields just resumes at once).
+template <bool kAnyHit, bool kCount, class Vote = AilaLaineWarpVote>
+RF_HDI Hit aila_laine_traverse(const AilaLaineView& bvh, const Ray& ray, TraversalCounters* counters) {
+    AilaLaineRayState state;
+    aila_laine_begin(bvh, ray, state);
+    while (!aila_laine_resume<kAnyHit, kCount, Vote>(bvh, state, counters)) {
+    }
+    return state.hit;
 }
 
 }  // namespace detail

@@ -4,10 +4,12 @@
 // src/trace; what is GPU-only here is scheduling:
 //  - one thread per ray (grid-stride loop) for every kernel;
 //  - for the node-pair BVH, the persistent threads of Aila and Laine 2009
-//    (sec. 3): just enough warps to fill the device, each fetching 32 rays at
-//    a time from a global counter with one atomic, so that warps finishing
-//    early take more work instead of idling while slow warps finish, with
-//    the speculative while-while traversal (trace/aila_laine_traversal.h).
+//    (sec. 3): just enough warps to fill the device, taking rays from a
+//    global counter with one atomic per warp, so that warps finishing early
+//    take more work instead of idling while slow warps finish, with the
+//    speculative while-while traversal (trace/aila_laine_traversal.h) and
+//    the 2012 addendum's dynamic fetch, which refills a warp's terminated
+//    lanes once most of them are idle.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -44,21 +46,41 @@ __global__ void occluded_kernel(Tracer tracer, const Ray* rays, uint8_t* flags, 
         flags[i] = tracer.occluded(rays[i]) ? 1 : 0;
 }
 
-// Persistent warps (Aila and Laine 2009): lane 0 takes the next 32 rays with
-// one atomicAdd and broadcasts the base; the warp loops until none are left.
+// Persistent warps (Aila and Laine 2009) with dynamic fetch (Aila, Laine and
+// Karras 2012): each pass, the lanes without a ray take new ones with one
+// atomicAdd per warp (a ballot counts them, a prefix popc ranks them), then
+// every lane resumes its traversal. A lane leaves the traversal when its ray
+// is done or, via AilaLaineDynamicFetchVote, when fewer than
+// kAilaLaineDynamicFetchThreshold lanes are still traversing, so the warp
+// refills its idle lanes instead of running nearly empty. A lane exits the
+// kernel once the ray pool is exhausted and it has no ray.
 template <bool kAnyHit>
 __global__ void aila_laine_persistent_kernel(AilaLaineView bvh, const Ray* rays, Hit* hits, uint8_t* flags,
                                              uint32_t count, uint32_t* next_ray) {
     const uint32_t lane = threadIdx.x & 31u;
+    const uint32_t lanes_below = (1u << lane) - 1u;
+    AilaLaineRayState state;
+    uint32_t ray_index = 0;
+    bool has_ray = false;
     for (;;) {
-        uint32_t base = 0;
-        if (lane == 0) base = atomicAdd(next_ray, 32u);
-        base = __shfl_sync(0xFFFFFFFFu, base, 0);
-        if (base >= count) return;
-        const uint32_t i = base + lane;
-        if (i < count) {
-            if constexpr (kAnyHit) flags[i] = aila_laine_occluded(bvh, rays[i]) ? 1 : 0;
-            else hits[i] = aila_laine_intersect(bvh, rays[i]);
+        const uint32_t active = __activemask();
+        const uint32_t needing = __ballot_sync(active, !has_ray);
+        if (needing != 0) {
+            const int leader = __ffs(needing) - 1;
+            uint32_t base = 0;
+            if (int(lane) == leader) base = atomicAdd(next_ray, uint32_t(__popc(needing)));
+            base = __shfl_sync(active, base, leader);
+            if (!has_ray) {
+                ray_index = base + uint32_t(__popc(needing & lanes_below));
+                if (ray_index >= count) return;  // nothing left for this lane
+                aila_laine_begin(bvh, rays[ray_index], state);
+                has_ray = true;
+            }
+        }
+        if (aila_laine_resume<kAnyHit, false, AilaLaineDynamicFetchVote>(bvh, state, nullptr)) {
+            if constexpr (kAnyHit) flags[ray_index] = state.hit.found() ? 1 : 0;
+            else hits[ray_index] = state.hit;
+            has_ray = false;
         }
     }
 }
@@ -151,7 +173,7 @@ void launch_trace(DeviceTracer::Impl& impl, bool any_hit, uint32_t count) {
 }
 
 uint32_t checked_ray_count(size_t count) {
-    if (count > 0xFFFFFFFFu - 64u) throw Error("cuda::DeviceTracer: " + std::to_string(count) + " rays in one batch exceed 2^32");
+    if (count > 0x7FFFFFFFu) throw Error("cuda::DeviceTracer: " + std::to_string(count) + " rays in one batch exceed 2^31");
     return uint32_t(count);
 }
 
