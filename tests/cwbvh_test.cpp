@@ -2,8 +2,10 @@
 // Incoherent Ray Traversal on GPUs Through Compressed Wide BVHs"): the
 // 80-byte node, conservative 8-bit quantisation, the layout invariants of a
 // real build (contiguous children and triangles, leaves of at most three
-// triangles, every reference stored once, octant slot order), and the shared
-// host/device traversal against the brute-force reference.
+// triangles, every reference stored once, octant slot order assigned
+// optimally by the auction algorithm), and the shared host/device traversal,
+// with and without the postponing of triangle groups, against the
+// brute-force reference.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -23,6 +25,7 @@
 #include "accel_test_scenes.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
+#include "render/random.h"
 #include "trace/bvh_traversal.h"
 #include "trace/cwbvh_traversal.h"
 
@@ -177,6 +180,56 @@ void check_layout(const Bvh& bvh, const std::vector<Triangle>& triangles, const 
     }
 }
 
+// Postponement policies for the host (the default never postpones there).
+// Both record how often they were asked and the deepest stack they saw.
+struct PostponeCount {
+    size_t asked = 0;
+    size_t postponed = 0;
+    int max_stack = 0;
+    void begin_iteration() {}
+    void pushed(int size) { max_stack = std::max(max_stack, size); }
+};
+struct AlwaysPostpone : PostponeCount {
+    bool postpone() {
+        ++asked;
+        ++postponed;
+        return true;
+    }
+};
+// Postpones when a hash of (seed, step) is odd: about half the time, with no
+// pattern tied to the tree.
+struct RandomPostpone : PostponeCount {
+    uint32_t seed = 0;
+    uint32_t step = 0;
+    bool postpone() {
+        ++asked;
+        const bool yes = (pcg_hash(seed ^ pcg_hash(step++)) & 1u) != 0;
+        postponed += yes;
+        return yes;
+    }
+};
+
+bool same_counters(const CwbvhCounters& a, const CwbvhCounters& b) {
+    return a.nodes_visited == b.nodes_visited && a.boxes_tested == b.boxes_tested && a.prims_tested == b.prims_tested;
+}
+
+// Closest and any hit with both test policies against brute force. On a
+// ray that hits nothing tmax never shrinks, so postponing must not change
+// which nodes, boxes and triangles are tested, only their order.
+void compare_postponing_with_brute_force(const CwbvhView& view, const Ray& ray, const Hit& expected,
+                                         AlwaysPostpone& always, RandomPostpone& random) {
+    CwbvhCounters plain, with_always, with_random;
+    cwbvh_intersect_counted(view, ray, plain);
+    expect_same_closest(cwbvh_intersect_counted(view, ray, with_always, always), expected, ray);
+    expect_same_closest(cwbvh_intersect_counted(view, ray, with_random, random), expected, ray);
+    EXPECT_EQ(cwbvh_occluded(view, ray, always), expected.found());
+    EXPECT_EQ(cwbvh_occluded(view, ray, random), expected.found());
+    if (!expected.found()) {
+        EXPECT_TRUE(same_counters(plain, with_always));
+        EXPECT_TRUE(same_counters(plain, with_random));
+    }
+}
+
 void compare_with_brute_force(const SceneGeometry& g, const BuildOptions& options, size_t ray_count,
                               uint32_t seed) {
     const Bvh bvh = build_bvh(g.triangles, options);
@@ -185,6 +238,9 @@ void compare_with_brute_force(const SceneGeometry& g, const BuildOptions& option
     const CwbvhView view = cw.view();
     const BruteForceAccel brute(g);
     size_t hits = 0;
+    AlwaysPostpone always;
+    RandomPostpone random;
+    random.seed = seed;
     for (const Ray& ray : test::make_rays(g, ray_count, seed)) {
         const Hit expected = brute.intersect(ray);
         const Hit got = cwbvh_intersect(view, ray);
@@ -197,11 +253,30 @@ void compare_with_brute_force(const SceneGeometry& g, const BuildOptions& option
         EXPECT_EQ(cwbvh_occluded_counted(view, ray, counters), expected.found());
         CwbvhCounters all;
         EXPECT_EQ(cwbvh_intersect_counted(view, ray, all).prim, got.prim);
+        compare_postponing_with_brute_force(view, ray, expected, always, random);
         hits += expected.found();
     }
     // The rays must exercise both outcomes.
     EXPECT_GT(hits, ray_count / 5);
     EXPECT_LT(hits, ray_count);
+    // Where a node has both leaves and inner children (not so in every
+    // regular tessellation), the policies were consulted: postponing
+    // happened, at random about half the time. The stack stayed within its
+    // bound: one node group and one triangle group per level below the root.
+    const bool mixed_node = std::any_of(cw.nodes.begin(), cw.nodes.end(), [](const CwbvhNode& n) {
+        return n.imask != 0 && std::any_of(n.meta, n.meta + kCwbvhWidth, [](uint8_t m) {
+                   return m != kCwbvhEmptyMeta && !cwbvh_meta_is_inner(m);
+               });
+    });
+    if (mixed_node) {
+        EXPECT_GT(always.postponed, 0u);
+        EXPECT_GT(random.postponed, 0u);
+        EXPECT_LT(random.postponed, random.asked);
+    }
+    for (const PostponeCount* policy : {static_cast<const PostponeCount*>(&always), static_cast<const PostponeCount*>(&random)}) {
+        EXPECT_LE(policy->max_stack, 2 * (cw.depth - 1));
+        EXPECT_LE(policy->max_stack, kCwbvhTraversalStackSize);
+    }
 }
 
 constexpr Builder kBuilders[] = {Builder::BinnedSah, Builder::Sbvh, Builder::Lbvh30};
@@ -548,6 +623,21 @@ TEST(Cwbvh, DeepestCanonicalChainStaysWithinTheStack) {
     EXPECT_TRUE(cwbvh_occluded(cw.view(), ray));
     const Ray forward{Vec3f(-0.5f, 0.1f, 0.0f), 0.0f, Vec3f(1, 0, 0)};
     EXPECT_EQ(cwbvh_intersect(cw.view(), forward).prim, 0u);
+
+    // Every wide node but the last has leaves and one inner child, and the
+    // ray hits them all: postponing every triangle group piles up one per
+    // level above the deepest, whose own triangles find the hit.
+    AlwaysPostpone always;
+    const Hit postponed = cwbvh_intersect(cw.view(), ray, always);
+    EXPECT_EQ(postponed.prim, static_cast<uint32_t>(kBvhMaxDepth));
+    EXPECT_EQ(postponed.t, 10.0f);
+    EXPECT_EQ(always.max_stack, cw.depth - 1);
+    EXPECT_EQ(always.postponed, size_t(cw.depth - 1));
+    AlwaysPostpone always_any;
+    EXPECT_TRUE(cwbvh_occluded(cw.view(), ray, always_any));
+    const Ray short_ray{ray.org, 0.0f, ray.dir, 9.5f};  // stops before the nearest triangle
+    EXPECT_FALSE(cwbvh_occluded(cw.view(), short_ray, always_any));
+    EXPECT_FALSE(cwbvh_intersect(cw.view(), short_ray, always_any).found());
 }
 
 TEST(Cwbvh, MalformedBvhThrows) {
@@ -604,6 +694,220 @@ TEST(Cwbvh, CountersShowLogarithmicWork) {
     // Wide nodes replace about three binary levels each.
     EXPECT_LT(double(wide.nodes_visited), 0.5 * double(binary.nodes_visited));
     EXPECT_LT(max_nodes, 200u);
+}
+
+// ---- Slot assignment (section 4.2): the auction against brute force ----
+
+using CostTable = double[kCwbvhWidth][kCwbvhWidth];
+
+double assignment_cost(const CostTable& cost, int count, const int (&slot_of)[kCwbvhWidth]) {
+    double total = 0.0;
+    for (int c = 0; c < count; ++c) total += cost[c][slot_of[c]];
+    return total;
+}
+
+// Every slot in range and none used twice.
+bool is_injective(int count, const int (&slot_of)[kCwbvhWidth]) {
+    unsigned used = 0;
+    for (int c = 0; c < count; ++c) {
+        if (slot_of[c] < 0 || slot_of[c] >= kCwbvhWidth || ((used >> slot_of[c]) & 1u)) return false;
+        used |= 1u << slot_of[c];
+    }
+    return true;
+}
+
+// Least total over all 8! / (8 - count)! injective assignments (depth first,
+// children in order, each taking a free slot).
+double brute_force_optimum(const CostTable& cost, int count) {
+    double best = INFINITY;
+    struct Search {
+        const CostTable& cost;
+        int count;
+        double& best;
+        void run(int child, unsigned used, double sum) {
+            if (child == count) {
+                best = std::min(best, sum);
+                return;
+            }
+            for (int s = 0; s < kCwbvhWidth; ++s) {
+                if (!((used >> s) & 1u)) run(child + 1, used | (1u << s), sum + cost[child][s]);
+            }
+        }
+    };
+    Search{cost, count, best}.run(0, 0u, 0.0);
+    return best;
+}
+
+double cost_range(const CostTable& cost, int count) {
+    double lo = INFINITY, hi = -INFINITY;
+    for (int c = 0; c < count; ++c) {
+        for (int s = 0; s < kCwbvhWidth; ++s) {
+            lo = std::min(lo, cost[c][s]);
+            hi = std::max(hi, cost[c][s]);
+        }
+    }
+    return hi - lo;
+}
+
+// Thousands of random tables of every kind: continuous, small integers
+// (many ties), all equal, huge magnitudes, and the real geometric costs of
+// random child boxes. The auction is a valid assignment within its
+// documented 1e-6 * range of the optimum (exactly optimal for integer
+// costs, whose distinct totals differ by at least 1), never worse than
+// greedy; greedy must be strictly worse on some tables.
+TEST(CwbvhAuction, MatchesTheBruteForceOptimum) {
+    std::mt19937 rng(2017);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    int greedy_worse = 0, integer_tables = 0;
+    constexpr int kTables = 3000;
+    for (int table = 0; table < kTables; ++table) {
+        const int count = 1 + int(rng() % 8u);
+        const int kind = table % 5;
+        CostTable cost;
+        if (kind == 4) {
+            Box3f boxes[kCwbvhWidth];
+            for (int c = 0; c < count; ++c) {
+                const Vec3f lo(float(unit(rng)), float(unit(rng)), float(unit(rng)));
+                boxes[c] = {lo, lo + Vec3f(float(unit(rng)), float(unit(rng)), float(unit(rng))) * 0.5f};
+            }
+            cwbvh_slot_costs(boxes, count, cost);
+        } else {
+            const double scale = kind == 3 ? 1e30 : 1.0;
+            for (int c = 0; c < count; ++c) {
+                for (int s = 0; s < kCwbvhWidth; ++s) {
+                    switch (kind) {
+                    case 0: cost[c][s] = unit(rng) * 2.0 - 1.0; break;
+                    case 1: cost[c][s] = double(rng() % 4u); break;            // ties everywhere
+                    case 2: cost[c][s] = table % 2 ? 7.0 : double(rng() % 2u); break;  // all equal, or 0/1
+                    default: cost[c][s] = scale * (unit(rng) - 0.5); break;
+                    }
+                }
+            }
+        }
+        int auction[kCwbvhWidth], greedy[kCwbvhWidth];
+        cwbvh_assign_slots_auction(cost, count, auction);
+        cwbvh_assign_slots_greedy(cost, count, greedy);
+        ASSERT_TRUE(is_injective(count, auction)) << "table " << table;
+        ASSERT_TRUE(is_injective(count, greedy)) << "table " << table;
+        const double optimum = brute_force_optimum(cost, count);
+        const double range = cost_range(cost, count);
+        const double got = assignment_cost(cost, count, auction);
+        const double greedy_total = assignment_cost(cost, count, greedy);
+        if (kind == 1 || kind == 2) {
+            ++integer_tables;
+            EXPECT_EQ(got, optimum) << "table " << table << " count " << count;
+        } else {
+            // The bound, plus rounding of the sums of eight doubles.
+            const double tolerance = 1e-6 * range + 1e-13 * count * (std::fabs(optimum) + range);
+            EXPECT_LE(got, optimum + tolerance) << "table " << table << " count " << count;
+        }
+        EXPECT_GE(got, optimum - 1e-13 * count * (std::fabs(optimum) + range));
+        EXPECT_LE(got, greedy_total + 1e-6 * range) << "table " << table;
+        if (greedy_total > optimum + 1e-3 * range) ++greedy_worse;
+    }
+    EXPECT_GT(integer_tables, kTables / 3);
+    EXPECT_GT(greedy_worse, kTables / 50) << "greedy would pass for the auction";
+}
+
+// A table where greedy, taking the cheapest pair (child 0, slot 0) first,
+// leaves child 1 only its expensive slots; the optimum gives slot 0 to child 1.
+TEST(CwbvhAuction, BeatsGreedyWhereTheCheapestPairIsWrong) {
+    CostTable cost;
+    for (int s = 0; s < kCwbvhWidth; ++s) {
+        cost[0][s] = s == 0 ? 0.0 : 1.0;
+        cost[1][s] = s == 0 ? 0.1 : 10.0;
+    }
+    int auction[kCwbvhWidth], greedy[kCwbvhWidth];
+    cwbvh_assign_slots_greedy(cost, 2, greedy);
+    cwbvh_assign_slots_auction(cost, 2, auction);
+    EXPECT_EQ(greedy[0], 0);
+    EXPECT_DOUBLE_EQ(assignment_cost(cost, 2, greedy), 10.0);
+    EXPECT_EQ(auction[1], 0);
+    EXPECT_NE(auction[0], 0);
+    EXPECT_DOUBLE_EQ(assignment_cost(cost, 2, auction), 1.1);
+}
+
+// Inputs that break naive auctions: all ties (every bid raises a price by
+// eps only), costs near the double range (hi - lo overflows unless scaled),
+// subnormal differences, non-finite entries. All must terminate with a
+// valid assignment; finite entries win over non-finite ones where possible.
+TEST(CwbvhAuction, DegenerateTablesTerminate) {
+    for (int count = 0; count <= kCwbvhWidth; ++count) {
+        for (double value : {0.0, -3.0, 1e30, -1e308, 5e-324}) {
+            CostTable cost;
+            for (auto& row : cost) std::fill(row, row + kCwbvhWidth, value);
+            int slot_of[kCwbvhWidth];
+            cwbvh_assign_slots_auction(cost, count, slot_of);
+            EXPECT_TRUE(is_injective(count, slot_of)) << count << " " << value;
+            for (int c = count; c < kCwbvhWidth; ++c) EXPECT_EQ(slot_of[c], -1);
+        }
+        if (count == 0) continue;
+        // Extremes of both signs: the optimum is still found.
+        CostTable cost;
+        for (int c = 0; c < count; ++c) {
+            for (int s = 0; s < kCwbvhWidth; ++s) cost[c][s] = (c + s) % kCwbvhWidth == 0 ? -1.7e308 : 1.7e308;
+        }
+        int slot_of[kCwbvhWidth];
+        cwbvh_assign_slots_auction(cost, count, slot_of);
+        ASSERT_TRUE(is_injective(count, slot_of));
+        for (int c = 0; c < count; ++c) EXPECT_EQ((c + slot_of[c]) % kCwbvhWidth, 0) << "child " << c;
+        // Non-finite costs everywhere except one slot per child.
+        for (int c = 0; c < count; ++c) {
+            for (int s = 0; s < kCwbvhWidth; ++s) {
+                cost[c][s] = s == c ? double(c) : (s % 2 ? INFINITY : NAN);
+            }
+        }
+        cwbvh_assign_slots_auction(cost, count, slot_of);
+        ASSERT_TRUE(is_injective(count, slot_of));
+        for (int c = 0; c < count; ++c) EXPECT_EQ(slot_of[c], c);
+    }
+}
+
+// The builder uses the auction: random roots of two to eight single-triangle
+// leaves get the optimal octant assignment of their triangle boxes, also
+// where greedy would not.
+TEST(CwbvhAuction, BuilderAssignsSlotsOptimally) {
+    std::mt19937 rng(42);
+    std::uniform_real_distribution<float> coordinate(-10.0f, 10.0f);
+    std::uniform_real_distribution<float> offset(-1.0f, 1.0f);
+    int greedy_worse = 0;
+    constexpr int kScenes = 300;
+    for (int scene = 0; scene < kScenes; ++scene) {
+        const int count = 2 + scene % 7;
+        std::vector<Triangle> triangles;
+        for (int i = 0; i < count; ++i) {
+            const Vec3f c(coordinate(rng), coordinate(rng), coordinate(rng));
+            triangles.push_back({c + Vec3f(offset(rng), offset(rng), offset(rng)),
+                                 c + Vec3f(offset(rng), offset(rng), offset(rng)),
+                                 c + Vec3f(offset(rng), offset(rng), offset(rng))});
+        }
+        const Bvh bvh = build_bvh(triangles, BuildOptions{.max_leaf_size = 1});
+        const CwbvhBvh cw = build_cwbvh(bvh, triangles);
+        ASSERT_EQ(cw.nodes.size(), 1u) << "scene " << scene;
+        const CwbvhNode& root = cw.nodes[0];
+        int slot_of[kCwbvhWidth];
+        int leaves = 0;
+        for (int s = 0; s < kCwbvhWidth; ++s) {
+            if (root.meta[s] == kCwbvhEmptyMeta) continue;
+            ASSERT_EQ(root.meta[s] >> 5, 1) << "one triangle per leaf";
+            const uint32_t prim = bits(cw.triangles[root.base_index_triangle + (root.meta[s] & 31u)].v0.w);
+            ASSERT_LT(prim, uint32_t(count));
+            slot_of[prim] = s;
+            ++leaves;
+        }
+        ASSERT_EQ(leaves, count);
+        Box3f boxes[kCwbvhWidth];
+        for (int i = 0; i < count; ++i) boxes[i] = triangles[size_t(i)].bounds();
+        CostTable cost;
+        cwbvh_slot_costs(boxes, count, cost);
+        const double optimum = brute_force_optimum(cost, count);
+        const double range = cost_range(cost, count);
+        EXPECT_LE(assignment_cost(cost, count, slot_of), optimum + 1e-6 * range) << "scene " << scene;
+        int greedy[kCwbvhWidth];
+        cwbvh_assign_slots_greedy(cost, count, greedy);
+        if (assignment_cost(cost, count, greedy) > optimum + 1e-3 * range) ++greedy_worse;
+    }
+    EXPECT_GT(greedy_worse, 0);
 }
 
 }  // namespace

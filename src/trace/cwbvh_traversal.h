@@ -14,11 +14,37 @@
 // arranged (nearly front to back) without sorting. The child's index is the
 // group base plus the number of inner slots below it (popc of the imask).
 // Each iteration visits one node, pushes the rest of its group when it has
-// more, and then tests the node's leaf triangles. The paper's postponing of
-// triangle groups while few SIMT lanes are active is a GPU scheduling
-// heuristic that does not change results; it is left out, so the stack only
-// ever holds node groups (at most one per wide level below the root, which
-// build_cwbvh bounds by kCwbvhStackSize).
+// more, and then tests the node's leaf triangles.
+//
+// Triangle postponement (the paper's section 5 and Algorithm 1): on the
+// GPU, a node's triangles are tested one per loop trip by the lanes that
+// have some, so a warp where only a few lanes have triangles left runs
+// nearly empty. When, before a triangle, fewer than kCwbvhPostponeRatio
+// (20 %, the paper's threshold) of the lanes that started the iteration are
+// still in the triangle loop, the lane pushes its remaining triangle group
+// (base triangle index, bits 0..23 the triangles left, bits 24..31 zero) and
+// goes on with node traversal; the group is tested when popped. A popped
+// entry is therefore a node group (bits 24..31 nonzero) or a triangle group,
+// and the loop dispatches on that. The decision is a policy (template
+// parameter, like the counters): the default reads __activemask() on the
+// device and never postpones on the host, where one ray is its own warp;
+// tests pass policies that postpone always or at random. The hit distance
+// does not depend on the policy (postponing only reorders the triangle
+// tests, each against the current tmax; among triangles at exactly the same
+// distance the one reported may change), nor does the work on a ray that
+// hits nothing.
+// Two deviations from Algorithm 1, neither changes results: a popped
+// triangle group is not postponed again, and a node's triangles are only
+// postponed while the node has hit inner children to go on with; in both
+// other cases the next step would pop the group straight back, so the push
+// would be pure overhead (and for a popped group with an always-postponing
+// policy, an endless loop).
+// Stack bound: entries, bottom to top, are ordered by wide level, with at
+// most one node group (siblings left at that level) and one triangle group
+// (of a node at that level that has inner children) per level. In a wide
+// tree of depth D <= kCwbvhMaxDepth that is at most (D - 1) node groups
+// (levels 2..D) and (D - 1) triangle groups (levels 1..D - 1), i.e. at most
+// 2 * kCwbvhStackSize entries: kCwbvhTraversalStackSize.
 //
 // Boxes: the dequantised child box (cwbvh_child_box, the one the builder
 // checked to contain the exact box) goes through the robust slab test of
@@ -46,6 +72,15 @@ struct CwbvhCounters {
     uint32_t boxes_tested = 0;   // child boxes tested
     uint32_t prims_tested = 0;   // triangle tests
 };
+
+// Entries of the traversal stack: one node group and one triangle group per
+// wide level below the root (see the top of this file).
+inline constexpr int kCwbvhTraversalStackSize = 2 * kCwbvhStackSize;
+
+// Postpone a node's remaining triangles when fewer than this fraction of the
+// lanes active at the start of the iteration are still testing triangles
+// (Ylitie, Karras and Laine 2017, section 5: 20 %).
+inline constexpr float kCwbvhPostponeRatio = 0.2f;
 
 namespace detail {
 
@@ -126,9 +161,37 @@ struct CwbvhCountAll {
     RF_HDI void prim() { ++c->prims_tested; }
 };
 
+}  // namespace detail
+
+// Postponement policies. The traversal calls begin_iteration() at the start
+// of every main-loop iteration, postpone() before each triangle it may
+// postpone (true: push the triangles left and go on with the nodes), and
+// pushed(size) after every push with the new stack size (instrumentation).
+// The default, the paper's heuristic: on the device, postpone when fewer
+// than kCwbvhPostponeRatio of the iteration's lanes are in the triangle
+// loop; on the host, never.
+struct CwbvhPostponeOnFewActiveLanes {
+    uint32_t lanes = 0;  // active lanes at the start of the iteration (device)
+    RF_HDI void begin_iteration() {
+#if defined(__CUDA_ARCH__)
+        lanes = detail::cwbvh_popc(__activemask());
+#endif
+    }
+    RF_HDI bool postpone() {
+#if defined(__CUDA_ARCH__)
+        return float(detail::cwbvh_popc(__activemask())) < float(lanes) * kCwbvhPostponeRatio;
+#else
+        return false;
+#endif
+    }
+    RF_HDI void pushed(int) {}
+};
+
+namespace detail {
+
 // Shared loop: closest hit (kAnyHit = false) or first hit (kAnyHit = true).
-template <bool kAnyHit, class Counters>
-RF_HDI Hit cwbvh_traverse(const CwbvhView& bvh, const Ray& ray, Counters* counters) {
+template <bool kAnyHit, class Counters, class Postpone>
+RF_HDI Hit cwbvh_traverse(const CwbvhView& bvh, const Ray& ray, Counters* counters, Postpone* postpone) {
     Hit hit;
     if (bvh.node_count == 0) return hit;
     const SlabRay slab = SlabRay::make(ray);
@@ -139,32 +202,51 @@ RF_HDI Hit cwbvh_traverse(const CwbvhView& bvh, const Ray& ray, Counters* counte
     const uint32_t octant = (slab.neg_x ? 1u : 0u) | (slab.neg_y ? 2u : 0u) | (slab.neg_z ? 4u : 0u);
     const uint32_t oct_inv = 7u - octant;
 
-    CwbvhGroup stack[kCwbvhStackSize];
+    CwbvhGroup stack[kCwbvhTraversalStackSize];
     int stack_size = 0;
     // The root as the only child (slot 0, inner) of a virtual parent at base 0.
     CwbvhGroup group{0u, (1u << (24u + oct_inv)) | 1u};
     for (;;) {
-        // Nearest remaining child of the group in octant order.
-        const int bit = cwbvh_highest_bit(group.hits & kCwbvhNodeBits);
-        group.hits &= ~(1u << bit);
-        const uint32_t slot = static_cast<uint32_t>(bit - 24) ^ oct_inv;
-        const uint32_t below = (group.hits & 0xFFu) & ((1u << slot) - 1u);
-        const uint32_t index = group.base + cwbvh_popc(below);
-        if (group.hits & kCwbvhNodeBits) stack[stack_size++] = group;
+        postpone->begin_iteration();
+        CwbvhGroup triangles;
+        bool may_postpone;
+        if (group.hits & kCwbvhNodeBits) {
+            // A node group: its nearest remaining child in octant order.
+            const int bit = cwbvh_highest_bit(group.hits & kCwbvhNodeBits);
+            group.hits &= ~(1u << bit);
+            const uint32_t slot = static_cast<uint32_t>(bit - 24) ^ oct_inv;
+            const uint32_t below = (group.hits & 0xFFu) & ((1u << slot) - 1u);
+            const uint32_t index = group.base + cwbvh_popc(below);
+            if (group.hits & kCwbvhNodeBits) {
+                stack[stack_size++] = group;
+                postpone->pushed(stack_size);
+            }
 
-        // One copy of the whole 80-byte node: five 16-byte loads on the GPU
-        // instead of a byte load per field.
-        const CwbvhNode node = bvh.nodes[index];
-        if constexpr (Counters::kCount) counters->node();
-        const uint32_t hits = cwbvh_child_hits(node, slab, tmin, tmax, oct_inv, counters);
-        group = {node.base_index_child, (hits & kCwbvhNodeBits) | node.imask};
+            // One copy of the whole 80-byte node: five 16-byte loads on the GPU
+            // instead of a byte load per field.
+            const CwbvhNode node = bvh.nodes[index];
+            if constexpr (Counters::kCount) counters->node();
+            const uint32_t hits = cwbvh_child_hits(node, slab, tmin, tmax, oct_inv, counters);
+            group = {node.base_index_child, (hits & kCwbvhNodeBits) | node.imask};
+            triangles = {node.base_index_triangle, hits & kCwbvhTriangleBits};
+            may_postpone = (group.hits & kCwbvhNodeBits) != 0;
+        } else {
+            // A postponed triangle group, tested now.
+            triangles = group;
+            group.hits = 0;
+            may_postpone = false;
+        }
 
-        // The node's hit leaves, triangle by triangle.
-        uint32_t triangle_hits = hits & kCwbvhTriangleBits;
-        while (triangle_hits != 0) {
-            const int k = cwbvh_lowest_bit(triangle_hits);
-            triangle_hits &= triangle_hits - 1u;
-            const CwbvhTriangle& t = bvh.triangles[node.base_index_triangle + static_cast<uint32_t>(k)];
+        // The hit leaves' triangles, one by one.
+        while (triangles.hits != 0) {
+            if (may_postpone && postpone->postpone()) {
+                stack[stack_size++] = triangles;
+                postpone->pushed(stack_size);
+                break;
+            }
+            const int k = cwbvh_lowest_bit(triangles.hits);
+            triangles.hits &= triangles.hits - 1u;
+            const CwbvhTriangle& t = bvh.triangles[triangles.base + static_cast<uint32_t>(k)];
             const Triangle tri{Vec3f(t.v0.x, t.v0.y, t.v0.z), Vec3f(t.v1.x, t.v1.y, t.v1.z),
                                Vec3f(t.v2.x, t.v2.y, t.v2.z)};
             if constexpr (Counters::kCount) counters->prim();
@@ -181,7 +263,7 @@ RF_HDI Hit cwbvh_traverse(const CwbvhView& bvh, const Ray& ray, Counters* counte
 
         if ((group.hits & kCwbvhNodeBits) == 0) {
             if (stack_size == 0) return hit;
-            group = stack[--stack_size];
+            group = stack[--stack_size];  // a node group or a triangle group
         }
     }
 }
@@ -192,13 +274,15 @@ RF_HDI Hit cwbvh_traverse(const CwbvhView& bvh, const Ray& ray, Counters* counte
 // layout was built with.
 RF_HDI Hit cwbvh_intersect(const CwbvhView& bvh, const Ray& ray) {
     detail::CwbvhNoCount none;
-    return detail::cwbvh_traverse<false>(bvh, ray, &none);
+    CwbvhPostponeOnFewActiveLanes postpone;
+    return detail::cwbvh_traverse<false>(bvh, ray, &none, &postpone);
 }
 
 // True when any triangle is hit with t in [ray.tmin, ray.tmax].
 RF_HDI bool cwbvh_occluded(const CwbvhView& bvh, const Ray& ray) {
     detail::CwbvhNoCount none;
-    return detail::cwbvh_traverse<true>(bvh, ray, &none).found();
+    CwbvhPostponeOnFewActiveLanes postpone;
+    return detail::cwbvh_traverse<true>(bvh, ray, &none, &postpone).found();
 }
 
 // Counting variants (counters are accumulated). With TraversalCounters,
@@ -206,19 +290,47 @@ RF_HDI bool cwbvh_occluded(const CwbvhView& bvh, const Ray& ray) {
 // CwbvhCounters, node fetches and box tests are counted separately.
 RF_HDI Hit cwbvh_intersect_counted(const CwbvhView& bvh, const Ray& ray, TraversalCounters& counters) {
     detail::CwbvhCountBoxes count{&counters};
-    return detail::cwbvh_traverse<false>(bvh, ray, &count);
+    CwbvhPostponeOnFewActiveLanes postpone;
+    return detail::cwbvh_traverse<false>(bvh, ray, &count, &postpone);
 }
 RF_HDI bool cwbvh_occluded_counted(const CwbvhView& bvh, const Ray& ray, TraversalCounters& counters) {
     detail::CwbvhCountBoxes count{&counters};
-    return detail::cwbvh_traverse<true>(bvh, ray, &count).found();
+    CwbvhPostponeOnFewActiveLanes postpone;
+    return detail::cwbvh_traverse<true>(bvh, ray, &count, &postpone).found();
 }
 RF_HDI Hit cwbvh_intersect_counted(const CwbvhView& bvh, const Ray& ray, CwbvhCounters& counters) {
     detail::CwbvhCountAll count{&counters};
-    return detail::cwbvh_traverse<false>(bvh, ray, &count);
+    CwbvhPostponeOnFewActiveLanes postpone;
+    return detail::cwbvh_traverse<false>(bvh, ray, &count, &postpone);
 }
 RF_HDI bool cwbvh_occluded_counted(const CwbvhView& bvh, const Ray& ray, CwbvhCounters& counters) {
     detail::CwbvhCountAll count{&counters};
-    return detail::cwbvh_traverse<true>(bvh, ray, &count).found();
+    CwbvhPostponeOnFewActiveLanes postpone;
+    return detail::cwbvh_traverse<true>(bvh, ray, &count, &postpone).found();
+}
+
+// The same with a caller's postponement policy (see CwbvhPostponeOnFewActiveLanes).
+template <class Postpone>
+RF_HDI Hit cwbvh_intersect(const CwbvhView& bvh, const Ray& ray, Postpone& postpone) {
+    detail::CwbvhNoCount none;
+    return detail::cwbvh_traverse<false>(bvh, ray, &none, &postpone);
+}
+template <class Postpone>
+RF_HDI bool cwbvh_occluded(const CwbvhView& bvh, const Ray& ray, Postpone& postpone) {
+    detail::CwbvhNoCount none;
+    return detail::cwbvh_traverse<true>(bvh, ray, &none, &postpone).found();
+}
+template <class Postpone>
+RF_HDI Hit cwbvh_intersect_counted(const CwbvhView& bvh, const Ray& ray, CwbvhCounters& counters,
+                                   Postpone& postpone) {
+    detail::CwbvhCountAll count{&counters};
+    return detail::cwbvh_traverse<false>(bvh, ray, &count, &postpone);
+}
+template <class Postpone>
+RF_HDI bool cwbvh_occluded_counted(const CwbvhView& bvh, const Ray& ray, CwbvhCounters& counters,
+                                   Postpone& postpone) {
+    detail::CwbvhCountAll count{&counters};
+    return detail::cwbvh_traverse<true>(bvh, ray, &count, &postpone).found();
 }
 
 }  // namespace rf

@@ -2,7 +2,9 @@
 // Karras and Laine 2017 ("Efficient Incoherent Ray Traversal on GPUs Through
 // Compressed Wide BVHs"): leaf refinement to single triangles, the section 3
 // cost-optimal collapse with leaves of at most three triangles, then the
-// section 4 node encoding (octant slot order, 8-bit child box quantisation).
+// section 4 node encoding: octant slot order (section 4.2, the optimal
+// child-to-slot assignment found with Bertsekas' auction algorithm) and
+// 8-bit child box quantisation.
 // See cwbvh_layout.h for the format.
 #include "accel/bvh/wide/cwbvh_layout.h"
 
@@ -241,28 +243,39 @@ private:
     float area_bias_ = 1.0f;
 };
 
-// Octant slot assignment (section 4.2), greedy: slot s should hold the child
-// a ray with direction signs s (bit set = negative) meets first, the one
-// lowest along that octant's diagonal. Returns slot_of[child].
-void assign_slots(const Box3f* boxes, int count, const Box3f& node_box, int* slot_of) {
-    const Vec3f centre = node_box.lo * 0.5f + node_box.hi * 0.5f;
-    float cost[kCwbvhWidth][kCwbvhWidth];
+float dequantize(float p, int q, float step) { return p + float(q) * step; }
+
+}  // namespace
+
+void cwbvh_slot_costs(const Box3f* child_boxes, int count, double (&cost)[kCwbvhWidth][kCwbvhWidth]) {
+    // In double: finite for every pair of finite float boxes.
+    Box3f node_box;
+    for (int c = 0; c < count; ++c) node_box.extend(child_boxes[c]);
+    double centre[3];
+    for (int a = 0; a < 3; ++a) centre[a] = 0.5 * double(node_box.lo[a]) + 0.5 * double(node_box.hi[a]);
     for (int c = 0; c < count; ++c) {
-        const Vec3f offset = boxes[c].lo * 0.5f + boxes[c].hi * 0.5f - centre;
+        double offset[3];
+        for (int a = 0; a < 3; ++a)
+            offset[a] = 0.5 * double(child_boxes[c].lo[a]) + 0.5 * double(child_boxes[c].hi[a]) - centre[a];
         for (int s = 0; s < kCwbvhWidth; ++s) {
-            const Vec3f diagonal((s & 1) ? -1.0f : 1.0f, (s & 2) ? -1.0f : 1.0f, (s & 4) ? -1.0f : 1.0f);
-            cost[c][s] = dot(offset, diagonal);
+            cost[c][s] = ((s & 1) ? -offset[0] : offset[0]) + ((s & 2) ? -offset[1] : offset[1]) +
+                         ((s & 4) ? -offset[2] : offset[2]);
         }
-        slot_of[c] = -1;
     }
+}
+
+void cwbvh_assign_slots_greedy(const double (&cost)[kCwbvhWidth][kCwbvhWidth], int count,
+                               int (&slot_of)[kCwbvhWidth]) {
     bool slot_taken[kCwbvhWidth] = {};
+    for (int c = 0; c < kCwbvhWidth; ++c) slot_of[c] = -1;
     for (int round = 0; round < count; ++round) {
         int best_c = -1, best_s = -1;
         for (int c = 0; c < count; ++c) {
             if (slot_of[c] >= 0) continue;
             for (int s = 0; s < kCwbvhWidth; ++s) {
                 if (slot_taken[s]) continue;
-                if (best_c < 0 || cost[c][s] < cost[best_c][best_s]) {
+                // `!(>=)` so that a NaN never blocks the first pick.
+                if (best_c < 0 || !(cost[c][s] >= cost[best_c][best_s])) {
                     best_c = c;
                     best_s = s;
                 }
@@ -273,9 +286,104 @@ void assign_slots(const Box3f* boxes, int count, const Box3f& node_box, int* slo
     }
 }
 
-float dequantize(float p, int q, float step) { return p + float(q) * step; }
+// Auction algorithm for the assignment problem (D. P. Bertsekas, "The
+// auction algorithm: a distributed relaxation method for the assignment
+// problem", Annals of Operations Research 14, 1988), with epsilon scaling.
+// Children bid for slots; the benefit of slot s to child c is the
+// normalised negated cost, in [0, 1]. To make the problem square (eight
+// bidders, eight objects), the 8 - count missing children are dummies
+// that value every slot at zero: they only take the slots nobody needs, so
+// an optimal square assignment restricted to the real children is an
+// optimal injective one, and the square problem keeps the textbook
+// guarantees under epsilon scaling (the asymmetric one would need reverse
+// auction steps).
+//
+// A round: an unassigned bidder takes the slot j1 of highest value
+// benefit - price, raising its price by (best value - second best value +
+// eps) and evicting its previous holder. Every bid raises a price by at
+// least eps, so each round ends after finitely many bids; at its end every
+// bidder holds a slot within eps of its best value (eps-complementary
+// slackness), hence the total benefit is within 8 * eps of the maximum.
+// Prices carry over from round to round while eps shrinks by 8 from the
+// benefit range (1) to kFinalEps, which keeps every round short.
+void cwbvh_assign_slots_auction(const double (&cost)[kCwbvhWidth][kCwbvhWidth], int count,
+                                int (&slot_of)[kCwbvhWidth]) {
+    constexpr int n = kCwbvhWidth;
+    // 8 * kFinalEps < 1e-6: the documented bound, relative to the cost range.
+    constexpr double kFinalEps = 1e-6 / 9.0;
+    for (int c = 0; c < n; ++c) slot_of[c] = -1;
+    count = std::clamp(count, 0, n);
+    if (count == 0) return;
 
-}  // namespace
+    // Normalisation. Scaling by a power of two first (exact) keeps
+    // hi - lo finite for costs anywhere in the double range.
+    double largest = 0.0;
+    for (int c = 0; c < count; ++c) {
+        for (int s = 0; s < n; ++s) {
+            if (std::isfinite(cost[c][s])) largest = std::max(largest, std::fabs(cost[c][s]));
+        }
+    }
+    int exponent = 0;
+    if (largest > 0.0) std::frexp(largest, &exponent);
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (int c = 0; c < count; ++c) {
+        for (int s = 0; s < n; ++s) {
+            if (!std::isfinite(cost[c][s])) continue;
+            const double x = std::ldexp(cost[c][s], -exponent);
+            lo = std::min(lo, x);
+            hi = std::max(hi, x);
+        }
+    }
+    const double range = hi - lo;  // in [0, 2]; 0 (or -inf: no finite cost): all ties
+    double benefit[n][n] = {};
+    for (int c = 0; c < count; ++c) {
+        for (int s = 0; s < n; ++s) {
+            if (!std::isfinite(cost[c][s])) {
+                benefit[c][s] = -1.0;  // below every finite cost's benefit
+            } else if (range > 0.0) {
+                benefit[c][s] = (hi - std::ldexp(cost[c][s], -exponent)) / range;
+            }
+        }
+    }
+
+    double price[n] = {};
+    int holder[n];     // slot -> bidder, -1 for none
+    int held[n];       // bidder -> slot, -1 for none
+    int waiting[n];    // unassigned bidders (a stack)
+    for (double eps = 1.0;; eps = std::max(eps * 0.125, kFinalEps)) {
+        int waiting_count = 0;
+        for (int i = 0; i < n; ++i) {
+            holder[i] = -1;
+            held[i] = -1;
+            waiting[waiting_count++] = n - 1 - i;
+        }
+        while (waiting_count > 0) {
+            const int bidder = waiting[--waiting_count];
+            int best = 0;
+            double best_value = benefit[bidder][0] - price[0];
+            double second_value = -std::numeric_limits<double>::infinity();
+            for (int s = 1; s < n; ++s) {
+                const double value = benefit[bidder][s] - price[s];
+                if (value > best_value) {
+                    second_value = best_value;
+                    best_value = value;
+                    best = s;
+                } else if (value > second_value) {
+                    second_value = value;
+                }
+            }
+            price[best] += best_value - second_value + eps;
+            if (holder[best] >= 0) {
+                held[holder[best]] = -1;
+                waiting[waiting_count++] = holder[best];
+            }
+            holder[best] = bidder;
+            held[bidder] = best;
+        }
+        if (eps <= kFinalEps) break;
+    }
+    for (int c = 0; c < count; ++c) slot_of[c] = held[c];
+}
 
 bool cwbvh_quantize(CwbvhNode& node, const Box3f (&boxes)[kCwbvhWidth], unsigned used) {
     uint8_t* q_lo[3] = {node.q_lo_x, node.q_lo_y, node.q_lo_z};
@@ -364,13 +472,12 @@ CwbvhBvh build_cwbvh(const Bvh& bvh, const std::vector<Triangle>& triangles) {
         } else {
             count = collapse.node_slots(p.refined, children);
         }
-        Box3f child_box[kCwbvhWidth], node_box;
-        for (int c = 0; c < count; ++c) {
-            child_box[c] = refined[children[c]].box;
-            node_box.extend(child_box[c]);
-        }
+        Box3f child_box[kCwbvhWidth];
+        for (int c = 0; c < count; ++c) child_box[c] = refined[children[c]].box;
+        double slot_cost[kCwbvhWidth][kCwbvhWidth] = {};
+        cwbvh_slot_costs(child_box, count, slot_cost);
         int slot_of[kCwbvhWidth];
-        assign_slots(child_box, count, node_box, slot_of);
+        cwbvh_assign_slots_auction(slot_cost, count, slot_of);
         int child_in[kCwbvhWidth];  // slot -> child, -1 for empty
         std::fill(child_in, child_in + kCwbvhWidth, -1);
         for (int c = 0; c < count; ++c) child_in[slot_of[c]] = c;

@@ -30,9 +30,9 @@
 // child met first by rays whose direction has the sign pattern s (bit a set =
 // negative along axis a), so the traversal, which visits hit children in the
 // order of slot XOR ray octant, goes nearly front to back with no sorting.
-// The paper solves this assignment optimally (auction algorithm); we assign
-// greedily, cheapest (child, slot) pair first, with the cost
-// dot(child centroid - node centroid, octant diagonal).
+// The cost of child c in slot s is dot(child centre - node centre, octant-s
+// diagonal); as in the paper, the assignment minimising the summed cost is
+// found with Bertsekas' auction algorithm (cwbvh_assign_slots_auction).
 //
 // Collapse: our own implementation of the paper's section 3 dynamic
 // programme with leaves of at most three triangles (the unary count in
@@ -51,8 +51,9 @@
 // triangle index bit-cast into v0.w), as in aila_laine_layout.h, so the
 // shared traversal's hits are bit-identical to the scalar watertight test.
 //
-// The traversal's fixed stack holds at most one entry per wide level below
-// the root; build_cwbvh throws rf::Error when the wide tree is deeper than
+// The traversal's fixed stack holds at most one node group per wide level
+// below the root (kCwbvhStackSize), plus as many postponed triangle groups
+// (trace/cwbvh_traversal.h); build_cwbvh throws rf::Error when the wide tree is deeper than
 // kCwbvhMaxDepth (never seen: the tree is several times shallower than the
 // binary one), and also when a box cannot be quantised in float (scene
 // extents near FLT_MAX).
@@ -73,8 +74,10 @@ namespace rf {
 
 inline constexpr int kCwbvhWidth = 8;
 inline constexpr int kCwbvhMaxLeafTriangles = 3;
-// Entries of the traversal stack (8 bytes each) and the deepest wide tree
-// (in nodes, root included) it can traverse: one entry per level below the root.
+// Node groups on the traversal stack (8 bytes each) and the deepest wide
+// tree (in nodes, root included) it can traverse: one node group per level
+// below the root. The traversal's stack is twice this (postponed triangle
+// groups, kCwbvhTraversalStackSize in trace/cwbvh_traversal.h).
 inline constexpr int kCwbvhStackSize = 32;
 inline constexpr int kCwbvhMaxDepth = kCwbvhStackSize + 1;
 
@@ -160,6 +163,27 @@ struct CwbvhBvh {
 // the boxes cannot be quantised conservatively in float (non-finite, or
 // extents near FLT_MAX).
 bool cwbvh_quantize(CwbvhNode& node, const Box3f (&boxes)[kCwbvhWidth], unsigned used);
+
+// Octant slot assignment (section 4.2). cost[c][s], c < count <= 8: the
+// cost of child c in slot s, dot(child centre - node centre, diagonal of
+// octant s) with the diagonal's component a = -1 where s has bit a, else +1.
+// Rows >= count are left untouched. Node centre: centre of the union of the
+// child boxes.
+void cwbvh_slot_costs(const Box3f* child_boxes, int count, double (&cost)[kCwbvhWidth][kCwbvhWidth]);
+
+// Both return slot_of[c] for c < count: distinct slots in 0..7.
+// Auction algorithm (Bertsekas), what build_cwbvh uses: the summed cost is
+// within 1e-6 * (largest - smallest cost of the table) of the minimum over
+// all injective assignments, and exactly minimal when the minimum beats every
+// other assignment by more than that (integer costs of range < 1e6, say).
+// Non-finite costs are treated as worse than every finite one. Terminates
+// for every input.
+void cwbvh_assign_slots_auction(const double (&cost)[kCwbvhWidth][kCwbvhWidth], int count,
+                                int (&slot_of)[kCwbvhWidth]);
+// Greedy, cheapest (child, slot) pair first (what the builder used before;
+// kept for comparison): can be arbitrarily worse than the optimum.
+void cwbvh_assign_slots_greedy(const double (&cost)[kCwbvhWidth][kCwbvhWidth], int count,
+                               int (&slot_of)[kCwbvhWidth]);
 
 // Converts `bvh` (built over `triangles`; references from spatial splits
 // allowed). Throws rf::Error when the BVH is malformed (links or primitive
