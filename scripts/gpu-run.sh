@@ -3,18 +3,30 @@
 # .gpu-debs/ (made by scripts/gpu-bundle.sh) into a private prefix, builds
 # the CLI and the gpu tests, runs `ctest -L gpu`, then the GPU benchmarks of
 # issue 6, writing everything to $OUT (or ./gpu-out).
-#   scripts/gpu-run.sh [tests|bench|all]   (default all)
+#   scripts/gpu-run.sh [tests|bench|memcheck|all]   (default all; memcheck runs
+#   some gpu tests under compute-sanitizer)
+# A cold build plus tests plus bench may not fit one 10-minute call: run
+# `tests` first and `bench` in a second call (build-gpu/ stays while the
+# machine is warm).
 set -uo pipefail
+test_rc=0 bench_rc=0 path_rc=0
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 what="${1:-all}"
 out="${OUT:-$ROOT/gpu-out}"
 mkdir -p "$out"
 prefix=/tmp/rayforge-debs
 mkdir -p "$prefix"
-for f in "$ROOT"/.gpu-debs/*.deb; do dpkg-deb -x "$f" "$prefix"; done
+shopt -s nullglob
+debs=("$ROOT"/.gpu-debs/*.deb)
+if ((${#debs[@]} == 0)); then
+  echo "gpu-run.sh: no packages in $ROOT/.gpu-debs: run scripts/gpu-bundle.sh here and carry .gpu-debs" >&2
+  exit 2
+fi
+for f in "${debs[@]}"; do dpkg-deb -x "$f" "$prefix" || { echo "gpu-run.sh: cannot unpack $f" >&2; exit 2; }; done
 lib="$prefix/usr/lib/x86_64-linux-gnu"
 export CMAKE_PREFIX_PATH="$prefix/usr:$lib/cmake${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
-export CPATH="$prefix/usr/include${CPATH:+:$CPATH}"
+# Multiarch headers (libjpeg's jconfig.h) live one level down.
+export CPATH="$prefix/usr/include:$prefix/usr/include/x86_64-linux-gnu${CPATH:+:$CPATH}"
 export LIBRARY_PATH="$lib${LIBRARY_PATH:+:$LIBRARY_PATH}"
 export LD_LIBRARY_PATH="$lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 export PATH="$prefix/usr/bin:$PATH"
@@ -34,15 +46,29 @@ rf="$build/bin/rayforge"
 
 if [[ "$what" == all || "$what" == tests ]]; then
   (cd "$build" && ctest -L gpu --output-on-failure) > "$out/gpu-tests.txt" 2>&1
-  echo "gpu tests: rc=$?"; tail -15 "$out/gpu-tests.txt"
+  test_rc=$?
+  echo "gpu tests: rc=$test_rc"; tail -15 "$out/gpu-tests.txt"
+fi
+if [[ "$what" == memcheck ]]; then
+  # Device memory errors and races (compute-sanitizer ships with the toolkit).
+  gpu_tests=$(find "$build" -name rayforge_gpu_tests -type f | head -1)
+  compute-sanitizer --tool memcheck --error-exitcode 3 "$gpu_tests" \
+    --gtest_filter='GpuDeviceTracer.*:GpuRenderer.AovsAndCallbacks:GpuRenderer.RaySortingChangesNothing' \
+    > "$out/memcheck.txt" 2>&1
+  test_rc=$?
+  echo "memcheck: rc=$test_rc"; tail -15 "$out/memcheck.txt"
 fi
 if [[ "$what" == all || "$what" == bench ]]; then
   scenes=(--scene builtin:cornell)
   [[ -d "$ROOT/shared/scenes" ]] && scenes=(--scenes-dir "$ROOT/shared/scenes" --scene sponza)
   "$rf" bench "${scenes[@]}" --device cuda --gpu-kernel all --rays primary,diffuse,shadow,ao --embree none \
     --reps 5 --json "$out/bench-rays.json" > "$out/bench-rays.txt" 2>&1
-  echo "bench rays: rc=$?"; tail -25 "$out/bench-rays.txt"
+  bench_rc=$?
+  echo "bench rays: rc=$bench_rc"; tail -25 "$out/bench-rays.txt"
   "$rf" bench "${scenes[@]}" --device cuda --integrator path --max-depth 4 --res 1024x768 --reps 20 \
     > "$out/bench-path.txt" 2>&1
-  echo "bench path: rc=$?"; tail -8 "$out/bench-path.txt"
+  path_rc=$?
+  echo "bench path: rc=$path_rc"; tail -8 "$out/bench-path.txt"
 fi
+# Non-zero when any step failed, so the caller sees it in the exit status.
+exit $(( ${test_rc:-0} || ${bench_rc:-0} || ${path_rc:-0} ))

@@ -24,12 +24,13 @@ std::vector<Ray> random_rays(const Box3f& bounds, size_t count, uint32_t seed) {
     std::uniform_real_distribution<float> u(0.0f, 1.0f);
     const Vec3f e = bounds.extent();
     std::vector<Ray> rays(count);
-    for (Ray& r : rays) {
+    for (size_t i = 0; i < count; ++i) {
+        Ray& r = rays[i];
         r.org = bounds.lo + Vec3f{u(rng) * e.x, u(rng) * e.y, u(rng) * e.z};
         Vec3f target = bounds.lo + Vec3f{u(rng) * e.x, u(rng) * e.y, u(rng) * e.z};
         r.dir = normalize(target - r.org + Vec3f{1e-3f, 0, 0});
         r.tmin = 0.0f;
-        r.tmax = (count & 1) ? kInfinity : 0.5f * length(e);
+        r.tmax = (i & 1) ? kInfinity : 0.5f * length(e);  // both kinds of tmax
     }
     return rays;
 }

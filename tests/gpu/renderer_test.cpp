@@ -25,6 +25,7 @@ bool have_device() { return !cuda::list_devices().empty(); }
 
 struct Rendered {
     Image cpu, gpu;
+    RenderStats cpu_stats, gpu_stats;
 };
 
 Rendered render_both(const std::string& scene_name, const RenderOptions& options, GpuKernel kernel) {
@@ -36,7 +37,7 @@ Rendered render_both(const std::string& scene_name, const RenderOptions& options
     cuda::Renderer gpu(scene, g, scene.camera_or_default(), options, kernel);
     cuda::render_progressive(gpu);
     EXPECT_EQ(gpu.passes(), options.spp);
-    return {cpu.image(), gpu.image()};
+    return {cpu.image(), gpu.image(), cpu.stats(), gpu.stats()};
 }
 
 // Share of pixels (all channels) within `tol` of each other, and the largest difference.
@@ -66,6 +67,13 @@ TEST(GpuRenderer, WhittedNormalsAndAoMatchTheCpu) {
             float worst = 0.0f;
             // A ray grazing an edge may go either way under a different rounding: a few pixels may differ.
             EXPECT_GE(share_within(r.cpu, r.gpu, 1e-3f, worst), 0.995) << "worst " << worst;
+            // The same queries, counted the same way (a grazing ray may spawn a ray more or less).
+            const auto near = [](uint64_t a, uint64_t b) { return double(a > b ? a - b : b - a) <= 0.005 * double(std::max(a, b)); };
+            EXPECT_GT(r.gpu_stats.closest_rays, 0u);
+            EXPECT_TRUE(near(r.cpu_stats.closest_rays, r.gpu_stats.closest_rays))
+                << r.cpu_stats.closest_rays << " vs " << r.gpu_stats.closest_rays;
+            EXPECT_TRUE(near(r.cpu_stats.shadow_rays, r.gpu_stats.shadow_rays))
+                << r.cpu_stats.shadow_rays << " vs " << r.gpu_stats.shadow_rays;
         }
 }
 
@@ -114,11 +122,13 @@ TEST(GpuRenderer, RaySortingChangesNothing) {
     cuda::Renderer sorted(scene, g, scene.camera_or_default(), o);
     cuda::render_progressive(sorted);
     const Image a = plain.image(), b = sorted.image();
-    for (size_t i = 0; i < a.pixels.size(); ++i) {
-        ASSERT_EQ(a.pixels[i].x, b.pixels[i].x) << i;
-        ASSERT_EQ(a.pixels[i].y, b.pixels[i].y) << i;
-        ASSERT_EQ(a.pixels[i].z, b.pixels[i].z) << i;
-    }
+    // Sorting only permutes independent paths. A path's hits do not depend on
+    // its warp except on an exact tie between two triangles (a shared edge),
+    // where CWBVH postponement may pick the other one: allow 0.1 % of pixels.
+    size_t differing = 0;
+    for (size_t i = 0; i < a.pixels.size(); ++i)
+        differing += a.pixels[i].x != b.pixels[i].x || a.pixels[i].y != b.pixels[i].y || a.pixels[i].z != b.pixels[i].z;
+    EXPECT_LE(differing, a.pixels.size() / 1000) << differing << " of " << a.pixels.size() << " pixels differ";
     EXPECT_FALSE(sorted.last_pass().paths_per_bounce.empty());
     EXPECT_EQ(sorted.last_pass().paths_per_bounce[0], uint32_t(64 * 48));
 }

@@ -14,6 +14,9 @@ std::vector<DeviceInfo> list_devices() {
         (void)cudaGetLastError();
         return devices;
     }
+    // Free memory needs each device current in turn; the caller's is restored.
+    int current = 0;
+    const bool had_current = cudaGetDevice(&current) == cudaSuccess;
     int driver = 0, runtime = 0;
     (void)cudaDriverGetVersion(&driver);
     (void)cudaRuntimeGetVersion(&runtime);
@@ -43,6 +46,8 @@ std::vector<DeviceInfo> list_devices() {
         (void)cudaGetLastError();
         devices.push_back(info);
     }
+    if (had_current) (void)cudaSetDevice(current);
+    (void)cudaGetLastError();
     return devices;
 }
 

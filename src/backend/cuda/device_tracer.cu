@@ -116,9 +116,10 @@ class EventTimer {
 public:
     EventTimer() {
         RF_CUDA_CHECK(cudaEventCreate(&start_));
-        if (cudaEventCreate(&stop_) != cudaSuccess) {
+        const cudaError_t stop_status = cudaEventCreate(&stop_);
+        if (stop_status != cudaSuccess) {
             cudaEventDestroy(start_);
-            RF_CUDA_CHECK(cudaGetLastError());
+            throw_cuda_error(stop_status, "cudaEventCreate(&stop_)", __FILE__, __LINE__);
         }
     }
     ~EventTimer() {
@@ -140,19 +141,30 @@ private:
     cudaEvent_t start_{}, stop_{};
 };
 
-// Launches the trace of `count` resident rays with the kernel's scheduling.
+// Work done before the timed launch, so that it is not timed: the
+// persistent kernel's ray counter is reset and its grid size (enough warps
+// to fill every multiprocessor) is queried once.
+void prepare_trace(DeviceTracer::Impl& impl, bool any_hit) {
+    if (impl.kernel != GpuKernel::AilaLaine) return;
+    impl.work_counter.reserve(1);
+    RF_CUDA_CHECK(cudaMemset(impl.work_counter.data(), 0, sizeof(uint32_t)));
+    int& blocks = impl.persistent_blocks[any_hit ? 1 : 0];
+    if (blocks != 0) return;
+    int per_sm = 0;
+    if (any_hit)
+        RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, aila_laine_persistent_kernel<true>,
+                                                                   kBlockSize, 0));
+    else
+        RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, aila_laine_persistent_kernel<false>,
+                                                                   kBlockSize, 0));
+    blocks = std::max(1, per_sm) * impl.multiprocessors;
+}
+
+// Launches the trace of `count` resident rays with the kernel's scheduling
+// (after prepare_trace).
 void launch_trace(DeviceTracer::Impl& impl, bool any_hit, uint32_t count) {
     if (impl.kernel == GpuKernel::AilaLaine) {
-        impl.work_counter.reserve(1);
-        RF_CUDA_CHECK(cudaMemset(impl.work_counter.data(), 0, sizeof(uint32_t)));
-        int per_sm = 0;
-        if (any_hit)
-            RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, aila_laine_persistent_kernel<true>,
-                                                                       kBlockSize, 0));
-        else
-            RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, aila_laine_persistent_kernel<false>,
-                                                                       kBlockSize, 0));
-        const int blocks = std::max(1, per_sm) * impl.multiprocessors;
+        const int blocks = impl.persistent_blocks[any_hit ? 1 : 0];
         if (any_hit)
             aila_laine_persistent_kernel<true><<<blocks, kBlockSize>>>(impl.aila_laine.bvh, impl.rays.data(), nullptr,
                                                                        impl.flags.data(), count,
@@ -312,6 +324,7 @@ KernelTiming DeviceTracer::trace_uploaded(bool any_hit) {
     if (count == 0) return timing;
     if (any_hit) impl.flags.reserve(count);
     else impl.hits.reserve(count);
+    prepare_trace(impl, any_hit);
     EventTimer timer;
     timer.start();
     launch_trace(impl, any_hit, count);

@@ -16,6 +16,7 @@ struct DeviceTracer::Impl {
     int device = 0;
     AccelStats stats;
     int multiprocessors = 1;
+    int persistent_blocks[2] = {0, 0};  // Aila-Laine grid size, closest / any hit (0: not yet queried)
 
     DeviceBuffer<Triangle> triangles{"triangles"};
     // The arrays of whichever structure the kernel reads.

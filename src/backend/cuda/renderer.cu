@@ -14,8 +14,7 @@
 // Garanzha and Loop 2010 (render/ray_sort_key.h) with CUB's radix sort
 // before each extension, so neighbouring threads trace similar rays.
 //
-// Whitted, AO and normals run one thread per pixel (the per-sample functions
-// of src/render/integrators), templated on the tracer.
+// Whitted, AO and normals run one thread per pixel (pixel_kernels.h).
 #include <cuda_runtime.h>
 
 #include <cub/device/device_radix_sort.cuh>
@@ -26,12 +25,10 @@
 
 #include "backend/cuda/device_scene.h"
 #include "backend/cuda/device_tracer_impl.h"
+#include "backend/cuda/pixel_kernels.h"
 #include "rayforge/core/error.h"
-#include "render/integrators/ao.h"
-#include "render/integrators/normals.h"
 #include "render/integrators/path.h"
 #include "render/integrators/path_stages.h"
-#include "render/integrators/whitted.h"
 #include "render/ray_sort_key.h"
 #include "render/texture_lod.h"
 
@@ -130,13 +127,6 @@ __global__ void connect_kernel(Tracer tracer, DeviceSceneView view, WavefrontBuf
     if (connect_shadow(tracer, view, shadow)) q.paths[shadow.path].radiance += shadow.contribution;
 }
 
-struct Films {
-    Vec3f* color = nullptr;
-    Vec3f* albedo = nullptr;
-    Vec3f* normal = nullptr;
-    Vec3f* depth = nullptr;
-};
-
 __global__ void accumulate_paths_kernel(WavefrontBuffers q, uint32_t count, float clamp, Films films) {
     const uint32_t pixel = blockIdx.x * blockDim.x + threadIdx.x;
     if (pixel >= count) return;
@@ -146,44 +136,6 @@ __global__ void accumulate_paths_kernel(WavefrontBuffers q, uint32_t count, floa
         films.albedo[pixel] += a.albedo;
         films.normal[pixel] += a.normal;
         films.depth[pixel] += Vec3f(a.depth);
-    }
-}
-
-struct PixelKernelParams {
-    DeviceSceneView view;
-    CameraFrame camera;
-    int width = 0, height = 0;
-    uint32_t sample = 0, seed = 0;
-    bool centre = false;  // one sample at the pixel centre (Whitted and normals at 1 spp)
-    int integrator = 0;   // rf::IntegratorKind
-    WhittedSettings whitted;
-    AoSettings ao;
-    float clamp = 0.0f;
-    Films films;
-};
-
-// One sample per pixel of the integrators that need no wavefront.
-template <class Tracer>
-__global__ void pixel_kernel(Tracer tracer, PixelKernelParams p) {
-    const uint32_t pixel = blockIdx.x * blockDim.x + threadIdx.x;
-    if (pixel >= uint32_t(p.width) * uint32_t(p.height)) return;
-    const int x = int(pixel % uint32_t(p.width)), y = int(pixel / uint32_t(p.width));
-    RandomStream rng(pixel, p.sample, p.seed);
-    const Vec2f jitter = p.centre ? Vec2f{0.5f, 0.5f} : rng.next2();
-    const Vec2f lens = rng.next2();
-    const Ray ray = p.camera.generate(float(x) + jitter.x, float(y) + jitter.y, p.width, p.height, lens.x, lens.y);
-    Vec3f value;
-    switch (p.integrator) {
-        case int(IntegratorKind::Normals): value = normals_radiance(tracer, p.view, ray); break;
-        case int(IntegratorKind::AmbientOcclusion): value = ao_radiance(tracer, p.view, ray, rng, p.ao); break;
-        default: value = whitted_radiance(tracer, p.view, ray, rng, p.whitted); break;
-    }
-    p.films.color[pixel] += film_sample(value, p.clamp);
-    if (p.films.albedo) {
-        const FirstHitAovs a = first_hit_aovs(tracer, p.view, ray);
-        p.films.albedo[pixel] += a.albedo;
-        p.films.normal[pixel] += a.normal;
-        p.films.depth[pixel] += Vec3f(a.depth);
     }
 }
 
@@ -221,6 +173,7 @@ struct Renderer::State {
     DeviceBuffer<ShadowConnection> shadows{"shadow connections"};
     DeviceBuffer<uint32_t> shadow_queue{"shadow queue"};
     DeviceBuffer<uint32_t> counters{"queue counters"};
+    DeviceBuffer<unsigned long long> ray_counts{"ray counters"};
     DeviceBuffer<uint32_t> sort_keys{"ray sort keys"}, sorted_keys{"sorted ray keys"};
     DeviceBuffer<unsigned char> sort_scratch{"radix sort scratch"};
 
@@ -311,10 +264,14 @@ struct Renderer::State {
         p.ao = ao;
         p.clamp = options.max_sample_value;
         p.films = films();
-        tracer->impl().with_tracer(
-            [&](const auto& t) { pixel_kernel<<<blocks_for(pixels()), kBlock>>>(t, p); });
-        RF_CUDA_CHECK(cudaGetLastError());
-        last.closest_rays += pixels();
+        ray_counts.reserve(2);
+        RF_CUDA_CHECK(cudaMemset(ray_counts.data(), 0, 2 * sizeof(unsigned long long)));
+        p.ray_counts = ray_counts.data();
+        launch_pixel_kernel(tracer->impl(), p, blocks_for(pixels()), kBlock);
+        unsigned long long counted[2] = {0, 0};
+        RF_CUDA_CHECK(cudaMemcpy(counted, ray_counts.data(), sizeof(counted), cudaMemcpyDeviceToHost));
+        last.closest_rays += counted[0];
+        last.shadow_rays += counted[1];
     }
 };
 

@@ -1,0 +1,191 @@
+// The CUDA LBVH (Karras 2012; backend/cuda/lbvh_build.cu) against the CPU
+// LBVH: the same BVH (nodes and primitive order) on soups, spheres and
+// degenerate inputs with 30- and 63-bit codes; the device's raw radix tree,
+// parents, arrival counters and bottom-up boxes checked directly; hits of the
+// downloaded BVH (host traversal) equal brute force; the stage report is
+// filled. Skips with a message when no CUDA device is present.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "../accel_test_scenes.h"
+#include "accel/brute_force.h"
+#include "accel/bvh/build/karras_tree.h"
+#include "accel/bvh/build/lbvh.h"
+#include "accel/bvh/build/morton_tree.h"
+#include "backend/cuda/lbvh_build.h"
+#include "rayforge/backend/cuda.h"
+#include "rayforge/backend/cuda_build.h"
+#include "rayforge/core/error.h"
+#include "trace/bvh_traversal.h"
+
+namespace rf {
+namespace {
+
+bool have_device() { return !cuda::list_devices().empty(); }
+
+#define RF_REQUIRE_DEVICE() \
+    if (!have_device()) GTEST_SKIP() << "no CUDA device: " << cuda::device_unavailable_reason()
+
+bool same_box(const Box3f& a, const Box3f& b) { return std::memcmp(&a, &b, sizeof(Box3f)) == 0; }
+
+struct NamedScene {
+    std::string name;
+    SceneGeometry geometry;
+};
+
+std::vector<NamedScene> test_scenes() {
+    std::vector<NamedScene> scenes;
+    scenes.push_back({"soup", test::make_triangle_soup(20000, 1, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f)});
+    scenes.push_back({"sphere", test::to_geometry(test::make_icosphere(5))});
+    scenes.push_back({"nasty", test::make_nasty_geometry(2)});
+    scenes.push_back({"far", test::make_triangle_soup(3000, 3, {Vec3f(1e6f), Vec3f(1e6f + 100.0f)}, 1.0f)});
+    SceneGeometry point;  // every triangle in one point: all codes equal
+    for (int i = 0; i < 1000; ++i) test::append(point, {Vec3f(3.0f), Vec3f(3.0f), Vec3f(3.0f)});
+    scenes.push_back({"one point", std::move(point)});
+    SceneGeometry two;
+    test::append(two, {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)});
+    test::append(two, {Vec3f(0, 0, 2), Vec3f(1, 0, 2), Vec3f(0, 1, 2)});
+    scenes.push_back({"two", std::move(two)});
+    return scenes;
+}
+
+void expect_same_bvh(const Bvh& expected, const Bvh& got, const std::string& what) {
+    ASSERT_EQ(expected.nodes.size(), got.nodes.size()) << what;
+    EXPECT_EQ(expected.prim_indices, got.prim_indices) << what;
+    size_t wrong = 0;
+    for (size_t i = 0; i < expected.nodes.size(); ++i) {
+        wrong += !same_box(expected.nodes[i].bounds, got.nodes[i].bounds) ||
+                 expected.nodes[i].first != got.nodes[i].first || expected.nodes[i].count != got.nodes[i].count;
+    }
+    EXPECT_EQ(wrong, 0u) << what << ": nodes that differ";
+}
+
+TEST(GpuLbvhBuild, SameBvhAsCpuLbvh) {
+    RF_REQUIRE_DEVICE();
+    for (const NamedScene& scene : test_scenes()) {
+        for (int bits : {30, 63}) {
+            for (int leaf_size : {1, 4}) {
+                const BuildOptions options{.max_leaf_size = leaf_size};
+                const std::string what = scene.name + ", " + std::to_string(bits) + " bits, leaves of " +
+                                         std::to_string(leaf_size);
+                expect_same_bvh(build_lbvh(scene.geometry.triangles, options, bits),
+                                cuda::build_lbvh_on_device(scene.geometry.triangles, options, bits), what);
+            }
+        }
+    }
+}
+
+TEST(GpuLbvhBuild, EmptyAndSingleTriangle) {
+    RF_REQUIRE_DEVICE();
+    for (int bits : {30, 63}) {
+        EXPECT_TRUE(cuda::build_lbvh_on_device({}, {}, bits).nodes.empty());
+        SceneGeometry one;
+        test::append(one, {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)});
+        const Bvh bvh = cuda::build_lbvh_on_device(one.triangles, {}, bits);
+        ASSERT_EQ(bvh.nodes.size(), 1u);
+        EXPECT_EQ(bvh.nodes[0].count, 1u);
+        EXPECT_EQ(bvh.prim_indices, std::vector<uint32_t>{0});
+        EXPECT_TRUE(same_box(bvh.nodes[0].bounds, build_lbvh(one.triangles, {}, bits).nodes[0].bounds));
+    }
+    EXPECT_THROW((void)cuda::build_lbvh_on_device({}, {}, 32), Error);
+}
+
+// The device's own radix tree: the order and inner nodes of the CPU's
+// Morton sort and Karras construction, consistent parents, every counter
+// reached twice, every inner box the union of its children's.
+template <class Key>
+void check_raw_tree(const SceneGeometry& g, const std::string& what) {
+    const int bits = sizeof(Key) == 4 ? 30 : 63;
+    SCOPED_TRACE(what + ", " + std::to_string(bits) + " bits");
+    morton::RawTree cpu(g.triangles, BuildOptions{});
+    morton::Buffer<Key> keys;
+    cpu.sort_by_morton_codes(keys);
+    const uint32_t n = cpu.size();
+    const cuda::DeviceKarrasTree dev = cuda::build_karras_tree_on_device(g.triangles, bits);
+    ASSERT_EQ(dev.order, cpu.order);
+    std::vector<uint32_t> children(2 * size_t{n - 1});
+    for (uint32_t i = 0; i + 1 < n; ++i) karras::build_inner(keys.data(), n, i, &children[2 * size_t{i}], nullptr, nullptr);
+    ASSERT_EQ(dev.children, children);
+    for (uint32_t i = 0; i < n; ++i) ASSERT_TRUE(same_box(dev.triangle_boxes[cpu.order[i]], cpu.boxes[i])) << i;
+    EXPECT_EQ(dev.inner_parent[0], karras::kNoParent);
+    size_t wrong_parents = 0, wrong_boxes = 0, wrong_counts = 0;
+    for (uint32_t i = 0; i + 1 < n; ++i) {
+        Box3f box[2];
+        for (int c = 0; c < 2; ++c) {
+            const uint32_t ref = dev.children[2 * size_t{i} + c];
+            const bool leaf = karras::is_leaf_ref(ref);
+            const uint32_t index = ref & ~karras::kLeafRef;
+            wrong_parents += (leaf ? dev.leaf_parent[index] : dev.inner_parent[index]) != i;
+            box[c] = leaf ? cpu.boxes[index] : dev.inner_boxes[index];
+        }
+        wrong_boxes += !same_box(dev.inner_boxes[i], morton::box_union(box[0], box[1]));
+        wrong_counts += dev.arrivals[i] != 2;
+    }
+    EXPECT_EQ(wrong_parents, 0u);
+    EXPECT_EQ(wrong_boxes, 0u);
+    EXPECT_EQ(wrong_counts, 0u);
+}
+
+TEST(GpuLbvhBuild, DeviceRadixTreeParentsAndBoxes) {
+    RF_REQUIRE_DEVICE();
+    for (const NamedScene& scene : test_scenes()) {
+        check_raw_tree<uint32_t>(scene.geometry, scene.name);
+        check_raw_tree<uint64_t>(scene.geometry, scene.name);
+    }
+    // Large enough for many blocks to race on the counters.
+    const SceneGeometry big = test::make_triangle_soup(300000, 9, {Vec3f(-100.0f), Vec3f(100.0f)}, 0.5f);
+    check_raw_tree<uint32_t>(big, "300K soup");
+}
+
+TEST(GpuLbvhBuild, StagesAndPeakMemoryAreReported) {
+    RF_REQUIRE_DEVICE();
+    const SceneGeometry soup = test::make_triangle_soup(200000, 4, {Vec3f(-50.0f), Vec3f(50.0f)}, 0.5f);
+    for (int bits : {30, 63}) {
+        cuda::DeviceBuildStages stages;
+        const Bvh bvh = cuda::build_lbvh_on_device(soup.triangles, {}, bits, &stages);
+        EXPECT_FALSE(bvh.nodes.empty());
+        for (double ms : {stages.upload_ms, stages.bounds_ms, stages.morton_ms, stages.sort_ms, stages.inner_nodes_ms,
+                          stages.boxes_ms, stages.download_ms, stages.emit_ms}) {
+            EXPECT_GT(ms, 0.0);
+        }
+        EXPECT_DOUBLE_EQ(stages.device_total_ms(),
+                         stages.bounds_ms + stages.morton_ms + stages.sort_ms + stages.inner_nodes_ms + stages.boxes_ms);
+        // At least the triangles, or the boxes plus the tree, were on the device at once.
+        EXPECT_GE(stages.peak_device_bytes, soup.triangles.size() * sizeof(Triangle));
+    }
+}
+
+TEST(GpuLbvhBuild, HitsEqualBruteForce) {
+    RF_REQUIRE_DEVICE();
+    const SceneGeometry soup = test::make_triangle_soup(5000, 6, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.7f);
+    const BruteForceAccel brute(soup);
+    std::mt19937 rng(17);
+    std::uniform_real_distribution<float> u(-12.0f, 12.0f);
+    std::vector<Ray> rays(4000);
+    for (Ray& r : rays) {
+        r.org = Vec3f(u(rng), u(rng), u(rng));
+        r.dir = normalize(Vec3f(u(rng), u(rng), u(rng)) - r.org + Vec3f(1e-3f, 0.0f, 0.0f));
+    }
+    for (int bits : {30, 63}) {
+        const Bvh bvh = cuda::build_lbvh_on_device(soup.triangles, {}, bits);
+        const BvhView view{bvh.nodes.data(), bvh.prim_indices.data(), soup.triangles.data(),
+                           static_cast<uint32_t>(bvh.nodes.size())};
+        size_t mismatches = 0, hits = 0;
+        for (const Ray& ray : rays) {
+            const Hit expected = brute.intersect(ray), got = bvh_intersect(view, ray);
+            hits += expected.found();
+            // The same triangle tests in another order: the same t, maybe another triangle at it.
+            mismatches += expected.found() != got.found() || (expected.found() && expected.t != got.t);
+        }
+        EXPECT_GT(hits, rays.size() / 10);
+        EXPECT_EQ(mismatches, 0u) << bits << " bits";
+    }
+}
+
+}  // namespace
+}  // namespace rf
