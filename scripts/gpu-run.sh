@@ -9,7 +9,7 @@
 # `tests` first and `bench` in a second call (build-gpu/ stays while the
 # machine is warm).
 set -uo pipefail
-test_rc=0 bench_rc=0 path_rc=0
+test_rc=0 bench_rc=0 path_rc=0 build_rc=0
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 what="${1:-all}"
 out="${OUT:-$ROOT/gpu-out}"
@@ -69,6 +69,10 @@ if [[ "$what" == all || "$what" == bench ]]; then
     > "$out/bench-path.txt" 2>&1
   path_rc=$?
   echo "bench path: rc=$path_rc"; tail -8 "$out/bench-path.txt"
+  # Seed 000's builders: GPU rows and the device LBVH's stage breakdown (issue 7).
+  "$rf" bench --preset seed000 "${scenes[@]}" --device cuda --embree none > "$out/bench-seed000.txt" 2>&1
+  build_rc=$?
+  echo "bench seed000: rc=$build_rc"; tail -8 "$out/bench-seed000.txt"
 fi
 # Non-zero when any step failed, so the caller sees it in the exit status.
-exit $(( ${test_rc:-0} || ${bench_rc:-0} || ${path_rc:-0} ))
+exit $(( test_rc || bench_rc || path_rc || build_rc ))

@@ -487,6 +487,7 @@ TEST(BenchGpu, RowsWithoutTheBackendFailWithOneReason) {
     const SceneGeometry geometry = SceneGeometry::build(make_builtin_scene("cube"));
     EXPECT_THROW(bench::GpuTracer(geometry, GpuKernel::Cwbvh, BuildOptions{}, 0), Error);
     EXPECT_EQ(bench::gpu_device_name(0), "");
+    EXPECT_THROW(bench::gpu_build_lbvh(geometry.triangles, BuildOptions{}, 30, 0), Error);
 }
 
 // GPU rows as the runner makes them, printed and written next to a CPU row.

@@ -350,19 +350,24 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
                                       a.repetitions, a.build_repetitions);
         });
     if (preset && preset->configuration_table) bench::print_configuration_table(std::cout, records);
-    if (preset && preset->stage_breakdown && devices.cpu) {
+    if (preset && preset->stage_breakdown) {
         std::vector<bench::StageBreakdown> stages;
         for (const std::string& name : scenes) {
+            bench::LoadedScene scene;
             try {
-                const bench::LoadedScene scene =
-                    bench::load_bench_scene(bench::resolve_scene(name, config.scenes_dir));
-                if (!a.quiet) std::cerr << "stage breakdown: " << scene.spec.name << '\n';
+                scene = bench::load_bench_scene(bench::resolve_scene(name, config.scenes_dir));
+            } catch (const Error&) {
+                continue;  // unloadable scenes were reported by the main run
+            }
+            if (!a.quiet) std::cerr << "stage breakdown: " << scene.spec.name << '\n';
+            if (devices.cpu)
                 for (bench::StageBreakdown& row :
                      bench::measure_stage_breakdowns(scene, a.threads, a.build_repetitions))
                     stages.push_back(std::move(row));
-            } catch (const Error&) {
-                // Unloadable scenes were reported by the main run.
-            }
+            if (devices.gpu)  // device failures are errors: the device was asked for
+                for (bench::StageBreakdown& row :
+                     bench::measure_device_stage_breakdowns(scene, devices.gpu_index, a.build_repetitions))
+                    stages.push_back(std::move(row));
         }
         bench::print_stage_breakdowns(std::cout, stages, a.threads, a.build_repetitions);
     }

@@ -10,6 +10,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "gpu_candidates.h"
@@ -54,6 +55,20 @@ private:
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };
+
+// One device build with its stages (rf::cuda::DeviceBuildStages): device
+// stages in pipeline order, then the transfers and the host's part.
+struct GpuBuildStages {
+    std::vector<std::pair<std::string, double>> device_stages;  // name -> ms
+    double device_ms = 0.0;                                     // their sum
+    double upload_ms = 0.0, download_ms = 0.0, host_ms = 0.0;
+    size_t peak_device_bytes = 0;
+    size_t nodes = 0;
+    double sah_cost = 0.0;
+};
+// LBVH (Karras 2012) on `device` with `morton_bits` (30 or 63).
+GpuBuildStages gpu_build_lbvh(std::span<const Triangle> triangles, const BuildOptions& options, int morton_bits,
+                              int device);
 
 // What one pass of the device renderer did.
 struct GpuPass {

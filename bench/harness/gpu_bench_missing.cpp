@@ -21,6 +21,8 @@ void GpuTracer::count_traversal(std::span<const Ray>, bool, TraversalTotals&) co
 AccelStats GpuTracer::stats() const { return {}; }
 size_t GpuTracer::device_bytes() const { return 0; }
 
+GpuBuildStages gpu_build_lbvh(std::span<const Triangle>, const BuildOptions&, int, int) { throw Error(kCudaNotBuilt); }
+
 struct GpuRenderer::Impl {};
 GpuRenderer::GpuRenderer(const Scene&, const SceneGeometry&, const Camera&, const RenderOptions&, GpuKernel,
                          const BuildOptions&, int) {

@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <iomanip>
 #include <ostream>
+#include <sstream>
 
 #include "accel/bvh/build/grid_bvh.h"
 #include "accel/bvh/build/hlbvh2.h"
 #include "core/parallel.h"
+#include "gpu_bench.h"
 
 namespace rf::bench {
 namespace {
@@ -69,6 +71,31 @@ std::vector<StageBreakdown> measure_stage_breakdowns(const LoadedScene& scene, i
     row.detail = std::to_string(h.cluster_count) + " clusters";
     rows.push_back(row);
     return rows;
+}
+
+std::vector<StageBreakdown> measure_device_stage_breakdowns(const LoadedScene& scene, int device, int repetitions) {
+    const std::span<const Triangle> triangles = scene.geometry.triangles;
+    const BuildOptions options;
+    std::vector<GpuBuildStages> runs;
+    (void)gpu_build_lbvh(triangles, options, 30, device);  // warm-up: module load, first allocations
+    for (int i = 0; i < std::max(1, repetitions); ++i) runs.push_back(gpu_build_lbvh(triangles, options, 30, device));
+    std::sort(runs.begin(), runs.end(),
+              [](const GpuBuildStages& a, const GpuBuildStages& b) { return a.device_ms < b.device_ms; });
+    const GpuBuildStages& s = runs[runs.size() / 2];
+    StageBreakdown row;
+    row.scene = scene.spec.name;
+    row.triangles = triangles.size();
+    row.builder = "lbvh30 (cuda)";
+    row.stages = s.device_stages;
+    row.total_ms = s.device_ms;
+    std::ostringstream detail;
+    detail.setf(std::ios::fixed);
+    detail.precision(2);
+    detail << "peak " << double(s.peak_device_bytes) / (1024.0 * 1024.0) << " MiB on the device, " << s.nodes
+           << " nodes, SAH " << s.sah_cost << "; not in total: upload " << s.upload_ms << ", download "
+           << s.download_ms << ", host emission " << s.host_ms << " ms";
+    row.detail = detail.str();
+    return {row};
 }
 
 void print_stage_breakdowns(std::ostream& out, const std::vector<StageBreakdown>& rows, int threads,
