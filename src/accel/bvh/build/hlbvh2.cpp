@@ -12,7 +12,8 @@
 //     from 0 to 1, found by binary search (O(log n) code reads; geometrically
 //     a midpoint split of the node's Morton cell). A range of at most
 //     numLeafTri (= options.max_leaf_size) triangles is a leaf. Ranges whose
-//     codes are all equal are halved by position. The GPU work queues (one
+//     codes are all equal are halved by position (hlbvh2_tasks.h, shared
+//     with the CUDA builder's work queues). The GPU work queues (one
 //     node per thread, one level per launch) become TBB tasks: clusters in
 //     parallel, and large ranges split into parallel subtasks. Boxes are
 //     computed bottom-up as the recursion returns.
@@ -25,16 +26,22 @@
 //     and writes the canonical depth-first layout.
 // Node indices are fixed by the input (bottom inner node = its split position
 // - 1; top nodes numbered by their cluster ranges), so the tree is the same
-// for every thread count.
+// for every thread count. emit_hlbvh2_forest() takes bottom trees built
+// elsewhere (the CUDA builder) and finishes them with the same top level
+// and emitter.
 #include "accel/bvh/build/hlbvh2.h"
 
 #include <algorithm>
-#include <bit>
+#include <atomic>
 #include <chrono>
+#include <utility>
 
+#include "accel/bvh/build/hlbvh2_emit.h"
+#include "accel/bvh/build/hlbvh2_tasks.h"
 #include "accel/bvh/build/morton_radix_sort.h"
 #include "accel/bvh/build/morton_tree.h"
 #include "core/parallel.h"
+#include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 
 namespace rf {
@@ -49,6 +56,8 @@ constexpr uint32_t kTopBins = 8;                   // grid SAH: up to 8 bins (7 
 constexpr uint32_t kParallelRange = 4096;          // triangles per range to split into tasks
 constexpr uint32_t kParallelTop = 256;             // clusters per top node to split into tasks
 constexpr uint32_t kCompactBlock = 64 * 1024;
+static_assert(hlbvh2::kLeafRef == kLeafRef && hlbvh2::kCodeBits == kCodeBits &&
+              hlbvh2::kClusterShift == kClusterShift, "the shared task steps use this builder's encoding");
 
 class Stopwatch {
 public:
@@ -106,6 +115,45 @@ public:
         return bvh;
     }
 
+    // The same tree from bottom levels built elsewhere (emit_hlbvh2_forest).
+    Bvh build_from_forest(Hlbvh2Forest&& forest, Hlbvh2Stages& stages) {
+        if (forest.order.size() != tree_.triangles.size()) throw Error("HLBVH2 emission: order and triangles differ in size");
+        if (forest.order.size() >= kLeafRef) throw Error("Morton BVH build: more than 2^31-1 triangles");
+        const uint32_t n = static_cast<uint32_t>(forest.order.size());
+        if (n == 0) return {};
+        const size_t clusters = forest.cluster_prefix.size();
+        if (clusters == 0 || forest.cluster_begin.size() != clusters + 1 || forest.cluster_begin[0] != 0 ||
+            forest.cluster_begin[clusters] != n || forest.refs.size() != 2 * (size_t{n} - 1) + clusters) {
+            throw Error("HLBVH2 emission: inconsistent cluster or reference arrays");
+        }
+        for (size_t c = 0; c < clusters; ++c) {
+            if (forest.cluster_begin[c] >= forest.cluster_begin[c + 1]) throw Error("HLBVH2 emission: empty cluster");
+        }
+        Stopwatch clock;
+        tree_.set_order(std::move(forest.order));
+        tree_.enable_leaf_runs();
+        budgeted_resize(tree_.nodes, size_t{n} - 1 + (clusters - 1), "HLBVH2: nodes");
+        cluster_begin_ = std::move(forest.cluster_begin);
+        cluster_prefix_ = std::move(forest.cluster_prefix);
+        refs_ = std::move(forest.refs);
+        budgeted_resize(cluster_root_, clusters, "HLBVH2: cluster roots");
+        std::atomic<bool> malformed{false};
+        parallel::for_range(uint32_t{0}, static_cast<uint32_t>(clusters), 1u, [&](uint32_t lo, uint32_t hi) {
+            for (uint32_t c = lo; c != hi; ++c) {
+                const uint32_t root = refs_[2 * (size_t{n} - 1) + c];
+                cluster_root_[c] = root;
+                if (!refit_range(root, cluster_begin_[c], cluster_begin_[c + 1], 0)) malformed = true;
+            }
+        });
+        if (malformed) throw Error("HLBVH2 emission: malformed bottom tree");
+        stages.bottom_ms = clock.lap();
+        const uint32_t root = build_top(static_cast<uint32_t>(clusters));
+        stages.top_ms = clock.lap();
+        Bvh bvh = tree_.emit(root);
+        stages.emit_ms = clock.lap();
+        return bvh;
+    }
+
 private:
     // Starts of the runs of equal 15-bit prefixes, plus n at the end.
     void find_clusters() {
@@ -132,6 +180,25 @@ private:
         });
     }
 
+    // Finalizes the downloaded subtree `ref` over sorted range [a, b),
+    // checking that it is what process_task makes; false when it is not.
+    bool refit_range(uint32_t ref, uint32_t a, uint32_t b, int depth) {
+        const uint32_t count = b - a;
+        if (morton::is_leaf_ref(ref)) {
+            if ((ref & ~kLeafRef) != a || count > leaf_size_) return false;
+            tree_.set_leaf_run(a, count);
+            return true;
+        }
+        const uint32_t mid = ref + 1;
+        // Ranges shrink by one at least per level, and 64 levels of 30-bit codes
+        // then halvings cover 2^31 primitives: deeper means a cycle.
+        if (count <= leaf_size_ || mid <= a || mid >= b || depth > 96) return false;
+        const uint32_t left = refs_[2 * size_t{ref}], right = refs_[2 * size_t{ref} + 1];
+        if (!refit_range(left, a, mid, depth + 1) || !refit_range(right, mid, b, depth + 1)) return false;
+        tree_.finalize(ref, left, right);
+        return true;
+    }
+
     // The bottom-level subtree over sorted range [a, b); returns its reference.
     uint32_t build_range(uint32_t a, uint32_t b) {
         const uint32_t count = b - a;
@@ -139,21 +206,7 @@ private:
             tree_.set_leaf_run(a, count);
             return kLeafRef | a;
         }
-        uint32_t mid;
-        const uint32_t differ = keys_[a] ^ keys_[b - 1];
-        if (differ != 0) {
-            // Codes in [a, b) share every bit above `bit`, so that bit is 0s then 1s:
-            // binary search for the first 1.
-            const uint32_t bit = static_cast<uint32_t>(std::bit_width(differ) - 1);
-            uint32_t lo = a + 1, hi = b - 1;  // keys_[a] has a 0 there, keys_[b-1] a 1
-            while (lo < hi) {
-                const uint32_t m = lo + (hi - lo) / 2;
-                if ((keys_[m] >> bit) & 1u) hi = m; else lo = m + 1;
-            }
-            mid = lo;
-        } else {
-            mid = a + count / 2;  // all codes equal: halve by position
-        }
+        const uint32_t mid = hlbvh2::split_position(keys_.data(), a, b);
         uint32_t left, right;
         if (count > kParallelRange) {
             parallel::invoke([&] { left = build_range(a, mid); }, [&] { right = build_range(mid, b); });
@@ -177,7 +230,8 @@ private:
         std::vector<Cluster> clusters(count);
         parallel::for_range(0u, count, 64u, [&](uint32_t lo, uint32_t hi) {
             for (uint32_t c = lo; c != hi; ++c) {
-                const uint32_t prefix = keys_[cluster_begin_[c]] >> kClusterShift;
+                const uint32_t prefix =
+                    cluster_prefix_.empty() ? keys_[cluster_begin_[c]] >> kClusterShift : cluster_prefix_[c];
                 Cluster& cl = clusters[c];
                 for (int axis = 0; axis < 3; ++axis) cl.cell[axis] = cluster_cell(prefix, axis);
                 cl.triangles = cluster_begin_[c + 1] - cluster_begin_[c];
@@ -277,6 +331,8 @@ private:
     morton::Buffer<uint32_t> keys_;
     std::vector<uint32_t> cluster_begin_;
     std::vector<uint32_t> cluster_root_;
+    std::vector<uint32_t> cluster_prefix_;  // given with a forest; else read from keys_
+    std::vector<uint32_t> refs_;            // a forest's references
     uint32_t top_base_ = 0;
 };
 
@@ -287,6 +343,18 @@ Bvh build_hlbvh2(std::span<const Triangle> triangles, const BuildOptions& option
     Hlbvh2Builder builder(triangles, options);
     Bvh bvh = parallel::with_threads(options.threads, [&] { return builder.build(local); });
     if (stages) *stages = local;
+    return bvh;
+}
+
+Bvh emit_hlbvh2_forest(std::span<const Triangle> triangles, const BuildOptions& options, Hlbvh2Forest&& forest,
+                       Hlbvh2Stages* stages) {
+    Hlbvh2Stages local;
+    Hlbvh2Builder builder(triangles, options);
+    Bvh bvh = parallel::with_threads(options.threads, [&] { return builder.build_from_forest(std::move(forest), local); });
+    if (stages) {
+        stages->top_ms = local.top_ms;
+        stages->emit_ms = local.bottom_ms + local.emit_ms;  // the bottom refit is part of the host's emission
+    }
     return bvh;
 }
 

@@ -111,8 +111,9 @@ RF_HDI void build_inner(const Key* keys, uint32_t n, uint32_t index, uint32_t* c
     }
 }
 
-// Box growth with the semantics of std::min/max (and of morton::box_union),
-// so boxes come out bit-identical on both backends; inputs are finite.
+// Box growth with the semantics of std::min/max, so boxes come out
+// bit-identical on both backends (morton::box_union is this one); inputs
+// are finite.
 RF_HDI Box3f box_union(const Box3f& a, const Box3f& b) {
     Box3f r;
     r.lo = Vec3f(a.lo.x < b.lo.x ? a.lo.x : b.lo.x, a.lo.y < b.lo.y ? a.lo.y : b.lo.y, a.lo.z < b.lo.z ? a.lo.z : b.lo.z);

@@ -17,6 +17,7 @@
 #include <span>
 #include <vector>
 
+#include "accel/bvh/build/karras_tree.h"
 #include "accel/bvh/build/morton_buffer.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/accel/bvh/bvh.h"
@@ -29,13 +30,9 @@ namespace rf::morton {
 inline constexpr uint32_t kLeafRef = 0x80000000u;
 inline bool is_leaf_ref(uint32_t ref) { return (ref & kLeafRef) != 0; }
 
-// Box growth with std::min/max semantics (single instructions); inputs are finite.
-inline Box3f box_union(const Box3f& a, const Box3f& b) {
-    Box3f r;
-    r.lo = Vec3f(a.lo.x < b.lo.x ? a.lo.x : b.lo.x, a.lo.y < b.lo.y ? a.lo.y : b.lo.y, a.lo.z < b.lo.z ? a.lo.z : b.lo.z);
-    r.hi = Vec3f(a.hi.x > b.hi.x ? a.hi.x : b.hi.x, a.hi.y > b.hi.y ? a.hi.y : b.hi.y, a.hi.z > b.hi.z ? a.hi.z : b.hi.z);
-    return r;
-}
+// Box growth with std::min/max semantics (single instructions; inputs are
+// finite): the one the device builders use too.
+using karras::box_union;
 // Surface area without the empty-box test (boxes here are never empty).
 inline float half_area(const Box3f& b) {
     const float x = b.hi.x - b.lo.x, y = b.hi.y - b.lo.y, z = b.hi.z - b.lo.z;

@@ -1,0 +1,27 @@
+// Internal face of the CUDA HLBVH2 (hlbvh2_build.cu): the bottom levels as
+// the device left them, for the GPU tests to check the forest, the cluster
+// compaction and the device's level-wise boxes directly.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "accel/bvh/build/hlbvh2_emit.h"
+#include "rayforge/backend/cuda_build.h"
+#include "rayforge/math/box.h"
+#include "rayforge/scene/scene_geometry.h"
+
+namespace rf::cuda {
+
+struct DeviceHlbvh2Forest {
+    Hlbvh2Forest forest;               // empty arrays for n < 2
+    std::vector<Box3f> cluster_boxes;  // per cluster, from the device's bottom-up pass
+    std::vector<uint32_t> level_sizes; // tasks per work-queue level, level 0 = the clusters
+};
+
+// leaf_size: 1 .. 64 (BuildOptions::max_leaf_size).
+DeviceHlbvh2Forest build_hlbvh2_forest_on_device(std::span<const Triangle> triangles, uint32_t leaf_size,
+                                                 DeviceBuildStages* stages = nullptr, int device = 0);
+
+}  // namespace rf::cuda

@@ -1,0 +1,130 @@
+// The CUDA HLBVH2 (Garanzha 2014 ch. 5; backend/cuda/hlbvh2_build.cu, work
+// queues) against the CPU HLBVH2: the same BVH (nodes and primitive order) on
+// soups, spheres and degenerate inputs; the device's forest (order, clusters,
+// references) equal to the CPU's sort and shared task steps; the device's
+// level-wise cluster boxes equal to the unions of their triangles' boxes;
+// the stage report filled. Skips with a message when no CUDA device is present.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "../accel_test_scenes.h"
+#include "accel/bvh/build/hlbvh2.h"
+#include "accel/bvh/build/hlbvh2_tasks.h"
+#include "accel/bvh/build/morton_tree.h"
+#include "backend/cuda/hlbvh2_build.h"
+#include "rayforge/backend/cuda.h"
+#include "rayforge/backend/cuda_build.h"
+
+namespace rf {
+namespace {
+
+bool have_device() { return !cuda::list_devices().empty(); }
+
+#define RF_REQUIRE_DEVICE() \
+    if (!have_device()) GTEST_SKIP() << "no CUDA device: " << cuda::device_unavailable_reason()
+
+bool same_box(const Box3f& a, const Box3f& b) { return std::memcmp(&a, &b, sizeof(Box3f)) == 0; }
+
+struct NamedScene {
+    std::string name;
+    SceneGeometry geometry;
+};
+
+std::vector<NamedScene> test_scenes() {
+    std::vector<NamedScene> scenes;
+    scenes.push_back({"soup", test::make_triangle_soup(20000, 1, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f)});
+    scenes.push_back({"big soup", test::make_triangle_soup(300000, 2, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.05f)});
+    scenes.push_back({"sphere", test::to_geometry(test::make_icosphere(5))});
+    scenes.push_back({"nasty", test::make_nasty_geometry(2)});
+    SceneGeometry point;  // every triangle in one point: all codes equal
+    for (int i = 0; i < 1000; ++i) test::append(point, {Vec3f(3.0f), Vec3f(3.0f), Vec3f(3.0f)});
+    scenes.push_back({"one point", std::move(point)});
+    SceneGeometry two;
+    test::append(two, {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)});
+    test::append(two, {Vec3f(0, 0, 2), Vec3f(1, 0, 2), Vec3f(0, 1, 2)});
+    scenes.push_back({"two", std::move(two)});
+    return scenes;
+}
+
+void expect_same_bvh(const Bvh& expected, const Bvh& got, const std::string& what) {
+    ASSERT_EQ(expected.nodes.size(), got.nodes.size()) << what;
+    EXPECT_EQ(expected.prim_indices, got.prim_indices) << what;
+    size_t wrong = 0;
+    for (size_t i = 0; i < expected.nodes.size(); ++i) {
+        wrong += !same_box(expected.nodes[i].bounds, got.nodes[i].bounds) ||
+                 expected.nodes[i].first != got.nodes[i].first || expected.nodes[i].count != got.nodes[i].count;
+    }
+    EXPECT_EQ(wrong, 0u) << what << ": nodes that differ";
+}
+
+TEST(GpuHlbvh2Build, SameBvhAsCpuHlbvh2) {
+    RF_REQUIRE_DEVICE();
+    for (const NamedScene& scene : test_scenes()) {
+        for (int leaf_size : {1, 4, 8}) {
+            const BuildOptions options{.max_leaf_size = leaf_size};
+            expect_same_bvh(build_hlbvh2(scene.geometry.triangles, options),
+                            cuda::build_hlbvh2_on_device(scene.geometry.triangles, options),
+                            scene.name + ", leaves of " + std::to_string(leaf_size));
+        }
+    }
+}
+
+TEST(GpuHlbvh2Build, EmptyAndSingleTriangle) {
+    RF_REQUIRE_DEVICE();
+    EXPECT_TRUE(cuda::build_hlbvh2_on_device({}, {}).nodes.empty());
+    SceneGeometry one;
+    test::append(one, {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)});
+    const Bvh bvh = cuda::build_hlbvh2_on_device(one.triangles, {});
+    ASSERT_EQ(bvh.nodes.size(), 1u);
+    EXPECT_EQ(bvh.prim_indices, std::vector<uint32_t>{0});
+}
+
+TEST(GpuHlbvh2Build, DeviceForestAndClusterBoxes) {
+    RF_REQUIRE_DEVICE();
+    for (const NamedScene& scene : test_scenes()) {
+        SCOPED_TRACE(scene.name);
+        morton::RawTree cpu(scene.geometry.triangles, BuildOptions{});
+        morton::Buffer<uint32_t> keys;
+        cpu.sort_by_morton_codes(keys);
+        const uint32_t n = cpu.size();
+        const cuda::DeviceHlbvh2Forest dev = cuda::build_hlbvh2_forest_on_device(scene.geometry.triangles, 4);
+        ASSERT_EQ(dev.forest.order, cpu.order);
+        std::vector<uint32_t> begin;
+        for (uint32_t i = 0; i < n; ++i) {
+            if (i == 0 || (keys[i] >> 15) != (keys[i - 1] >> 15)) begin.push_back(i);
+        }
+        begin.push_back(n);
+        ASSERT_EQ(dev.forest.cluster_begin, begin);
+        ASSERT_EQ(dev.level_sizes.front(), begin.size() - 1);
+        size_t wrong = 0;
+        for (size_t c = 0; c + 1 < begin.size(); ++c) {
+            EXPECT_EQ(dev.forest.cluster_prefix[c], keys[begin[c]] >> 15);
+            Box3f box = cpu.boxes[begin[c]];
+            for (uint32_t i = begin[c]; i < begin[c + 1]; ++i) box = morton::box_union(box, cpu.boxes[i]);
+            wrong += !same_box(box, dev.cluster_boxes[c]);
+        }
+        EXPECT_EQ(wrong, 0u) << "cluster boxes that differ";
+    }
+}
+
+TEST(GpuHlbvh2Build, StagesAreReported) {
+    RF_REQUIRE_DEVICE();
+    const SceneGeometry g = test::make_triangle_soup(200000, 5, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.05f);
+    cuda::DeviceBuildStages stages;
+    (void)cuda::build_hlbvh2_on_device(g.triangles, {}, &stages);
+    EXPECT_GT(stages.sort_ms, 0.0);
+    EXPECT_GT(stages.clusters_ms, 0.0);
+    EXPECT_GT(stages.bottom_ms, 0.0);
+    EXPECT_GT(stages.boxes_ms, 0.0);
+    EXPECT_GT(stages.top_ms, 0.0);
+    EXPECT_GT(stages.emit_ms, 0.0);
+    EXPECT_GT(stages.cluster_count, 1u);
+    EXPECT_GT(stages.bottom_levels, 1u);
+    EXPECT_GT(stages.peak_device_bytes, 200000u * sizeof(Triangle));
+}
+
+}  // namespace
+}  // namespace rf
