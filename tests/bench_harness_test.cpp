@@ -488,6 +488,7 @@ TEST(BenchGpu, RowsWithoutTheBackendFailWithOneReason) {
     EXPECT_THROW(bench::GpuTracer(geometry, GpuKernel::Cwbvh, BuildOptions{}, 0), Error);
     EXPECT_EQ(bench::gpu_device_name(0), "");
     EXPECT_THROW(bench::gpu_build_lbvh(geometry.triangles, BuildOptions{}, 30, 0), Error);
+    EXPECT_THROW(bench::gpu_build_hlbvh2(geometry.triangles, BuildOptions{}, 0), Error);
 }
 
 // GPU rows as the runner makes them, printed and written next to a CPU row.

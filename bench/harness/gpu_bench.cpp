@@ -38,23 +38,43 @@ void GpuTracer::count_traversal(std::span<const Ray> rays, bool any_hit, Travers
 AccelStats GpuTracer::stats() const { return impl_->tracer.stats(); }
 size_t GpuTracer::device_bytes() const { return impl_->tracer.device_bytes(); }
 
+namespace {
+
+GpuBuildStages common_stages(const cuda::DeviceBuildStages& s, const Bvh& bvh) {
+    GpuBuildStages out;
+    out.device_ms = s.device_total_ms();
+    out.upload_ms = s.upload_ms;
+    out.download_ms = s.download_ms;
+    out.host_ms = s.emit_ms + s.top_ms;
+    out.peak_device_bytes = s.peak_device_bytes;
+    out.nodes = bvh.nodes.size();
+    out.sah_cost = bvh.nodes.empty() ? 0.0 : bvh.sah_cost();
+    return out;
+}
+
+}  // namespace
+
 GpuBuildStages gpu_build_lbvh(std::span<const Triangle> triangles, const BuildOptions& options, int morton_bits,
                               int device) {
     cuda::DeviceBuildStages s;
     const Bvh bvh = cuda::build_lbvh_on_device(triangles, options, morton_bits, &s, device);
-    GpuBuildStages out;
+    GpuBuildStages out = common_stages(s, bvh);
     out.device_stages = {{"bounds", s.bounds_ms},
                          {"morton", s.morton_ms},
                          {"sort", s.sort_ms},
                          {"inner nodes", s.inner_nodes_ms},
                          {"boxes", s.boxes_ms}};
-    out.device_ms = s.device_total_ms();
-    out.upload_ms = s.upload_ms;
-    out.download_ms = s.download_ms;
-    out.host_ms = s.emit_ms;
-    out.peak_device_bytes = s.peak_device_bytes;
-    out.nodes = bvh.nodes.size();
-    out.sah_cost = bvh.nodes.empty() ? 0.0 : bvh.sah_cost();
+    return out;
+}
+
+GpuBuildStages gpu_build_hlbvh2(std::span<const Triangle> triangles, const BuildOptions& options, int device) {
+    cuda::DeviceBuildStages s;
+    const Bvh bvh = cuda::build_hlbvh2_on_device(triangles, options, &s, device);
+    GpuBuildStages out = common_stages(s, bvh);
+    out.device_stages = {{"bounds", s.bounds_ms},  {"morton", s.morton_ms},  {"sort", s.sort_ms},
+                         {"clusters", s.clusters_ms}, {"bottom", s.bottom_ms}, {"boxes", s.boxes_ms}};
+    out.detail = std::to_string(s.cluster_count) + " clusters, " + std::to_string(s.bottom_levels) +
+                 " bottom levels, top level " + std::to_string(s.top_ms) + " ms on the host";
     return out;
 }
 

@@ -65,10 +65,14 @@ struct GpuBuildStages {
     size_t peak_device_bytes = 0;
     size_t nodes = 0;
     double sah_cost = 0.0;
+    std::string detail;  // builder-specific sizes (clusters, levels)
 };
 // LBVH (Karras 2012) on `device` with `morton_bits` (30 or 63).
 GpuBuildStages gpu_build_lbvh(std::span<const Triangle> triangles, const BuildOptions& options, int morton_bits,
                               int device);
+// HLBVH2 (Garanzha 2014 ch. 5) on `device`; its top level runs on the host
+// for now and is listed among the host's work.
+GpuBuildStages gpu_build_hlbvh2(std::span<const Triangle> triangles, const BuildOptions& options, int device);
 
 // What one pass of the device renderer did.
 struct GpuPass {

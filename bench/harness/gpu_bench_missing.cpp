@@ -22,6 +22,7 @@ AccelStats GpuTracer::stats() const { return {}; }
 size_t GpuTracer::device_bytes() const { return 0; }
 
 GpuBuildStages gpu_build_lbvh(std::span<const Triangle>, const BuildOptions&, int, int) { throw Error(kCudaNotBuilt); }
+GpuBuildStages gpu_build_hlbvh2(std::span<const Triangle>, const BuildOptions&, int) { throw Error(kCudaNotBuilt); }
 
 struct GpuRenderer::Impl {};
 GpuRenderer::GpuRenderer(const Scene&, const SceneGeometry&, const Camera&, const RenderOptions&, GpuKernel,

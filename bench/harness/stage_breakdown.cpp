@@ -73,29 +73,43 @@ std::vector<StageBreakdown> measure_stage_breakdowns(const LoadedScene& scene, i
     return rows;
 }
 
-std::vector<StageBreakdown> measure_device_stage_breakdowns(const LoadedScene& scene, int device, int repetitions) {
-    const std::span<const Triangle> triangles = scene.geometry.triangles;
-    const BuildOptions options;
+namespace {
+
+// The build with the median device time of `repetitions`, after a warm-up
+// (module load, first allocations).
+template <class Build>
+StageBreakdown median_device_build(const LoadedScene& scene, const std::string& name, int repetitions, Build&& build) {
+    (void)build();
     std::vector<GpuBuildStages> runs;
-    (void)gpu_build_lbvh(triangles, options, 30, device);  // warm-up: module load, first allocations
-    for (int i = 0; i < std::max(1, repetitions); ++i) runs.push_back(gpu_build_lbvh(triangles, options, 30, device));
+    for (int i = 0; i < std::max(1, repetitions); ++i) runs.push_back(build());
     std::sort(runs.begin(), runs.end(),
               [](const GpuBuildStages& a, const GpuBuildStages& b) { return a.device_ms < b.device_ms; });
     const GpuBuildStages& s = runs[runs.size() / 2];
     StageBreakdown row;
     row.scene = scene.spec.name;
-    row.triangles = triangles.size();
-    row.builder = "lbvh30 (cuda)";
+    row.triangles = scene.geometry.triangles.size();
+    row.builder = name;
     row.stages = s.device_stages;
     row.total_ms = s.device_ms;
     std::ostringstream detail;
     detail.setf(std::ios::fixed);
     detail.precision(2);
     detail << "peak " << double(s.peak_device_bytes) / (1024.0 * 1024.0) << " MiB on the device, " << s.nodes
-           << " nodes, SAH " << s.sah_cost << "; not in total: upload " << s.upload_ms << ", download "
-           << s.download_ms << ", host emission " << s.host_ms << " ms";
+           << " nodes, SAH " << s.sah_cost << (s.detail.empty() ? "" : ", ") << s.detail << "; not in total: upload "
+           << s.upload_ms << ", download " << s.download_ms << ", host " << s.host_ms << " ms";
     row.detail = detail.str();
-    return {row};
+    return row;
+}
+
+}  // namespace
+
+std::vector<StageBreakdown> measure_device_stage_breakdowns(const LoadedScene& scene, int device, int repetitions) {
+    const std::span<const Triangle> triangles = scene.geometry.triangles;
+    const BuildOptions options;
+    return {median_device_build(scene, "lbvh30 (cuda)", repetitions,
+                                [&] { return gpu_build_lbvh(triangles, options, 30, device); }),
+            median_device_build(scene, "hlbvh2 (cuda)", repetitions,
+                                [&] { return gpu_build_hlbvh2(triangles, options, device); })};
 }
 
 void print_stage_breakdowns(std::ostream& out, const std::vector<StageBreakdown>& rows, int threads,
