@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "../accel_test_scenes.h"
+#include "gpu_build_checks.h"
 #include "accel/brute_force.h"
 #include "accel/bvh/build/karras_tree.h"
 #include "accel/bvh/build/lbvh.h"
@@ -26,17 +27,10 @@
 namespace rf {
 namespace {
 
-bool have_device() { return !cuda::list_devices().empty(); }
-
-#define RF_REQUIRE_DEVICE() \
-    if (!have_device()) GTEST_SKIP() << "no CUDA device: " << cuda::device_unavailable_reason()
-
-bool same_box(const Box3f& a, const Box3f& b) { return std::memcmp(&a, &b, sizeof(Box3f)) == 0; }
-
-struct NamedScene {
-    std::string name;
-    SceneGeometry geometry;
-};
+using gpu_build_test::append_degenerate_scenes;
+using gpu_build_test::expect_same_bvh;
+using gpu_build_test::NamedScene;
+using gpu_build_test::same_box;
 
 std::vector<NamedScene> test_scenes() {
     std::vector<NamedScene> scenes;
@@ -44,25 +38,8 @@ std::vector<NamedScene> test_scenes() {
     scenes.push_back({"sphere", test::to_geometry(test::make_icosphere(5))});
     scenes.push_back({"nasty", test::make_nasty_geometry(2)});
     scenes.push_back({"far", test::make_triangle_soup(3000, 3, {Vec3f(1e6f), Vec3f(1e6f + 100.0f)}, 1.0f)});
-    SceneGeometry point;  // every triangle in one point: all codes equal
-    for (int i = 0; i < 1000; ++i) test::append(point, {Vec3f(3.0f), Vec3f(3.0f), Vec3f(3.0f)});
-    scenes.push_back({"one point", std::move(point)});
-    SceneGeometry two;
-    test::append(two, {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)});
-    test::append(two, {Vec3f(0, 0, 2), Vec3f(1, 0, 2), Vec3f(0, 1, 2)});
-    scenes.push_back({"two", std::move(two)});
+    append_degenerate_scenes(scenes);
     return scenes;
-}
-
-void expect_same_bvh(const Bvh& expected, const Bvh& got, const std::string& what) {
-    ASSERT_EQ(expected.nodes.size(), got.nodes.size()) << what;
-    EXPECT_EQ(expected.prim_indices, got.prim_indices) << what;
-    size_t wrong = 0;
-    for (size_t i = 0; i < expected.nodes.size(); ++i) {
-        wrong += !same_box(expected.nodes[i].bounds, got.nodes[i].bounds) ||
-                 expected.nodes[i].first != got.nodes[i].first || expected.nodes[i].count != got.nodes[i].count;
-    }
-    EXPECT_EQ(wrong, 0u) << what << ": nodes that differ";
 }
 
 TEST(GpuLbvhBuild, SameBvhAsCpuLbvh) {

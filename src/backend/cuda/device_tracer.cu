@@ -22,6 +22,7 @@
 #include "accel/grid/uniform_grid.h"
 #include "accel/kdtree/kdtree_build.h"
 #include "backend/cuda/device_tracer_impl.h"
+#include "backend/cuda/event_timer.h"
 
 namespace rf::cuda {
 
@@ -110,36 +111,6 @@ __global__ void count_kernel(Tracer tracer, const Ray* rays, uint32_t count, boo
 double ms_since(std::chrono::steady_clock::time_point start) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
-
-// CUDA events around one launch; destroyed on every path.
-class EventTimer {
-public:
-    EventTimer() {
-        RF_CUDA_CHECK(cudaEventCreate(&start_));
-        const cudaError_t stop_status = cudaEventCreate(&stop_);
-        if (stop_status != cudaSuccess) {
-            cudaEventDestroy(start_);
-            throw_cuda_error(stop_status, "cudaEventCreate(&stop_)", __FILE__, __LINE__);
-        }
-    }
-    ~EventTimer() {
-        cudaEventDestroy(start_);
-        cudaEventDestroy(stop_);
-    }
-    EventTimer(const EventTimer&) = delete;
-    EventTimer& operator=(const EventTimer&) = delete;
-    void start() { RF_CUDA_CHECK(cudaEventRecord(start_)); }
-    double stop_ms() {
-        RF_CUDA_CHECK(cudaEventRecord(stop_));
-        RF_CUDA_CHECK(cudaEventSynchronize(stop_));
-        float ms = 0.0f;
-        RF_CUDA_CHECK(cudaEventElapsedTime(&ms, start_, stop_));
-        return double(ms);
-    }
-
-private:
-    cudaEvent_t start_{}, stop_{};
-};
 
 // Work done before the timed launch, so that it is not timed: the
 // persistent kernel's ray counter is reset and its grid size (enough warps

@@ -126,7 +126,7 @@ void build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
                   DeviceHlbvh2Forest& out, bool raw) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
     MemoryMeter meter;
-    StageTimer timer;
+    EventTimer timer;
 
     // 1. Boxes, bounds, codes, the sort.
     DeviceMortonOrder<uint32_t> sorted;
@@ -164,7 +164,7 @@ void build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
     meter.allocate(prefix, clusters);
     level0_tasks_kernel<<<blocks_for(clusters), kBlockSize>>>(sorted.keys.data(), n, cluster_begin.data(), clusters,
                                                               queue[0].data(), prefix.data());
-    stages.clusters_ms = timer.stop();
+    stages.clusters_ms = timer.stop_ms();
 
     // 3. Bottom levels.
     const size_t ref_count = 2 * (size_t{n} - 1) + clusters;
@@ -194,7 +194,7 @@ void build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
         if (count > capacity) throw Error("HLBVH2: work queue overflow");
         in = 1 - in;
     }
-    stages.bottom_ms = timer.stop();
+    stages.bottom_ms = timer.stop_ms();
     stages.bottom_levels = static_cast<uint32_t>(level_sizes.size());
     meter.release(queue[0]);
     meter.release(queue[1]);
@@ -213,7 +213,7 @@ void build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
     }
     cluster_boxes_kernel<<<blocks_for(clusters), kBlockSize>>>(view, refs.data() + 2 * (size_t{n} - 1), clusters,
                                                                cluster_boxes.data());
-    stages.boxes_ms = timer.stop();
+    stages.boxes_ms = timer.stop_ms();
     stages.peak_device_bytes = meter.peak();
 
     // 5. What the host's top level and emission need.
@@ -227,7 +227,7 @@ void build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
         out.cluster_boxes = download_all(cluster_boxes, clusters);
         out.level_sizes = level_sizes;
     }
-    stages.download_ms = timer.stop();
+    stages.download_ms = timer.stop_ms();
 }
 
 void build_raw(std::span<const Triangle> triangles, uint32_t leaf_size, DeviceBuildStages& stages, int device,

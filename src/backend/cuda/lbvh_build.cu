@@ -64,7 +64,7 @@ void build_on_device(std::span<const Triangle> triangles, DeviceBuildStages& sta
                      bool raw) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
     MemoryMeter meter;
-    StageTimer timer;
+    EventTimer timer;
 
     // 1-3. Boxes, centroid bounds, Morton codes, the sort (morton_sort.cu).
     DeviceMortonOrder<Key> sorted;
@@ -82,7 +82,7 @@ void build_on_device(std::span<const Triangle> triangles, DeviceBuildStages& sta
     timer.start();
     inner_nodes_kernel<Key><<<blocks_for(n - 1), kBlockSize>>>(sorted_keys.data(), n, children.data(),
                                                                inner_parent.data(), leaf_parent.data());
-    stages.inner_nodes_ms = timer.stop();
+    stages.inner_nodes_ms = timer.stop_ms();
     meter.release(sorted.keys);
 
     // 5. Bottom-up boxes.
@@ -95,7 +95,7 @@ void build_on_device(std::span<const Triangle> triangles, DeviceBuildStages& sta
     timer.start();
     RF_CUDA_CHECK(cudaMemsetAsync(arrivals.data(), 0, arrivals.bytes()));
     boxes_kernel<<<blocks_for(n), kBlockSize>>>(view, n);
-    stages.boxes_ms = timer.stop();
+    stages.boxes_ms = timer.stop_ms();
     stages.peak_device_bytes = meter.peak();
 
     // 6. The tree back to the host.
@@ -109,7 +109,7 @@ void build_on_device(std::span<const Triangle> triangles, DeviceBuildStages& sta
         out.inner_boxes = download_all(inner_boxes, n - 1);
         out.triangle_boxes = download_all(boxes, n);
     }
-    stages.download_ms = timer.stop();
+    stages.download_ms = timer.stop_ms();
 }
 
 void check_input(std::span<const Triangle> triangles, int morton_bits) {

@@ -112,14 +112,14 @@ __global__ void morton_kernel(const Box3f* boxes, uint32_t n, const Box3f* bound
 
 template <class Key>
 void sort_triangles_by_morton_codes(std::span<const Triangle> triangles, const std::string& label,
-                                    DeviceBuildStages& stages, MemoryMeter& meter, StageTimer& timer,
+                                    DeviceBuildStages& stages, MemoryMeter& meter, EventTimer& timer,
                                     DeviceMortonOrder<Key>& out) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
     DeviceBuffer<Triangle> device_triangles(label + ": triangles");
     meter.allocate(device_triangles, n);
     timer.start();
     device_triangles.upload(triangles);
-    stages.upload_ms = timer.stop();
+    stages.upload_ms = timer.stop_ms();
 
     // 1. Triangle boxes and the centroid bounds.
     DeviceBuffer<Box3f>& boxes = out.boxes;
@@ -132,7 +132,7 @@ void sort_triangles_by_morton_codes(std::span<const Triangle> triangles, const s
     timer.start();
     triangle_boxes_kernel<<<bounds_blocks, kBlockSize>>>(device_triangles.data(), n, boxes.data(), block_bounds.data());
     union_kernel<<<1, kBlockSize>>>(block_bounds.data(), bounds_blocks, bounds.data());
-    stages.bounds_ms = timer.stop();
+    stages.bounds_ms = timer.stop_ms();
     meter.release(device_triangles);
     meter.release(block_bounds);
 
@@ -146,7 +146,7 @@ void sort_triangles_by_morton_codes(std::span<const Triangle> triangles, const s
     }
     timer.start();
     morton_kernel<Key><<<blocks_for(n), kBlockSize>>>(boxes.data(), n, bounds.data(), keys[0].data(), values[0].data());
-    stages.morton_ms = timer.stop();
+    stages.morton_ms = timer.stop_ms();
     // `bounds` is freed on return without leaving the meter: the LBVH always
     // counted it live to the end, and its peak report stays as it was.
 
@@ -161,7 +161,7 @@ void sort_triangles_by_morton_codes(std::span<const Triangle> triangles, const s
     timer.start();
     RF_CUDA_CHECK(
         cub::DeviceRadixSort::SortPairs(temp.data(), temp_bytes, key_buffers, value_buffers, n, 0, key_bits));
-    stages.sort_ms = timer.stop();
+    stages.sort_ms = timer.stop_ms();
     meter.release(temp);
     const int sorted = key_buffers.Current() == keys[0].data() ? 0 : 1;
     meter.release(keys[1 - sorted]);
@@ -171,10 +171,10 @@ void sort_triangles_by_morton_codes(std::span<const Triangle> triangles, const s
 }
 
 template void sort_triangles_by_morton_codes<uint32_t>(std::span<const Triangle>, const std::string&,
-                                                       DeviceBuildStages&, MemoryMeter&, StageTimer&,
+                                                       DeviceBuildStages&, MemoryMeter&, EventTimer&,
                                                        DeviceMortonOrder<uint32_t>&);
 template void sort_triangles_by_morton_codes<uint64_t>(std::span<const Triangle>, const std::string&,
-                                                       DeviceBuildStages&, MemoryMeter&, StageTimer&,
+                                                       DeviceBuildStages&, MemoryMeter&, EventTimer&,
                                                        DeviceMortonOrder<uint64_t>&);
 
 }  // namespace rf::cuda

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "backend/cuda/device_buffer.h"
+#include "backend/cuda/event_timer.h"
 #include "rayforge/backend/cuda_build.h"
 #include "rayforge/math/box.h"
 #include "rayforge/scene/scene_geometry.h"
@@ -44,39 +45,6 @@ private:
     size_t live_ = 0, peak_ = 0;
 };
 
-// Two events around one stage's device work.
-class StageTimer {
-public:
-    StageTimer() {
-        RF_CUDA_CHECK(cudaEventCreate(&start_));
-        const cudaError_t status = cudaEventCreate(&stop_);
-        if (status != cudaSuccess) {
-            cudaEventDestroy(start_);
-            throw_cuda_error(status, "cudaEventCreate(&stop_)", __FILE__, __LINE__);
-        }
-    }
-    ~StageTimer() {
-        cudaEventDestroy(start_);
-        cudaEventDestroy(stop_);
-    }
-    StageTimer(const StageTimer&) = delete;
-    StageTimer& operator=(const StageTimer&) = delete;
-
-    void start() { RF_CUDA_CHECK(cudaEventRecord(start_)); }
-    // Waits for the stage (launch errors surface here) and returns its milliseconds.
-    double stop() {
-        RF_CUDA_CHECK(cudaGetLastError());
-        RF_CUDA_CHECK(cudaEventRecord(stop_));
-        RF_CUDA_CHECK(cudaEventSynchronize(stop_));
-        float ms = 0.0f;
-        RF_CUDA_CHECK(cudaEventElapsedTime(&ms, start_, stop_));
-        return ms;
-    }
-
-private:
-    cudaEvent_t start_ = nullptr, stop_ = nullptr;
-};
-
 template <class T>
 inline std::vector<T> download_all(const DeviceBuffer<T>& buffer, size_t count) {
     std::vector<T> host(count);
@@ -100,7 +68,7 @@ struct DeviceMortonOrder {
 // allocated is freed before it returns, all through `meter`.
 template <class Key>
 void sort_triangles_by_morton_codes(std::span<const Triangle> triangles, const std::string& label,
-                                    DeviceBuildStages& stages, MemoryMeter& meter, StageTimer& timer,
+                                    DeviceBuildStages& stages, MemoryMeter& meter, EventTimer& timer,
                                     DeviceMortonOrder<Key>& out);
 
 }  // namespace rf::cuda

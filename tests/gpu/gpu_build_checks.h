@@ -1,0 +1,55 @@
+// What the device-builder tests (lbvh_build_test.cpp, hlbvh2_build_test.cpp)
+// share: the skip without a device, named test scenes with the degenerate
+// inputs every Morton builder must survive, and the bit-exact BVH comparison.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "../accel_test_scenes.h"
+#include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/backend/cuda.h"
+
+namespace rf::gpu_build_test {
+
+inline bool have_device() { return !cuda::list_devices().empty(); }
+
+#define RF_REQUIRE_DEVICE()                   \
+    if (!::rf::gpu_build_test::have_device()) \
+    GTEST_SKIP() << "no CUDA device: " << ::rf::cuda::device_unavailable_reason()
+
+inline bool same_box(const Box3f& a, const Box3f& b) { return std::memcmp(&a, &b, sizeof(Box3f)) == 0; }
+
+struct NamedScene {
+    std::string name;
+    SceneGeometry geometry;
+};
+
+// Appends every triangle in one point (all Morton codes equal) and two triangles.
+inline void append_degenerate_scenes(std::vector<NamedScene>& scenes) {
+    SceneGeometry point;
+    for (int i = 0; i < 1000; ++i) test::append(point, {Vec3f(3.0f), Vec3f(3.0f), Vec3f(3.0f)});
+    scenes.push_back({"one point", std::move(point)});
+    SceneGeometry two;
+    test::append(two, {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)});
+    test::append(two, {Vec3f(0, 0, 2), Vec3f(1, 0, 2), Vec3f(0, 1, 2)});
+    scenes.push_back({"two", std::move(two)});
+}
+
+// Same nodes (boxes bit for bit, links, counts) and the same primitive order.
+inline void expect_same_bvh(const Bvh& expected, const Bvh& got, const std::string& what) {
+    ASSERT_EQ(expected.nodes.size(), got.nodes.size()) << what;
+    EXPECT_EQ(expected.prim_indices, got.prim_indices) << what;
+    size_t wrong = 0;
+    for (size_t i = 0; i < expected.nodes.size(); ++i) {
+        wrong += !same_box(expected.nodes[i].bounds, got.nodes[i].bounds) ||
+                 expected.nodes[i].first != got.nodes[i].first || expected.nodes[i].count != got.nodes[i].count;
+    }
+    EXPECT_EQ(wrong, 0u) << what << ": nodes that differ";
+}
+
+}  // namespace rf::gpu_build_test
