@@ -30,11 +30,29 @@ struct DeviceBuildStages {
     double top_ms = 0.0;          // top level over the cluster boxes, on the host for now ("top (host)")
     uint32_t cluster_count = 0;   // clusters (bottom trees)
     uint32_t bottom_levels = 0;   // work-queue launches of the bottom levels
+    uint32_t top_levels = 0;      // HLBVH2: task-queue launches of the device top level
+    // PLOC only:
+    double ploc_ms = 0.0;         // all iterations: nearest neighbours, merges, compaction
+    uint32_t ploc_iterations = 0; // iterations until one cluster is left
+    // GridBvh / GridBvhSplit only (Garanzha 2014 ch. 4; sort_ms: the cell-key sort):
+    double partial_triangles_ms = 0.0; // references and their splitting (§4.4)
+    double grid0_ms = 0.0;        // TopGrid0 and the 8^3 bottom grids by compaction (§4.2)
+    double coarse_levels_ms = 0.0;// count-only levels of detail
+    double hierarchy_ms = 0.0;    // EmitHierarchy by task queues (§4.3)
+    double leaf_finish_ms = 0.0;  // leaf gathering and splitting of leaves over 4 references
+    size_t references = 0;        // GridBvh: (partial) triangle references; uniform grid: cell references
+    size_t occupied_top_cells = 0;// non-empty TopGrid0 cells
+    // Uniform grid only (Kalojanov and Slusallek 2009; sort_ms: the pair sort):
+    double cell_pairs_ms = 0.0;   // counting and writing (cell, triangle) pairs
+    double cell_ranges_ms = 0.0;  // cell start offsets from the sorted pairs
+    double proximity_ms = 0.0;    // proximity-cloud distance transform
 
     // The build on the device alone: bounds + morton + sort + inner nodes
     // (LBVH) or clusters + bottom levels (HLBVH2) + boxes.
     [[nodiscard]] double device_total_ms() const {
-        return bounds_ms + morton_ms + sort_ms + inner_nodes_ms + clusters_ms + bottom_ms + boxes_ms;
+        return bounds_ms + morton_ms + sort_ms + inner_nodes_ms + clusters_ms + bottom_ms + boxes_ms + ploc_ms +
+               partial_triangles_ms + grid0_ms + coarse_levels_ms + hierarchy_ms + leaf_finish_ms + cell_pairs_ms +
+               cell_ranges_ms + proximity_ms;
     }
 };
 
@@ -56,5 +74,42 @@ Bvh build_lbvh_on_device(std::span<const Triangle> triangles, const BuildOptions
 // failures (out of memory names the buffer).
 Bvh build_hlbvh2_on_device(std::span<const Triangle> triangles, const BuildOptions& options,
                            DeviceBuildStages* stages = nullptr, int device = 0);
+
+// PLOC (Meister and Bittner 2018) on device `device`: the same BVH as
+// rf::build_ploc with the same options (radius options.ploc_radius).
+Bvh build_ploc_on_device(std::span<const Triangle> triangles, const BuildOptions& options,
+                         DeviceBuildStages* stages = nullptr, int device = 0);
+
+// GridBvh, or GridBvhSplit with `partial_triangles` (Garanzha 2014 ch. 4), on
+// device `device`: the same BVH as rf::build_grid_bvh with the same options;
+// GridBvhSplit adds at most floor(options.split_budget * triangles) references.
+Bvh build_grid_bvh_on_device(std::span<const Triangle> triangles, const BuildOptions& options,
+                             bool partial_triangles, DeviceBuildStages* stages = nullptr, int device = 0);
+
+}  // namespace rf::cuda
+
+namespace rf {
+struct UniformGrid;
+struct AilaLaineBvh;
+struct CwbvhBvh;
+}  // namespace rf
+
+namespace rf::cuda {
+
+// Uniform grid by sorting (cell, triangle) pairs (Kalojanov and Slusallek
+// 2009) on device `device`, with the proximity-cloud distance transform when
+// asked: the same grid as rf::build_uniform_grid (same layout, same cell
+// lists in ascending triangle order, same distances).
+UniformGrid build_uniform_grid_on_device(std::span<const Triangle> triangles, int resolution,
+                                         bool proximity_clouds, DeviceBuildStages* stages = nullptr,
+                                         int device = 0);
+
+// Conversions of a canonical BVH to the GPU traversal layouts on device
+// `device`, timed separately (`device_ms`: the kernels, CUDA events): the same
+// result as rf::convert_to_aila_laine and rf::build_cwbvh.
+AilaLaineBvh convert_to_aila_laine_on_device(const Bvh& bvh, std::span<const Triangle> triangles,
+                                             double* device_ms = nullptr, int device = 0);
+CwbvhBvh build_cwbvh_on_device(const Bvh& bvh, std::span<const Triangle> triangles, double* device_ms = nullptr,
+                               int device = 0);
 
 }  // namespace rf::cuda
