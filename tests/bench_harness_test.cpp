@@ -487,8 +487,42 @@ TEST(BenchGpu, RowsWithoutTheBackendFailWithOneReason) {
     const SceneGeometry geometry = SceneGeometry::build(make_builtin_scene("cube"));
     EXPECT_THROW(bench::GpuTracer(geometry, GpuKernel::Cwbvh, BuildOptions{}, 0), Error);
     EXPECT_EQ(bench::gpu_device_name(0), "");
-    EXPECT_THROW(bench::gpu_build_lbvh(geometry.triangles, BuildOptions{}, 30, 0), Error);
-    EXPECT_THROW(bench::gpu_build_hlbvh2(geometry.triangles, BuildOptions{}, 0), Error);
+    BuildOptions lbvh;
+    lbvh.builder = Builder::Lbvh30;
+    EXPECT_THROW(bench::gpu_build(geometry.triangles, lbvh, 0), Error);
+    EXPECT_THROW(bench::gpu_build_grid(geometry.triangles, 0, true, 0), Error);
+    EXPECT_THROW(bench::gpu_convert_layout(Bvh{}, geometry.triangles, GpuKernel::Cwbvh, 0), Error);
+}
+
+TEST(BenchGpu, DeviceBuildReportListsTheStagesThatRan) {
+    cuda::DeviceBuildStages s;
+    s.on_device = true;
+    s.bounds_ms = 0.5;
+    s.sort_ms = 1.5;
+    s.clusters_ms = 0.25;
+    s.bottom_ms = 2.0;
+    s.boxes_ms = 0.75;
+    s.emit_ms = 3.0;
+    s.optimize_ms = 4.0;
+    s.peak_device_bytes = 3u << 20;
+    s.cluster_count = 7;
+    s.bottom_levels = 9;
+    const bench::GpuBuildStages b = bench::describe_device_build(s, 123, 45.5);
+    ASSERT_EQ(b.device_stages.size(), 5u);
+    const char* order[] = {"bounds", "sort", "clusters", "bottom", "boxes"};
+    for (size_t i = 0; i < 5; ++i) EXPECT_EQ(b.device_stages[i].first, order[i]);
+    EXPECT_DOUBLE_EQ(b.device_ms, 5.0);
+    EXPECT_DOUBLE_EQ(b.host_ms, 7.0);
+    EXPECT_EQ(b.detail, "7 clusters, 9 bottom levels");
+    const std::string line = bench::format_device_build(b);
+    for (const char* part : {"device build 5.000 ms", "bounds 0.500", "boxes 0.750", "peak 3.00 MiB", "123 nodes",
+                             "SAH 45.50", "7 clusters", "host 7.00 ms"})
+        EXPECT_NE(line.find(part), std::string::npos) << part << " in " << line;
+    // Grids have no SAH; host builds say so.
+    EXPECT_EQ(bench::format_device_build(bench::describe_device_build(s, 8, std::nan(""))).find("SAH"),
+              std::string::npos);
+    s.on_device = false;
+    EXPECT_EQ(bench::format_device_build(bench::describe_device_build(s, 8, 1.0)), "built on the host");
 }
 
 // GPU rows as the runner makes them, printed and written next to a CPU row.

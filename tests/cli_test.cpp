@@ -62,7 +62,7 @@ void expect_one_error_line(const CliResult& r) {
 }
 
 TEST(Cli, HelpForEveryVerbAndVersion) {
-    for (const char* args : {"--help", "info --help", "render --help", "bench --help"}) {
+    for (const char* args : {"--help", "info --help", "render --help", "bench --help", "build --help"}) {
         CliResult r = run_cli(args);
         EXPECT_EQ(r.exit_code, 0) << args << ": " << r.err;
         EXPECT_NE(r.out.find("Usage"), std::string::npos) << args << ": " << r.out;
@@ -71,10 +71,12 @@ TEST(Cli, HelpForEveryVerbAndVersion) {
     for (const char* option : {"--res", "--spp", "--integrator", "--camera", "--threads", "--max-depth", "--ao-radius",
                                "--exposure", "--seed", "--rr-depth", "--light-sampling", "--tonemap", "--aov",
                                "--time-budget", "--env-map", "--reflection-depth", "--refraction-depth", "--shading",
-                               "--device", "--gpu-kernel", "--wavefront", "--sort-rays"})
+                               "--device", "--gpu-kernel", "--build-on", "--wavefront", "--sort-rays"})
         EXPECT_NE(render_help.out.find(option), std::string::npos) << option;
-    for (const char* option : {"--device", "--gpu-kernel", "--spp"})
+    for (const char* option : {"--device", "--gpu-kernel", "--spp", "--build-on", "--build-stages"})
         EXPECT_NE(run_cli("bench --help").out.find(option), std::string::npos) << option;
+    for (const char* option : {"--device", "--builder", "--reps", "--convert", "--threads"})
+        EXPECT_NE(run_cli("build --help").out.find(option), std::string::npos) << option;
     EXPECT_NE(run_cli("info --help").out.find("--devices"), std::string::npos);
     CliResult version = run_cli("--version");
     EXPECT_EQ(version.exit_code, 0);
@@ -257,6 +259,47 @@ TEST(Cli, RenderOnCudaNamesWhyItCannot) {
     }
     // Validated and then given up on before anything is written.
     EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+TEST(Cli, BuildReportsEveryBuildAndTheMedian) {
+    CliResult r = run_cli("build builtin:cornell --builder hlbvh2 --reps 2 --threads 2");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.out.find("bvh/hlbvh2 on cpu, build 1:"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("bvh/hlbvh2 on cpu, build 2:"), std::string::npos) << r.out;
+    EXPECT_EQ(r.out.find("build 3:"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("median"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("SAH"), std::string::npos) << r.out;
+    CliResult grid = run_cli("build builtin:cube --accel grid-proximity --reps 1");
+    ASSERT_EQ(grid.exit_code, 0) << grid.err;
+    EXPECT_NE(grid.out.find("on cpu, build 1:"), std::string::npos) << grid.out;
+}
+
+TEST(Cli, DeviceBuildOptionsNeedACudaDevice) {
+    expect_one_error_line(run_cli("build builtin:cube --convert cwbvh"));
+    expect_one_error_line(run_cli("render builtin:cube --res 8x8 -o /tmp/rf_never.png --build-on host"));
+    CliResult bench = run_cli("bench --scene builtin:cube --res 8x8 --build-on device -q");
+    expect_one_error_line(bench);
+    EXPECT_NE(bench.err.find("--build-on: needs --device cuda"), std::string::npos) << bench.err;
+    // A kd-tree has no device builder; without the backend the device itself is the error.
+    CliResult kd = run_cli("build builtin:cube --accel kdtree --device cuda");
+    expect_one_error_line(kd);
+    EXPECT_NE(kd.err.find(cuda_backend_built() ? "--device cuda" : "built without the CUDA backend"),
+              std::string::npos)
+        << kd.err;
+    for (const char* args : {"build", "build builtin:cube --reps 0", "build builtin:cube --convert bvh2",
+                             "build builtin:cube --device gpu", "render builtin:cube -o x.png --build-on gpu"}) {
+        CliResult usage = run_cli(args);
+        EXPECT_EQ(usage.exit_code, 2) << "'" << args << "': " << usage.err;
+    }
+}
+
+TEST(Cli, BenchBuildStagesWithoutAPreset) {
+    CliResult r = run_cli("bench --scene builtin:cube --layout bvh2 --rays primary --res 8x8 --reps 1 --build-reps 1 "
+                          "--embree none --threads 2 --build-stages -q");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_NE(r.out.find("Build stages"), std::string::npos) << r.out;
+    for (const char* builder : {"gridbvh", "gridbvh-split", "hlbvh2"})
+        EXPECT_NE(r.out.find(std::string(" ") + builder + " "), std::string::npos) << builder << ": " << r.out;
 }
 
 TEST(Cli, RenderWavefrontWithSortedRaysOnTheCpu) {

@@ -137,6 +137,8 @@ int run_render_bench(const BenchArgs& a, const bench::BenchConfig& config) {
         const std::vector<GpuKernel> kernels =
             a.gpu_kernels.empty() ? std::vector<GpuKernel>{kDefaultGpuKernel} : parse_gpu_kernels(split_list(a.gpu_kernels));
         render.gpu = bench::gpu_candidates(kernels, config.candidates);
+        const bool build_on_device = config.gpu.front().build.options.build_on_device;  // --build-on
+        for (bench::GpuCandidate& g : render.gpu) g.build.options.build_on_device = build_on_device;
         render.gpu_device = config.gpu_device;
     }
     render.integrators = a.integrators;
@@ -219,6 +221,11 @@ CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
                     "Camera rays per pixel of the ray sets, sample 0 at the pixel centre and the others jittered "
                     "(default: 1 for cpu rows, 4 for cuda rows, the protocol's GPU rule)")
         ->check(CLI::Range(1, 64));
+    add_build_on_option(cmd, a.build_on);
+    cmd->add_flag("--build-stages", a.build_stages,
+                  "After the tables, time every builder stage by stage on each scene (dissertation tables 4.1 and "
+                  "5.1: the CPU's gridbvh, gridbvh-split and hlbvh2; with --device cuda every device builder, the "
+                  "device uniform grids and the device layout conversions), as the seed000 preset does");
     cmd->add_flag("--list", a.list, "List scenes, structures, presets and the Embree peer, then exit");
     cmd->add_flag("-q,--quiet", a.quiet, "No progress lines on stderr");
     return cmd;
@@ -245,6 +252,7 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
         }
     }
     if (!devices.gpu && !a.gpu_kernels.empty()) throw Error("--gpu-kernel: needs --device cuda");
+    const bool build_on_device = parse_build_on(a.build_on, devices.gpu);
     std::vector<bench::Candidate> unimplemented;
 
     std::vector<std::string> scenes = split_list(a.scenes);
@@ -307,6 +315,7 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
                                                : preset                ? preset->gpu_kernels
                                                                        : all_gpu_kernels();
         config.gpu = bench::gpu_candidates(kernels, config.candidates);
+        for (bench::GpuCandidate& g : config.gpu) g.build.options.build_on_device = build_on_device;
         config.gpu_device = devices.gpu_index;
         info.gpu = bench::gpu_device_name(devices.gpu_index);
     }
@@ -350,7 +359,7 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
                                       a.repetitions, a.build_repetitions);
         });
     if (preset && preset->configuration_table) bench::print_configuration_table(std::cout, records);
-    if (preset && preset->stage_breakdown) {
+    if ((preset && preset->stage_breakdown) || a.build_stages) {
         std::vector<bench::StageBreakdown> stages;
         for (const std::string& name : scenes) {
             bench::LoadedScene scene;

@@ -54,6 +54,7 @@ struct RenderArgs {
     bool quiet = false;
     std::string device = "cpu";       // cpu | cuda | cuda:N
     std::string gpu_kernel;           // "" = rf::kDefaultGpuKernel
+    std::string build_on;             // --build-on device|host ("" = device), with --device cuda
     bool wavefront = false;           // CPU path tracer: wavefront passes
     bool sort_rays = false;           // CPU wavefront: sort rays before tracing
     // Options whose presence overrides the scene file's render settings.
@@ -71,6 +72,17 @@ struct RenderArgs {
 };
 CLI::App* add_render_command(CLI::App& app, RenderArgs& args);
 int run_render(const RenderArgs& args);
+
+struct BuildArgs {
+    std::string scene;       // a file or builtin:NAME
+    AccelArgs accel;
+    std::string device = "cpu";
+    int repetitions = 3;
+    int threads = 0;
+    std::string convert;     // "", aila-laine or cwbvh: the device layout conversion too
+};
+CLI::App* add_build_command(CLI::App& app, BuildArgs& args);
+int run_build(const BuildArgs& args);
 
 struct BenchArgs {
     std::vector<std::string> scenes;       // comma lists allowed in every list option
@@ -96,6 +108,8 @@ struct BenchArgs {
     std::vector<std::string> gpu_kernels;  // GPU kernel names or all (default: all, a preset's, or for
                                            // --integrator the default kernel)
     int spp = 0;                           // camera rays per pixel of the sets; 0 = 1 on the CPU, 4 on a GPU
+    std::string build_on;                  // --build-on device|host ("" = device) for the GPU rows
+    bool build_stages = false;             // the stage breakdown tables for every scene, not only seed000's
 };
 CLI::App* add_bench_command(CLI::App& app, BenchArgs& args);
 int run_bench(const BenchArgs& args, const std::string& command_line);

@@ -35,6 +35,19 @@ CLI::Validator gpu_kernel_validator(bool allow_all) {
         "KERNEL");
 }
 
+void add_build_on_option(CLI::App* cmd, std::string& value) {
+    cmd->add_option("--build-on", value,
+                    "With --device cuda: where the structure is built, device (default: the device builders lbvh30, "
+                    "lbvh63, hlbvh2, ploc, gridbvh, gridbvh-split and uniform grids, and the layout conversions; other "
+                    "builders run on the CPU) or host (everything on the CPU, then uploaded)")
+        ->check(CLI::IsMember({"device", "host"}));
+}
+
+bool parse_build_on(const std::string& value, bool cuda_device) {
+    if (!value.empty() && !cuda_device) throw Error("--build-on: needs --device cuda");
+    return value != "host";
+}
+
 void require_usable(const Device& device, const std::string& option) {
     if (!device.is_cuda()) return;
 #ifdef RAYFORGE_HAS_CUDA

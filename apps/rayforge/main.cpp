@@ -28,6 +28,8 @@ int main(int argc, char** argv) {
     rf::cli::RenderArgs render_args;
     CLI::App* info = rf::cli::add_info_command(app, info_args);
     CLI::App* render = rf::cli::add_render_command(app, render_args);
+    rf::cli::BuildArgs build_args;
+    CLI::App* build = rf::cli::add_build_command(app, build_args);
     rf::cli::BenchArgs bench_args;
     CLI::App* bench = rf::cli::add_bench_command(app, bench_args);
 
@@ -47,6 +49,7 @@ int main(int argc, char** argv) {
     try {
         if (info->parsed()) return rf::cli::run_info(info_args);
         if (render->parsed()) return rf::cli::run_render(render_args);
+        if (build->parsed()) return rf::cli::run_build(build_args);
         if (bench->parsed()) {
             std::string command_line = "rayforge";
             for (int i = 1; i < argc; ++i) command_line += std::string(" ") + argv[i];

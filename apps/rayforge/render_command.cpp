@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "commands.h"
+#include "device_build_report.h"
 #include "progress_bar.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
@@ -262,6 +263,7 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
                     "grid | grid-proximity (default " + to_string(kDefaultGpuKernel) + "); the structure is built "
                     "with the --builder / --grid-res options")
         ->check(gpu_kernel_validator());
+    add_build_on_option(cmd, a.build_on);
     cmd->add_flag("--wavefront", a.wavefront,
                   "path on the CPU: run the path tracer stage by stage over queues of paths (a wavefront, as the "
                   "GPU does; same image)");
@@ -276,6 +278,7 @@ int run_render(const RenderArgs& a) {
     const Device device = parse_device(a.device);
     const GpuKernel kernel = a.gpu_kernel.empty() ? kDefaultGpuKernel : parse_gpu_kernel(a.gpu_kernel);
     require_usable(device, "--device " + a.device);  // before the scene loads: fail fast
+    const bool build_on_device = parse_build_on(a.build_on, device.is_cuda());
     Clock::time_point start = Clock::now();
     Scene scene = load_scene(a.scene);
     SceneGeometry geometry = SceneGeometry::build(scene);
@@ -331,15 +334,21 @@ int run_render(const RenderArgs& a) {
                              "(--light to place lights, --no-headlight to disable)\n");
     }
 
-    const BuildOptions build_options = to_build_options(a.accel, a.threads);
+    BuildOptions build_options = to_build_options(a.accel, a.threads);
+    build_options.build_on_device = build_on_device;
     RenderSummary summary;
+    std::string device_build_line;
     double setup_ms = 0.0;
     if (device.is_cuda()) {
 #ifdef RAYFORGE_HAS_CUDA
-        // The device renderer builds its own structure (on the CPU, then uploads it).
+        // The device renderer builds its own structure (on the device where
+        // the builder has a device version, else on the CPU, then uploaded).
         Clock::time_point setup_start = Clock::now();
         cuda::Renderer renderer(scene, geometry, camera, options, kernel, build_options, device.index);
         const AccelStats stats = renderer.tracer().stats();
+        device_build_line = to_string(device) + " " + stats.name + ": " +
+                            bench::format_device_build(bench::describe_device_build(
+                                renderer.tracer().build_stages(), stats.node_count, stats.sah_cost));
         setup_ms = ms_since(setup_start) - stats.build_ms;
         render_and_write(a, renderer, tone, [](cuda::Renderer& r, const auto& after_pass, const auto& progress) {
             cuda::render_progressive(r, after_pass, progress);
@@ -369,6 +378,7 @@ int run_render(const RenderArgs& a) {
                 summary.passes, geometry.size(), load_ms, summary.build_ms, summary.accel.c_str(), setup_ms, render_ms,
                 render_ms > 0.0 ? double(rs.samples) / (render_ms * 1e3) : 0.0,
                 render_ms > 0.0 ? double(rs.rays()) / (render_ms * 1e3) : 0.0);
+    if (!device_build_line.empty()) std::printf("%s\n", device_build_line.c_str());
     return 0;
 }
 

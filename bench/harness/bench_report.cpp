@@ -131,6 +131,14 @@ void print_scene_tables(std::ostream& out, const std::vector<BenchRecord>& recor
         }
     }
 
+    // Where the GPU rows' structures were built, with the device's stages.
+    std::map<std::string, bool> described;
+    for (const BenchRecord& r : records) {
+        if (!r.is_gpu() || described[row_label(r)]) continue;
+        described[row_label(r)] = true;
+        out << "  " << row_label(r) << ": " << format_device_build(r.device_build) << '\n';
+    }
+
     // Traces: Mrays/s; Embree columns and ratios when the peer ran; the
     // agreement of CPU rows with Embree medium, of GPU rows with the CPU reference.
     const std::vector<PeerFigures> no_peers;
@@ -285,6 +293,17 @@ void write_json(const std::string& path, const std::vector<BenchRecord>& records
                                 {"max_rel_t_diff", r.reference->max_rel_t_diff}};
         else
             rec["reference"] = nullptr;
+        if (r.is_gpu() && r.device_build.on_device) {
+            const GpuBuildStages& b = r.device_build;
+            Json stages = Json::object();
+            for (const auto& [name, ms] : b.device_stages) stages[name] = ms;
+            rec["device_build"] = {{"device_ms", b.device_ms},     {"stages_ms", stages},
+                                   {"layout_ms", b.layout_ms},     {"upload_ms", b.upload_ms},
+                                   {"download_ms", b.download_ms}, {"host_ms", b.host_ms},
+                                   {"peak_device_bytes", b.peak_device_bytes}, {"detail", b.detail}};
+        } else {
+            rec["device_build"] = nullptr;  // CPU rows, and GPU rows built on the host
+        }
         list.push_back(rec);
     }
     root["records"] = list;

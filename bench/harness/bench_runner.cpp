@@ -61,6 +61,7 @@ struct BuiltGpu {
     GpuCandidate candidate;
     std::unique_ptr<GpuTracer> tracer;
     std::vector<double> build_runs;  // GpuTracer::stats().build_ms of each build
+    GpuBuildStages median_build;     // the stages of the build with the median build_ms
 };
 
 // The GPU rows of one ray set: rays resident on the device, the kernel time
@@ -92,6 +93,7 @@ void trace_gpu_rows(const RaySet& set, const Accel& reference, const std::string
         rec.stats = tracer.stats();
         rec.layout_ms = rec.stats.layout_ms;
         rec.device_bytes = tracer.device_bytes();
+        rec.device_build = g.median_build;
         ReferenceAgreement agreement;
         agreement.reference = reference_label;
         TraceResult out;  // what the last timed launch found
@@ -218,13 +220,20 @@ std::vector<BenchRecord> run_bench(const BenchConfig& config, std::ostream& log,
             for (const GpuCandidate& candidate : config.gpu) {
                 say("  building " + gpu_device + " " + candidate.label() + " x" +
                     std::to_string(config.build_repetitions));
-                BuiltGpu g{candidate, nullptr, {}};
+                BuiltGpu g{candidate, nullptr, {}, {}};
                 BuildOptions options = candidate.build.options;
                 options.threads = config.threads;
+                std::vector<std::pair<double, GpuBuildStages>> stage_runs;
                 for (int r = 0; r < config.build_repetitions; ++r) {
                     g.tracer.reset();  // frees the device memory of the previous build first
                     g.tracer = std::make_unique<GpuTracer>(geometry, candidate.kernel, options, config.gpu_device);
                     g.build_runs.push_back(g.tracer->stats().build_ms);
+                    stage_runs.emplace_back(g.build_runs.back(), g.tracer->build_stages());
+                }
+                if (!stage_runs.empty()) {
+                    std::sort(stage_runs.begin(), stage_runs.end(),
+                              [](const auto& a, const auto& b) { return a.first < b.first; });
+                    g.median_build = stage_runs[stage_runs.size() / 2].second;
                 }
                 gpus.push_back(std::move(g));
             }

@@ -17,6 +17,7 @@
 
 #include "bench_scenes.h"
 #include "candidates.h"
+#include "device_build_report.h"
 #include "embree_peer.h"
 #include "gpu_candidates.h"
 #include "ray_sets.h"
@@ -96,6 +97,7 @@ struct BenchRecord {
     double steps_per_ray = 0.0, prims_per_ray = 0.0, restarts_per_ray = 0.0;
     std::vector<PeerFigures> embree;     // CPU rows
     std::optional<ReferenceAgreement> reference;  // GPU rows
+    GpuBuildStages device_build;         // GPU rows: the stages of the median build (on_device: built there)
     [[nodiscard]] bool is_gpu() const { return device != "cpu"; }
 };
 

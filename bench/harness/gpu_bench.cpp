@@ -3,6 +3,12 @@
 #include "gpu_bench.h"
 
 #include "rayforge/backend/cuda.h"
+#include <limits>
+#include <utility>
+
+#include "accel/bvh/wide/aila_laine_layout.h"
+#include "accel/bvh/wide/cwbvh_layout.h"
+#include "accel/grid/uniform_grid.h"
 #include "rayforge/backend/cuda_build.h"
 #include "rayforge/core/error.h"
 
@@ -40,41 +46,46 @@ size_t GpuTracer::device_bytes() const { return impl_->tracer.device_bytes(); }
 
 namespace {
 
-GpuBuildStages common_stages(const cuda::DeviceBuildStages& s, const Bvh& bvh) {
-    GpuBuildStages out;
-    out.device_ms = s.device_total_ms();
-    out.upload_ms = s.upload_ms;
-    out.download_ms = s.download_ms;
-    out.host_ms = s.emit_ms + s.top_ms;
-    out.peak_device_bytes = s.peak_device_bytes;
-    out.nodes = bvh.nodes.size();
-    out.sah_cost = bvh.nodes.empty() ? 0.0 : bvh.sah_cost();
-    return out;
-}
+double sah_of(const Bvh& bvh) { return bvh.nodes.empty() ? 0.0 : bvh.sah_cost(); }
 
 }  // namespace
 
-GpuBuildStages gpu_build_lbvh(std::span<const Triangle> triangles, const BuildOptions& options, int morton_bits,
-                              int device) {
+GpuBuildStages GpuTracer::build_stages() const {
+    const AccelStats stats = impl_->tracer.stats();
+    return describe_device_build(impl_->tracer.build_stages(), stats.node_count, stats.sah_cost);
+}
+
+GpuBuildStages gpu_build(std::span<const Triangle> triangles, const BuildOptions& options, int device,
+                         Bvh* bvh_out) {
     cuda::DeviceBuildStages s;
-    const Bvh bvh = cuda::build_lbvh_on_device(triangles, options, morton_bits, &s, device);
-    GpuBuildStages out = common_stages(s, bvh);
-    out.device_stages = {{"bounds", s.bounds_ms},
-                         {"morton", s.morton_ms},
-                         {"sort", s.sort_ms},
-                         {"inner nodes", s.inner_nodes_ms},
-                         {"boxes", s.boxes_ms}};
+    Bvh bvh = cuda::build_bvh_on_device(triangles, options, &s, device);
+    GpuBuildStages out = describe_device_build(s, bvh.nodes.size(), sah_of(bvh));
+    if (bvh_out) *bvh_out = std::move(bvh);
     return out;
 }
 
-GpuBuildStages gpu_build_hlbvh2(std::span<const Triangle> triangles, const BuildOptions& options, int device) {
+GpuBuildStages gpu_build_grid(std::span<const Triangle> triangles, int resolution, bool proximity, int device) {
     cuda::DeviceBuildStages s;
-    const Bvh bvh = cuda::build_hlbvh2_on_device(triangles, options, &s, device);
-    GpuBuildStages out = common_stages(s, bvh);
-    out.device_stages = {{"bounds", s.bounds_ms},  {"morton", s.morton_ms},  {"sort", s.sort_ms},
-                         {"clusters", s.clusters_ms}, {"bottom", s.bottom_ms}, {"boxes", s.boxes_ms}};
-    out.detail = std::to_string(s.cluster_count) + " clusters, " + std::to_string(s.bottom_levels) +
-                 " bottom levels, top level " + std::to_string(s.top_ms) + " ms on the host";
+    const UniformGrid grid = cuda::build_uniform_grid_on_device(triangles, resolution, proximity, &s, device);
+    s.on_device = true;
+    GpuBuildStages out = describe_device_build(s, grid.cell_count(), std::numeric_limits<double>::quiet_NaN());
+    out.detail += (out.detail.empty() ? "" : ", ") + std::to_string(grid.non_empty_cells()) + " non-empty cells";
+    return out;
+}
+
+GpuBuildStages gpu_convert_layout(const Bvh& bvh, std::span<const Triangle> triangles, GpuKernel kernel, int device) {
+    cuda::DeviceBuildStages s;
+    s.on_device = true;
+    size_t nodes = 0;
+    if (kernel == GpuKernel::AilaLaine) {
+        nodes = cuda::convert_to_aila_laine_on_device(bvh, triangles, &s.layout_ms, device).nodes.size();
+    } else if (kernel == GpuKernel::Cwbvh) {
+        nodes = cuda::build_cwbvh_on_device(bvh, triangles, &s.layout_ms, device).nodes.size();
+    } else {
+        throw Error("gpu_convert_layout: " + to_string(kernel) + " has no layout conversion");
+    }
+    GpuBuildStages out = describe_device_build(s, nodes, sah_of(bvh));
+    out.device_stages = {{"layout", s.layout_ms}};
     return out;
 }
 

@@ -13,8 +13,10 @@
 #include <utility>
 #include <vector>
 
+#include "device_build_report.h"
 #include "gpu_candidates.h"
 #include "rayforge/accel/accel.h"
+#include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/backend/device.h"
 #include "rayforge/math/ray.h"
 #include "rayforge/render/render.h"
@@ -48,31 +50,24 @@ public:
     void download_occluded(std::span<uint8_t> flags) const;  // after trace(true)
     void count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const;
 
-    [[nodiscard]] AccelStats stats() const;  // build_ms: CPU build + layout + upload
+    [[nodiscard]] AccelStats stats() const;  // build_ms: build + layout + upload (wall time)
     [[nodiscard]] size_t device_bytes() const;
+    // The stages of the structure's build and layout conversion (on_device false: built on the host).
+    [[nodiscard]] GpuBuildStages build_stages() const;
 
 private:
     struct Impl;
     std::unique_ptr<Impl> impl_;
 };
 
-// One device build with its stages (rf::cuda::DeviceBuildStages): device
-// stages in pipeline order, then the transfers and the host's part.
-struct GpuBuildStages {
-    std::vector<std::pair<std::string, double>> device_stages;  // name -> ms
-    double device_ms = 0.0;                                     // their sum
-    double upload_ms = 0.0, download_ms = 0.0, host_ms = 0.0;
-    size_t peak_device_bytes = 0;
-    size_t nodes = 0;
-    double sah_cost = 0.0;
-    std::string detail;  // builder-specific sizes (clusters, levels)
-};
-// LBVH (Karras 2012) on `device` with `morton_bits` (30 or 63).
-GpuBuildStages gpu_build_lbvh(std::span<const Triangle> triangles, const BuildOptions& options, int morton_bits,
-                              int device);
-// HLBVH2 (Garanzha 2014 ch. 5) on `device`; its top level runs on the host
-// for now and is listed among the host's work.
-GpuBuildStages gpu_build_hlbvh2(std::span<const Triangle> triangles, const BuildOptions& options, int device);
+// options.builder on `device` (rf::cuda::build_bvh_on_device); throws
+// rf::Error for a builder without a device version.
+GpuBuildStages gpu_build(std::span<const Triangle> triangles, const BuildOptions& options, int device,
+                         Bvh* bvh_out = nullptr);
+// A uniform grid (with the proximity clouds when asked) on `device`.
+GpuBuildStages gpu_build_grid(std::span<const Triangle> triangles, int resolution, bool proximity, int device);
+// The conversion of `bvh` to `kernel`'s layout (aila-laine or cwbvh) on `device`: one "layout" stage.
+GpuBuildStages gpu_convert_layout(const Bvh& bvh, std::span<const Triangle> triangles, GpuKernel kernel, int device);
 
 // What one pass of the device renderer did.
 struct GpuPass {

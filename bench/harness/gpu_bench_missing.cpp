@@ -21,8 +21,11 @@ void GpuTracer::count_traversal(std::span<const Ray>, bool, TraversalTotals&) co
 AccelStats GpuTracer::stats() const { return {}; }
 size_t GpuTracer::device_bytes() const { return 0; }
 
-GpuBuildStages gpu_build_lbvh(std::span<const Triangle>, const BuildOptions&, int, int) { throw Error(kCudaNotBuilt); }
-GpuBuildStages gpu_build_hlbvh2(std::span<const Triangle>, const BuildOptions&, int) { throw Error(kCudaNotBuilt); }
+GpuBuildStages GpuTracer::build_stages() const { return {}; }
+
+GpuBuildStages gpu_build(std::span<const Triangle>, const BuildOptions&, int, Bvh*) { throw Error(kCudaNotBuilt); }
+GpuBuildStages gpu_build_grid(std::span<const Triangle>, int, bool, int) { throw Error(kCudaNotBuilt); }
+GpuBuildStages gpu_convert_layout(const Bvh&, std::span<const Triangle>, GpuKernel, int) { throw Error(kCudaNotBuilt); }
 
 struct GpuRenderer::Impl {};
 GpuRenderer::GpuRenderer(const Scene&, const SceneGeometry&, const Camera&, const RenderOptions&, GpuKernel,

@@ -1,10 +1,12 @@
 #include "stage_breakdown.h"
 
 #include <algorithm>
+#include <cmath>
 #include <iomanip>
 #include <ostream>
 #include <sstream>
 
+#include "accel/bvh/build/build_bvh.h"
 #include "accel/bvh/build/grid_bvh.h"
 #include "accel/bvh/build/hlbvh2.h"
 #include "core/parallel.h"
@@ -95,8 +97,10 @@ StageBreakdown median_device_build(const LoadedScene& scene, const std::string& 
     detail.setf(std::ios::fixed);
     detail.precision(2);
     detail << "peak " << double(s.peak_device_bytes) / (1024.0 * 1024.0) << " MiB on the device, " << s.nodes
-           << " nodes, SAH " << s.sah_cost << (s.detail.empty() ? "" : ", ") << s.detail << "; not in total: upload "
-           << s.upload_ms << ", download " << s.download_ms << ", host " << s.host_ms << " ms";
+           << " nodes";
+    if (std::isfinite(s.sah_cost)) detail << ", SAH " << s.sah_cost;
+    detail << (s.detail.empty() ? "" : ", ") << s.detail << "; not in total: upload " << s.upload_ms << ", download "
+           << s.download_ms << ", host " << s.host_ms << " ms";
     row.detail = detail.str();
     return row;
 }
@@ -105,11 +109,26 @@ StageBreakdown median_device_build(const LoadedScene& scene, const std::string& 
 
 std::vector<StageBreakdown> measure_device_stage_breakdowns(const LoadedScene& scene, int device, int repetitions) {
     const std::span<const Triangle> triangles = scene.geometry.triangles;
-    const BuildOptions options;
-    return {median_device_build(scene, "lbvh30 (cuda)", repetitions,
-                                [&] { return gpu_build_lbvh(triangles, options, 30, device); }),
-            median_device_build(scene, "hlbvh2 (cuda)", repetitions,
-                                [&] { return gpu_build_hlbvh2(triangles, options, device); })};
+    std::vector<StageBreakdown> rows;
+    for (const Builder builder : {Builder::Lbvh30, Builder::Lbvh63, Builder::Hlbvh2, Builder::Ploc, Builder::GridBvh,
+                                  Builder::GridBvhSplit}) {
+        BuildOptions options;
+        options.builder = builder;
+        rows.push_back(median_device_build(scene, to_string(builder) + " (cuda)", repetitions,
+                                           [&] { return gpu_build(triangles, options, device); }));
+    }
+    for (const bool proximity : {false, true})
+        rows.push_back(median_device_build(scene, proximity ? "grid-prox (cuda)" : "grid (cuda)", repetitions,
+                                           [&] { return gpu_build_grid(triangles, 0, proximity, device); }));
+    // Layout conversions of the default tree, each its own row (issue 7: timed separately).
+    const Bvh bvh = build_bvh(triangles, BuildOptions{});
+    for (const GpuKernel kernel : {GpuKernel::AilaLaine, GpuKernel::Cwbvh})
+        rows.push_back(median_device_build(scene, to_string(kernel) + " layout (cuda)", repetitions, [&] {
+            GpuBuildStages s = gpu_convert_layout(bvh, triangles, kernel, device);
+            s.device_ms = s.layout_ms;  // the row's total is the conversion
+            return s;
+        }));
+    return rows;
 }
 
 void print_stage_breakdowns(std::ostream& out, const std::vector<StageBreakdown>& rows, int threads,
@@ -121,7 +140,7 @@ void print_stage_breakdowns(std::ostream& out, const std::vector<StageBreakdown>
     const auto precision = out.precision();
     out << std::fixed << std::setprecision(1);
     for (const StageBreakdown& row : rows) {
-        out << "  " << std::left << std::setw(20) << row.scene << ' ' << std::setw(14) << row.builder << std::right
+        out << "  " << std::left << std::setw(20) << row.scene << ' ' << std::setw(24) << row.builder << std::right
             << " total " << std::setw(8) << row.total_ms << " |";
         for (const auto& [name, ms] : row.stages) out << ' ' << name << ' ' << ms;
         out << " | " << row.detail << " (" << row.triangles << " triangles)\n";

@@ -26,8 +26,10 @@ struct StageBreakdown {
 // `threads` threads (0 = all cores) and keeps the build with the median total.
 std::vector<StageBreakdown> measure_stage_breakdowns(const LoadedScene& scene, int threads, int repetitions);
 
-// The device builders (issue 7; so far LBVH with 30-bit codes and HLBVH2)
-// on CUDA device `device`, each the build with the median device time of
+// The device builders (issue 7: lbvh30, lbvh63, hlbvh2, ploc, gridbvh,
+// gridbvh-split, the uniform grid with and without proximity clouds) and the
+// device layout conversions of the default BVH (aila-laine, cwbvh) on CUDA
+// device `device`, each the build with the median device time of
 // `repetitions`.
 // Throws rf::Error when the backend or the device is missing.
 std::vector<StageBreakdown> measure_device_stage_breakdowns(const LoadedScene& scene, int device, int repetitions);

@@ -68,6 +68,11 @@ struct BuildOptions {
     bool kd_perfect_splits = true;   // clip triangles to the cell when evaluating splits
     float kd_empty_bonus = 0.2f;     // SAH discount for cutting off empty space
     int kd_short_stack_size = 4;     // entries of the short-stack traversal
+    // CUDA backend only: build on the device where a device builder exists
+    // (lbvh30, lbvh63, hlbvh2, ploc, gridbvh, gridbvh-split, uniform grids)
+    // and convert to the GPU layouts there; false builds on the CPU. Every
+    // device builder yields the same structure as its CPU version.
+    bool build_on_device = true;
 };
 
 struct AccelStats {

@@ -14,6 +14,7 @@
 
 #include "rayforge/accel/accel.h"
 #include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/backend/cuda_build.h"
 #include "rayforge/backend/device.h"
 #include "rayforge/math/ray.h"
 #include "rayforge/render/render.h"
@@ -50,9 +51,11 @@ struct KernelTiming {
 };
 
 // An acceleration structure on one device with the traversal kernel that
-// reads it. The structure is built on the CPU with `build`'s builder and
-// parameters (device builders are issue 7), converted to the kernel's layout
-// (node pairs, CWBVH, kd nodes, grid cells) and uploaded with the triangles.
+// reads it. The structure is built with `build`'s builder and parameters: on
+// the device when build.build_on_device is set and the builder has a device
+// version (cuda_build.h; the layout conversion then runs there too), else on
+// the CPU; then converted to the kernel's layout (node pairs, CWBVH, kd
+// nodes, grid cells) and uploaded with the triangles.
 class DeviceTracer {
 public:
     DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, const BuildOptions& build = {}, int device = 0);
@@ -76,8 +79,11 @@ public:
 
     [[nodiscard]] GpuKernel kernel() const;
     [[nodiscard]] int device() const;
-    // name "cuda/<kernel>/<builder>", build_ms (CPU build + layout + upload), layout_ms, nodes, bytes on the device.
+    // name "cuda/<kernel>/<builder>", build_ms (build + layout + upload, wall time), layout_ms, nodes, bytes on
+    // the device.
     [[nodiscard]] AccelStats stats() const;
+    // The build's stages (on_device false: built on the host, no stages).
+    [[nodiscard]] const DeviceBuildStages& build_stages() const;
     [[nodiscard]] size_t device_bytes() const;
 
     struct Impl;

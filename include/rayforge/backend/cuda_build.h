@@ -47,14 +47,29 @@ struct DeviceBuildStages {
     double cell_ranges_ms = 0.0;  // cell start offsets from the sorted pairs
     double proximity_ms = 0.0;    // proximity-cloud distance transform
 
-    // The build on the device alone: bounds + morton + sort + inner nodes
-    // (LBVH) or clusters + bottom levels (HLBVH2) + boxes.
+    // Any builder:
+    double optimize_ms = 0.0;     // host: reinsertion optimizer (options.optimize) after a device build
+    double layout_ms = 0.0;       // device layout conversion (node pairs, CWBVH) when a tracer asked for one
+    bool on_device = false;       // false: this structure was built on the host (no device builder, or asked so)
+
+    // The build on the device alone: every stage above that runs there (not
+    // the transfers, the host's emission and optimizer, or a layout conversion).
     [[nodiscard]] double device_total_ms() const {
         return bounds_ms + morton_ms + sort_ms + inner_nodes_ms + clusters_ms + bottom_ms + boxes_ms + ploc_ms +
                partial_triangles_ms + grid0_ms + coarse_levels_ms + hierarchy_ms + leaf_finish_ms + cell_pairs_ms +
                cell_ranges_ms + proximity_ms;
     }
 };
+
+// Whether options.builder has a device version: lbvh30, lbvh63, hlbvh2,
+// ploc, gridbvh, gridbvh-split.
+bool has_device_builder(Builder builder);
+
+// The BVH of options.builder built on device `device` (then the host's
+// reinsertion optimizer when options.optimize is set): the same BVH as
+// rf::build_bvh. Throws rf::Error for a builder without a device version.
+Bvh build_bvh_on_device(std::span<const Triangle> triangles, const BuildOptions& options,
+                        DeviceBuildStages* stages = nullptr, int device = 0);
 
 // LBVH (Karras 2012) on device `device`: the same BVH as rf::build_lbvh with
 // the same options and Morton bits (30 or 63): same nodes, same primitive

@@ -1,7 +1,8 @@
-// rf::cuda::DeviceTracer: builds the structure a GPU kernel reads on the
-// CPU, converts it to that kernel's layout, uploads it, and traces batches
-// of rays in device memory. Per-ray traversal is the shared code of
-// src/trace; what is GPU-only here is scheduling:
+// rf::cuda::DeviceTracer: builds the structure a GPU kernel reads (on the
+// device where a device builder exists and BuildOptions::build_on_device is
+// set, else on the CPU), converts it to that kernel's layout, uploads it,
+// and traces batches of rays in device memory. Per-ray traversal is the
+// shared code of src/trace; what is GPU-only here is scheduling:
 //  - one thread per ray (grid-stride loop) for every kernel;
 //  - for the node-pair BVH, the persistent threads of Aila and Laine 2009
 //    (sec. 3): just enough warps to fill the device, taking rays from a
@@ -23,6 +24,7 @@
 #include "accel/kdtree/kdtree_build.h"
 #include "backend/cuda/device_tracer_impl.h"
 #include "backend/cuda/event_timer.h"
+#include "rayforge/backend/cuda_build.h"
 
 namespace rf::cuda {
 
@@ -185,7 +187,9 @@ DeviceTracer::DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, cons
         case GpuKernel::Bvh2:
         case GpuKernel::AilaLaine:
         case GpuKernel::Cwbvh: {
-            const Bvh bvh = build_bvh(triangles, build);
+            const bool device_build = build.build_on_device && has_device_builder(build.builder);
+            const Bvh bvh = device_build ? build_bvh_on_device(triangles, build, &impl.build_stages, device)
+                                         : build_bvh(triangles, build);
             stats.name += "/" + to_string(build.builder);
             stats.sah_cost = bvh.sah_cost(1.0f, 1.0f);
             stats.quality_cost = bvh.quality_cost(2.0);
@@ -199,7 +203,10 @@ DeviceTracer::DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, cons
                 stats.node_count = bvh.nodes.size();
                 structure_bytes = bvh.memory_bytes();
             } else if (kernel == GpuKernel::AilaLaine) {
-                const AilaLaineBvh al = convert_to_aila_laine(bvh, triangles);
+                const AilaLaineBvh al = build.build_on_device
+                                            ? convert_to_aila_laine_on_device(bvh, triangles,
+                                                                              &impl.build_stages.layout_ms, device)
+                                            : convert_to_aila_laine(bvh, triangles);
                 layout_ms = ms_since(layout_start);
                 impl.aila_laine_nodes.upload(al.nodes);
                 impl.aila_laine_triangles.upload(al.triangles);
@@ -208,7 +215,9 @@ DeviceTracer::DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, cons
                 stats.node_count = al.nodes.size();
                 structure_bytes = al.memory_bytes();
             } else {
-                const CwbvhBvh cw = build_cwbvh(bvh, geometry.triangles);
+                const CwbvhBvh cw = build.build_on_device
+                                        ? build_cwbvh_on_device(bvh, triangles, &impl.build_stages.layout_ms, device)
+                                        : build_cwbvh(bvh, geometry.triangles);
                 layout_ms = ms_since(layout_start);
                 impl.cwbvh_nodes.upload(cw.nodes);
                 impl.cwbvh_triangles.upload(cw.triangles);
@@ -238,8 +247,13 @@ DeviceTracer::DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, cons
         }
         case GpuKernel::Grid:
         case GpuKernel::ProximityGrid: {
+            const bool proximity = kernel == GpuKernel::ProximityGrid;
             const UniformGrid grid =
-                build_uniform_grid(triangles, build.grid_resolution, kernel == GpuKernel::ProximityGrid);
+                build.build_on_device
+                    ? build_uniform_grid_on_device(triangles, build.grid_resolution, proximity, &impl.build_stages,
+                                                   device)
+                    : build_uniform_grid(triangles, build.grid_resolution, proximity);
+            impl.build_stages.on_device = build.build_on_device;
             impl.cell_start.upload(grid.cell_start);
             impl.cell_prims.upload(grid.cell_prims);
             impl.proximity.upload(grid.proximity);
@@ -336,6 +350,7 @@ void DeviceTracer::count_traversal(std::span<const Ray> rays, bool any_hit, Trav
 GpuKernel DeviceTracer::kernel() const { return impl_->kernel; }
 int DeviceTracer::device() const { return impl_->device; }
 AccelStats DeviceTracer::stats() const { return impl_->stats; }
+const DeviceBuildStages& DeviceTracer::build_stages() const { return impl_->build_stages; }
 
 size_t DeviceTracer::device_bytes() const {
     const Impl& i = *impl_;

@@ -8,6 +8,7 @@
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/device_tracers.h"
 #include "rayforge/backend/cuda.h"
+#include "rayforge/backend/cuda_build.h"
 
 namespace rf::cuda {
 
@@ -15,6 +16,7 @@ struct DeviceTracer::Impl {
     GpuKernel kernel = GpuKernel::Bvh2;
     int device = 0;
     AccelStats stats;
+    DeviceBuildStages build_stages;  // of the structure's build and layout conversion (on_device: where)
     int multiprocessors = 1;
     int persistent_blocks[2] = {0, 0};  // Aila-Laine grid size, closest / any hit (0: not yet queried)
 

@@ -1,0 +1,122 @@
+// `rayforge build`: builds a scene's acceleration structure several times
+// and reports each build (issue 7): on the CPU the wall time, SAH cost, nodes
+// and memory; on a CUDA device (--device cuda) the time of every device
+// stage, the transfers and the host's part, the peak device memory, the SAH
+// cost and the node count, and with --convert the device layout conversion.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "accel/accel_factories.h"
+#include "commands.h"
+#include "gpu_bench.h"
+#include "rayforge/accel/accel.h"
+#include "rayforge/backend/device.h"
+#include "rayforge/core/error.h"
+#include "rayforge/io/scene_io.h"
+#include "rayforge/scene/scene_geometry.h"
+
+namespace rf::cli {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double ms_since(Clock::time_point start) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+double median(std::vector<double> values) {
+    std::sort(values.begin(), values.end());
+    const size_t n = values.size();
+    return n % 2 ? values[n / 2] : 0.5 * (values[n / 2 - 1] + values[n / 2]);
+}
+
+// The device build of `options` (a BVH builder, or a uniform grid), and the
+// layout conversion of the BVH to `convert` when asked.
+bench::GpuBuildStages device_build(const SceneGeometry& geometry, const BuildOptions& options, int device,
+                                   const std::string& convert) {
+    const std::span<const Triangle> triangles(geometry.triangles);
+    if (options.structure == Structure::Grid || options.structure == Structure::ProximityGrid)
+        return bench::gpu_build_grid(triangles, options.grid_resolution,
+                                     options.structure == Structure::ProximityGrid, device);
+    Bvh bvh;
+    bench::GpuBuildStages build = bench::gpu_build(triangles, options, device, convert.empty() ? nullptr : &bvh);
+    if (!convert.empty())
+        build.layout_ms = bench::gpu_convert_layout(bvh, triangles, parse_gpu_kernel(convert), device).layout_ms;
+    return build;
+}
+
+}  // namespace
+
+CLI::App* add_build_command(CLI::App& app, BuildArgs& a) {
+    CLI::App* cmd = app.add_subcommand(
+        "build", "Build a scene's acceleration structure and report the build: time per stage on a CUDA device, "
+                 "memory, SAH cost and nodes");
+    cmd->add_option("scene", a.scene, "Scene file (.obj, .gltf, .glb, .ply, .aff, .json) or builtin:NAME")->required();
+    add_accel_options(cmd, a.accel);
+    cmd->add_option("--device", a.device, "Where to build: cpu (default), cuda (= cuda:0) or cuda:N")
+        ->check(device_validator());
+    cmd->add_option("--reps", a.repetitions, "Builds, after one warm-up build (default 3)")
+        ->check(CLI::Range(1, 1000));
+    cmd->add_option("--threads", a.threads, "CPU threads (0 = all cores)")->check(CLI::NonNegativeNumber);
+    cmd->add_option("--convert", a.convert,
+                    "With --device cuda and a BVH: also convert it on the device to a GPU layout, aila-laine or "
+                    "cwbvh, timed separately")
+        ->check(CLI::IsMember({"aila-laine", "cwbvh"}));
+    return cmd;
+}
+
+int run_build(const BuildArgs& a) {
+    const Device device = parse_device(a.device);
+    require_usable(device, "--device " + a.device);
+    const BuildOptions options = to_build_options(a.accel, a.threads);
+    validate_build_options(options);
+    if (!a.convert.empty() && !device.is_cuda()) throw Error("--convert: needs --device cuda");
+    if (!a.convert.empty() && options.structure != Structure::Bvh) throw Error("--convert: needs --accel bvh");
+    if (device.is_cuda() && options.structure != Structure::Bvh && options.structure != Structure::Grid &&
+        options.structure != Structure::ProximityGrid)
+        throw Error("--device " + a.device + ": " + to_string(options.structure) +
+                    " has no device builder (device builders: bvh with lbvh30, lbvh63, hlbvh2, ploc, gridbvh, "
+                    "gridbvh-split; grid; grid-proximity)");
+
+    const Clock::time_point load_start = Clock::now();
+    const SceneGeometry geometry = SceneGeometry::build(load_scene(a.scene));
+    std::printf("%s: %zu triangles, loaded in %.1f ms\n", a.scene.c_str(), geometry.size(), ms_since(load_start));
+    const std::string what = to_string(options.structure) +
+                             (options.structure == Structure::Bvh ? "/" + to_string(options.builder) : std::string());
+
+    std::vector<double> totals;
+    if (device.is_cuda()) {
+        (void)device_build(geometry, options, device.index, a.convert);  // warm-up: module load, first allocations
+        for (int r = 0; r < a.repetitions; ++r) {
+            const bench::GpuBuildStages build = device_build(geometry, options, device.index, a.convert);
+            std::printf("%s on %s, build %d: %s\n", what.c_str(), to_string(device).c_str(), r + 1,
+                        bench::format_device_build(build).c_str());
+            totals.push_back(build.device_ms);
+        }
+        std::printf("%s on %s: median device time %.3f ms of %d builds\n", what.c_str(), to_string(device).c_str(),
+                    median(totals), a.repetitions);
+        return 0;
+    }
+    (void)build_accel(geometry, options);  // warm-up: thread pool, first page faults
+    for (int r = 0; r < a.repetitions; ++r) {
+        const Clock::time_point start = Clock::now();
+        const std::unique_ptr<Accel> accel = build_accel(geometry, options);
+        const double wall_ms = ms_since(start);
+        const AccelStats stats = accel->stats();
+        char quality[64] = "";
+        if (std::isfinite(stats.sah_cost)) std::snprintf(quality, sizeof(quality), "SAH %.2f, ", stats.sah_cost);
+        std::printf("%s on cpu, build %d: %.2f ms (%s, layout %.2f ms); %s%zu nodes, %zu leaves, %.2f MB\n",
+                    what.c_str(), r + 1, wall_ms, stats.name.c_str(), stats.layout_ms, quality,
+                    stats.node_count, stats.leaf_count, double(stats.bytes) / 1e6);
+        totals.push_back(wall_ms);
+    }
+    std::printf("%s on cpu: median %.2f ms of %d builds\n", what.c_str(), median(totals), a.repetitions);
+    return 0;
+}
+
+}  // namespace rf::cli
