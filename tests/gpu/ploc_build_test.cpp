@@ -1,0 +1,161 @@
+// The CUDA PLOC (Meister and Bittner 2018; backend/cuda/ploc_build.cu)
+// against the CPU PLOC: the same BVH (nodes and primitive order) on soups,
+// spheres and degenerate inputs, with the shared-memory window search
+// (radius 1, 16) and the plain one (radius 300); the device's clustering
+// checked directly (the CPU's Morton order, node boxes the unions of their
+// children, every node made once); hits equal brute force; the stage report
+// is filled. Skips with a message when no CUDA device is present.
+#include <gtest/gtest.h>
+
+#include <random>
+#include <string>
+#include <vector>
+
+#include "../accel_test_scenes.h"
+#include "gpu_build_checks.h"
+#include "accel/brute_force.h"
+#include "accel/bvh/build/morton_tree.h"
+#include "accel/bvh/build/ploc.h"
+#include "accel/bvh/build/ploc_emit.h"
+#include "backend/cuda/ploc_build.h"
+#include "rayforge/backend/cuda.h"
+#include "rayforge/backend/cuda_build.h"
+#include "trace/bvh_traversal.h"
+
+namespace rf {
+namespace {
+
+using gpu_build_test::append_degenerate_scenes;
+using gpu_build_test::expect_same_bvh;
+using gpu_build_test::NamedScene;
+using gpu_build_test::same_box;
+
+std::vector<NamedScene> test_scenes() {
+    std::vector<NamedScene> scenes;
+    scenes.push_back({"soup", test::make_triangle_soup(20000, 1, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f)});
+    scenes.push_back({"sphere", test::to_geometry(test::make_icosphere(5))});
+    scenes.push_back({"nasty", test::make_nasty_geometry(2)});
+    scenes.push_back({"far", test::make_triangle_soup(3000, 3, {Vec3f(1e6f), Vec3f(1e6f + 100.0f)}, 1.0f)});
+    SceneGeometry nested;  // one centre, growing triangles: equal codes, different boxes
+    for (int i = 1; i <= 500; ++i) {
+        const float s = 0.01f * static_cast<float>(i);
+        test::append(nested, {Vec3f(-s, -s, 0), Vec3f(s, -s, 0), Vec3f(0, s, 0)});
+    }
+    scenes.push_back({"equal codes", std::move(nested)});
+    append_degenerate_scenes(scenes);
+    return scenes;
+}
+
+TEST(GpuPlocBuild, SameBvhAsCpuPloc) {
+    RF_REQUIRE_DEVICE();
+    for (const NamedScene& scene : test_scenes()) {
+        for (int radius : {1, 16, 300}) {
+            // The plain search of radius 300 is slow on the CPU side: smaller scenes only.
+            if (radius == 300 && scene.geometry.triangles.size() > 5000) continue;
+            for (int leaf_size : {1, 4}) {
+                const BuildOptions options{.max_leaf_size = leaf_size, .ploc_radius = radius};
+                const std::string what = scene.name + ", radius " + std::to_string(radius) + ", leaves of " +
+                                         std::to_string(leaf_size);
+                expect_same_bvh(build_ploc(scene.geometry.triangles, options),
+                                cuda::build_ploc_on_device(scene.geometry.triangles, options), what);
+            }
+        }
+    }
+}
+
+TEST(GpuPlocBuild, EmptyAndSingleTriangle) {
+    RF_REQUIRE_DEVICE();
+    EXPECT_TRUE(cuda::build_ploc_on_device({}, {}).nodes.empty());
+    SceneGeometry one;
+    test::append(one, {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)});
+    const Bvh bvh = cuda::build_ploc_on_device(one.triangles, {});
+    ASSERT_EQ(bvh.nodes.size(), 1u);
+    EXPECT_EQ(bvh.nodes[0].count, 1u);
+    EXPECT_EQ(bvh.prim_indices, std::vector<uint32_t>{0});
+    EXPECT_TRUE(same_box(bvh.nodes[0].bounds, build_ploc(one.triangles, {}).nodes[0].bounds));
+}
+
+// The device's own clustering: the CPU's Morton order, every node's box the
+// union of its children's, and the CPU's BVH from it.
+void check_clustering(const SceneGeometry& g, int radius, const std::string& what) {
+    SCOPED_TRACE(what + ", radius " + std::to_string(radius));
+    morton::RawTree cpu(g.triangles, BuildOptions{});
+    morton::Buffer<uint64_t> keys;
+    cpu.sort_by_morton_codes(keys);
+    const uint32_t n = cpu.size();
+    cuda::DeviceBuildStages stages;
+    cuda::DevicePlocTree dev = cuda::build_ploc_tree_on_device(g.triangles, radius, &stages);
+    ASSERT_EQ(dev.order, cpu.order);
+    ASSERT_EQ(dev.children.size(), 2 * size_t{n - 1});
+    ASSERT_EQ(dev.node_boxes.size(), size_t{n - 1});
+    EXPECT_EQ(stages.ploc_iterations, dev.iteration_nodes.size());
+    size_t wrong_boxes = 0;
+    for (uint32_t k = 0; k + 1 < n; ++k) {
+        Box3f box[2];
+        for (int c = 0; c < 2; ++c) {
+            const uint32_t ref = dev.children[2 * size_t{k} + c];
+            box[c] = morton::is_leaf_ref(ref) ? cpu.boxes[ref & ~morton::kLeafRef] : dev.node_boxes[ref];
+        }
+        wrong_boxes += !same_box(dev.node_boxes[k], morton::box_union(box[0], box[1]));
+    }
+    EXPECT_EQ(wrong_boxes, 0u);
+    const BuildOptions options{.ploc_radius = radius};
+    expect_same_bvh(build_ploc(g.triangles, options),
+                    emit_ploc_tree(g.triangles, options, std::move(dev.order), dev.children, dev.iteration_nodes),
+                    what);
+}
+
+TEST(GpuPlocBuild, DeviceClusteringAndNodeBoxes) {
+    RF_REQUIRE_DEVICE();
+    for (const NamedScene& scene : test_scenes()) {
+        if (scene.geometry.triangles.size() < 2) continue;
+        check_clustering(scene.geometry, 16, scene.name);
+    }
+    // Many blocks, many iterations.
+    const SceneGeometry big = test::make_triangle_soup(300000, 9, {Vec3f(-100.0f), Vec3f(100.0f)}, 0.5f);
+    check_clustering(big, 16, "300K soup");
+    check_clustering(big, 1, "300K soup");
+}
+
+TEST(GpuPlocBuild, StagesAndPeakMemoryAreReported) {
+    RF_REQUIRE_DEVICE();
+    const SceneGeometry soup = test::make_triangle_soup(200000, 4, {Vec3f(-50.0f), Vec3f(50.0f)}, 0.5f);
+    cuda::DeviceBuildStages stages;
+    const Bvh bvh = cuda::build_ploc_on_device(soup.triangles, {}, &stages);
+    EXPECT_FALSE(bvh.nodes.empty());
+    for (double ms : {stages.upload_ms, stages.bounds_ms, stages.morton_ms, stages.sort_ms, stages.ploc_ms,
+                      stages.download_ms, stages.emit_ms}) {
+        EXPECT_GT(ms, 0.0);
+    }
+    EXPECT_GT(stages.ploc_iterations, 1u);
+    EXPECT_DOUBLE_EQ(stages.device_total_ms(),
+                     stages.bounds_ms + stages.morton_ms + stages.sort_ms + stages.ploc_ms);
+    EXPECT_GE(stages.peak_device_bytes, soup.triangles.size() * sizeof(Triangle));
+}
+
+TEST(GpuPlocBuild, HitsEqualBruteForce) {
+    RF_REQUIRE_DEVICE();
+    const SceneGeometry soup = test::make_triangle_soup(5000, 6, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.7f);
+    const BruteForceAccel brute(soup);
+    std::mt19937 rng(17);
+    std::uniform_real_distribution<float> u(-12.0f, 12.0f);
+    std::vector<Ray> rays(4000);
+    for (Ray& r : rays) {
+        r.org = Vec3f(u(rng), u(rng), u(rng));
+        r.dir = normalize(Vec3f(u(rng), u(rng), u(rng)) - r.org + Vec3f(1e-3f, 0.0f, 0.0f));
+    }
+    const Bvh bvh = cuda::build_ploc_on_device(soup.triangles, {});
+    const BvhView view{bvh.nodes.data(), bvh.prim_indices.data(), soup.triangles.data(),
+                       static_cast<uint32_t>(bvh.nodes.size())};
+    size_t mismatches = 0, hits = 0;
+    for (const Ray& ray : rays) {
+        const Hit expected = brute.intersect(ray), got = bvh_intersect(view, ray);
+        hits += expected.found();
+        mismatches += expected.found() != got.found() || (expected.found() && expected.t != got.t);
+    }
+    EXPECT_GT(hits, rays.size() / 10);
+    EXPECT_EQ(mismatches, 0u);
+}
+
+}  // namespace
+}  // namespace rf
