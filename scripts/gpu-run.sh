@@ -2,14 +2,16 @@
 # On a CUDA machine without package access (the device machine): unpacks
 # .gpu-debs/ (made by scripts/gpu-bundle.sh) into a private prefix, builds
 # the CLI and the gpu tests, runs `ctest -L gpu`, then the GPU benchmarks of
-# issue 6, writing everything to $OUT (or ./gpu-out).
-#   scripts/gpu-run.sh [tests|bench|memcheck|all]   (default all; memcheck runs
-#   some gpu tests under compute-sanitizer)
+# issues 6 and 7, writing everything to $OUT (or ./gpu-out).
+#   scripts/gpu-run.sh [tests|bench|builds|memcheck|all]   (default all;
+#   memcheck runs some gpu tests under compute-sanitizer; builds times every
+#   device builder on the Stanford Dragon and on 2 and 15 copies of it, the
+#   sizes of seed 000's table 5.1, when shared/scenes is there)
 # A cold build plus tests plus bench may not fit one 10-minute call: run
 # `tests` first and `bench` in a second call (build-gpu/ stays while the
 # machine is warm).
 set -uo pipefail
-test_rc=0 bench_rc=0 path_rc=0 build_rc=0
+test_rc=0 bench_rc=0 path_rc=0 build_rc=0 builds_rc=0
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 what="${1:-all}"
 out="${OUT:-$ROOT/gpu-out}"
@@ -74,5 +76,32 @@ if [[ "$what" == all || "$what" == bench ]]; then
   build_rc=$?
   echo "bench seed000: rc=$build_rc"; tail -8 "$out/bench-seed000.txt"
 fi
+if [[ "$what" == all || "$what" == builds ]]; then
+  # Issue 7's targets: 871K (Dragon), 1.74M (2 dragons; the table's 1.76M)
+  # and 13.1M (15 dragons; the table's 12.7M) triangles.
+  dragon="$ROOT/shared/scenes/stanford-dragon/dragon_vrip.ply"
+  if [[ -f "$dragon" ]]; then
+    for copies in 1 2 15; do
+      scene="$out/dragon-x$copies.json"
+      {
+        printf '{"meshes": ['
+        for ((i = 0; i < copies; ++i)); do
+          ((i > 0)) && printf ', '
+          printf '{"file": "%s", "transform": {"translate": [%d, 0, 0]}}' "$dragon" $((i * 1))
+        done
+        printf ']}\n'
+      } > "$scene"
+      for builder in lbvh30 lbvh63 hlbvh2 ploc gridbvh gridbvh-split; do
+        "$rf" build "$scene" --device cuda --builder "$builder" --reps 5 --convert cwbvh \
+          >> "$out/builds.txt" 2>&1 || builds_rc=1
+      done
+      "$rf" build "$scene" --device cuda --accel grid-proximity --reps 5 >> "$out/builds.txt" 2>&1 || builds_rc=1
+      "$rf" build "$scene" --device cpu --builder sbvh --reps 1 >> "$out/builds.txt" 2>&1 || builds_rc=1
+    done
+    echo "builds: rc=$builds_rc"; grep -E "median|error" "$out/builds.txt"
+  else
+    echo "builds: skipped, no $dragon (copy the Stanford Dragon into shared/scenes)"
+  fi
+fi
 # Non-zero when any step failed, so the caller sees it in the exit status.
-exit $(( test_rc || bench_rc || path_rc || build_rc ))
+exit $(( test_rc || bench_rc || path_rc || build_rc || builds_rc ))
