@@ -14,8 +14,8 @@
 #include "accel/accel_factories.h"
 #include "accel/grid/grid_accel.h"
 #include "accel/grid/proximity_clouds.h"
-#include "accel/grid/triangle_box_overlap.h"
 #include "accel/grid/uniform_grid.h"
+#include "accel/grid/uniform_grid_steps.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
 #include "rayforge/accel/accel.h"
@@ -25,6 +25,10 @@
 
 namespace rf {
 namespace {
+
+using uniform_grid_steps::to_vec3d;
+using uniform_grid_steps::triangle_overlaps_cell_box;
+using SatVec3 = uniform_grid_steps::Vec3d;
 
 // ---------------------------------------------------------------- SAT test
 
@@ -56,27 +60,27 @@ bool clip_overlap(SatVec3 lo, SatVec3 hi, const std::vector<SatVec3>& triangle) 
 TEST(UniformGrid, SatOverlapHandPickedCases) {
     const SatVec3 c(0, 0, 0), h(1, 1, 1);
     // Inside, enclosing, far away.
-    EXPECT_TRUE(triangle_box_overlap(c, h, {-0.5, 0, 0}, {0.5, 0, 0}, {0, 0.5, 0}));
-    EXPECT_TRUE(triangle_box_overlap(c, h, {-10, -10, 0}, {10, -10, 0}, {0, 10, 0}));
-    EXPECT_FALSE(triangle_box_overlap(c, h, {5, 5, 5}, {6, 5, 5}, {5, 6, 5}));
+    EXPECT_TRUE(triangle_overlaps_cell_box(c, h, {-0.5, 0, 0}, {0.5, 0, 0}, {0, 0.5, 0}));
+    EXPECT_TRUE(triangle_overlaps_cell_box(c, h, {-10, -10, 0}, {10, -10, 0}, {0, 10, 0}));
+    EXPECT_FALSE(triangle_overlaps_cell_box(c, h, {5, 5, 5}, {6, 5, 5}, {5, 6, 5}));
     // Touching a face counts as overlap; just beyond it does not.
-    EXPECT_TRUE(triangle_box_overlap(c, h, {1, -3, -3}, {1, 3, -3}, {1, 0, 3}));
-    EXPECT_FALSE(triangle_box_overlap(c, h, {1.001, -3, -3}, {1.001, 3, -3}, {1.001, 0, 3}));
+    EXPECT_TRUE(triangle_overlaps_cell_box(c, h, {1, -3, -3}, {1, 3, -3}, {1, 0, 3}));
+    EXPECT_FALSE(triangle_overlaps_cell_box(c, h, {1.001, -3, -3}, {1.001, 3, -3}, {1.001, 0, 3}));
     // AABBs overlap but the plane x + y + z = 3.5 passes beyond the corner (1, 1, 1).
-    EXPECT_FALSE(triangle_box_overlap(c, h, {3.5, 0, 0}, {0, 3.5, 0}, {0, 0, 3.5}));
-    EXPECT_TRUE(triangle_box_overlap(c, h, {2.9, 0, 0}, {0, 2.9, 0}, {0, 0, 2.9}));
+    EXPECT_FALSE(triangle_overlaps_cell_box(c, h, {3.5, 0, 0}, {0, 3.5, 0}, {0, 0, 3.5}));
+    EXPECT_TRUE(triangle_overlaps_cell_box(c, h, {2.9, 0, 0}, {0, 2.9, 0}, {0, 0, 2.9}));
     // AABBs and plane overlap, but an edge axis separates: a thin triangle in
     // the plane z = 0 running diagonally past the corner (1, 1).
-    EXPECT_FALSE(triangle_box_overlap(c, h, {2.2, 0, 0}, {0, 2.2, 0}, {2.3, 0.1, 0}));
-    EXPECT_TRUE(triangle_box_overlap(c, h, {1.9, 0, 0}, {0, 1.9, 0}, {2.3, 0.1, 0}));
+    EXPECT_FALSE(triangle_overlaps_cell_box(c, h, {2.2, 0, 0}, {0, 2.2, 0}, {2.3, 0.1, 0}));
+    EXPECT_TRUE(triangle_overlaps_cell_box(c, h, {1.9, 0, 0}, {0, 1.9, 0}, {2.3, 0.1, 0}));
     // Degenerate triangles: a point, a segment (crossing / missing the box).
-    EXPECT_TRUE(triangle_box_overlap(c, h, {0.5, 0.5, 0.5}, {0.5, 0.5, 0.5}, {0.5, 0.5, 0.5}));
-    EXPECT_FALSE(triangle_box_overlap(c, h, {1.5, 0.5, 0.5}, {1.5, 0.5, 0.5}, {1.5, 0.5, 0.5}));
-    EXPECT_TRUE(triangle_box_overlap(c, h, {-3, -3, 0}, {3, 3, 0}, {0, 0, 0}));
-    EXPECT_FALSE(triangle_box_overlap(c, h, {-1, 3.5, 0}, {3.5, -1, 0}, {1.25, 1.25, 0}));
+    EXPECT_TRUE(triangle_overlaps_cell_box(c, h, {0.5, 0.5, 0.5}, {0.5, 0.5, 0.5}, {0.5, 0.5, 0.5}));
+    EXPECT_FALSE(triangle_overlaps_cell_box(c, h, {1.5, 0.5, 0.5}, {1.5, 0.5, 0.5}, {1.5, 0.5, 0.5}));
+    EXPECT_TRUE(triangle_overlaps_cell_box(c, h, {-3, -3, 0}, {3, 3, 0}, {0, 0, 0}));
+    EXPECT_FALSE(triangle_overlaps_cell_box(c, h, {-1, 3.5, 0}, {3.5, -1, 0}, {1.25, 1.25, 0}));
     // A non-cubic, off-centre box.
-    EXPECT_TRUE(triangle_box_overlap({10, 0, 0}, {0.1, 5, 5}, {9.95, -100, -100}, {9.95, 100, -100}, {9.95, 0, 100}));
-    EXPECT_FALSE(triangle_box_overlap({10, 0, 0}, {0.1, 5, 5}, {10.2, -100, -100}, {10.2, 100, -100}, {10.2, 0, 100}));
+    EXPECT_TRUE(triangle_overlaps_cell_box({10, 0, 0}, {0.1, 5, 5}, {9.95, -100, -100}, {9.95, 100, -100}, {9.95, 0, 100}));
+    EXPECT_FALSE(triangle_overlaps_cell_box({10, 0, 0}, {0.1, 5, 5}, {10.2, -100, -100}, {10.2, 100, -100}, {10.2, 0, 100}));
 }
 
 TEST(UniformGrid, SatOverlapMatchesPolygonClipping) {
@@ -89,7 +93,7 @@ TEST(UniformGrid, SatOverlapMatchesPolygonClipping) {
         const double s = size(rng);
         std::vector<SatVec3> tri;
         for (int k = 0; k < 3; ++k) tri.push_back({centre.x + s * u(rng), centre.y + s * u(rng), centre.z + s * u(rng)});
-        const bool sat = triangle_box_overlap({0, 0, 0}, {1, 1, 1}, tri[0], tri[1], tri[2]);
+        const bool sat = triangle_overlaps_cell_box({0, 0, 0}, {1, 1, 1}, tri[0], tri[1], tri[2]);
         ASSERT_EQ(sat, clip_overlap(lo, hi, tri)) << "case " << i;
         (sat ? overlaps : disjoint) += 1;
     }
@@ -188,8 +192,9 @@ TEST(UniformGrid, EveryCellOverlappingATriangleHoldsIt) {
                     for (int y = lo[1]; y <= hi[1]; ++y)
                         for (int x = lo[0]; x <= hi[0]; ++x) {
                             const Box3f box = grid.cell_box(x, y, z);
-                            const SatVec3 centre(box.center()), half(box.extent() * 0.5f);
-                            if (!triangle_box_overlap(centre, half, SatVec3(tri.v0), SatVec3(tri.v1), SatVec3(tri.v2)))
+                            const SatVec3 centre = to_vec3d(box.center()), half = to_vec3d(box.extent() * 0.5f);
+                            if (!triangle_overlaps_cell_box(centre, half, to_vec3d(tri.v0), to_vec3d(tri.v1),
+                                                            to_vec3d(tri.v2)))
                                 continue;
                             ++overlapped;
                             const size_t c = size_t(x) + size_t(d[0]) * (size_t(y) + size_t(d[1]) * size_t(z));

@@ -1,7 +1,8 @@
 // Uniform grid build (seeds 001 §2.1.2 and 002 §4.2.1): layout by seed 002's
 // resolution rule, exact triangle/cell overlap by Akenine-Möller's SAT test
 // (seed 001), compact per-cell lists built in parallel by a count pass, a
-// prefix sum and a fill pass.
+// prefix sum and a fill pass. The per-triangle cell enumeration lives in
+// uniform_grid_steps.h, shared with the sort-based device build.
 #include "accel/grid/uniform_grid.h"
 
 #include <algorithm>
@@ -11,7 +12,7 @@
 #include <string>
 
 #include "accel/grid/proximity_clouds.h"
-#include "accel/grid/triangle_box_overlap.h"
+#include "accel/grid/uniform_grid_steps.h"
 #include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
@@ -114,125 +115,6 @@ GridLayout choose_grid_layout(const Box3f& bounds, size_t triangle_count, int re
 
 namespace {
 
-// Visits the cells a triangle overlaps (cells inflated by `eps`): cell ranges
-// from the triangle's bounds, then the SAT test per cell. Large triangles
-// are walked in columns along the normal's dominant axis, where the plane
-// spans only a couple of cells, instead of testing their whole bounding box.
-class CellOverlap {
-public:
-    CellOverlap(const GridLayout& layout, double eps) : layout_(layout), eps_(eps) {
-        const GridView view{nullptr, nullptr, nullptr, nullptr, layout.origin, layout.cell_size,
-                            1.0f / layout.cell_size, {layout.dims[0], layout.dims[1], layout.dims[2]}};
-        for (int a = 0; a < 3; ++a) {
-            planes_[a].resize(static_cast<size_t>(layout.dims[a]) + 1);
-            for (int i = 0; i <= layout.dims[a]; ++i) planes_[a][i] = grid_plane(view, a, i);
-        }
-    }
-
-    template <class Visit>
-    void for_each_cell(const Triangle& tri, Visit&& visit) const {
-        const Box3f bb = tri.bounds();
-        int lo[3], hi[3];
-        for (int a = 0; a < 3; ++a) {
-            lo[a] = first_cell(a, bb.lo[a]);
-            hi[a] = last_cell(a, bb.hi[a]);
-            if (lo[a] > hi[a]) return;
-        }
-        const size_t box_cells = size_t(hi[0] - lo[0] + 1) * size_t(hi[1] - lo[1] + 1) * size_t(hi[2] - lo[2] + 1);
-        if (box_cells == 1) {
-            // The triangle lies inside this one (inflated) cell.
-            visit(index(lo[0], lo[1], lo[2]));
-            return;
-        }
-        const SatVec3 v0(tri.v0), v1(tri.v1), v2(tri.v2);
-        const SatVec3 e0 = v1 - v0, e1 = v2 - v0;
-        const SatVec3 n = sat_cross(e0, e1);
-        const double nn = sat_dot(n, n);
-        const bool well_shaped = nn > 1e-12 * sat_dot(e0, e0) * sat_dot(e1, e1);
-        if (box_cells <= 8 || !well_shaped) {
-            // Small boxes, and (near-)degenerate triangles whose plane is unreliable.
-            for (int z = lo[2]; z <= hi[2]; ++z)
-                for (int y = lo[1]; y <= hi[1]; ++y)
-                    for (int x = lo[0]; x <= hi[0]; ++x)
-                        if (overlaps(v0, v1, v2, x, y, z)) visit(index(x, y, z));
-            return;
-        }
-        const double na[3] = {std::fabs(n.x), std::fabs(n.y), std::fabs(n.z)};
-        const int k = na[0] >= na[1] && na[0] >= na[2] ? 0 : (na[1] >= na[2] ? 1 : 2);
-        const int i_axis = k == 0 ? 1 : 0, j_axis = k == 2 ? 1 : 2;
-        const double nv[3] = {n.x, n.y, n.z};
-        const double d = sat_dot(n, v0);
-        int cell[3];
-        for (int ci = lo[i_axis]; ci <= hi[i_axis]; ++ci) {
-            for (int cj = lo[j_axis]; cj <= hi[j_axis]; ++cj) {
-                // The plane's k-range over this column (inflated), clipped to the bounds.
-                const double x0 = planes_[i_axis][ci] - eps_, x1 = planes_[i_axis][ci + 1] + eps_;
-                const double y0 = planes_[j_axis][cj] - eps_, y1 = planes_[j_axis][cj + 1] + eps_;
-                double kmin = std::numeric_limits<double>::infinity(), kmax = -kmin;
-                for (double x : {x0, x1}) {
-                    for (double y : {y0, y1}) {
-                        const double pk = (d - nv[i_axis] * x - nv[j_axis] * y) / nv[k];
-                        kmin = std::min(kmin, pk);
-                        kmax = std::max(kmax, pk);
-                    }
-                }
-                const double slack = 1e-9 * (std::fabs(kmin) + std::fabs(kmax));
-                kmin = std::max(kmin - slack, double(bb.lo[k]));
-                kmax = std::min(kmax + slack, double(bb.hi[k]));
-                if (kmin > kmax) continue;
-                const int k_lo = std::max(lo[k], first_cell(k, kmin));
-                const int k_hi = std::min(hi[k], last_cell(k, kmax));
-                cell[i_axis] = ci;
-                cell[j_axis] = cj;
-                for (int ck = k_lo; ck <= k_hi; ++ck) {
-                    cell[k] = ck;
-                    if (overlaps(v0, v1, v2, cell[0], cell[1], cell[2])) visit(index(cell[0], cell[1], cell[2]));
-                }
-            }
-        }
-    }
-
-private:
-    [[nodiscard]] uint32_t index(int x, int y, int z) const {
-        return static_cast<uint32_t>(x) +
-               static_cast<uint32_t>(layout_.dims[0]) *
-                   (static_cast<uint32_t>(y) + static_cast<uint32_t>(layout_.dims[1]) * static_cast<uint32_t>(z));
-    }
-
-    [[nodiscard]] int estimate(int a, double x) const {
-        const double c = std::floor((x - double(layout_.origin[a])) / double(layout_.cell_size));
-        return static_cast<int>(std::clamp(c, 0.0, double(layout_.dims[a] - 1)));
-    }
-    // The first cell whose inflated box reaches x: planes[i + 1] + eps >= x.
-    [[nodiscard]] int first_cell(int a, double x) const {
-        const std::vector<double>& p = planes_[a];
-        int i = estimate(a, x);
-        while (i > 0 && p[i] + eps_ >= x) --i;
-        while (i < layout_.dims[a] - 1 && p[i + 1] + eps_ < x) ++i;
-        return i;
-    }
-    // The last cell whose inflated box starts at or below x: planes[i] - eps <= x.
-    [[nodiscard]] int last_cell(int a, double x) const {
-        const std::vector<double>& p = planes_[a];
-        int i = estimate(a, x);
-        while (i < layout_.dims[a] - 1 && p[i + 1] - eps_ <= x) ++i;
-        while (i > 0 && p[i] - eps_ > x) --i;
-        return i;
-    }
-
-    [[nodiscard]] bool overlaps(SatVec3 v0, SatVec3 v1, SatVec3 v2, int x, int y, int z) const {
-        const SatVec3 lo(planes_[0][x], planes_[1][y], planes_[2][z]);
-        const SatVec3 hi(planes_[0][x + 1], planes_[1][y + 1], planes_[2][z + 1]);
-        const SatVec3 center(0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), 0.5 * (lo.z + hi.z));
-        const SatVec3 half(0.5 * (hi.x - lo.x) + eps_, 0.5 * (hi.y - lo.y) + eps_, 0.5 * (hi.z - lo.z) + eps_);
-        return triangle_box_overlap(center, half, v0, v1, v2);
-    }
-
-    const GridLayout& layout_;
-    double eps_;
-    std::vector<double> planes_[3];
-};
-
 // Inclusive prefix sum of the per-cell counts in place, in parallel blocks;
 // returns the total. Throws when it does not fit 32-bit offsets.
 uint64_t inclusive_scan(std::vector<uint32_t>& counts, size_t n) {
@@ -279,6 +161,37 @@ Box3f triangle_bounds(std::span<const Triangle> triangles) {
 
 }  // namespace
 
+namespace uniform_grid_steps {
+
+// Margin on every cell, larger than the traversal's rounding: its crossing
+// distances are off by a few ulps of the grid's size and its positions by a
+// few ulps of the coordinates. The triangle test, though, computes in the
+// frame of the ray's origin, so its hits can be off the triangle by a few
+// ulps of the origin's distance: 2^-15 of the grid's size covers origins up
+// to ~50 grid sizes away (beyond that, a hit within rounding of a silhouette
+// edge, an artefact of that rounding, can be missed).
+double cell_inflation(const GridLayout& layout) {
+    const GridView shape{nullptr, nullptr, nullptr, nullptr, layout.origin, layout.cell_size, 0.0f, {0, 0, 0}};
+    Box3f grid_box;
+    for (int a = 0; a < 3; ++a) {
+        grid_box.lo[a] = grid_plane(shape, a, 0);
+        grid_box.hi[a] = grid_plane(shape, a, layout.dims[a]);
+    }
+    return 1e-4 * layout.cell_size + double(max_component(grid_box.extent())) * 0x1p-15 +
+           max_abs_coordinate(grid_box) * 0x1p-22;
+}
+
+CellPlanes::CellPlanes(const GridLayout& layout) {
+    const GridView shape{nullptr, nullptr, nullptr, nullptr, layout.origin, layout.cell_size, 0.0f, {0, 0, 0}};
+    budgeted_reserve(values, size_t(layout.dims[0]) + layout.dims[1] + layout.dims[2] + 3, "uniform grid: cell planes");
+    for (int a = 0; a < 3; ++a) {
+        offset[a] = values.size();
+        for (int i = 0; i <= layout.dims[a]; ++i) values.push_back(double(grid_plane(shape, a, i)));
+    }
+}
+
+}  // namespace uniform_grid_steps
+
 UniformGrid build_uniform_grid(std::span<const Triangle> triangles, int resolution, bool proximity_clouds) {
     UniformGrid grid;
     if (triangles.size() > std::numeric_limits<uint32_t>::max() - 1) {
@@ -289,29 +202,18 @@ UniformGrid build_uniform_grid(std::span<const Triangle> triangles, int resoluti
     const size_t cells = grid.layout.cell_count();
     if (cells == 0) return grid;
 
-    // Margin on every cell, larger than the traversal's rounding: its crossing
-    // distances are off by a few ulps of the grid's size and its positions by
-    // a few ulps of the coordinates. The triangle test, though, computes in
-    // the frame of the ray's origin, so its hits can be off the triangle by a
-    // few ulps of the origin's distance: 2^-15 of the grid's size covers
-    // origins up to ~50 grid sizes away (beyond that, a hit within rounding
-    // of a silhouette edge, an artefact of that rounding, can be missed).
-    Box3f grid_box;
-    const GridView shape = grid.view(nullptr);
-    for (int a = 0; a < 3; ++a) {
-        grid_box.lo[a] = grid_plane(shape, a, 0);
-        grid_box.hi[a] = grid_plane(shape, a, grid.layout.dims[a]);
-    }
-    grid.inflation = 1e-4 * grid.layout.cell_size + double(max_component(grid_box.extent())) * 0x1p-15 +
-                     max_abs_coordinate(grid_box) * 0x1p-22;
-    const CellOverlap overlap(grid.layout, grid.inflation);
+    // The margin on every cell and the cells' planes (uniform_grid_steps.h,
+    // shared with the device build so that both fill the same cells).
+    grid.inflation = uniform_grid_steps::cell_inflation(grid.layout);
+    const uniform_grid_steps::CellPlanes planes(grid.layout);
+    const uniform_grid_steps::CellGridView overlap = planes.view(grid.layout, grid.inflation, planes.values.data());
 
     // Count pass: references per cell.
     budgeted_resize(grid.cell_start, cells + 1, "uniform grid: cell offsets");
     uint32_t* start = grid.cell_start.data();
     parallel::for_range(size_t(0), triangles.size(), kTriangleGrain, [&](size_t lo, size_t hi) {
         for (size_t t = lo; t < hi; ++t) {
-            overlap.for_each_cell(triangles[t], [&](uint32_t cell) {
+            uniform_grid_steps::for_each_overlapped_cell(overlap, triangles[t], [&](uint32_t cell) {
                 std::atomic_ref<uint32_t>(start[cell]).fetch_add(1, std::memory_order_relaxed);
             });
         }
@@ -325,7 +227,7 @@ UniformGrid build_uniform_grid(std::span<const Triangle> triangles, int resoluti
     uint32_t* prims = grid.cell_prims.data();
     parallel::for_range(size_t(0), triangles.size(), kTriangleGrain, [&](size_t lo, size_t hi) {
         for (size_t t = lo; t < hi; ++t) {
-            overlap.for_each_cell(triangles[t], [&](uint32_t cell) {
+            uniform_grid_steps::for_each_overlapped_cell(overlap, triangles[t], [&](uint32_t cell) {
                 const uint32_t slot = std::atomic_ref<uint32_t>(start[cell]).fetch_sub(1, std::memory_order_relaxed) - 1;
                 prims[slot] = static_cast<uint32_t>(t);
             });
