@@ -1,39 +1,16 @@
 // Conversion of the canonical BVH to the node-pair layout of Aila and Laine
-// 2009 ("Understanding the Efficiency of Ray Traversal on GPUs").
+// 2009 ("Understanding the Efficiency of Ray Traversal on GPUs"), depth
+// first; the node and leaf-list writers are aila_laine_steps.h's, shared with
+// the device conversion (backend/cuda/layout_convert.cu).
 #include "accel/bvh/wide/aila_laine_layout.h"
 
-#include <cstring>
 #include <limits>
 #include <string>
 
+#include "accel/bvh/wide/aila_laine_steps.h"
 #include "rayforge/core/error.h"
 
 namespace rf {
-
-namespace {
-
-float float_from_bits(uint32_t bits) {
-    float f;
-    std::memcpy(&f, &bits, sizeof f);
-    return f;
-}
-
-AilaLaineFloat4 vertex(const Vec3f& v, float w) { return {v.x, v.y, v.z, w}; }
-
-// Stores `box` as child slot `side` (0 or 1) of `node`.
-void set_child_box(AilaLaineNode& node, int side, const Box3f& box) {
-    AilaLaineFloat4& xy = side == 0 ? node.xy0 : node.xy1;
-    xy = {box.lo.x, box.hi.x, box.lo.y, box.hi.y};
-    if (side == 0) {
-        node.z.x = box.lo.z;
-        node.z.y = box.hi.z;
-    } else {
-        node.z.z = box.lo.z;
-        node.z.w = box.hi.z;
-    }
-}
-
-}  // namespace
 
 AilaLaineBvh convert_to_aila_laine(const Bvh& bvh, std::span<const Triangle> triangles) {
     AilaLaineBvh out;
@@ -55,12 +32,9 @@ AilaLaineBvh convert_to_aila_laine(const Bvh& bvh, std::span<const Triangle> tri
             const uint32_t prim = bvh.prim_indices[slot];
             if (prim >= triangles.size())
                 throw Error("convert_to_aila_laine: primitive index " + std::to_string(prim) + " out of range");
-            const Triangle& tri = triangles[prim];
-            out.triangles.push_back(vertex(tri.v0, float_from_bits(prim)));
-            out.triangles.push_back(vertex(tri.v1, 0.0f));
-            out.triangles.push_back(vertex(tri.v2, 0.0f));
         }
-        out.triangles.push_back({float_from_bits(kAilaLaineLeafEndX), 0.0f, 0.0f, float_from_bits(kAilaLaineLeafEndW)});
+        out.triangles.resize(offset + aila_laine::leaf_list_float4s(leaf.count));
+        aila_laine::write_leaf_list(leaf, bvh.prim_indices.data(), triangles.data(), &out.triangles[offset]);
         ++out.leaf_count;
         out.triangle_refs += leaf.count;
         return ~static_cast<int32_t>(offset);
@@ -105,8 +79,8 @@ AilaLaineBvh convert_to_aila_laine(const Bvh& bvh, std::span<const Triangle> tri
         if (p.parent >= 0) out.nodes[static_cast<size_t>(p.parent)].link[p.side] = index;
         out.nodes.emplace_back();  // value-initialised: links and padding 0
         AilaLaineNode& converted = out.nodes.back();
-        set_child_box(converted, 0, bvh.nodes[left].bounds);
-        set_child_box(converted, 1, bvh.nodes[left + 1].bounds);
+        aila_laine::set_child_box(converted, 0, bvh.nodes[left].bounds);
+        aila_laine::set_child_box(converted, 1, bvh.nodes[left + 1].bounds);
         pending.push_back({left + 1, index, 1, p.depth + 1});
         pending.push_back({left, index, 0, p.depth + 1});
     }

@@ -99,6 +99,8 @@ struct AilaLaineBvh {
 // memory; leaf lists are laid out in the same depth-first order. Throws
 // rf::Error when the BVH is malformed (links or prim indices out of range,
 // deeper than kBvhMaxDepth) or too large for 31-bit links.
+// rf::cuda::convert_to_aila_laine_on_device gives the same arrays
+// (aila_laine_steps.h).
 AilaLaineBvh convert_to_aila_laine(const Bvh& bvh, std::span<const Triangle> triangles);
 
 }  // namespace rf

@@ -46,6 +46,11 @@
 // (plus a tiny constant so that zero-area subtrees still prefer fewer nodes).
 // collapse_bvh<8> (wide_bvh.h) could not be reused: it never splits a binary
 // leaf and counts 4-triangle packs.
+// The steps are shared with the device conversion (rf::cuda::
+// build_cwbvh_on_device, backend/cuda/layout_convert.cu), which gives the
+// same arrays: cwbvh_refine_steps.h, cwbvh_collapse_steps.h (the DP),
+// cwbvh_encode_steps.h (slots, quantisation, node encoding) and
+// cwbvh_emit_steps.h (the depth-first numbering level by level).
 //
 // Triangles are stored as their original vertices (three float4s, the
 // triangle index bit-cast into v0.w), as in aila_laine_layout.h, so the
@@ -162,14 +167,14 @@ struct CwbvhBvh {
 // slots in `used` (bit s = slot s; the others get zeros). Returns false when
 // the boxes cannot be quantised conservatively in float (non-finite, or
 // extents near FLT_MAX).
-bool cwbvh_quantize(CwbvhNode& node, const Box3f (&boxes)[kCwbvhWidth], unsigned used);
+RF_HDI bool cwbvh_quantize(CwbvhNode& node, const Box3f (&boxes)[kCwbvhWidth], unsigned used);
 
 // Octant slot assignment (section 4.2). cost[c][s], c < count <= 8: the
 // cost of child c in slot s, dot(child centre - node centre, diagonal of
 // octant s) with the diagonal's component a = -1 where s has bit a, else +1.
 // Rows >= count are left untouched. Node centre: centre of the union of the
 // child boxes.
-void cwbvh_slot_costs(const Box3f* child_boxes, int count, double (&cost)[kCwbvhWidth][kCwbvhWidth]);
+RF_HDI void cwbvh_slot_costs(const Box3f* child_boxes, int count, double (&cost)[kCwbvhWidth][kCwbvhWidth]);
 
 // Both return slot_of[c] for c < count: distinct slots in 0..7.
 // Auction algorithm (Bertsekas), what build_cwbvh uses: the summed cost is
@@ -178,8 +183,8 @@ void cwbvh_slot_costs(const Box3f* child_boxes, int count, double (&cost)[kCwbvh
 // other assignment by more than that (integer costs of range < 1e6, say).
 // Non-finite costs are treated as worse than every finite one. Terminates
 // for every input.
-void cwbvh_assign_slots_auction(const double (&cost)[kCwbvhWidth][kCwbvhWidth], int count,
-                                int (&slot_of)[kCwbvhWidth]);
+RF_HDI void cwbvh_assign_slots_auction(const double (&cost)[kCwbvhWidth][kCwbvhWidth], int count,
+                                       int (&slot_of)[kCwbvhWidth]);
 // Greedy, cheapest (child, slot) pair first (what the builder used before;
 // kept for comparison): can be arbitrarily worse than the optimum.
 void cwbvh_assign_slots_greedy(const double (&cost)[kCwbvhWidth][kCwbvhWidth], int count,
@@ -192,3 +197,6 @@ void cwbvh_assign_slots_greedy(const double (&cost)[kCwbvhWidth][kCwbvhWidth], i
 CwbvhBvh build_cwbvh(const Bvh& bvh, const std::vector<Triangle>& triangles);
 
 }  // namespace rf
+
+// The definitions of the host/device steps above (and the per-node encoding).
+#include "accel/bvh/wide/cwbvh_encode_steps.h"
