@@ -8,6 +8,13 @@
 // children), that every primitive is in exactly one leaf, the level-wise
 // bottom-up boxes, and that the host emission (emit_hlbvh2_forest, the
 // device build's host half) gives build_hlbvh2's BVH. A wrong split must fail.
+// The top level (hlbvh2_top_level.h; backend/cuda/hlbvh2_top_level.cu) is run
+// the same way: one launch per level, 4 tasks per warp, 8 lanes per task
+// whose shuffles (butterfly bounds, prefix/suffix bin scans, the candidate
+// fold) and ballots (the stable partition, the enqueue) are emulated lane by
+// lane, warps shuffled; its references must be the CPU's top level
+// (build_hlbvh2_top_level) and, emitted, give build_hlbvh2's BVH. A wrong
+// tie rule must fail.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -21,6 +28,7 @@
 #include "accel/bvh/build/hlbvh2.h"
 #include "accel/bvh/build/hlbvh2_emit.h"
 #include "accel/bvh/build/hlbvh2_tasks.h"
+#include "accel/bvh/build/hlbvh2_top_level.h"
 #include "accel/bvh/build/morton_tree.h"
 #include "accel_test_scenes.h"
 #include "rayforge/core/error.h"
@@ -218,8 +226,8 @@ std::vector<NamedScene> scenes() {
     return out;
 }
 
-Hlbvh2Forest to_forest(const SortedClusters& s, const QueueForest& f) {
-    return {s.order, f.refs, s.cluster_begin, s.cluster_prefix};
+Hlbvh2Forest to_forest(const SortedClusters& s, const QueueForest& f, std::vector<uint32_t> top_refs = {}) {
+    return {s.order, f.refs, s.cluster_begin, s.cluster_prefix, std::move(top_refs)};
 }
 
 bool same_bvh(const Bvh& a, const Bvh& b) {
@@ -352,6 +360,351 @@ TEST(Hlbvh2DeviceLogic, MalformedForestThrows) {
     // A cluster root pointing at a leaf that is not its range's start.
     bad.refs[2 * (n - 1)] = kLeafRef | 1u;
     EXPECT_THROW((void)emit_hlbvh2_forest(g.triangles, BuildOptions{.max_leaf_size = 1}, std::move(bad)), Error);
+}
+
+// ---- The top level ----
+
+using hlbvh2::TopBin;
+using hlbvh2::TopCluster;
+using hlbvh2::TopTask;
+constexpr uint32_t kLanes = hlbvh2::kTopLanes;
+constexpr uint32_t kTasksPerWarp = kWarp / kLanes;
+
+// The tie rule the checks must catch: a later candidate of equal cost wins.
+bool consider_last_of_equals(hlbvh2::TopSplit& best, float cost, int axis, uint32_t plane) {
+    if (best.axis >= 0 && !(cost <= best.cost)) return false;
+    best = {cost, axis, plane};
+    return true;
+}
+using Consider = bool (*)(hlbvh2::TopSplit&, float, int, uint32_t);
+
+// process_top_task of hlbvh2_top_level.cu, its 8 lanes in lockstep: each
+// shuffle reads the other lanes' values from before the step.
+uint32_t emulate_top_task(const TopTask& task, const TopCluster* in, TopCluster* out, uint32_t top_base,
+                          uint32_t* top_refs, TopTask children[2], Consider consider) {
+    const uint32_t count = task.end - task.first;
+    hlbvh2::CellBounds bounds[kLanes];
+    for (uint32_t lane = 0; lane < kLanes; ++lane) {
+        bounds[lane] = hlbvh2::strided_cell_bounds(in, task.first, task.end, lane, kLanes);
+    }
+    for (uint32_t d = kLanes / 2; d > 0; d /= 2) {  // __shfl_xor_sync butterfly
+        hlbvh2::CellBounds next[kLanes];
+        for (uint32_t lane = 0; lane < kLanes; ++lane) {
+            next[lane] = bounds[lane];
+            hlbvh2::merge(next[lane], bounds[lane ^ d]);
+        }
+        std::copy(next, next + kLanes, bounds);
+    }
+    TopBin bins[kLanes][3];
+    for (uint32_t lane = 0; lane < kLanes; ++lane) {
+        hlbvh2::bin_task_lane(in, task.first, task.end, bounds[lane], lane, bins[lane]);
+    }
+    float cost[kLanes][3] = {};
+    bool valid[kLanes][3] = {};
+    uint32_t left_clusters[kLanes][3] = {};
+    for (int axis = 0; axis < 3; ++axis) {
+        TopBin below[kLanes], above[kLanes];
+        for (uint32_t lane = 0; lane < kLanes; ++lane) below[lane] = above[lane] = bins[lane][axis];
+        for (uint32_t d = 1; d < kLanes; d *= 2) {  // __shfl_up_sync / __shfl_down_sync scans
+            TopBin next_below[kLanes], next_above[kLanes];
+            for (uint32_t lane = 0; lane < kLanes; ++lane) {
+                next_below[lane] = lane >= d ? hlbvh2::merge_bins(below[lane - d], below[lane]) : below[lane];
+                next_above[lane] = lane + d < kLanes ? hlbvh2::merge_bins(above[lane], above[lane + d]) : above[lane];
+            }
+            std::copy(next_below, next_below + kLanes, below);
+            std::copy(next_above, next_above + kLanes, above);
+        }
+        for (uint32_t lane = 0; lane < kLanes; ++lane) {
+            const TopBin left = lane == 0 ? TopBin{} : below[lane - 1];
+            valid[lane][axis] = lane >= 1 && lane < hlbvh2::axis_bins(bounds[lane], axis) &&
+                                hlbvh2::plane_cost(left, above[lane], &cost[lane][axis]);
+            left_clusters[lane][axis] = left.clusters;
+        }
+    }
+    hlbvh2::TopSplit split;  // every lane folds the same candidates: lane 0's fold stands for all
+    uint32_t left_count = count / 2;
+    for (int axis = 0; axis < 3; ++axis) {
+        for (uint32_t plane = 1; plane < kLanes; ++plane) {
+            if (valid[plane][axis] && consider(split, cost[plane][axis], axis, plane)) {
+                left_count = left_clusters[plane][axis];
+            }
+        }
+    }
+    const uint32_t right_count = count - left_count;
+    uint32_t lefts = 0;
+    for (uint32_t chunk = task.first; chunk < task.end; chunk += kLanes) {
+        bool left[kLanes] = {};
+        uint32_t left_bits = 0;  // the ballot
+        for (uint32_t lane = 0; lane < kLanes; ++lane) {
+            const uint32_t i = chunk + lane;
+            if (i >= task.end) continue;
+            left[lane] = split.axis >= 0 ? hlbvh2::goes_left(in[i], bounds[lane], split) : i - task.first < left_count;
+            left_bits |= (left[lane] ? 1u : 0u) << lane;
+        }
+        for (uint32_t lane = 0; lane < kLanes; ++lane) {
+            const uint32_t i = chunk + lane;
+            if (i >= task.end) continue;
+            const uint32_t lefts_before = lefts + static_cast<uint32_t>(std::popcount(left_bits & ((1u << lane) - 1u)));
+            const uint32_t at = left[lane] ? task.first + lefts_before : task.first + left_count + (i - task.first - lefts_before);
+            out[at] = in[i];
+            if (left[lane] && left_count == 1) top_refs[2 * task.node] = in[i].root;
+            if (!left[lane] && right_count == 1) top_refs[2 * task.node + 1] = in[i].root;
+        }
+        lefts += static_cast<uint32_t>(std::popcount(left_bits));
+    }
+    TopTask halves[2];
+    hlbvh2::child_tasks(task, left_count, halves);
+    uint32_t inner = 0;
+    for (int side = 0; side < 2; ++side) {
+        if (halves[side].end - halves[side].first < 2) continue;
+        top_refs[2 * task.node + side] = top_base + halves[side].node;
+        children[inner++] = halves[side];
+    }
+    return inner;
+}
+
+struct QueueTop {
+    std::vector<uint32_t> refs;                       // 2 per top node
+    std::vector<std::vector<uint32_t>> level_nodes;   // per level, the task's node numbers
+};
+
+// The task-queue launches of hlbvh2_top_level.cu, warps in a shuffled order.
+QueueTop run_top_task_queues(std::vector<TopCluster> clusters, uint32_t top_base, uint32_t seed,
+                             Consider consider = hlbvh2::consider) {
+    const uint32_t count = static_cast<uint32_t>(clusters.size());
+    QueueTop top;
+    if (count < 2) return top;
+    top.refs.assign(2 * size_t{count - 1}, kUnset);
+    std::vector<TopCluster> buffer[2] = {std::move(clusters), std::vector<TopCluster>(count)};
+    std::vector<TopTask> queue[2] = {{TopTask{0, count, 0}}, {}};
+    std::mt19937 rng(seed);
+    int side = 0;
+    while (!queue[side].empty()) {
+        const std::vector<TopTask>& input = queue[side];
+        std::vector<TopTask>& output = queue[1 - side];
+        output.assign(count / 2, TopTask{kUnset, kUnset, kUnset});
+        uint32_t tail = 0;
+        std::vector<uint32_t> nodes(input.size(), kUnset);
+        std::vector<uint32_t> warps((input.size() + kTasksPerWarp - 1) / kTasksPerWarp);
+        std::iota(warps.begin(), warps.end(), 0u);
+        std::shuffle(warps.begin(), warps.end(), rng);
+        for (uint32_t warp : warps) {
+            TopTask children[kTasksPerWarp][2];
+            uint32_t inner[kTasksPerWarp] = {};
+            uint32_t one_or_more = 0, two = 0;  // ballots of the tasks' lane 0s
+            for (uint32_t group = 0; group < kTasksPerWarp; ++group) {
+                const size_t at = size_t{warp} * kTasksPerWarp + group;
+                if (at >= input.size()) continue;
+                inner[group] = emulate_top_task(input[at], buffer[side].data(), buffer[1 - side].data(), top_base,
+                                                top.refs.data(), children[group], consider);
+                nodes[at] = input[at].node;
+                one_or_more |= (inner[group] >= 1 ? 1u : 0u) << (group * kLanes);
+                two |= (inner[group] == 2 ? 1u : 0u) << (group * kLanes);
+            }
+            const uint32_t base = tail;
+            tail += hlbvh2::enqueue_total(one_or_more, two);
+            for (uint32_t group = 0; group < kTasksPerWarp; ++group) {
+                const uint32_t offset = base + hlbvh2::enqueue_offset(one_or_more, two, static_cast<int>(group * kLanes));
+                for (uint32_t k = 0; k < inner[group]; ++k) output[offset + k] = children[group][k];
+            }
+        }
+        output.resize(tail);
+        top.level_nodes.push_back(std::move(nodes));
+        queue[side].clear();
+        side = 1 - side;
+    }
+    return top;
+}
+
+// The clusters as the device's top level sees them, after the bottom levels.
+std::vector<TopCluster> top_clusters(const SortedClusters& s, const QueueForest& f, std::vector<Box3f>& inner_boxes) {
+    const uint32_t n = static_cast<uint32_t>(s.keys.size());
+    inner_boxes.assign(n > 0 ? n - 1 : 0, Box3f{});
+    const hlbvh2::BoxView view{f.refs.data(), f.leaf_runs.data(), s.order.data(), s.triangle_boxes.data(),
+                               inner_boxes.data()};
+    for (size_t l = f.level_nodes.size(); l-- > 0;) {
+        for (uint32_t node : f.level_nodes[l]) {
+            if (node != hlbvh2::kNoNode) hlbvh2::node_box(view, node);
+        }
+    }
+    std::vector<TopCluster> clusters;
+    for (size_t c = 0; c < s.cluster_prefix.size(); ++c) {
+        const uint32_t root = f.refs[2 * (n - 1) + c];
+        clusters.push_back({hlbvh2::reference_box(view, root), hlbvh2::pack_cells(s.cluster_prefix[c]),
+                            s.cluster_begin[c + 1] - s.cluster_begin[c], root});
+    }
+    return clusters;
+}
+
+std::vector<NamedScene> top_scenes() {
+    std::vector<NamedScene> out = scenes();
+    out.push_back({"big soup", test::make_triangle_soup(40000, 2, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.05f)});
+    SceneGeometry plane;  // every centroid at z = 0: every cluster in one cell-plane
+    for (int x = 0; x < 40; ++x) {
+        for (int y = 0; y < 40; ++y) {
+            const Vec3f p{static_cast<float>(x), static_cast<float>(y) * 0.7f, 0.0f};
+            test::append(plane, {p, p + Vec3f(0.3f, 0, 0), p + Vec3f(0, 0.3f, 0)});
+        }
+    }
+    out.push_back({"one cell-plane", std::move(plane)});
+    SceneGeometry lattice;  // 8^3 equal triangles on a cubic lattice: equal costs on every axis
+    for (int x = 0; x < 8; ++x) {
+        for (int y = 0; y < 8; ++y) {
+            for (int z = 0; z < 8; ++z) {
+                const Vec3f p{static_cast<float>(x), static_cast<float>(y), static_cast<float>(z)};
+                test::append(lattice, {p - Vec3f(0.1f), p + Vec3f(0.1f, 0.1f, -0.1f), p + Vec3f(-0.1f, 0.1f, 0.1f)});
+            }
+        }
+    }
+    out.push_back({"equal costs", std::move(lattice)});
+    return out;
+}
+
+// Random distinct cells with random boxes, as the top level's only input.
+std::vector<TopCluster> random_clusters(uint32_t count, uint32_t seed, float extent) {
+    std::mt19937 rng(seed);
+    std::vector<uint32_t> prefixes(1u << 15);
+    std::iota(prefixes.begin(), prefixes.end(), 0u);
+    std::shuffle(prefixes.begin(), prefixes.end(), rng);
+    prefixes.resize(count);
+    std::sort(prefixes.begin(), prefixes.end());
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    std::vector<TopCluster> clusters;
+    for (uint32_t c = 0; c < count; ++c) {
+        TopCluster cl;
+        const uint32_t cells = hlbvh2::pack_cells(prefixes[c]);
+        const Vec3f lo{(hlbvh2::cell_of(cells, 0) + unit(rng) * 0.5f) * extent,
+                       (hlbvh2::cell_of(cells, 1) + unit(rng) * 0.5f) * extent,
+                       (hlbvh2::cell_of(cells, 2) + unit(rng) * 0.5f) * extent};
+        cl.box.lo = lo;
+        cl.box.hi = lo + Vec3f(unit(rng), unit(rng), unit(rng)) * extent;
+        cl.cells = cells;
+        cl.triangles = 1 + rng() % 50;
+        cl.root = kLeafRef | (c * 64);
+        clusters.push_back(cl);
+    }
+    return clusters;
+}
+
+TEST(Hlbvh2DeviceLogic, TopLevelTaskQueuesBuildTheCpuTopLevel) {
+    for (const NamedScene& scene : top_scenes()) {
+        for (uint32_t leaf_size : {1u, 4u}) {
+            SCOPED_TRACE(scene.name + ", leaves of " + std::to_string(leaf_size));
+            const SortedClusters s = sort_and_cluster(scene.geometry.triangles);
+            if (s.keys.size() < 2) continue;
+            const uint32_t n = static_cast<uint32_t>(s.keys.size());
+            const QueueForest f = run_work_queues(s, leaf_size, 5);
+            std::vector<Box3f> inner_boxes;
+            const std::vector<TopCluster> clusters = top_clusters(s, f, inner_boxes);
+            if (scene.name == "one point") EXPECT_EQ(clusters.size(), 1u);
+            if (scene.name == "two") EXPECT_EQ(clusters.size(), 2u);
+            if (scene.name == "one cell-plane") {
+                EXPECT_GT(clusters.size(), 8u);
+                for (const TopCluster& c : clusters) EXPECT_EQ(hlbvh2::cell_of(c.cells, 2), hlbvh2::cell_of(clusters[0].cells, 2));
+            }
+            std::vector<TopCluster> cpu_clusters = clusters;
+            const std::vector<uint32_t> expected = build_hlbvh2_top_level(cpu_clusters, n - 1);
+            ASSERT_EQ(expected.size(), clusters.size() > 1 ? 2 * (clusters.size() - 1) : 0u);
+            // Two warp schedules (the second seed depends on the leaf size: four in all).
+            QueueTop top;
+            for (uint32_t seed : {1u, 2u + leaf_size}) {
+                top = run_top_task_queues(clusters, n - 1, seed);
+                EXPECT_EQ(top.refs, expected);
+                size_t nodes = 0;
+                for (const auto& level : top.level_nodes) nodes += level.size();
+                EXPECT_EQ(nodes, clusters.size() > 1 ? clusters.size() - 1 : 0u) << "every task is one top node";
+            }
+            const BuildOptions options{.max_leaf_size = static_cast<int>(leaf_size)};
+            EXPECT_TRUE(same_bvh(build_hlbvh2(scene.geometry.triangles, options),
+                                 emit_hlbvh2_forest(scene.geometry.triangles, options, to_forest(s, f, top.refs))));
+        }
+    }
+}
+
+TEST(Hlbvh2DeviceLogic, TopLevelOfRandomAndExtremeClusters) {
+    // Random cells; tiny and huge boxes (areas overflowing to inf and NaN
+    // costs follow the same tie rules on both sides); equal boxes (all ties).
+    for (uint32_t count : {2u, 3u, 9u, 100u, 1000u, 5000u}) {
+        for (float extent : {1e-30f, 1.0f, 1e18f, 1e37f, 3e37f}) {
+            SCOPED_TRACE(std::to_string(count) + " clusters, extent " + std::to_string(extent));
+            std::vector<TopCluster> clusters = random_clusters(count, count + 17, extent);
+            std::vector<TopCluster> cpu = clusters;
+            const uint32_t top_base = 64 * count;
+            EXPECT_EQ(run_top_task_queues(clusters, top_base, count).refs, build_hlbvh2_top_level(cpu, top_base));
+            for (TopCluster& c : clusters) {
+                c.box = clusters[0].box;
+                c.triangles = 3;
+            }
+            cpu = clusters;
+            EXPECT_EQ(run_top_task_queues(clusters, top_base, count + 1).refs, build_hlbvh2_top_level(cpu, top_base));
+        }
+    }
+}
+
+TEST(Hlbvh2DeviceLogic, TopLevelBoxesAreUnionsOfClusters) {
+    const SortedClusters s = sort_and_cluster(test::make_triangle_soup(20000, 8, {Vec3f(-5.0f), Vec3f(5.0f)}, 0.2f).triangles);
+    const uint32_t n = static_cast<uint32_t>(s.keys.size());
+    const QueueForest f = run_work_queues(s, 4, 2);
+    std::vector<Box3f> inner_boxes;
+    const std::vector<TopCluster> clusters = top_clusters(s, f, inner_boxes);
+    ASSERT_GT(clusters.size(), 100u);
+    const QueueTop top = run_top_task_queues(clusters, n - 1, 4);
+    std::vector<Box3f> top_boxes(clusters.size() - 1);
+    const hlbvh2::TopBoxView view{{f.refs.data(), f.leaf_runs.data(), s.order.data(), s.triangle_boxes.data(),
+                                   inner_boxes.data()},
+                                  top.refs.data(), n - 1, top_boxes.data()};
+    for (size_t l = top.level_nodes.size(); l-- > 0;) {  // deepest level first, one launch each
+        for (uint32_t k : top.level_nodes[l]) hlbvh2::top_node_box(view, k);
+    }
+    // The root's box is the union of every cluster's; every box holds its children's.
+    Box3f all = clusters[0].box;
+    for (const TopCluster& c : clusters) all = hlbvh2::box_union(all, c.box);
+    EXPECT_TRUE(same_box(top_boxes[0], all));
+    size_t wrong = 0;
+    for (size_t k = 0; k < top_boxes.size(); ++k) {
+        for (int side = 0; side < 2; ++side) {
+            const Box3f child = hlbvh2::top_reference_box(view, top.refs[2 * k + side]);
+            wrong += !same_box(hlbvh2::box_union(top_boxes[k], child), top_boxes[k]);
+        }
+    }
+    EXPECT_EQ(wrong, 0u);
+}
+
+TEST(Hlbvh2DeviceLogic, WrongTopTieRuleIsCaught) {
+    const std::vector<NamedScene> all = top_scenes();
+    const SceneGeometry& g = all.back().geometry;  // equal costs
+    const SortedClusters s = sort_and_cluster(g.triangles);
+    const uint32_t n = static_cast<uint32_t>(s.keys.size());
+    const QueueForest f = run_work_queues(s, 1, 1);
+    std::vector<Box3f> inner_boxes;
+    const std::vector<TopCluster> clusters = top_clusters(s, f, inner_boxes);
+    std::vector<TopCluster> cpu = clusters;
+    const QueueTop wrong = run_top_task_queues(clusters, n - 1, 1, consider_last_of_equals);
+    EXPECT_NE(wrong.refs, build_hlbvh2_top_level(cpu, n - 1));
+    const BuildOptions options{.max_leaf_size = 1};
+    EXPECT_FALSE(same_bvh(build_hlbvh2(g.triangles, options),
+                          emit_hlbvh2_forest(g.triangles, options, to_forest(s, f, wrong.refs))));
+}
+
+TEST(Hlbvh2DeviceLogic, MalformedTopLevelThrows) {
+    const SceneGeometry g = test::make_triangle_soup(2000, 4, {Vec3f(-1.0f), Vec3f(1.0f)}, 0.2f);
+    const SortedClusters s = sort_and_cluster(g.triangles);
+    const uint32_t n = static_cast<uint32_t>(s.keys.size());
+    const QueueForest f = run_work_queues(s, 1, 1);
+    std::vector<Box3f> inner_boxes;
+    const std::vector<uint32_t> good = run_top_task_queues(top_clusters(s, f, inner_boxes), n - 1, 1).refs;
+    ASSERT_GT(good.size(), 4u);
+    const BuildOptions options{.max_leaf_size = 1};
+    EXPECT_NO_THROW((void)emit_hlbvh2_forest(g.triangles, options, to_forest(s, f, good)));
+    std::vector<uint32_t> bad = good;
+    bad[2] = n - 1;  // a child replaced by the root: a cycle
+    EXPECT_THROW((void)emit_hlbvh2_forest(g.triangles, options, to_forest(s, f, bad)), Error);
+    bad = good;
+    bad.back() = bad.front();  // a reference used twice
+    EXPECT_THROW((void)emit_hlbvh2_forest(g.triangles, options, to_forest(s, f, bad)), Error);
+    bad = good;
+    bad.pop_back();
+    EXPECT_THROW((void)emit_hlbvh2_forest(g.triangles, options, to_forest(s, f, bad)), Error);
 }
 
 }  // namespace

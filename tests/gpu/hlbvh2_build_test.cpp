@@ -3,17 +3,23 @@
 // soups, spheres and degenerate inputs; the device's forest (order, clusters,
 // references) equal to the CPU's sort and shared task steps; the device's
 // level-wise cluster boxes equal to the unions of their triangles' boxes;
-// the stage report filled. Skips with a message when no CUDA device is present.
+// the device's top level (hlbvh2_top_level.cu, task queues) equal to the
+// CPU's (build_hlbvh2_top_level over the same clusters) with its boxes the
+// unions of their clusters'; the stage report filled. Skips with a message
+// when no CUDA device is present.
 #include <gtest/gtest.h>
 
 #include <cstring>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "../accel_test_scenes.h"
 #include "gpu_build_checks.h"
 #include "accel/bvh/build/hlbvh2.h"
+#include "accel/bvh/build/hlbvh2_emit.h"
 #include "accel/bvh/build/hlbvh2_tasks.h"
+#include "accel/bvh/build/hlbvh2_top_level.h"
 #include "accel/bvh/build/morton_tree.h"
 #include "backend/cuda/hlbvh2_build.h"
 #include "rayforge/backend/cuda.h"
@@ -87,6 +93,48 @@ TEST(GpuHlbvh2Build, DeviceForestAndClusterBoxes) {
     }
 }
 
+TEST(GpuHlbvh2Build, DeviceTopLevelIsTheCpuTopLevel) {
+    RF_REQUIRE_DEVICE();
+    for (const NamedScene& scene : test_scenes()) {
+        SCOPED_TRACE(scene.name);
+        const cuda::DeviceHlbvh2Forest dev = cuda::build_hlbvh2_forest_on_device(scene.geometry.triangles, 4);
+        const size_t clusters = dev.forest.cluster_prefix.size();
+        if (clusters < 2) {
+            EXPECT_TRUE(dev.forest.top_refs.empty());
+            continue;
+        }
+        const uint32_t n = static_cast<uint32_t>(dev.forest.order.size());
+        std::vector<hlbvh2::TopCluster> cpu(clusters);
+        for (size_t c = 0; c < clusters; ++c) {
+            cpu[c] = {dev.cluster_boxes[c], hlbvh2::pack_cells(dev.forest.cluster_prefix[c]),
+                      dev.forest.cluster_begin[c + 1] - dev.forest.cluster_begin[c], dev.forest.refs[2 * (n - 1) + c]};
+        }
+        const std::vector<hlbvh2::TopCluster> original = cpu;
+        ASSERT_EQ(dev.forest.top_refs, build_hlbvh2_top_level(cpu, n - 1));
+        EXPECT_GE(dev.top_level_sizes.size(), 1u);
+        // Each top box is the union of the clusters below it.
+        ASSERT_EQ(dev.top_boxes.size(), clusters - 1);
+        std::vector<Box3f> expected(clusters - 1);
+        std::unordered_map<uint32_t, Box3f> cluster_box;
+        for (const hlbvh2::TopCluster& c : original) cluster_box[c.root] = c.box;
+        auto box_of = [&](uint32_t ref) {
+            if ((ref & hlbvh2::kLeafRef) == 0 && ref >= n - 1) return expected[ref - (n - 1)];
+            const auto it = cluster_box.find(ref);
+            if (it == cluster_box.end()) {
+                ADD_FAILURE() << "unknown reference " << ref;
+                return Box3f{};
+            }
+            return it->second;
+        };
+        for (size_t k = clusters - 1; k-- > 0;) {  // children are numbered above their parent
+            expected[k] = hlbvh2::box_union(box_of(dev.forest.top_refs[2 * k]), box_of(dev.forest.top_refs[2 * k + 1]));
+        }
+        size_t wrong = 0;
+        for (size_t k = 0; k + 1 < clusters; ++k) wrong += !same_box(expected[k], dev.top_boxes[k]);
+        EXPECT_EQ(wrong, 0u) << "top boxes that differ";
+    }
+}
+
 TEST(GpuHlbvh2Build, StagesAreReported) {
     RF_REQUIRE_DEVICE();
     const SceneGeometry g = test::make_triangle_soup(200000, 5, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.05f);
@@ -100,6 +148,7 @@ TEST(GpuHlbvh2Build, StagesAreReported) {
     EXPECT_GT(stages.emit_ms, 0.0);
     EXPECT_GT(stages.cluster_count, 1u);
     EXPECT_GT(stages.bottom_levels, 1u);
+    EXPECT_GT(stages.top_levels, 1u);
     EXPECT_GT(stages.peak_device_bytes, 200000u * sizeof(Triangle));
 }
 

@@ -16,7 +16,7 @@ namespace rf::cuda {
 // CUDA events around their kernels; transfers and host work are separate.
 struct DeviceBuildStages {
     double upload_ms = 0.0;       // triangles to the device
-    double bounds_ms = 0.0;       // per-triangle boxes and the centroid bounds reduction
+    double bounds_ms = 0.0;       // per-triangle boxes and the bounds reduction (centroids; grids: triangles)
     double morton_ms = 0.0;       // Morton codes
     double sort_ms = 0.0;         // radix sort of (code, triangle) pairs
     double inner_nodes_ms = 0.0;  // Karras's inner-node construction
@@ -27,7 +27,7 @@ struct DeviceBuildStages {
     // HLBVH2 only (zero for LBVH):
     double clusters_ms = 0.0;     // compaction of runs of equal 15-bit prefixes, the level-0 tasks
     double bottom_ms = 0.0;       // bottom levels by work queues, one launch per level (boxes_ms: their boxes)
-    double top_ms = 0.0;          // top level over the cluster boxes, on the host for now ("top (host)")
+    double top_ms = 0.0;          // top level over the cluster boxes by task queues (its boxes: boxes_ms)
     uint32_t cluster_count = 0;   // clusters (bottom trees)
     uint32_t bottom_levels = 0;   // work-queue launches of the bottom levels
     uint32_t top_levels = 0;      // HLBVH2: task-queue launches of the device top level
@@ -55,7 +55,7 @@ struct DeviceBuildStages {
     // The build on the device alone: every stage above that runs there (not
     // the transfers, the host's emission and optimizer, or a layout conversion).
     [[nodiscard]] double device_total_ms() const {
-        return bounds_ms + morton_ms + sort_ms + inner_nodes_ms + clusters_ms + bottom_ms + boxes_ms + ploc_ms +
+        return bounds_ms + morton_ms + sort_ms + inner_nodes_ms + clusters_ms + bottom_ms + top_ms + boxes_ms + ploc_ms +
                partial_triangles_ms + grid0_ms + coarse_levels_ms + hierarchy_ms + leaf_finish_ms + cell_pairs_ms +
                cell_ranges_ms + proximity_ms;
     }
@@ -81,12 +81,12 @@ Bvh build_lbvh_on_device(std::span<const Triangle> triangles, const BuildOptions
 
 // HLBVH2 (Garanzha, Pantaleoni and McAllister 2011; Garanzha 2014 ch. 5) on
 // device `device`: the same BVH as rf::build_hlbvh2 with the same options.
-// The device sorts 30-bit codes once, compacts the 15-bit clusters and
-// builds the bottom levels by work queues, with their boxes level by level;
-// the host builds the top level over the clusters (the CPU's grid SAH: the
-// device top level is not written yet) and writes the canonical layout.
-// 0 and 1 triangles are handled on the host. Throws rf::Error for CUDA
-// failures (out of memory names the buffer).
+// The device sorts 30-bit codes once, compacts the 15-bit clusters, builds
+// the bottom levels by work queues and the top level over the clusters by
+// task queues (the grid SAH of ch. 4 on the top grid, 8 threads per task),
+// with the boxes of every level; the host refits the raw tree and writes the
+// canonical layout. 0 and 1 triangles are handled on the host. Throws
+// rf::Error for CUDA failures (out of memory names the buffer).
 Bvh build_hlbvh2_on_device(std::span<const Triangle> triangles, const BuildOptions& options,
                            DeviceBuildStages* stages = nullptr, int device = 0);
 

@@ -18,10 +18,12 @@
 //     leaves) for the box pass.
 //  4. boxes bottom-up per level, deepest first, one launch per level, one
 //     thread per recorded node (node_box), then the cluster boxes.
-//  5. top (host): the order, references and clusters come back; the host
-//     refits them and builds the top level with the CPU's grid SAH
-//     (emit_hlbvh2_forest), then emits the canonical BVH. The device grid
-//     SAH top level is still to do.
+//  5. the top level over the clusters by task queues (hlbvh2_top_level.cu:
+//     the grid SAH of ch. 4 with the top grid only, 8 lanes per task, the
+//     CPU's tree by construction), then the top nodes' boxes bottom-up.
+//  6. the raw tree (order, references, clusters, top level) comes back; the
+//     host refits it (box, count, SAH cost, leaf collapse per node) and
+//     emits the canonical BVH (emit_hlbvh2_forest).
 // Stages are timed with CUDA events; buffers are counted by a MemoryMeter.
 #include <cuda_runtime.h>
 
@@ -37,6 +39,7 @@
 #include "accel/bvh/build/hlbvh2_tasks.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/hlbvh2_build.h"
+#include "backend/cuda/hlbvh2_top_level.h"
 #include "backend/cuda/morton_sort.h"
 #include "rayforge/backend/cuda.h"
 #include "rayforge/core/error.h"
@@ -214,18 +217,36 @@ void build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
     cluster_boxes_kernel<<<blocks_for(clusters), kBlockSize>>>(view, refs.data() + 2 * (size_t{n} - 1), clusters,
                                                                cluster_boxes.data());
     stages.boxes_ms = timer.stop_ms();
+    meter.release(level_nodes);
+
+    // 5. The top level over the clusters.
+    DeviceTopLevel top;
+    if (clusters >= 2) {
+        DeviceTopLevelInput input;
+        input.n = n;
+        input.clusters = clusters;
+        input.cluster_begin = cluster_begin.data();
+        input.cluster_prefix = prefix.data();
+        input.cluster_boxes = cluster_boxes.data();
+        input.cluster_roots = refs.data() + 2 * (size_t{n} - 1);
+        input.bottom = view;
+        build_top_level_on_device(input, meter, timer, stages, top);
+    }
     stages.peak_device_bytes = meter.peak();
 
-    // 5. What the host's top level and emission need.
+    // 6. The raw tree for the host's refit and emission.
     timer.start();
     out.forest.order = download_all(sorted.order, n);
     out.forest.refs = download_all(refs, ref_count);
     out.forest.cluster_begin = download_all(cluster_begin, clusters);
     out.forest.cluster_begin.push_back(n);
     out.forest.cluster_prefix = download_all(prefix, clusters);
+    if (clusters >= 2) out.forest.top_refs = download_all(top.top_refs, 2 * (size_t{clusters} - 1));
     if (raw) {
         out.cluster_boxes = download_all(cluster_boxes, clusters);
         out.level_sizes = level_sizes;
+        if (clusters >= 2) out.top_boxes = download_all(top.top_boxes, clusters - 1);
+        out.top_level_sizes = top.level_sizes;
     }
     stages.download_ms = timer.stop_ms();
 }
@@ -260,8 +281,7 @@ Bvh build_hlbvh2_on_device(std::span<const Triangle> triangles, const BuildOptio
     build_raw(triangles, static_cast<uint32_t>(std::max(options.max_leaf_size, 1)), s, device, raw, false);
     Hlbvh2Stages host;
     Bvh bvh = emit_hlbvh2_forest(triangles, options, std::move(raw.forest), &host);
-    s.top_ms = host.top_ms;
-    s.emit_ms = host.emit_ms;
+    s.emit_ms = host.top_ms + host.emit_ms;  // the host checks and finalizes the device's top level
     return bvh;
 }
 

@@ -1,6 +1,6 @@
-// Internal face of the CUDA HLBVH2 (hlbvh2_build.cu): the bottom levels as
-// the device left them, for the GPU tests to check the forest, the cluster
-// compaction and the device's level-wise boxes directly.
+// Internal face of the CUDA HLBVH2 (hlbvh2_build.cu): the raw tree as the
+// device left it, for the GPU tests to check the forest, the cluster
+// compaction, the top level and the device's level-wise boxes directly.
 #pragma once
 
 #include <cstdint>
@@ -15,9 +15,11 @@
 namespace rf::cuda {
 
 struct DeviceHlbvh2Forest {
-    Hlbvh2Forest forest;               // empty arrays for n < 2
-    std::vector<Box3f> cluster_boxes;  // per cluster, from the device's bottom-up pass
-    std::vector<uint32_t> level_sizes; // tasks per work-queue level, level 0 = the clusters
+    Hlbvh2Forest forest;                   // empty arrays for n < 2; top_refs empty for 1 cluster
+    std::vector<Box3f> cluster_boxes;      // per cluster, from the device's bottom-up pass
+    std::vector<uint32_t> level_sizes;     // tasks per work-queue level, level 0 = the clusters
+    std::vector<Box3f> top_boxes;          // per top node k, from the device's bottom-up pass
+    std::vector<uint32_t> top_level_sizes; // tasks per top task-queue level, level 0 = the root
 };
 
 // leaf_size: 1 .. 64 (BuildOptions::max_leaf_size).

@@ -1,1 +1,280 @@
-// placeholder: being written (issue 7)
+// HLBVH2's top level on the device (Garanzha 2014, dissertation ch. 5: the
+// tree over the clusters by the grid-based SAH of ch. 4, §4.3, with the top
+// grid only), building the CPU's tree (hlbvh2.cpp build_hlbvh2_top_level)
+// from the shared steps of accel/bvh/build/hlbvh2_top_level.h:
+//  1. one thread per cluster: its cell in the 32^3 grid, triangle count,
+//     box and root, in cluster order; the root task (all clusters, node 0).
+//  2. task queues, one launch per level: each warp takes 4 tasks with one
+//     atomicAdd on the input queue's head (lane 0, broadcast by shuffle);
+//     each task is processed by 8 lanes, as in ch. 4 (one lane per bin):
+//     the cell bounds (strided over the clusters, a min/max reduction by
+//     shuffles), the bin each lane owns on every axis, prefix and suffix
+//     unions of the bins by shuffles (the box union is exact, so the bins
+//     and areas are the CPU's), each lane's plane cost (rounded step by step:
+//     the CPU's values), then every lane folds the 21 candidates in the CPU's
+//     order (axis, then plane; the first kept unless a later one is strictly
+//     cheaper). The clusters are partitioned stably into the other buffer
+//     (ballot ranks within the task's 8 lanes, chunk by chunk), which is the
+//     CPU's std::stable_partition, so the children's ranges and node numbers
+//     are the CPU's; lone clusters' roots are written at once, and tasks of
+//     >= 2 clusters are enqueued at a warp-local prefix (two ballots + popc)
+//     after one atomicAdd per warp on the output tail. Cluster buffers and
+//     queues ping-pong; no global scan.
+//  3. the top nodes' boxes bottom-up, one launch per level, deepest first.
+#include <cuda_runtime.h>
+
+#include <algorithm>
+
+#include "accel/bvh/build/hlbvh2_top_level.h"
+#include "backend/cuda/hlbvh2_top_level.h"
+#include "rayforge/core/error.h"
+
+namespace rf::cuda {
+namespace {
+
+using hlbvh2::TopBin;
+using hlbvh2::TopCluster;
+using hlbvh2::TopTask;
+
+constexpr int kBlockSize = 256;  // a multiple of 32: every warp is full, so full-mask ballots are valid
+constexpr uint32_t kWarp = 32;
+constexpr uint32_t kFullMask = 0xffffffffu;
+constexpr uint32_t kLanes = hlbvh2::kTopLanes;     // threads per task
+constexpr uint32_t kTasksPerWarp = kWarp / kLanes;
+constexpr uint32_t kMaxQueueBlocks = 1024;         // warps loop over the queue beyond this
+static_assert(kWarp % kLanes == 0, "tasks do not straddle warps");
+
+uint32_t blocks_for(uint64_t threads) { return static_cast<uint32_t>((threads + kBlockSize - 1) / kBlockSize); }
+
+// Stage 1: the clusters as top-level primitives, and the root task.
+__global__ void top_clusters_kernel(DeviceTopLevelInput in, TopCluster* clusters, TopTask* root_task) {
+    const uint32_t c = blockIdx.x * kBlockSize + threadIdx.x;
+    if (c == 0) *root_task = TopTask{0, in.clusters, 0};
+    if (c >= in.clusters) return;
+    const uint32_t end = c + 1 < in.clusters ? in.cluster_begin[c + 1] : in.n;
+    clusters[c] = TopCluster{in.cluster_boxes[c], hlbvh2::pack_cells(in.cluster_prefix[c]), end - in.cluster_begin[c],
+                             in.cluster_roots[c]};
+}
+
+// Shuffles of a bin within a task's lanes (width kLanes).
+__device__ TopBin shuffle_bin_up(uint32_t mask, const TopBin& b, uint32_t delta) {
+    TopBin r;
+    r.box.lo = Vec3f(__shfl_up_sync(mask, b.box.lo.x, delta, kLanes), __shfl_up_sync(mask, b.box.lo.y, delta, kLanes),
+                     __shfl_up_sync(mask, b.box.lo.z, delta, kLanes));
+    r.box.hi = Vec3f(__shfl_up_sync(mask, b.box.hi.x, delta, kLanes), __shfl_up_sync(mask, b.box.hi.y, delta, kLanes),
+                     __shfl_up_sync(mask, b.box.hi.z, delta, kLanes));
+    r.triangles = __shfl_up_sync(mask, b.triangles, delta, kLanes);
+    r.clusters = __shfl_up_sync(mask, b.clusters, delta, kLanes);
+    return r;
+}
+__device__ TopBin shuffle_bin_down(uint32_t mask, const TopBin& b, uint32_t delta) {
+    TopBin r;
+    r.box.lo = Vec3f(__shfl_down_sync(mask, b.box.lo.x, delta, kLanes),
+                     __shfl_down_sync(mask, b.box.lo.y, delta, kLanes),
+                     __shfl_down_sync(mask, b.box.lo.z, delta, kLanes));
+    r.box.hi = Vec3f(__shfl_down_sync(mask, b.box.hi.x, delta, kLanes),
+                     __shfl_down_sync(mask, b.box.hi.y, delta, kLanes),
+                     __shfl_down_sync(mask, b.box.hi.z, delta, kLanes));
+    r.triangles = __shfl_down_sync(mask, b.triangles, delta, kLanes);
+    r.clusters = __shfl_down_sync(mask, b.clusters, delta, kLanes);
+    return r;
+}
+
+// One task by its 8 lanes (`mask`: theirs; `lane`: 0..7 within the task).
+// Returns, on every lane, the number of inner children to enqueue and
+// fills `children` with them.
+__device__ uint32_t process_top_task(uint32_t mask, uint32_t lane, uint32_t group, const TopTask& task,
+                                     const TopCluster* in, TopCluster* out, uint32_t top_base, uint32_t* top_refs,
+                                     TopTask children[2]) {
+    const uint32_t count = task.end - task.first;
+    // Cell bounds: strided partial bounds, then a butterfly min/max.
+    hlbvh2::CellBounds bounds = hlbvh2::strided_cell_bounds(in, task.first, task.end, lane, kLanes);
+    for (uint32_t d = kLanes / 2; d > 0; d /= 2) {
+        hlbvh2::CellBounds other;
+        for (int axis = 0; axis < 3; ++axis) {
+            other.lo[axis] = __shfl_xor_sync(mask, bounds.lo[axis], d, kLanes);
+            other.hi[axis] = __shfl_xor_sync(mask, bounds.hi[axis], d, kLanes);
+        }
+        hlbvh2::merge(bounds, other);
+    }
+    // This lane's bin on each axis.
+    TopBin bins[3];
+    hlbvh2::bin_task_lane(in, task.first, task.end, bounds, lane, bins);
+    // Plane `lane` of each axis: the bins below it against those from it on.
+    float cost[3];
+    bool valid[3];
+    uint32_t left_clusters[3];
+    for (int axis = 0; axis < 3; ++axis) {
+        TopBin below = bins[axis], above = bins[axis];  // inclusive prefix and suffix
+        for (uint32_t d = 1; d < kLanes; d *= 2) {
+            const TopBin up = shuffle_bin_up(mask, below, d), down = shuffle_bin_down(mask, above, d);
+            if (lane >= d) below = hlbvh2::merge_bins(up, below);
+            if (lane + d < kLanes) above = hlbvh2::merge_bins(above, down);
+        }
+        TopBin left = shuffle_bin_up(mask, below, 1);
+        if (lane == 0) left = TopBin{};
+        cost[axis] = 0.0f;
+        valid[axis] = lane >= 1 && lane < hlbvh2::axis_bins(bounds, axis) && hlbvh2::plane_cost(left, above, &cost[axis]);
+        left_clusters[axis] = left.clusters;
+    }
+    // Every lane folds the candidates in the CPU's order: the same choice everywhere.
+    hlbvh2::TopSplit split;
+    uint32_t left_count = count / 2;  // no plane (clusters sharing a cell): halve, as the CPU
+    for (int axis = 0; axis < 3; ++axis) {
+        for (uint32_t plane = 1; plane < kLanes; ++plane) {
+            const float c = __shfl_sync(mask, cost[axis], plane, kLanes);
+            const bool v = __shfl_sync(mask, valid[axis] ? 1 : 0, plane, kLanes) != 0;
+            const uint32_t lc = __shfl_sync(mask, left_clusters[axis], plane, kLanes);
+            if (v && hlbvh2::consider(split, c, axis, plane)) left_count = lc;
+        }
+    }
+    // Stable partition into `out`, 8 clusters at a time.
+    const uint32_t right_count = count - left_count;
+    const uint32_t below_lane = (1u << lane) - 1u;
+    uint32_t lefts = 0;
+    for (uint32_t chunk = task.first; chunk < task.end; chunk += kLanes) {
+        const uint32_t i = chunk + lane;
+        const bool has = i < task.end;
+        TopCluster c;
+        bool left = false;
+        if (has) {
+            c = in[i];
+            left = split.axis >= 0 ? hlbvh2::goes_left(c, bounds, split) : i - task.first < left_count;
+        }
+        const uint32_t left_bits = (__ballot_sync(mask, left) >> (group * kLanes)) & ((1u << kLanes) - 1u);
+        if (has) {
+            const uint32_t lefts_before = lefts + static_cast<uint32_t>(__popc(left_bits & below_lane));
+            const uint32_t at = left ? task.first + lefts_before
+                                     : task.first + left_count + (i - task.first - lefts_before);
+            out[at] = c;
+            // A lone cluster is its side's child: its root is the reference.
+            if (left && left_count == 1) top_refs[2 * task.node] = c.root;
+            if (!left && right_count == 1) top_refs[2 * task.node + 1] = c.root;
+        }
+        lefts += static_cast<uint32_t>(__popc(left_bits));
+    }
+    hlbvh2::TopTask halves[2];
+    hlbvh2::child_tasks(task, left_count, halves);
+    uint32_t inner = 0;
+    for (int side = 0; side < 2; ++side) {
+        if (halves[side].end - halves[side].first < 2) continue;
+        if (lane == 0) top_refs[2 * task.node + side] = top_base + halves[side].node;
+        children[inner++] = halves[side];
+    }
+    return inner;
+}
+
+// Stage 2: one level of the top tree. counters[0]: the input head,
+// counters[1]: the output tail; both zero at launch. Clusters of the
+// level's tasks are read from `in` and partitioned into `out`.
+__global__ void top_level_kernel(const TopCluster* in, TopCluster* out, const TopTask* input, uint32_t count,
+                                 TopTask* output, uint32_t* counters, uint32_t top_base, uint32_t* top_refs,
+                                 uint32_t* level_nodes) {
+    const uint32_t warp_lane = threadIdx.x % kWarp;
+    const uint32_t group = warp_lane / kLanes, lane = warp_lane % kLanes;
+    const uint32_t group_mask = ((1u << kLanes) - 1u) << (group * kLanes);
+    for (;;) {
+        uint32_t base = 0;
+        if (warp_lane == 0) base = atomicAdd(&counters[0], kTasksPerWarp);  // one dequeue per warp
+        base = __shfl_sync(kFullMask, base, 0);
+        if (base >= count) return;  // uniform over the warp
+        const uint32_t at = base + group;
+        TopTask children[2];
+        uint32_t inner = 0;
+        if (at < count) {  // uniform over the task's lanes
+            const TopTask task = input[at];
+            inner = process_top_task(group_mask, lane, group, task, in, out, top_base, top_refs, children);
+            if (lane == 0) level_nodes[at] = task.node;
+        }
+        // The task's lane 0 enqueues its children.
+        const bool leader = lane == 0;
+        const uint32_t one_or_more = __ballot_sync(kFullMask, leader && inner >= 1);
+        const uint32_t two = __ballot_sync(kFullMask, leader && inner == 2);
+        const uint32_t total = hlbvh2::enqueue_total(one_or_more, two);
+        uint32_t out_base = 0;
+        if (warp_lane == 0 && total != 0) out_base = atomicAdd(&counters[1], total);  // one enqueue per warp
+        out_base = __shfl_sync(kFullMask, out_base, 0);
+        if (leader) {
+            const uint32_t offset = out_base + hlbvh2::enqueue_offset(one_or_more, two, static_cast<int>(warp_lane));
+            for (uint32_t k = 0; k < inner; ++k) output[offset + k] = children[k];
+        }
+    }
+}
+
+// Stage 3: one level's top boxes; the deeper levels are final.
+__global__ void top_boxes_kernel(hlbvh2::TopBoxView view, const uint32_t* level_nodes, uint32_t count) {
+    const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
+    if (i < count) hlbvh2::top_node_box(view, level_nodes[i]);
+}
+
+uint32_t download_value(const uint32_t* device_value) {
+    uint32_t value = 0;
+    RF_CUDA_CHECK(cudaMemcpy(&value, device_value, sizeof value, cudaMemcpyDeviceToHost));
+    return value;
+}
+
+}  // namespace
+
+void build_top_level_on_device(const DeviceTopLevelInput& in, MemoryMeter& meter, EventTimer& timer,
+                               DeviceBuildStages& stages, DeviceTopLevel& out) {
+    const uint32_t clusters = in.clusters;
+    if (clusters < 2) throw Error("HLBVH2 device top level: fewer than 2 clusters");
+    const uint32_t top_nodes = clusters - 1;
+    const uint32_t top_base = in.n - 1;
+    // Tasks hold >= 2 clusters each, disjoint: a level has at most clusters / 2.
+    const uint32_t capacity = clusters / 2;
+    DeviceBuffer<TopCluster> cluster_buffer[2] = {DeviceBuffer<TopCluster>("HLBVH2: top clusters A"),
+                                                  DeviceBuffer<TopCluster>("HLBVH2: top clusters B")};
+    DeviceBuffer<TopTask> queue[2] = {DeviceBuffer<TopTask>("HLBVH2: top task queue A"),
+                                      DeviceBuffer<TopTask>("HLBVH2: top task queue B")};
+    DeviceBuffer<uint32_t> level_nodes("HLBVH2: top level nodes"), counters("HLBVH2: top queue counters");
+    meter.allocate(cluster_buffer[0], clusters);
+    meter.allocate(cluster_buffer[1], clusters);
+    meter.allocate(queue[0], capacity);
+    meter.allocate(queue[1], capacity);
+    meter.allocate(level_nodes, top_nodes);  // every task is a distinct top node
+    meter.allocate(counters, 2);
+    meter.allocate(out.top_refs, 2 * size_t{top_nodes});
+    meter.allocate(out.top_boxes, top_nodes);
+
+    timer.start();
+    top_clusters_kernel<<<blocks_for(clusters), kBlockSize>>>(in, cluster_buffer[0].data(), queue[0].data());
+    RF_CUDA_CHECK(cudaGetLastError());
+    std::vector<uint32_t> level_base;
+    out.level_sizes.clear();
+    uint32_t count = 1, base = 0;
+    int side = 0;  // the level's input clusters and queue
+    while (count != 0) {
+        if (base + size_t{count} > top_nodes) throw Error("HLBVH2: top levels overran their node list");
+        out.level_sizes.push_back(count);
+        level_base.push_back(base);
+        RF_CUDA_CHECK(cudaMemsetAsync(counters.data(), 0, counters.bytes()));
+        const uint32_t warps = (count + kTasksPerWarp - 1) / kTasksPerWarp;
+        const uint32_t blocks = std::min(blocks_for(uint64_t{warps} * kWarp), kMaxQueueBlocks);
+        top_level_kernel<<<blocks, kBlockSize>>>(cluster_buffer[side].data(), cluster_buffer[1 - side].data(),
+                                                 queue[side].data(), count, queue[1 - side].data(), counters.data(),
+                                                 top_base, out.top_refs.data(), level_nodes.data() + base);
+        RF_CUDA_CHECK(cudaGetLastError());
+        base += count;
+        count = download_value(counters.data() + 1);  // the next level's size (waits for this one)
+        if (count > capacity) throw Error("HLBVH2: top task queue overflow");
+        side = 1 - side;
+    }
+    if (base != top_nodes) throw Error("HLBVH2: the top levels made the wrong number of nodes");
+    stages.top_ms = timer.stop_ms();
+    stages.top_levels = static_cast<uint32_t>(out.level_sizes.size());
+    meter.release(queue[0]);
+    meter.release(queue[1]);
+    meter.release(cluster_buffer[0]);
+    meter.release(cluster_buffer[1]);
+
+    const hlbvh2::TopBoxView view{in.bottom, out.top_refs.data(), top_base, out.top_boxes.data()};
+    timer.start();
+    for (size_t l = out.level_sizes.size(); l-- > 0;) {
+        top_boxes_kernel<<<blocks_for(out.level_sizes[l]), kBlockSize>>>(view, level_nodes.data() + level_base[l],
+                                                                         out.level_sizes[l]);
+    }
+    stages.boxes_ms += timer.stop_ms();
+}
+
+}  // namespace rf::cuda

@@ -21,14 +21,15 @@
 //     box, by the grid SAH of ch. 4 with the top grid only: candidate planes
 //     lie on the 32^3 cluster grid, at most 8 bins (7 planes) per axis across
 //     the node's integer cell bounds; cost = area(L) * triangles(L) +
-//     area(R) * triangles(R).
+//     area(R) * triangles(R); a stable partition of the clusters. The steps
+//     are hlbvh2_top_level.h's, shared with the CUDA builder's task queues.
 //  6. The shared emitter (morton_tree.cpp) bounds the depth to kBvhMaxDepth
 //     and writes the canonical depth-first layout.
 // Node indices are fixed by the input (bottom inner node = its split position
 // - 1; top nodes numbered by their cluster ranges), so the tree is the same
-// for every thread count. emit_hlbvh2_forest() takes bottom trees built
-// elsewhere (the CUDA builder) and finishes them with the same top level
-// and emitter.
+// for every thread count. emit_hlbvh2_forest() takes bottom trees (and,
+// optionally, the top level) built elsewhere (the CUDA builder) and finishes
+// them with the same top level and emitter.
 #include "accel/bvh/build/hlbvh2.h"
 
 #include <algorithm>
@@ -38,6 +39,7 @@
 
 #include "accel/bvh/build/hlbvh2_emit.h"
 #include "accel/bvh/build/hlbvh2_tasks.h"
+#include "accel/bvh/build/hlbvh2_top_level.h"
 #include "accel/bvh/build/morton_radix_sort.h"
 #include "accel/bvh/build/morton_tree.h"
 #include "core/parallel.h"
@@ -51,8 +53,6 @@ using morton::kLeafRef;
 
 constexpr int kCodeBits = 30;
 constexpr int kClusterShift = 15;                  // clusters: the top 15 of 30 bits
-constexpr uint32_t kClusterGrid = 32;              // 2^5 cells per axis
-constexpr uint32_t kTopBins = 8;                   // grid SAH: up to 8 bins (7 planes) per axis
 constexpr uint32_t kParallelRange = 4096;          // triangles per range to split into tasks
 constexpr uint32_t kParallelTop = 256;             // clusters per top node to split into tasks
 constexpr uint32_t kCompactBlock = 64 * 1024;
@@ -71,11 +71,33 @@ private:
     std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
 };
 
-// Cell of a 15-bit cluster prefix on one axis (x: bits 3k+2, y: 3k+1, z: 3k).
-uint32_t cluster_cell(uint32_t prefix, int axis) {
-    uint32_t cell = 0;
-    for (int k = 0; k < 5; ++k) cell |= ((prefix >> (3 * k + 2 - axis)) & 1u) << k;
-    return cell;
+// The CPU's top level: the task at `task` over clusters[first, end), its
+// children recursively (in parallel when large); see hlbvh2_top_level.h.
+void build_top_task(std::span<hlbvh2::TopCluster> clusters, const hlbvh2::TopTask& task, uint32_t top_base,
+                    uint32_t* top_refs) {
+    const hlbvh2::CellBounds bounds = hlbvh2::strided_cell_bounds(clusters.data(), task.first, task.end, 0, 1);
+    hlbvh2::TopBin bins[3][hlbvh2::kTopBins];
+    hlbvh2::bin_task(clusters.data(), task.first, task.end, bounds, bins);
+    uint32_t left_count = (task.end - task.first) / 2;  // no plane (clusters sharing a cell): halve
+    const hlbvh2::TopSplit split = hlbvh2::choose_split(bins, bounds, &left_count);
+    if (split.axis >= 0) {
+        std::stable_partition(clusters.begin() + task.first, clusters.begin() + task.end,
+                              [&](const hlbvh2::TopCluster& c) { return hlbvh2::goes_left(c, bounds, split); });
+    }
+    hlbvh2::TopTask children[2];
+    hlbvh2::child_tasks(task, left_count, children);
+    for (int side = 0; side < 2; ++side) {
+        top_refs[2 * task.node + side] = hlbvh2::child_reference(children[side], clusters.data(), top_base);
+    }
+    auto build_child = [&](int side) {
+        if (children[side].end - children[side].first >= 2) build_top_task(clusters, children[side], top_base, top_refs);
+    };
+    if (task.end - task.first > kParallelTop) {
+        parallel::invoke([&] { build_child(0); }, [&] { build_child(1); });
+    } else {
+        build_child(0);
+        build_child(1);
+    }
 }
 
 class Hlbvh2Builder {
@@ -136,6 +158,7 @@ public:
         cluster_begin_ = std::move(forest.cluster_begin);
         cluster_prefix_ = std::move(forest.cluster_prefix);
         refs_ = std::move(forest.refs);
+        top_refs_ = std::move(forest.top_refs);
         budgeted_resize(cluster_root_, clusters, "HLBVH2: cluster roots");
         std::atomic<bool> malformed{false};
         parallel::for_range(uint32_t{0}, static_cast<uint32_t>(clusters), 1u, [&](uint32_t lo, uint32_t hi) {
@@ -219,111 +242,61 @@ private:
         return index;
     }
 
-    struct Cluster {
-        uint32_t cell[3];
-        uint32_t triangles;
-        Box3f box;
-        uint32_t root;
-    };
-
+    // The top level over the clusters (the CPU's, or the forest's given
+    // one), then every top node finalized: children are numbered above
+    // their parent, so descending numbers see final children.
     uint32_t build_top(uint32_t count) {
-        std::vector<Cluster> clusters(count);
-        parallel::for_range(0u, count, 64u, [&](uint32_t lo, uint32_t hi) {
-            for (uint32_t c = lo; c != hi; ++c) {
-                const uint32_t prefix =
-                    cluster_prefix_.empty() ? keys_[cluster_begin_[c]] >> kClusterShift : cluster_prefix_[c];
-                Cluster& cl = clusters[c];
-                for (int axis = 0; axis < 3; ++axis) cl.cell[axis] = cluster_cell(prefix, axis);
-                cl.triangles = cluster_begin_[c + 1] - cluster_begin_[c];
-                cl.box = tree_.bounds(cluster_root_[c]);
-                cl.root = cluster_root_[c];
-            }
-        });
         top_base_ = tree_.size() - 1;
-        return build_top_node(clusters, 0);
+        if (count == 1) {
+            if (!top_refs_.empty()) throw Error("HLBVH2 emission: top level of the wrong size");
+            return cluster_root_[0];
+        }
+        if (top_refs_.empty()) {
+            std::vector<hlbvh2::TopCluster> clusters(count);
+            parallel::for_range(0u, count, 64u, [&](uint32_t lo, uint32_t hi) {
+                for (uint32_t c = lo; c != hi; ++c) {
+                    const uint32_t prefix =
+                        cluster_prefix_.empty() ? keys_[cluster_begin_[c]] >> kClusterShift : cluster_prefix_[c];
+                    clusters[c] = {tree_.bounds(cluster_root_[c]), hlbvh2::pack_cells(prefix),
+                                   cluster_begin_[c + 1] - cluster_begin_[c], cluster_root_[c]};
+                }
+            });
+            top_refs_ = build_hlbvh2_top_level(clusters, top_base_);
+        } else {
+            check_top_level(count);
+        }
+        for (uint32_t k = count - 1; k-- > 0;) tree_.finalize(top_base_ + k, top_refs_[2 * k], top_refs_[2 * k + 1]);
+        return top_base_;
     }
 
-    // Top-level subtree over `clusters`; its inner nodes are numbered
-    // top_base_ + first_index .. + clusters.size() - 2.
-    uint32_t build_top_node(std::span<Cluster> clusters, uint32_t first_index) {
-        if (clusters.size() == 1) return clusters[0].root;
-        uint32_t lo[3] = {kClusterGrid, kClusterGrid, kClusterGrid}, hi[3] = {0, 0, 0};
-        for (const Cluster& c : clusters) {
-            for (int axis = 0; axis < 3; ++axis) {
-                lo[axis] = std::min(lo[axis], c.cell[axis]);
-                hi[axis] = std::max(hi[axis], c.cell[axis]);
-            }
-        }
-        struct Bin {
-            Box3f box;
-            uint32_t triangles = 0;
-            uint32_t clusters = 0;
-        };
-        float best_cost = 0.0f;
-        int best_axis = -1;
-        uint32_t best_plane = 0;
-        for (int axis = 0; axis < 3; ++axis) {
-            const uint32_t cells = hi[axis] - lo[axis] + 1;
-            if (cells < 2) continue;
-            const uint32_t bins = std::min(kTopBins, cells);
-            Bin bin[kTopBins];
-            for (const Cluster& c : clusters) {
-                Bin& b = bin[(c.cell[axis] - lo[axis]) * bins / cells];
-                b.box = morton::box_union(b.box, c.box);
-                b.triangles += c.triangles;
-                ++b.clusters;
-            }
-            float right_area[kTopBins];
-            uint32_t right_triangles[kTopBins], right_clusters[kTopBins];
-            Box3f acc;
-            uint32_t tris = 0, cls = 0;
-            for (uint32_t k = bins - 1; k > 0; --k) {
-                acc = morton::box_union(acc, bin[k].box);
-                tris += bin[k].triangles;
-                cls += bin[k].clusters;
-                right_area[k] = cls ? morton::half_area(acc) : 0.0f;
-                right_triangles[k] = tris;
-                right_clusters[k] = cls;
-            }
-            acc = Box3f{};
-            tris = cls = 0;
-            for (uint32_t k = 1; k < bins; ++k) {
-                acc = morton::box_union(acc, bin[k - 1].box);
-                tris += bin[k - 1].triangles;
-                cls += bin[k - 1].clusters;
-                if (cls == 0 || right_clusters[k] == 0) continue;
-                const float cost = morton::half_area(acc) * static_cast<float>(tris) +
-                                   right_area[k] * static_cast<float>(right_triangles[k]);
-                if (best_axis < 0 || cost < best_cost) {
-                    best_cost = cost;
-                    best_axis = axis;
-                    best_plane = k;
+    // A given top level must be a tree over exactly the cluster roots: each
+    // top node but the root, and each cluster root, referenced once, and
+    // top children numbered above their parent (so no cycle).
+    void check_top_level(uint32_t count) const {
+        const uint32_t n = tree_.size();
+        if (top_refs_.size() != 2 * (size_t{count} - 1)) throw Error("HLBVH2 emission: top level of the wrong size");
+        enum : uint8_t { kFree = 0, kRoot = 1, kUsed = 2 };
+        std::vector<uint8_t> bottom(2 * size_t{n}, kFree), top(count - 1, kFree);
+        auto bottom_slot = [&](uint32_t ref) -> size_t { return morton::is_leaf_ref(ref) ? n + (ref & ~kLeafRef) : ref; };
+        for (uint32_t c = 0; c < count; ++c) bottom[bottom_slot(cluster_root_[c])] = kRoot;
+        for (uint32_t k = 0; k + 1 < count; ++k) {
+            for (int side = 0; side < 2; ++side) {
+                const uint32_t ref = top_refs_[2 * size_t{k} + side];
+                if (!morton::is_leaf_ref(ref) && ref >= top_base_) {
+                    const uint32_t child = ref - top_base_;
+                    if (child >= count - 1 || child <= k || top[child] != kFree) {
+                        throw Error("HLBVH2 emission: malformed top level");
+                    }
+                    top[child] = kUsed;
+                } else {
+                    const size_t slot = bottom_slot(ref);
+                    if (slot >= bottom.size() || bottom[slot] != kRoot) throw Error("HLBVH2 emission: malformed top level");
+                    bottom[slot] = kUsed;
                 }
             }
         }
-        // Distinct clusters occupy distinct cells, so some axis spans two or
-        // more cells and its first and last bins are both occupied.
-        const int axis = best_axis;
-        const uint32_t cells = hi[axis] - lo[axis] + 1, bins = std::min(kTopBins, cells);
-        const auto middle = std::stable_partition(clusters.begin(), clusters.end(), [&](const Cluster& c) {
-            return (c.cell[axis] - lo[axis]) * bins / cells < best_plane;
-        });
-        const size_t left_count = static_cast<size_t>(middle - clusters.begin());
-        const std::span<Cluster> left_clusters = clusters.first(left_count);
-        const std::span<Cluster> right_clusters = clusters.subspan(left_count);
-        const uint32_t left_first = first_index + 1;
-        const uint32_t right_first = first_index + static_cast<uint32_t>(left_count);
-        uint32_t left, right;
-        if (clusters.size() > kParallelTop) {
-            parallel::invoke([&] { left = build_top_node(left_clusters, left_first); },
-                             [&] { right = build_top_node(right_clusters, right_first); });
-        } else {
-            left = build_top_node(left_clusters, left_first);
-            right = build_top_node(right_clusters, right_first);
-        }
-        const uint32_t index = top_base_ + first_index;
-        tree_.finalize(index, left, right);
-        return index;
+        // 2 (count - 1) references, each to a distinct node of count - 2 top
+        // nodes and count clusters: all of them.
     }
 
     morton::RawTree tree_;
@@ -333,7 +306,8 @@ private:
     std::vector<uint32_t> cluster_root_;
     std::vector<uint32_t> cluster_prefix_;  // given with a forest; else read from keys_
     std::vector<uint32_t> refs_;            // a forest's references
-    uint32_t top_base_ = 0;
+    std::vector<uint32_t> top_refs_;        // the top level: 2 per top node (given with a forest, or built)
+    uint32_t top_base_ = 0;                 // top node k is node top_base_ + k
 };
 
 }  // namespace
@@ -360,6 +334,14 @@ Bvh emit_hlbvh2_forest(std::span<const Triangle> triangles, const BuildOptions& 
 
 Bvh build_hlbvh2(std::span<const Triangle> triangles, const BuildOptions& options) {
     return build_hlbvh2(triangles, options, nullptr);
+}
+
+std::vector<uint32_t> build_hlbvh2_top_level(std::span<hlbvh2::TopCluster> clusters, uint32_t top_base) {
+    const uint32_t count = static_cast<uint32_t>(clusters.size());
+    if (count < 2) return {};
+    std::vector<uint32_t> top_refs(2 * (size_t{count} - 1));
+    build_top_task(clusters, hlbvh2::TopTask{0, count, 0}, top_base, top_refs.data());
+    return top_refs;
 }
 
 }  // namespace rf

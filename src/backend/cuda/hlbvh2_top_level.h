@@ -1,0 +1,45 @@
+// Internal face of the CUDA HLBVH2's top level (hlbvh2_top_level.cu): the
+// grid SAH over the cluster boxes (Garanzha 2014 ch. 5 over ch. 4 §4.3) by
+// task queues on the device, called by hlbvh2_build.cu once the bottom
+// levels and their boxes are final.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "accel/bvh/build/hlbvh2_tasks.h"
+#include "backend/cuda/device_buffer.h"
+#include "backend/cuda/event_timer.h"
+#include "backend/cuda/morton_sort.h"
+#include "rayforge/backend/cuda_build.h"
+#include "rayforge/math/box.h"
+
+namespace rf::cuda {
+
+// Device arrays the top level reads (all final when it starts).
+struct DeviceTopLevelInput {
+    uint32_t n = 0;                           // triangles; top node k is node n - 1 + k
+    uint32_t clusters = 0;                    // >= 2
+    const uint32_t* cluster_begin = nullptr;  // clusters: first sorted position (the last ends at n)
+    const uint32_t* cluster_prefix = nullptr; // clusters: 15-bit Morton prefix
+    const Box3f* cluster_boxes = nullptr;     // clusters
+    const uint32_t* cluster_roots = nullptr;  // clusters: bottom-tree root references
+    hlbvh2::BoxView bottom{};                 // the bottom levels' boxes, for the top boxes
+};
+
+// What it leaves on the device.
+struct DeviceTopLevel {
+    DeviceBuffer<uint32_t> top_refs{"HLBVH2: top-level child references"};  // 2 (clusters - 1): 2 k + side
+    DeviceBuffer<Box3f> top_boxes{"HLBVH2: top node boxes"};                  // clusters - 1
+    std::vector<uint32_t> level_sizes;  // tasks (= top nodes) per task-queue level, level 0 = the root
+};
+
+// Builds the top level: one launch per level, kTopLanes threads per task,
+// the same tree as the CPU's (build_hlbvh2_top_level), then the top nodes'
+// boxes bottom-up, one launch per level, deepest first. Sets stages.top_ms
+// (the task-queue levels) and stages.top_levels, and adds the top boxes'
+// time to stages.boxes_ms. Buffers are counted by `meter`.
+void build_top_level_on_device(const DeviceTopLevelInput& in, MemoryMeter& meter, EventTimer& timer,
+                               DeviceBuildStages& stages, DeviceTopLevel& out);
+
+}  // namespace rf::cuda
