@@ -32,23 +32,31 @@
 //    (levelOffset of Algorithm 4.1), then positions top-down, giving the
 //    depth-first layout of rf::Bvh.
 //
+// The per-task step of 3 (process_task), the cell keys and the sparse-grid
+// reads are grid_bvh_steps.h's, shared with the CUDA builder
+// (backend/cuda/grid_bvh_build.cu), which hands its hierarchy to steps 4-5
+// here through emit_grid_bvh_hierarchy (grid_bvh_emit.h).
+//
 // Depth: a grid split at depth d is taken only if d + 1 + the halving levels
 // of its larger side stay within kBvhMaxDepth; otherwise the task becomes a
 // large leaf whose finishing falls back to median splits in time. Every
 // decision depends on the input alone (fixed block sizes, ordered queues), so
 // the tree is the same for every thread count.
 #include "accel/bvh/build/grid_bvh.h"
+#include "accel/bvh/build/grid_bvh_emit.h"
 
 #include <algorithm>
 #include <atomic>
-#include <bit>
 #include <chrono>
 #include <cstdint>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "accel/bvh/build/grid_bvh_partial_triangles.h"
 #include "accel/bvh/build/grid_bvh_sparse_grid.h"
 #include "core/parallel.h"
+#include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 
 namespace rf {
@@ -57,11 +65,12 @@ namespace {
 using gridbvh::CellBox;
 using gridbvh::GridFrame;
 using gridbvh::GridRef;
-using gridbvh::kLevels;
-using gridbvh::kMaxUseRes;
+using gridbvh::kLeafBit;
+using gridbvh::median_levels;
+using gridbvh::NodeRegion;
 using gridbvh::SparseGrid;
-
-constexpr uint32_t kLeafBit = 0x80000000u;
+using gridbvh::SplitTask;
+using gridbvh::TaskOutcome;
 constexpr int kFinishBins = 8;
 constexpr uint32_t kParallelFinishSize = 4096;  // references per large-leaf subtree to build as two tasks
 
@@ -78,31 +87,6 @@ inline Vec3f vmax(const Vec3f& a, const Vec3f& b) {
     return {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)};
 }
 
-// Levels of halving needed until `count` references fit in leaves of `leaf_size`.
-int median_levels(uint32_t count, uint32_t leaf_size) {
-    const uint32_t leaves = (count + leaf_size - 1) / leaf_size;
-    return leaves <= 1 ? 0 : std::bit_width(leaves - 1);
-}
-
-struct SplitTask {
-    uint32_t node = 0;
-    uint32_t count = 0;  // references in the IBB
-    CellBox box{};       // the IBB, in cells of Grid_level
-    uint8_t level = 0;
-    uint8_t depth = 0;
-};
-
-struct TaskOutcome {
-    bool split = false;
-    SplitTask left, right;  // a leaf keeps its (refined) task in `left`
-};
-
-// Where a hierarchy node's references lie: its IBB when it was created.
-struct NodeRegion {
-    CellBox box{};
-    uint8_t level = 0;
-};
-
 // A finished leaf of the grid hierarchy. Usually one BvhNode whose triangle
 // indices sit in leaf_prims_ at its reference range; a large leaf gets a small
 // tree in canonical relative layout (node 0 its root; inner `first` is a local
@@ -113,31 +97,6 @@ struct LocalTree {
     uint32_t node_count = 1;
     std::vector<BvhNode> nodes;   // empty for a single leaf
     std::vector<uint32_t> prims;  // empty for a single leaf
-};
-
-// Integer-box statistics of one bin: reference count and the box of its non-empty cells.
-struct CellBin {
-    uint32_t count = 0;
-    int lo[3] = {1 << 20, 1 << 20, 1 << 20};
-    int hi[3] = {-1, -1, -1};
-    void add(int x, int y, int z, uint32_t c) {
-        count += c;
-        const int p[3] = {x, y, z};
-        for (int a = 0; a < 3; ++a) {
-            lo[a] = std::min(lo[a], p[a]);
-            hi[a] = std::max(hi[a], p[a]);
-        }
-    }
-    void merge(const CellBin& o) {
-        count += o.count;
-        for (int a = 0; a < 3; ++a) {
-            lo[a] = std::min(lo[a], o.lo[a]);
-            hi[a] = std::max(hi[a], o.hi[a]);
-        }
-    }
-    [[nodiscard]] CellBox box() const {
-        return {{uint16_t(lo[0]), uint16_t(lo[1]), uint16_t(lo[2])}, {uint16_t(hi[0]), uint16_t(hi[1]), uint16_t(hi[2])}};
-    }
 };
 
 class GridBvhBuilder {
@@ -204,13 +163,66 @@ public:
         return bvh;
     }
 
+    // Leaf finishing and emission of a hierarchy built elsewhere (the device).
+    Bvh emit(GridHierarchy&& h) {
+        const auto total_start = std::chrono::steady_clock::now();
+        Bvh bvh;
+        stages_.triangles = triangles_.size();
+        checked_index_count("GridBvh triangles", triangles_.size());
+        if (triangles_.empty()) return bvh;
+        check_hierarchy(h);
+        refs_ = std::move(h.refs);
+        frame_ = &h.frame;
+        hnodes_ = std::move(h.hnodes);
+        regions_ = std::move(h.regions);
+        leaves_ = std::move(h.leaves);
+        level_offset_ = std::move(h.level_offset);
+        leaf_begin_ = std::move(h.leaf_begin);
+        leaf_refs_ = std::move(h.leaf_refs);
+        stages_.references = refs_.size();
+        stages_.hierarchy_leaves = leaves_.size();
+        auto start = std::chrono::steady_clock::now();
+        finish_leaves();
+        stages_.leaf_finish_ms = ms_since(start);
+        start = std::chrono::steady_clock::now();
+        emit_canonical(bvh);
+        stages_.emission_ms = ms_since(start);
+        stages_.total_ms = ms_since(total_start);
+        frame_ = nullptr;
+        return bvh;
+    }
+
 private:
+    // What emit() relies on: children inside the next level, leaves in range.
+    void check_hierarchy(const GridHierarchy& h) const {
+        const size_t nodes = h.hnodes.size();
+        if (h.refs.empty() || nodes == 0 || h.regions.size() != nodes || h.level_offset.size() < 2 ||
+            h.level_offset.front() != 0 || h.level_offset.back() != nodes) {
+            throw Error("GridBvh hierarchy: malformed node arrays");
+        }
+        if (!h.leaf_begin.empty()) {
+            bool bad = h.leaf_begin.size() != h.leaves.size() + 1 || h.leaf_refs.size() != h.refs.size() ||
+                       h.leaf_begin.front() != 0 || h.leaf_begin.back() != h.refs.size();
+            for (size_t l = 0; !bad && l + 1 < h.leaf_begin.size(); ++l) bad = h.leaf_begin[l] > h.leaf_begin[l + 1];
+            for (size_t i = 0; !bad && i < h.leaf_refs.size(); ++i) bad = h.leaf_refs[i] >= h.refs.size();
+            if (bad) throw Error("GridBvh hierarchy: malformed leaf groups");
+        }
+        for (size_t l = 0; l + 1 < h.level_offset.size(); ++l) {
+            const uint32_t end = h.level_offset[l + 1];
+            if (h.level_offset[l] >= end) throw Error("GridBvh hierarchy: empty tree level");
+            for (uint32_t n = h.level_offset[l]; n < end; ++n) {
+                const uint32_t v = h.hnodes[n];
+                const bool bad = (v & kLeafBit) ? (v & ~kLeafBit) >= h.leaves.size()
+                                                : v < end || l + 2 >= h.level_offset.size() ||
+                                                      size_t{v} + 1 >= h.level_offset[l + 2];
+                if (bad) throw Error("GridBvh hierarchy: node " + std::to_string(n) + " links outside its child level");
+            }
+        }
+    }
+
     // §4.3, Algorithm 4.1: level-by-level split queues.
     void emit_hierarchy() {
-        const int top = kLevels - 1;
-        const uint16_t top_max = uint16_t((gridbvh::kFineRes >> top) - 1);
-        std::vector<SplitTask> queue{SplitTask{0, uint32_t(refs_.size()), {{0, 0, 0}, {top_max, top_max, top_max}},
-                                               uint8_t(top), 0}};
+        std::vector<SplitTask> queue{gridbvh::root_task(uint32_t(refs_.size()))};
         std::vector<SplitTask> next;
         std::vector<TaskOutcome> outcomes;
         hnodes_.assign(1, 0);
@@ -249,87 +261,10 @@ private:
         level_offset_.push_back(uint32_t(hnodes_.size()));
     }
 
-    // One split task (Fig. 4.3): refine while the IBB is small, bin its
-    // non-empty cells, pick the cheapest of up to 7 planes per axis.
-    TaskOutcome process(SplitTask task) const {
-        TaskOutcome outcome;
-        outcome.left = task;
-        if (task.count <= max_leaf_size_) return outcome;
-        CellBin bins[3][kMaxUseRes];
-        CellBox scanned{};  // the box the bins were filled over (bins index from its lo)
-        for (;;) {
-            const int longest = std::max({task.box.extent(0), task.box.extent(1), task.box.extent(2)});
-            if (task.level > 0 && longest <= kMaxUseRes / 2) {
-                for (int a = 0; a < 3; ++a) {
-                    task.box.lo[a] = uint16_t(2 * task.box.lo[a]);
-                    task.box.hi[a] = uint16_t(2 * task.box.hi[a] + 1);
-                }
-                --task.level;
-                continue;
-            }
-            for (auto& axis_bins : bins) {
-                for (CellBin& b : axis_bins) b = CellBin{};
-            }
-            grid_.for_each_cell(task.level, task.box, [&](int x, int y, int z, uint32_t c) {
-                bins[0][x - task.box.lo[0]].add(x, y, z, c);
-                bins[1][y - task.box.lo[1]].add(x, y, z, c);
-                bins[2][z - task.box.lo[2]].add(x, y, z, c);
-            });
-            scanned = task.box;
-            // Tighten the IBB to its non-empty cells; refine again if it shrank enough.
-            CellBin all;
-            for (const CellBin& b : bins[0]) all.merge(b);
-            const CellBox tight = all.box();
-            bool shrunk = false;
-            for (int a = 0; a < 3; ++a) shrunk |= tight.lo[a] != task.box.lo[a] || tight.hi[a] != task.box.hi[a];
-            task.box = tight;
-            if (shrunk && task.level > 0 &&
-                std::max({tight.extent(0), tight.extent(1), tight.extent(2)}) <= kMaxUseRes / 2) {
-                continue;
-            }
-            break;
-        }
-        outcome.left = task;
-        const Vec3f cell = frame_->cell_size(task.level);
-        auto area = [&](const CellBin& b) {
-            const double ex = double(b.hi[0] - b.lo[0] + 1) * cell.x, ey = double(b.hi[1] - b.lo[1] + 1) * cell.y,
-                         ez = double(b.hi[2] - b.lo[2] + 1) * cell.z;
-            return ex * ey + ey * ez + ez * ex;
-        };
-        int best_axis = -1;
-        double best_cost = 0.0;
-        CellBin best_left, best_right;
-        for (int a = 0; a < 3; ++a) {
-            const int bins_used = scanned.extent(a);
-            if (bins_used < 2) continue;
-            CellBin right_acc[kMaxUseRes];
-            CellBin acc;
-            for (int i = bins_used - 1; i > 0; --i) {
-                acc.merge(bins[a][i]);
-                right_acc[i] = acc;
-            }
-            CellBin left;
-            for (int i = 1; i < bins_used; ++i) {
-                left.merge(bins[a][i - 1]);
-                const CellBin& right = right_acc[i];
-                if (left.count == 0 || right.count == 0) continue;
-                const double cost = area(left) * left.count + area(right) * right.count;
-                if (best_axis < 0 || cost < best_cost) {
-                    best_axis = a;
-                    best_cost = cost;
-                    best_left = left;
-                    best_right = right;
-                }
-            }
-        }
-        if (best_axis < 0) return outcome;  // one Grid0 cell: a leaf
-        const uint32_t larger = std::max(best_left.count, best_right.count);
-        if (task.depth + 1 + median_levels(larger, max_leaf_size_) > kBvhMaxDepth) return outcome;
-        outcome.split = true;
-        outcome.left = SplitTask{0, best_left.count, best_left.box(), task.level, uint8_t(task.depth + 1)};
-        outcome.right = SplitTask{0, best_right.count, best_right.box(), task.level, uint8_t(task.depth + 1)};
-        outcome.left.node = task.node;  // the parent's node, read back during compaction
-        return outcome;
+    // One split task (Fig. 4.3): the shared step, scanning on this thread.
+    TaskOutcome process(const SplitTask& task) const {
+        const gridbvh::SparseGridView view = grid_.view();
+        return gridbvh::process_task(task, max_leaf_size_, *frame_, gridbvh::SerialScan{&view});
     }
 
     // The reference shuffling of §4.3 ("applied at leaf generation"): each
@@ -339,43 +274,7 @@ private:
     void finish_leaves() {
         const uint32_t n = uint32_t(refs_.size());
         const uint32_t leaf_count = uint32_t(leaves_.size());
-        std::vector<uint32_t> leaf_of, cursor;
-        budgeted_resize(leaf_of, n, "GridBvh: leaf of reference");
-        budgeted_resize(cursor, size_t{leaf_count} + 1, "GridBvh: leaf ranges");
-        parallel::for_range(0u, n, 4096u, [&](uint32_t lo, uint32_t hi) {
-            for (uint32_t i = lo; i < hi; ++i) {
-                const Vec3f c = refs_[i].centroid();
-                const int cell[3] = {frame_->cell(c.x, 0), frame_->cell(c.y, 1), frame_->cell(c.z, 2)};
-                uint32_t h = 0;
-                while (!(hnodes_[h] & kLeafBit)) {
-                    const uint32_t left = hnodes_[h];
-                    const NodeRegion& r = regions_[left];
-                    bool inside = true;
-                    for (int a = 0; a < 3; ++a) {
-                        const int v = cell[a] >> r.level;
-                        inside &= v >= r.box.lo[a] && v <= r.box.hi[a];
-                    }
-                    h = inside ? left : left + 1;
-                }
-                const uint32_t leaf = hnodes_[h] & ~kLeafBit;
-                leaf_of[i] = leaf;
-                std::atomic_ref<uint32_t>(cursor[leaf]).fetch_add(1, std::memory_order_relaxed);
-            }
-        });
-        leaf_begin_.resize(size_t{leaf_count} + 1);
-        uint32_t running = 0;
-        for (uint32_t l = 0; l <= leaf_count; ++l) {
-            leaf_begin_[l] = running;
-            if (l < leaf_count) running += cursor[l];
-            cursor[l] = leaf_begin_[l];
-        }
-        budgeted_resize(leaf_refs_, n, "GridBvh: leaf references");
-        parallel::for_range(0u, n, 4096u, [&](uint32_t lo, uint32_t hi) {
-            for (uint32_t i = lo; i < hi; ++i) {
-                leaf_refs_[std::atomic_ref<uint32_t>(cursor[leaf_of[i]]).fetch_add(1, std::memory_order_relaxed)] = i;
-            }
-        });
-
+        if (leaf_begin_.empty()) group_by_leaf();  // else grouped already (by the device)
         trees_.clear();
         trees_.resize(leaf_count);
         budgeted_resize(leaf_prims_, n, "GridBvh: leaf triangles");
@@ -413,6 +312,36 @@ private:
             }
         });
         stages_.large_leaves = large.load();
+    }
+
+    // Each reference's leaf (descent with its Grid0 cell), then the
+    // references grouped by leaf (a counting sort).
+    void group_by_leaf() {
+        const uint32_t n = uint32_t(refs_.size());
+        const uint32_t leaf_count = uint32_t(leaves_.size());
+        std::vector<uint32_t> leaf_of, cursor;
+        budgeted_resize(leaf_of, n, "GridBvh: leaf of reference");
+        budgeted_resize(cursor, size_t{leaf_count} + 1, "GridBvh: leaf ranges");
+        parallel::for_range(0u, n, 4096u, [&](uint32_t lo, uint32_t hi) {
+            for (uint32_t i = lo; i < hi; ++i) {
+                const uint32_t leaf = gridbvh::leaf_of_reference(hnodes_.data(), regions_.data(), *frame_, refs_[i]);
+                leaf_of[i] = leaf;
+                std::atomic_ref<uint32_t>(cursor[leaf]).fetch_add(1, std::memory_order_relaxed);
+            }
+        });
+        leaf_begin_.resize(size_t{leaf_count} + 1);
+        uint32_t running = 0;
+        for (uint32_t l = 0; l <= leaf_count; ++l) {
+            leaf_begin_[l] = running;
+            if (l < leaf_count) running += cursor[l];
+            cursor[l] = leaf_begin_[l];
+        }
+        budgeted_resize(leaf_refs_, n, "GridBvh: leaf references");
+        parallel::for_range(0u, n, 4096u, [&](uint32_t lo, uint32_t hi) {
+            for (uint32_t i = lo; i < hi; ++i) {
+                leaf_refs_[std::atomic_ref<uint32_t>(cursor[leaf_of[i]]).fetch_add(1, std::memory_order_relaxed)] = i;
+            }
+        });
     }
 
     // Parts of one triangle in one leaf become one reference (union box).
@@ -695,6 +624,13 @@ Bvh build_grid_bvh(std::span<const Triangle> triangles, const BuildOptions& opti
     GridBvhStages local;
     GridBvhBuilder builder(triangles, options, partial_triangles, stages ? *stages : local);
     return parallel::with_threads(options.threads, [&] { return builder.build(); });
+}
+
+Bvh emit_grid_bvh_hierarchy(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles,
+                            GridHierarchy&& hierarchy, GridBvhStages* stages) {
+    GridBvhStages local;
+    GridBvhBuilder builder(triangles, options, partial_triangles, stages ? *stages : local);
+    return parallel::with_threads(options.threads, [&] { return builder.emit(std::move(hierarchy)); });
 }
 
 Bvh build_grid_bvh(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles) {

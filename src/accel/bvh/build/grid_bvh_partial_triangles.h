@@ -12,10 +12,8 @@
 
 namespace rf::gridbvh {
 
-// Box of the part of `tri` inside `region`: the triangle clipped as a polygon
-// against the region's six planes. Empty when they do not meet. The result
-// lies inside `region` and inside the triangle's box.
-Box3f clip_triangle_to_box(const Triangle& tri, const Box3f& region);
+// clip_triangle_to_box, the split request, share and parts of one
+// reference: grid_bvh_steps.h (shared with the device).
 
 // One reference per triangle, with the triangle's box.
 std::vector<GridRef> make_triangle_refs(std::span<const Triangle> triangles);

@@ -17,10 +17,8 @@
 #include "accel/bvh/build/grid_bvh_sparse_grid.h"
 
 #include <algorithm>
-#include <bit>
 #include <chrono>
 #include <cmath>
-#include <tuple>
 
 #include "core/parallel.h"
 #include "rayforge/core/memory_budget.h"
@@ -84,23 +82,6 @@ GridFrame::GridFrame(const Box3f& scene) : origin(scene.lo), extent(scene.extent
         const float s = float(kFineRes) / extent[axis];
         to_cell[axis] = (extent[axis] > 0.0f && std::isfinite(s)) ? s : 0.0f;
     }
-}
-
-// Interleaves the low 3 bits of x, y, z (x lowest).
-static uint32_t morton9(uint32_t x, uint32_t y, uint32_t z) {
-    uint32_t code = 0;
-    for (int bit = 0; bit < 3; ++bit) {
-        code |= ((x >> bit) & 1u) << (3 * bit);
-        code |= ((y >> bit) & 1u) << (3 * bit + 1);
-        code |= ((z >> bit) & 1u) << (3 * bit + 2);
-    }
-    return code;
-}
-
-uint32_t fine_key(const GridFrame& frame, const Vec3f& c) {
-    const uint32_t x = uint32_t(frame.cell(c.x, 0)), y = uint32_t(frame.cell(c.y, 1)), z = uint32_t(frame.cell(c.z, 2));
-    const uint32_t top = (x >> 3) + kTopRes * ((y >> 3) + kTopRes * (z >> 3));
-    return (top << 9) | morton9(x & 7, y & 7, z & 7);
 }
 
 void SparseGrid::build(std::span<const GridRef> refs, const GridFrame& frame, BuildTimes* times) {
@@ -186,37 +167,6 @@ void SparseGrid::build(std::span<const GridRef> refs, const GridFrame& frame, Bu
     if (times) times->coarse_ms = ms_since(start);
 }
 
-uint32_t SparseGrid::rank(uint32_t m, uint32_t key) const {
-    const uint64_t* words = &top_mask_[size_t{m} * (kSubCells / 64)];
-    uint32_t r = 0;
-    const uint32_t full = key / 64;
-    for (uint32_t w = 0; w < full; ++w) r += uint32_t(std::popcount(words[w]));
-    if (key % 64 != 0) r += uint32_t(std::popcount(words[full] & ((uint64_t{1} << (key % 64)) - 1)));
-    return r;
-}
-
-std::pair<uint32_t, uint32_t> SparseGrid::sub_range(uint32_t m, uint32_t key_lo, uint32_t key_hi) const {
-    const uint32_t base = top_cells_[m];
-    return {fine_begin_[base + rank(m, key_lo)], fine_begin_[base + rank(m, key_hi)]};
-}
-
-uint32_t SparseGrid::count(int level, int x, int y, int z) const {
-    if (level >= 4) {
-        const int res = kFineRes >> level;
-        return dense_[level - 4][size_t(x) + size_t(res) * (size_t(y) + size_t(res) * size_t(z))];
-    }
-    const int shift = 3 - level;
-    const uint32_t m = top_rank(x >> shift, y >> shift, z >> shift);
-    if (m == kEmpty) return 0;
-    if (level == 3) return top_begin_[m + 1] - top_begin_[m];
-    // Grid_level cell = 8^level consecutive Morton keys of the bottom grid.
-    const uint32_t mask = (kSubRes >> level) - 1;
-    const uint32_t key = morton9((uint32_t(x) & mask) << level, (uint32_t(y) & mask) << level,
-                                 (uint32_t(z) & mask) << level);
-    const auto [first, end] = sub_range(m, key, key + (1u << (3 * level)));
-    return end - first;
-}
-
 void SparseGrid::collect(int level, const CellBox& box, std::vector<uint32_t>& out) const {
     for (int z = box.lo[2]; z <= box.hi[2]; ++z) {
         for (int y = box.lo[1]; y <= box.hi[1]; ++y) {
@@ -230,14 +180,15 @@ void SparseGrid::collect(int level, const CellBox& box, std::vector<uint32_t>& o
                 }
                 // At Grid3 and finer a cell's references are one contiguous run.
                 const int shift = 3 - level;
-                const uint32_t m = top_rank(x >> shift, y >> shift, z >> shift);
+                const SparseGridView g = view();
+                const uint32_t m = top_rank(g, x >> shift, y >> shift, z >> shift);
                 if (m == kEmpty) continue;
                 uint32_t first = top_begin_[m], end = top_begin_[m + 1];
                 if (level < 3) {
                     const uint32_t mask = (kSubRes >> level) - 1;
                     const uint32_t key = morton9((uint32_t(x) & mask) << level, (uint32_t(y) & mask) << level,
                                                  (uint32_t(z) & mask) << level);
-                    std::tie(first, end) = sub_range(m, key, key + (1u << (3 * level)));
+                    sub_range(g, m, key, key + (1u << (3 * level)), first, end);
                 }
                 for (uint32_t i = first; i < end; ++i) out.push_back(i);
             }
