@@ -15,6 +15,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <numeric>
 #include <random>
@@ -271,6 +272,30 @@ TEST(LayoutConvertDeviceLogic, CwbvhDpSolvedTooEarlyFails) {
     const std::vector<NamedBvh> bvhs = test_bvhs();
     const NamedBvh& c = bvhs[0];
     EXPECT_FALSE(same_cwbvh(build_cwbvh(c.bvh, c.triangles), emulate_cwbvh<FirstArrival>(c.bvh, c.triangles, 1)));
+}
+
+}  // namespace
+}  // namespace rf
+
+namespace rf {
+namespace {
+
+// Unions in different orders may give -0 or +0 for the same bound; the node
+// origin must not depend on it, or the device's nodes would differ from the
+// CPU's in the sign bit alone.
+TEST(LayoutConvertDeviceLogic, QuantisationOriginIgnoresTheSignOfZero) {
+    for (const float zero : {0.0f, -0.0f}) {
+        Box3f boxes[kCwbvhWidth];
+        boxes[0] = {{zero, zero, 1.0f}, {1.0f, 1.0f, 2.0f}};
+        boxes[1] = {{0.5f, zero, 1.5f}, {2.0f, 1.0f, 3.0f}};
+        CwbvhNode node{};
+        ASSERT_TRUE(cwbvh_quantize(node, boxes, 0b11u));
+        for (int a = 0; a < 2; ++a) {
+            uint32_t bits;
+            std::memcpy(&bits, &node.p[a], sizeof bits);
+            EXPECT_EQ(bits, 0u) << "axis " << a << ", zero " << (std::signbit(zero) ? "-0" : "+0");
+        }
+    }
 }
 
 }  // namespace

@@ -15,7 +15,7 @@
 //    write offset, the thread writes its (cell, triangle) pairs
 //    (write_cell_pairs), the pairs are radix-sorted by cell over
 //    cell_key_bits() bits, and a thread per sorted pair marks where the cell
-//    changes (mark_cell_starts). The sort is stable and the pairs are
+//    changes (cell_start_of). The sort is stable and the pairs are
 //    written in triangle order, so each cell's triangles stay ascending:
 //    the CPU builder's lists.
 //  - chessboard_line_pass(): one cell of a 1D pass of the proximity-cloud
@@ -257,20 +257,19 @@ RF_HDI int cell_key_bits(uint64_t cell_count) {
     return bits;
 }
 
-// Step 5: thread i of the `pairs` sorted pairs (pairs >= 1). Where the cell
-// changes from the previous pair's, this pair starts its cell and every
-// empty cell in between (an empty cell starts where the next non-empty one
-// does: the CPU's prefix-sum convention, cell_start[c] = references in cells
-// before c); the last pair also ends the grid (cell_start[cells] = pairs).
-// Each entry of cell_start is written by exactly one thread.
-RF_HDI void mark_cell_starts(const uint32_t* sorted_cells, uint32_t pairs, uint32_t i, uint64_t cell_count,
-                             uint32_t* cell_start) {
-    const uint64_t cell = sorted_cells[i];
-    const uint64_t first = i == 0 ? 0 : uint64_t{sorted_cells[i - 1]} + 1;
-    for (uint64_t c = first; c <= cell; ++c) cell_start[c] = i;
-    if (i + 1 == pairs) {
-        for (uint64_t c = cell + 1; c <= cell_count; ++c) cell_start[c] = pairs;
+// Step 5: thread c of cells 0..cell_count: cell c's start is the number of
+// sorted pairs in cells before c (a binary search), which is the CPU's
+// prefix-sum convention (an empty cell starts where the next non-empty one
+// does; cell_start[cell_count] = pairs). One thread per cell keeps the work
+// even however sparse the grid is.
+RF_HDI uint32_t cell_start_of(const uint32_t* sorted_cells, uint32_t pairs, uint64_t cell) {
+    uint32_t lo = 0, hi = pairs;  // the first pair whose cell is >= cell
+    while (lo < hi) {
+        const uint32_t mid = lo + (hi - lo) / 2;
+        if (uint64_t{sorted_cells[mid]} < cell) lo = mid + 1;
+        else hi = mid;
     }
+    return lo;
 }
 
 // ------------------------------------------------ proximity clouds

@@ -3,7 +3,8 @@
 // src/accel/bvh/build/grid_bvh_steps.h:
 //  1. references (§4.4): one thread per triangle writes its reference; the
 //     scene box is a cub::DeviceReduce of the reference boxes (min/max are
-//     exact, so any order gives the CPU's box). GridBvhSplit: two passes,
+//     exact and skip NaN as the CPU's fold does, so any order gives the
+//     CPU's box). GridBvhSplit: two passes,
 //     each one thread per reference for its split request, a CUB inclusive
 //     scan of the requests (the total asked), one thread per reference for
 //     its share of the free slots (the CPU's rounding-down rule, so exactly
@@ -104,9 +105,16 @@ private:
     DeviceBuffer<uint8_t> buffer_;
 };
 
+// The CPU folds into an accumulator that starts at +-FLT_MAX, so a NaN
+// coordinate never wins there; CUB combines in tree order, so NaN must lose
+// from either side here to give the CPU's box.
+__device__ float min_skipping_nan(float a, float b) { return isnan(b) ? a : isnan(a) ? b : (b < a ? b : a); }
+__device__ float max_skipping_nan(float a, float b) { return isnan(b) ? a : isnan(a) ? b : (b > a ? b : a); }
+
 struct BoxUnion {
     __device__ Box3f operator()(const Box3f& a, const Box3f& b) const {
-        return {gridbvh::vmin(a.lo, b.lo), gridbvh::vmax(a.hi, b.hi)};
+        return {{min_skipping_nan(a.lo.x, b.lo.x), min_skipping_nan(a.lo.y, b.lo.y), min_skipping_nan(a.lo.z, b.lo.z)},
+                {max_skipping_nan(a.hi.x, b.hi.x), max_skipping_nan(a.hi.y, b.hi.y), max_skipping_nan(a.hi.z, b.hi.z)}};
     }
 };
 
@@ -406,7 +414,8 @@ void build_on_device(std::span<const Triangle> triangles, const BuildOptions& op
             RF_CUDA_CHECK(
                 cub::DeviceScan::InclusiveSum(temp.get(temp_bytes), temp_bytes, ends.data(), ends.data(), ref_count));
             const uint64_t slots = download_value(ends.data() + ref_count - 1);
-            if (slots >= (uint64_t{1} << 32) - 1) throw Error("GridBvhSplit device build: more than 2^32-2 parts");
+            // Node and leaf links keep their top bit as the leaf flag (kLeafBit).
+            if (slots >= (uint64_t{1} << 30)) throw Error("GridBvhSplit device build: more than 2^30 parts");
             DeviceBuffer<GridRef> parts("GridBvhSplit: partial triangles");
             DeviceBuffer<uint32_t> kept("GridBvhSplit: kept parts");
             meter.allocate(parts, slots);
@@ -623,7 +632,8 @@ Bvh build_grid_bvh_on_device(std::span<const Triangle> triangles, const BuildOpt
     DeviceBuildStages& s = stages ? *stages : local;
     s = {};
     if (triangles.empty()) return build_grid_bvh(triangles, options, partial_triangles);  // nothing to build
-    if (triangles.size() >= (size_t{1} << 31)) throw Error("GridBvh device build: more than 2^31-1 triangles");
+    if (triangles.size() >= (size_t{1} << 30))  // node and leaf links keep their top bit as the leaf flag
+        throw Error("GridBvh device build: 2^30 triangles or more");
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
     GridHierarchy hierarchy;

@@ -14,8 +14,8 @@
 //  4. sort:    one cub::DeviceRadixSort::SortPairs by cell over just the
 //     bits of the largest cell index. The LSD sort is stable, so each cell's
 //     triangles stay ascending: the CPU's cell lists.
-//  5. ranges:  a thread per sorted pair marks where the cell changes
-//     (uniform_grid_steps::mark_cell_starts), empty cells included, giving
+//  5. ranges:  a thread per cell finds its first pair by binary search
+//     (uniform_grid_steps::cell_start_of), empty cells included, giving
 //     the CPU's cell_start.
 //  6. proximity clouds (when asked): the occupancy from cell_start, then
 //     three 1D passes of the Chebyshev distance transform (x, y, z), a thread
@@ -112,12 +112,12 @@ __global__ void write_pairs_kernel(steps::CellGridView grid, const Triangle* tri
     steps::write_cell_pairs(grid, triangles[t], t, static_cast<uint32_t>(offsets[t]), pair_cells, pair_triangles);
 }
 
-// Stage 5: a thread per sorted pair.
+// Stage 5: a thread per cell, and one for the end of the grid.
 __global__ void cell_starts_kernel(const uint32_t* sorted_cells, uint32_t pairs, uint64_t cell_count,
                                    uint32_t* cell_start) {
-    const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
-    if (i >= pairs) return;
-    steps::mark_cell_starts(sorted_cells, pairs, i, cell_count, cell_start);
+    const uint64_t c = uint64_t{blockIdx.x} * kBlockSize + threadIdx.x;
+    if (c > cell_count) return;
+    cell_start[c] = steps::cell_start_of(sorted_cells, pairs, c);
 }
 
 // Stage 6a: a thread per cell, 0 where occupied, the cap elsewhere.
@@ -261,8 +261,8 @@ UniformGrid build_uniform_grid_on_device(std::span<const Triangle> triangles, in
     meter.allocate(cell_start, cells + 1);
     timer.start();
     if (pairs > 0) {
-        cell_starts_kernel<<<blocks_for(pairs), kBlockSize>>>(pair_cells[sorted].data(), pairs, cells,
-                                                              cell_start.data());
+        cell_starts_kernel<<<blocks_for(cells + 1), kBlockSize>>>(pair_cells[sorted].data(), pairs, cells,
+                                                                  cell_start.data());
     } else {
         RF_CUDA_CHECK(cudaMemset(cell_start.data(), 0, (cells + 1) * sizeof(uint32_t)));
     }

@@ -136,7 +136,9 @@ RF_HDI void solve_node(const RefinedNode* nodes, uint32_t n, float bias, float* 
     const float as_node = add_rn(mul_rn(area, kNodeCost), dist[kWidth - 1]);
     const float as_leaf =
         node.triangles <= kMaxLeafTriangles ? mul_rn(mul_rn(area, kTriangleCost), float(node.triangles)) : kInf;
-    const bool is_inner = as_node < as_leaf;
+    // A node over more triangles than a leaf holds is inner even when its
+    // costs overflow to infinity (coordinates near 1e19): a leaf could not hold it.
+    const bool is_inner = as_node < as_leaf || node.triangles > kMaxLeafTriangles;
     c[0] = is_inner ? as_node : as_leaf;
     choice.split[0] = uint8_t((is_inner ? 1u : 0u) | (unsigned(dist_k[kWidth - 1]) << 1));
     uint8_t split = 0;  // one slot

@@ -184,7 +184,9 @@ RF_HDI bool cwbvh_quantize(CwbvhNode& node, const Box3f (&boxes)[kCwbvhWidth], u
             ++e;
         }
         if (!cwbvh::finite(255.0f * cwbvh_step(uint8_t(e)))) return false;
-        node.p[a] = lo;
+        // +0 for either zero: unions taken in different orders (CPU and
+        // device) may disagree on the sign, never on the value.
+        node.p[a] = lo == 0.0f ? 0.0f : lo;
         node.e[a] = uint8_t(e);
     }
     for (int s = 0; s < kCwbvhWidth; ++s) {
