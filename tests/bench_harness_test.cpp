@@ -523,6 +523,9 @@ TEST(BenchGpu, DeviceBuildReportListsTheStagesThatRan) {
               std::string::npos);
     s.on_device = false;
     EXPECT_EQ(bench::format_device_build(bench::describe_device_build(s, 8, 1.0)), "built on the host");
+    s.layout_ms = 0.25;
+    EXPECT_EQ(bench::format_device_build(bench::describe_device_build(s, 8, 1.0)),
+              "built on the host, layout converted on the device in 0.250 ms");
 }
 
 // GPU rows as the runner makes them, printed and written next to a CPU row.

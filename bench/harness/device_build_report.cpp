@@ -39,8 +39,13 @@ GpuBuildStages describe_device_build(const cuda::DeviceBuildStages& s, size_t no
 }
 
 std::string format_device_build(const GpuBuildStages& b) {
-    if (!b.on_device) return "built on the host";
     char buffer[256];
+    if (!b.on_device) {
+        if (b.layout_ms <= 0.0) return "built on the host";
+        std::snprintf(buffer, sizeof(buffer), "built on the host, layout converted on the device in %.3f ms",
+                      b.layout_ms);
+        return buffer;
+    }
     std::snprintf(buffer, sizeof(buffer), "device build %.3f ms (", b.device_ms);
     std::string line = buffer;
     for (size_t i = 0; i < b.device_stages.size(); ++i) {

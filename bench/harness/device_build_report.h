@@ -31,7 +31,7 @@ GpuBuildStages describe_device_build(const cuda::DeviceBuildStages& stages, size
 
 // One line: "device build 1.23 ms (bounds 0.01, ...) + layout 0.2 ms; peak
 // 12.3 MiB; SAH ...; upload/download/host ms; detail", or "built on the
-// host" when !on_device.
+// host" when !on_device (with the device layout conversion's time if any).
 std::string format_device_build(const GpuBuildStages& build);
 
 }  // namespace rf::bench
