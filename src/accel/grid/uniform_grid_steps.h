@@ -22,9 +22,10 @@
 //    distance transform (seed 001 §2.1.4), the device's variant of
 //    proximity_clouds.cpp (see the function's comment).
 //
-// Products go through exact_mul(): nvcc would otherwise fuse a * b + c into
-// one rounding (an FMA) where the host (built with -ffp-contract=off) rounds
-// twice, and the grids would differ in the last bit of a plane test.
+// Products go through dmul_rn() (core/rounded_arithmetic.h): nvcc would
+// otherwise fuse a * b + c into one rounding (an FMA) where the host (built
+// with -ffp-contract=off) rounds twice, and the grids would differ in the
+// last bit of a plane test.
 #pragma once
 
 #include <cmath>
@@ -33,19 +34,11 @@
 #include <vector>
 
 #include "accel/grid/uniform_grid.h"
+#include "core/rounded_arithmetic.h"
 #include "rayforge/core/host_device.h"
 #include "rayforge/scene/scene_geometry.h"
 
 namespace rf::uniform_grid_steps {
-
-// a * b rounded once and never fused with a neighbouring add.
-RF_HDI double exact_mul(double a, double b) {
-#if defined(__CUDA_ARCH__)
-    return __dmul_rn(a, b);
-#else
-    return a * b;
-#endif
-}
 
 struct Vec3d {
     double x, y, z;
@@ -53,10 +46,10 @@ struct Vec3d {
 
 RF_HDI Vec3d to_vec3d(Vec3f v) { return {double(v.x), double(v.y), double(v.z)}; }
 RF_HDI Vec3d operator-(Vec3d a, Vec3d b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
-RF_HDI double dot(Vec3d a, Vec3d b) { return exact_mul(a.x, b.x) + exact_mul(a.y, b.y) + exact_mul(a.z, b.z); }
+RF_HDI double dot(Vec3d a, Vec3d b) { return dmul_rn(a.x, b.x) + dmul_rn(a.y, b.y) + dmul_rn(a.z, b.z); }
 RF_HDI Vec3d cross(Vec3d a, Vec3d b) {
-    return {exact_mul(a.y, b.z) - exact_mul(a.z, b.y), exact_mul(a.z, b.x) - exact_mul(a.x, b.z),
-            exact_mul(a.x, b.y) - exact_mul(a.y, b.x)};
+    return {dmul_rn(a.y, b.z) - dmul_rn(a.z, b.y), dmul_rn(a.z, b.x) - dmul_rn(a.x, b.z),
+            dmul_rn(a.x, b.y) - dmul_rn(a.y, b.x)};
 }
 // std::min / std::max exactly (the CPU builder's original choices).
 RF_HDI double min_of(double a, double b) { return b < a ? b : a; }
@@ -74,7 +67,7 @@ RF_HDI double max3(double a, double b, double c) {
 
 // The box's projection radius on `axis` for half-sizes h.
 RF_HDI double projected_radius(Vec3d axis, Vec3d h) {
-    return exact_mul(h.x, fabs(axis.x)) + exact_mul(h.y, fabs(axis.y)) + exact_mul(h.z, fabs(axis.z));
+    return dmul_rn(h.x, fabs(axis.x)) + dmul_rn(h.y, fabs(axis.y)) + dmul_rn(h.z, fabs(axis.z));
 }
 
 // True when `axis` separates the box-centred triangle (v0, v1, v2) from the
@@ -159,9 +152,9 @@ RF_HDI int last_cell(const CellGridView& g, int a, double x) {
 RF_HDI bool overlaps_cell(const CellGridView& g, Vec3d v0, Vec3d v1, Vec3d v2, int x, int y, int z) {
     const Vec3d lo{g.planes[0][x], g.planes[1][y], g.planes[2][z]};
     const Vec3d hi{g.planes[0][x + 1], g.planes[1][y + 1], g.planes[2][z + 1]};
-    const Vec3d center{exact_mul(0.5, lo.x + hi.x), exact_mul(0.5, lo.y + hi.y), exact_mul(0.5, lo.z + hi.z)};
-    const Vec3d half{exact_mul(0.5, hi.x - lo.x) + g.eps, exact_mul(0.5, hi.y - lo.y) + g.eps,
-                     exact_mul(0.5, hi.z - lo.z) + g.eps};
+    const Vec3d center{dmul_rn(0.5, lo.x + hi.x), dmul_rn(0.5, lo.y + hi.y), dmul_rn(0.5, lo.z + hi.z)};
+    const Vec3d half{dmul_rn(0.5, hi.x - lo.x) + g.eps, dmul_rn(0.5, hi.y - lo.y) + g.eps,
+                     dmul_rn(0.5, hi.z - lo.z) + g.eps};
     return triangle_overlaps_cell_box(center, half, v0, v1, v2);
 }
 
@@ -185,7 +178,7 @@ RF_HDI void for_each_overlapped_cell(const CellGridView& g, const Triangle& tri,
     const Vec3d v0 = to_vec3d(tri.v0), v1 = to_vec3d(tri.v1), v2 = to_vec3d(tri.v2);
     const Vec3d e0 = v1 - v0, e1 = v2 - v0;
     const Vec3d n = cross(e0, e1);
-    const bool well_shaped = dot(n, n) > exact_mul(exact_mul(1e-12, dot(e0, e0)), dot(e1, e1));
+    const bool well_shaped = dot(n, n) > dmul_rn(dmul_rn(1e-12, dot(e0, e0)), dot(e1, e1));
     if (box_cells <= 8 || !well_shaped) {
         // Small boxes, and (near-)degenerate triangles whose plane is unreliable.
         for (int z = lo[2]; z <= hi[2]; ++z)
@@ -208,12 +201,12 @@ RF_HDI void for_each_overlapped_cell(const CellGridView& g, const Triangle& tri,
             double kmin = __builtin_huge_val(), kmax = -kmin;
             for (int xi = 0; xi < 2; ++xi) {
                 for (int yi = 0; yi < 2; ++yi) {
-                    const double pk = (d - exact_mul(nv[i_axis], xs[xi]) - exact_mul(nv[j_axis], ys[yi])) / nv[k];
+                    const double pk = (d - dmul_rn(nv[i_axis], xs[xi]) - dmul_rn(nv[j_axis], ys[yi])) / nv[k];
                     kmin = min_of(kmin, pk);
                     kmax = max_of(kmax, pk);
                 }
             }
-            const double slack = exact_mul(1e-9, fabs(kmin) + fabs(kmax));
+            const double slack = dmul_rn(1e-9, fabs(kmin) + fabs(kmax));
             kmin = max_of(kmin - slack, double(bb.lo[k]));
             kmax = min_of(kmax + slack, double(bb.hi[k]));
             if (kmin > kmax) continue;

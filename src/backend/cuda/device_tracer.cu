@@ -180,8 +180,13 @@ DeviceTracer::DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, cons
     stats.name = "cuda/" + to_string(kernel);
     double layout_ms = 0.0;
     size_t structure_bytes = 0;
-    impl.triangles.upload(triangles);
-    const Triangle* device_triangles = impl.triangles.data();
+    // The tracer's triangles go up after the build: a device builder holds
+    // its own copy while it runs and frees it before returning, so the two
+    // copies never coexist.
+    const auto upload_triangles = [&] {
+        impl.triangles.upload(triangles);
+        return static_cast<const Triangle*>(impl.triangles.data());
+    };
 
     switch (kernel) {
         case GpuKernel::Bvh2:
@@ -194,6 +199,7 @@ DeviceTracer::DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, cons
             stats.sah_cost = bvh.sah_cost(1.0f, 1.0f);
             stats.quality_cost = bvh.quality_cost(2.0);
             stats.leaf_count = bvh.leaf_count();
+            const Triangle* device_triangles = upload_triangles();
             const auto layout_start = std::chrono::steady_clock::now();
             if (kernel == GpuKernel::Bvh2) {
                 impl.bvh_nodes.upload(bvh.nodes);
@@ -233,6 +239,7 @@ DeviceTracer::DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, cons
         case GpuKernel::KdShortStack:
         case GpuKernel::KdRestart: {
             const KdTree tree = build_kdtree(triangles, build);
+            const Triangle* device_triangles = upload_triangles();
             impl.kd_nodes.upload(tree.nodes);
             impl.prim_indices.upload(tree.prim_indices);
             const KdTreeView kd{impl.kd_nodes.data(), impl.prim_indices.data(), device_triangles,
@@ -254,6 +261,7 @@ DeviceTracer::DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, cons
                                                    device)
                     : build_uniform_grid(triangles, build.grid_resolution, proximity);
             impl.build_stages.on_device = build.build_on_device;
+            const Triangle* device_triangles = upload_triangles();
             impl.cell_start.upload(grid.cell_start);
             impl.cell_prims.upload(grid.cell_prims);
             impl.proximity.upload(grid.proximity);

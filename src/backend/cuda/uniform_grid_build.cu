@@ -134,14 +134,19 @@ __global__ void chessboard_pass_kernel(const uint8_t* in, uint8_t* out, GridDims
     out[c] = steps::chessboard_pass_at(in, grid.dims, axis, c);
 }
 
-Box3f device_bounds(const DeviceBuffer<Triangle>& triangles, uint32_t n, MemoryMeter& meter) {
+// The triangles' bounds; `kernel_ms` times the two kernels alone (the
+// allocations and the download are host work).
+Box3f device_bounds(const DeviceBuffer<Triangle>& triangles, uint32_t n, MemoryMeter& meter, EventTimer& timer,
+                    double& kernel_ms) {
     DeviceBuffer<Box3f> block_bounds("uniform grid: block bounds"), bounds("uniform grid: bounds");
     const uint32_t blocks = std::min<uint32_t>(blocks_for(n), kMaxBoundsBlocks);
     meter.allocate(block_bounds, blocks);
     meter.allocate(bounds, 1);
+    timer.start();
     triangle_bounds_kernel<<<blocks, kBlockSize>>>(triangles.data(), n, block_bounds.data());
     union_kernel<<<1, kBlockSize>>>(block_bounds.data(), blocks, bounds.data());
     RF_CUDA_CHECK(cudaGetLastError());
+    kernel_ms = timer.stop_ms();
     Box3f result;
     bounds.download(std::span<Box3f>(&result, 1));
     meter.release(block_bounds);
@@ -177,9 +182,7 @@ UniformGrid build_uniform_grid_on_device(std::span<const Triangle> triangles, in
     s.upload_ms = timer.stop_ms();
 
     // 0. Bounds on the device, the layout and the margin on the host.
-    timer.start();
-    const Box3f bounds = device_bounds(device_triangles, n, meter);
-    s.bounds_ms = timer.stop_ms();
+    const Box3f bounds = device_bounds(device_triangles, n, meter, timer, s.bounds_ms);
     grid.layout = choose_grid_layout(bounds, n, resolution);
     const uint64_t cells = grid.layout.cell_count();
     if (cells == 0) return grid;  // non-empty input always has cells; kept for symmetry with the CPU

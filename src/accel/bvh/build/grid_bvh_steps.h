@@ -17,6 +17,7 @@
 #include <cmath>
 #include <cstdint>
 
+#include "core/rounded_arithmetic.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/box.h"
@@ -36,35 +37,7 @@ inline constexpr uint32_t kInvalidRef = 0xffffffffu;    // a part that came out 
 inline constexpr uint32_t kMaxSplitsPerRef = 4096;      // far above 128 parts: only bounds the arithmetic
 inline constexpr uint32_t kLeafBit = 0x80000000u;       // hierarchy node: kLeafBit | leaf index
 
-// ---- exact arithmetic: one rounding per operation on both compilers ----
-RF_HDI float mul_rn(float a, float b) {
-#if defined(__CUDA_ARCH__)
-    return __fmul_rn(a, b);
-#else
-    return a * b;
-#endif
-}
-RF_HDI float add_rn(float a, float b) {
-#if defined(__CUDA_ARCH__)
-    return __fadd_rn(a, b);
-#else
-    return a + b;
-#endif
-}
-RF_HDI double dmul_rn(double a, double b) {
-#if defined(__CUDA_ARCH__)
-    return __dmul_rn(a, b);
-#else
-    return a * b;
-#endif
-}
-RF_HDI double dadd_rn(double a, double b) {
-#if defined(__CUDA_ARCH__)
-    return __dadd_rn(a, b);
-#else
-    return a + b;
-#endif
-}
+// Exact arithmetic (one rounding per operation): core/rounded_arithmetic.h.
 // std::min / std::max semantics (the CPU builder's), not fminf/fmaxf.
 RF_HDI float min_f(float a, float b) { return b < a ? b : a; }
 RF_HDI float max_f(float a, float b) { return a < b ? b : a; }

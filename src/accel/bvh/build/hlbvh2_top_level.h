@@ -35,6 +35,7 @@
 #include <cstdint>
 
 #include "accel/bvh/build/hlbvh2_tasks.h"
+#include "core/rounded_arithmetic.h"
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/box.h"
 
@@ -114,22 +115,6 @@ RF_HDI TopBin merge_bins(const TopBin& a, const TopBin& b) {
     return r;
 }
 
-// Products and sums rounded one at a time: nvcc would otherwise fuse them
-// (the host is compiled with -ffp-contract=off).
-RF_HDI float mul_rn(float a, float b) {
-#if defined(__CUDA_ARCH__)
-    return __fmul_rn(a, b);
-#else
-    return a * b;
-#endif
-}
-RF_HDI float add_rn(float a, float b) {
-#if defined(__CUDA_ARCH__)
-    return __fadd_rn(a, b);
-#else
-    return a + b;
-#endif
-}
 // Half the surface area (morton::half_area's expression; boxes are never empty here).
 RF_HDI float top_half_area(const Box3f& b) {
     const float x = b.hi.x - b.lo.x, y = b.hi.y - b.lo.y, z = b.hi.z - b.lo.z;

@@ -30,6 +30,7 @@
 #include <cstring>
 
 #include "accel/bvh/build/karras_tree.h"
+#include "core/rounded_arithmetic.h"
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/box.h"
 
@@ -49,11 +50,7 @@ RF_HDI uint32_t clamp_radius(int radius) {
 RF_HDI float merged_area(const Box3f& a, const Box3f& b) {
     const Box3f m = karras::box_union(a, b);
     const float x = m.hi.x - m.lo.x, y = m.hi.y - m.lo.y, z = m.hi.z - m.lo.z;
-#if defined(__CUDA_ARCH__)
-    return __fadd_rn(__fadd_rn(__fmul_rn(x, y), __fmul_rn(y, z)), __fmul_rn(z, x));
-#else
-    return x * y + y * z + z * x;  // the library builds with -ffp-contract=off
-#endif
+    return add_rn(add_rn(mul_rn(x, y), mul_rn(y, z)), mul_rn(z, x));
 }
 
 // The tie rule between candidates j and k of cluster i at equal areas, the

@@ -16,6 +16,7 @@
 
 #include <cstdint>
 
+#include "core/rounded_arithmetic.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/core/float_bits.h"
 #include "rayforge/core/host_device.h"
@@ -51,21 +52,6 @@ struct Choice {
     uint8_t split[kWidth];
 };
 
-// Products and sums that no compiler fuses.
-RF_HDI float mul_rn(float a, float b) {
-#if defined(__CUDA_ARCH__)
-    return __fmul_rn(a, b);
-#else
-    return a * b;
-#endif
-}
-RF_HDI float add_rn(float a, float b) {
-#if defined(__CUDA_ARCH__)
-    return __fadd_rn(a, b);
-#else
-    return a + b;
-#endif
-}
 
 // A cost row entry another thread wrote (another block on the device: read
 // from L2, past a possibly stale L1 line).

@@ -21,6 +21,7 @@
 #include <cstdint>
 
 #include "accel/bvh/wide/cwbvh_collapse_steps.h"
+#include "core/rounded_arithmetic.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/core/host_device.h"
 #include "rayforge/scene/scene_geometry.h"
