@@ -1,6 +1,6 @@
-// What the device-builder tests (lbvh_build_test.cpp, hlbvh2_build_test.cpp)
-// share: the skip without a device, named test scenes with the degenerate
-// inputs every Morton builder must survive, and the bit-exact BVH comparison.
+// What the device-builder tests (tests/gpu/*_build_test.cpp) share: the skip
+// without a device, named test scenes with the degenerate inputs every
+// builder must survive, and the bit-exact BVH comparison.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -28,6 +28,16 @@ struct NamedScene {
     std::string name;
     SceneGeometry geometry;
 };
+
+// The scenes every device-builder test starts from: a soup, a sphere and
+// the nasty geometry (slivers, duplicates, huge and tiny triangles).
+inline std::vector<NamedScene> common_scenes() {
+    std::vector<NamedScene> scenes;
+    scenes.push_back({"soup", test::make_triangle_soup(20000, 1, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f)});
+    scenes.push_back({"sphere", test::to_geometry(test::make_icosphere(5))});
+    scenes.push_back({"nasty", test::make_nasty_geometry(2)});
+    return scenes;
+}
 
 // Appends every triangle in one point (all Morton codes equal) and two triangles.
 inline void append_degenerate_scenes(std::vector<NamedScene>& scenes) {

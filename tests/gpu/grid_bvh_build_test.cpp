@@ -40,11 +40,8 @@ SceneGeometry make_slivers(int count, uint32_t seed) {
 }
 
 std::vector<NamedScene> test_scenes() {
-    std::vector<NamedScene> scenes;
-    scenes.push_back({"soup", test::make_triangle_soup(20000, 1, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f)});
+    std::vector<NamedScene> scenes = gpu_build_test::common_scenes();
     scenes.push_back({"big soup", test::make_triangle_soup(200000, 2, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.05f)});
-    scenes.push_back({"sphere", test::to_geometry(test::make_icosphere(5))});
-    scenes.push_back({"nasty", test::make_nasty_geometry(2)});
     scenes.push_back({"slivers", make_slivers(20000, 3)});
     append_degenerate_scenes(scenes);
     return scenes;

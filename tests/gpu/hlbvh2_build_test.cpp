@@ -34,11 +34,8 @@ using gpu_build_test::NamedScene;
 using gpu_build_test::same_box;
 
 std::vector<NamedScene> test_scenes() {
-    std::vector<NamedScene> scenes;
-    scenes.push_back({"soup", test::make_triangle_soup(20000, 1, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f)});
+    std::vector<NamedScene> scenes = gpu_build_test::common_scenes();
     scenes.push_back({"big soup", test::make_triangle_soup(300000, 2, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.05f)});
-    scenes.push_back({"sphere", test::to_geometry(test::make_icosphere(5))});
-    scenes.push_back({"nasty", test::make_nasty_geometry(2)});
     append_degenerate_scenes(scenes);
     return scenes;
 }

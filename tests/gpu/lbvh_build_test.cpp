@@ -33,10 +33,7 @@ using gpu_build_test::NamedScene;
 using gpu_build_test::same_box;
 
 std::vector<NamedScene> test_scenes() {
-    std::vector<NamedScene> scenes;
-    scenes.push_back({"soup", test::make_triangle_soup(20000, 1, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f)});
-    scenes.push_back({"sphere", test::to_geometry(test::make_icosphere(5))});
-    scenes.push_back({"nasty", test::make_nasty_geometry(2)});
+    std::vector<NamedScene> scenes = gpu_build_test::common_scenes();
     scenes.push_back({"far", test::make_triangle_soup(3000, 3, {Vec3f(1e6f), Vec3f(1e6f + 100.0f)}, 1.0f)});
     append_degenerate_scenes(scenes);
     return scenes;
