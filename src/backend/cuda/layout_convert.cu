@@ -191,6 +191,22 @@ T download_one(const DeviceBuffer<T>& buffer, size_t index) {
     return value;
 }
 
+// The canonical BVH and its triangles uploaded, each buffer counted by `meter`.
+struct CanonicalOnDevice {
+    DeviceBuffer<BvhNode> nodes;
+    DeviceBuffer<uint32_t> prims;
+    DeviceBuffer<Triangle> triangles;
+    CanonicalOnDevice(const Bvh& bvh, std::span<const Triangle> tris, MemoryMeter& meter, const std::string& what)
+        : nodes(what + ": canonical nodes"), prims(what + ": primitive indices"), triangles(what + ": triangles") {
+        meter.allocate(nodes, bvh.nodes.size());
+        meter.allocate(prims, bvh.prim_indices.size());
+        meter.allocate(triangles, tris.size());
+        nodes.upload(bvh.nodes);
+        prims.upload(bvh.prim_indices);
+        triangles.upload(tris);
+    }
+};
+
 }  // namespace
 
 AilaLaineBvh convert_to_aila_laine_on_device(const Bvh& bvh, std::span<const Triangle> triangles,
@@ -211,15 +227,10 @@ AilaLaineBvh convert_to_aila_laine_on_device(const Bvh& bvh, std::span<const Tri
     MemoryMeter meter;
     EventTimer timer;
 
-    DeviceBuffer<BvhNode> nodes("node pairs: canonical nodes");
-    DeviceBuffer<uint32_t> prims("node pairs: primitive indices");
-    DeviceBuffer<Triangle> tris("node pairs: triangles");
-    meter.allocate(nodes, n);
-    meter.allocate(prims, bvh.prim_indices.size());
-    meter.allocate(tris, triangles.size());
-    nodes.upload(bvh.nodes);
-    prims.upload(bvh.prim_indices);
-    tris.upload(triangles);
+    CanonicalOnDevice input(bvh, triangles, meter, "node pairs");
+    DeviceBuffer<BvhNode>& nodes = input.nodes;
+    DeviceBuffer<uint32_t>& prims = input.prims;
+    DeviceBuffer<Triangle>& tris = input.triangles;
 
     DeviceBuffer<uint32_t> parent("node pairs: parents"), arrivals("node pairs: arrival counters");
     DeviceBuffer<aila_laine::SubtreeSize> size("node pairs: subtree sizes");
@@ -270,15 +281,10 @@ CwbvhBvh build_cwbvh_on_device(const Bvh& bvh, std::span<const Triangle> triangl
     MemoryMeter meter;
     EventTimer timer;
 
-    DeviceBuffer<BvhNode> canonical("CWBVH: canonical nodes");
-    DeviceBuffer<uint32_t> prims("CWBVH: primitive indices");
-    DeviceBuffer<Triangle> tris("CWBVH: triangles");
-    meter.allocate(canonical, canonical_count);
-    meter.allocate(prims, bvh.prim_indices.size());
-    meter.allocate(tris, triangles.size());
-    canonical.upload(bvh.nodes);
-    prims.upload(bvh.prim_indices);
-    tris.upload(triangles);
+    CanonicalOnDevice input(bvh, triangles, meter, "CWBVH");
+    DeviceBuffer<BvhNode>& canonical = input.nodes;
+    DeviceBuffer<uint32_t>& prims = input.prims;
+    DeviceBuffer<Triangle>& tris = input.triangles;
 
     // Refinement's state, then the DP's, then the emission's per-wide-node
     // arrays (at most one wide node per refined node).
