@@ -14,7 +14,10 @@
 // fold) and ballots (the stable partition, the enqueue) are emulated lane by
 // lane, warps shuffled; its references must be the CPU's top level
 // (build_hlbvh2_top_level) and, emitted, give build_hlbvh2's BVH. A wrong
-// tie rule must fail.
+// tie rule must fail. Large tasks take the block path (one block per task:
+// strided binning by shared-memory atomics on ordered float keys, emulated
+// in shuffled thread orders; the partition by a block scan); its merged bins
+// must equal bin_task's, its tree the CPU's, and a wrong stride must fail.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -378,6 +381,45 @@ bool consider_last_of_equals(hlbvh2::TopSplit& best, float cost, int axis, uint3
 }
 using Consider = bool (*)(hlbvh2::TopSplit&, float, int, uint32_t);
 
+// choose_split_lanes of hlbvh2_top_level.cu, its 8 lanes in lockstep
+// (bins[lane][axis]: lane's bin of each axis; the lanes' bounds are equal).
+hlbvh2::TopSplit emulate_split_lanes(const TopBin bins[kLanes][3], const hlbvh2::CellBounds& bounds, uint32_t count,
+                                     Consider consider, uint32_t* left_count_out) {
+    float cost[kLanes][3] = {};
+    bool valid[kLanes][3] = {};
+    uint32_t left_clusters[kLanes][3] = {};
+    for (int axis = 0; axis < 3; ++axis) {
+        TopBin below[kLanes], above[kLanes];
+        for (uint32_t lane = 0; lane < kLanes; ++lane) below[lane] = above[lane] = bins[lane][axis];
+        for (uint32_t d = 1; d < kLanes; d *= 2) {  // __shfl_up_sync / __shfl_down_sync scans
+            TopBin next_below[kLanes], next_above[kLanes];
+            for (uint32_t lane = 0; lane < kLanes; ++lane) {
+                next_below[lane] = lane >= d ? hlbvh2::merge_bins(below[lane - d], below[lane]) : below[lane];
+                next_above[lane] = lane + d < kLanes ? hlbvh2::merge_bins(above[lane], above[lane + d]) : above[lane];
+            }
+            std::copy(next_below, next_below + kLanes, below);
+            std::copy(next_above, next_above + kLanes, above);
+        }
+        for (uint32_t lane = 0; lane < kLanes; ++lane) {
+            const TopBin left = lane == 0 ? TopBin{} : below[lane - 1];
+            valid[lane][axis] = lane >= 1 && lane < hlbvh2::axis_bins(bounds, axis) &&
+                                hlbvh2::plane_cost(left, above[lane], &cost[lane][axis]);
+            left_clusters[lane][axis] = left.clusters;
+        }
+    }
+    hlbvh2::TopSplit split;  // every lane folds the same candidates: lane 0's fold stands for all
+    uint32_t left_count = count / 2;
+    for (int axis = 0; axis < 3; ++axis) {
+        for (uint32_t plane = 1; plane < kLanes; ++plane) {
+            if (valid[plane][axis] && consider(split, cost[plane][axis], axis, plane)) {
+                left_count = left_clusters[plane][axis];
+            }
+        }
+    }
+    *left_count_out = left_count;
+    return split;
+}
+
 // process_top_task of hlbvh2_top_level.cu, its 8 lanes in lockstep: each
 // shuffle reads the other lanes' values from before the step.
 uint32_t emulate_top_task(const TopTask& task, const TopCluster* in, TopCluster* out, uint32_t top_base,
@@ -399,37 +441,8 @@ uint32_t emulate_top_task(const TopTask& task, const TopCluster* in, TopCluster*
     for (uint32_t lane = 0; lane < kLanes; ++lane) {
         hlbvh2::bin_task_lane(in, task.first, task.end, bounds[lane], lane, bins[lane]);
     }
-    float cost[kLanes][3] = {};
-    bool valid[kLanes][3] = {};
-    uint32_t left_clusters[kLanes][3] = {};
-    for (int axis = 0; axis < 3; ++axis) {
-        TopBin below[kLanes], above[kLanes];
-        for (uint32_t lane = 0; lane < kLanes; ++lane) below[lane] = above[lane] = bins[lane][axis];
-        for (uint32_t d = 1; d < kLanes; d *= 2) {  // __shfl_up_sync / __shfl_down_sync scans
-            TopBin next_below[kLanes], next_above[kLanes];
-            for (uint32_t lane = 0; lane < kLanes; ++lane) {
-                next_below[lane] = lane >= d ? hlbvh2::merge_bins(below[lane - d], below[lane]) : below[lane];
-                next_above[lane] = lane + d < kLanes ? hlbvh2::merge_bins(above[lane], above[lane + d]) : above[lane];
-            }
-            std::copy(next_below, next_below + kLanes, below);
-            std::copy(next_above, next_above + kLanes, above);
-        }
-        for (uint32_t lane = 0; lane < kLanes; ++lane) {
-            const TopBin left = lane == 0 ? TopBin{} : below[lane - 1];
-            valid[lane][axis] = lane >= 1 && lane < hlbvh2::axis_bins(bounds[lane], axis) &&
-                                hlbvh2::plane_cost(left, above[lane], &cost[lane][axis]);
-            left_clusters[lane][axis] = left.clusters;
-        }
-    }
-    hlbvh2::TopSplit split;  // every lane folds the same candidates: lane 0's fold stands for all
-    uint32_t left_count = count / 2;
-    for (int axis = 0; axis < 3; ++axis) {
-        for (uint32_t plane = 1; plane < kLanes; ++plane) {
-            if (valid[plane][axis] && consider(split, cost[plane][axis], axis, plane)) {
-                left_count = left_clusters[plane][axis];
-            }
-        }
-    }
+    uint32_t left_count = 0;
+    const hlbvh2::TopSplit split = emulate_split_lanes(bins, bounds[0], count, consider, &left_count);
     const uint32_t right_count = count - left_count;
     uint32_t lefts = 0;
     for (uint32_t chunk = task.first; chunk < task.end; chunk += kLanes) {
@@ -438,15 +451,14 @@ uint32_t emulate_top_task(const TopTask& task, const TopCluster* in, TopCluster*
         for (uint32_t lane = 0; lane < kLanes; ++lane) {
             const uint32_t i = chunk + lane;
             if (i >= task.end) continue;
-            left[lane] = split.axis >= 0 ? hlbvh2::goes_left(in[i], bounds[lane], split) : i - task.first < left_count;
+            left[lane] = hlbvh2::cluster_goes_left(in[i], i, task, bounds[lane], split, left_count);
             left_bits |= (left[lane] ? 1u : 0u) << lane;
         }
         for (uint32_t lane = 0; lane < kLanes; ++lane) {
             const uint32_t i = chunk + lane;
             if (i >= task.end) continue;
             const uint32_t lefts_before = lefts + static_cast<uint32_t>(std::popcount(left_bits & ((1u << lane) - 1u)));
-            const uint32_t at = left[lane] ? task.first + lefts_before : task.first + left_count + (i - task.first - lefts_before);
-            out[at] = in[i];
+            out[hlbvh2::partition_slot(task, left_count, i, lefts_before, left[lane])] = in[i];
             if (left[lane] && left_count == 1) top_refs[2 * task.node] = in[i].root;
             if (!left[lane] && right_count == 1) top_refs[2 * task.node + 1] = in[i].root;
         }
@@ -463,28 +475,169 @@ uint32_t emulate_top_task(const TopTask& task, const TopCluster* in, TopCluster*
     return inner;
 }
 
+// The block path (top_large_task_kernel) emulated: shared-memory atomics as
+// plain updates (they commute: any order gives the same words).
+constexpr uint32_t kTaskBlock = 256;  // hlbvh2_top_level.cu's kTopTaskBlock
+constexpr uint32_t kTaskBlockWarps = kTaskBlock / kWarp;
+struct PlainAtomics {
+    void min(uint32_t* word, uint32_t value) const { *word = std::min(*word, value); }
+    void max(uint32_t* word, uint32_t value) const { *word = std::max(*word, value); }
+    void add(uint32_t* word, uint32_t value) const { *word += value; }
+};
+
+// Equal as values: zeros of either sign are equal (the only difference the
+// key encoding may make, see hlbvh2_top_level.h).
+bool same_bin_value(const TopBin& a, const TopBin& b) {
+    return a.box.lo.x == b.box.lo.x && a.box.lo.y == b.box.lo.y && a.box.lo.z == b.box.lo.z &&
+           a.box.hi.x == b.box.hi.x && a.box.hi.y == b.box.hi.y && a.box.hi.z == b.box.hi.z &&
+           a.triangles == b.triangles && a.clusters == b.clusters;
+}
+
+struct BlockPathStats {
+    size_t tasks = 0;           // tasks run by the block path
+    size_t bin_mismatches = 0;  // merged shared bins unlike bin_task's
+    size_t bad_slots = 0;       // partition slots outside the task (skipped: a bug's symptom)
+    size_t zero_signs = 0;      // bins equal to bin_task's as values, not as bits
+};
+
+// top_large_task_kernel for one task, its threads in shuffled orders:
+// strided cell bounds merged as the shared atomics would, strided binning
+// into the warps' key bins, the 8 lanes' merge and split, the partition by
+// an exclusive scan per chunk of kTaskBlock clusters. `stride`: the threads'
+// stride over the clusters (kTaskBlock; anything else is a bug to catch).
+uint32_t emulate_large_top_task(const TopTask& task, const TopCluster* in, TopCluster* out, uint32_t top_base,
+                                uint32_t* top_refs, TopTask children[2], Consider consider, uint32_t stride,
+                                std::mt19937& rng, BlockPathStats& stats) {
+    const uint32_t count = task.end - task.first;
+    std::vector<uint32_t> threads(kTaskBlock);
+    std::iota(threads.begin(), threads.end(), 0u);
+    std::shuffle(threads.begin(), threads.end(), rng);
+    hlbvh2::CellBounds bounds = hlbvh2::empty_cell_bounds();
+    for (uint32_t t : threads) hlbvh2::merge(bounds, hlbvh2::strided_cell_bounds(in, task.first, task.end, t, stride));
+    std::shuffle(threads.begin(), threads.end(), rng);
+    hlbvh2::TopBinKeys warp_bins[kTaskBlockWarps][3][hlbvh2::kTopBins];
+    for (auto& warp : warp_bins) {
+        for (auto& axis : warp) std::fill(axis, axis + hlbvh2::kTopBins, hlbvh2::empty_bin_keys());
+    }
+    PlainAtomics atomics;
+    for (uint32_t t : threads) {
+        hlbvh2::strided_bin_keys(in, task.first, task.end, t, stride, bounds, warp_bins[t / kWarp], atomics);
+    }
+    TopBin bins[kLanes][3];
+    for (uint32_t lane = 0; lane < kLanes; ++lane) {
+        for (int axis = 0; axis < 3; ++axis) {
+            hlbvh2::TopBinKeys keys = warp_bins[0][axis][lane];
+            for (uint32_t w = 1; w < kTaskBlockWarps; ++w) hlbvh2::merge_keys(keys, warp_bins[w][axis][lane]);
+            bins[lane][axis] = hlbvh2::decode_bin(keys);
+        }
+    }
+    TopBin expected[3][hlbvh2::kTopBins];
+    hlbvh2::bin_task(in, task.first, task.end, bounds, expected);
+    for (uint32_t lane = 0; lane < kLanes; ++lane) {
+        for (int axis = 0; axis < 3; ++axis) {
+            const bool same = same_bin_value(bins[lane][axis], expected[axis][lane]);
+            stats.bin_mismatches += !same;
+            stats.zero_signs += same && !same_box(bins[lane][axis].box, expected[axis][lane].box);
+        }
+    }
+    ++stats.tasks;
+    uint32_t left_count = 0;
+    const hlbvh2::TopSplit split = emulate_split_lanes(bins, bounds, count, consider, &left_count);
+    const uint32_t right_count = count - left_count;
+    uint32_t lefts = 0;
+    for (uint32_t chunk = task.first; chunk < task.end; chunk += kTaskBlock) {
+        bool left[kTaskBlock] = {};
+        uint32_t before[kTaskBlock] = {};  // cub::BlockScan's exclusive sum, in thread order
+        uint32_t chunk_lefts = 0;
+        for (uint32_t t = 0; t < kTaskBlock; ++t) {
+            const uint32_t i = chunk + t;
+            left[t] = i < task.end && hlbvh2::cluster_goes_left(in[i], i, task, bounds, split, left_count);
+            before[t] = chunk_lefts;
+            chunk_lefts += left[t] ? 1u : 0u;
+        }
+        std::shuffle(threads.begin(), threads.end(), rng);
+        for (uint32_t t : threads) {
+            const uint32_t i = chunk + t;
+            if (i >= task.end) continue;
+            const uint32_t slot = hlbvh2::partition_slot(task, left_count, i, lefts + before[t], left[t]);
+            if (slot < task.first || slot >= task.end) {
+                ++stats.bad_slots;
+                continue;
+            }
+            out[slot] = in[i];
+            if (left[t] && left_count == 1) top_refs[2 * task.node] = in[i].root;
+            if (!left[t] && right_count == 1) top_refs[2 * task.node + 1] = in[i].root;
+        }
+        lefts += chunk_lefts;
+    }
+    TopTask halves[2];
+    hlbvh2::child_tasks(task, left_count, halves);
+    uint32_t inner = 0;
+    for (int side = 0; side < 2; ++side) {
+        if (halves[side].end - halves[side].first < 2) continue;
+        top_refs[2 * task.node + side] = top_base + halves[side].node;
+        children[inner++] = halves[side];
+    }
+    return inner;
+}
+
 struct QueueTop {
     std::vector<uint32_t> refs;                       // 2 per top node
     std::vector<std::vector<uint32_t>> level_nodes;   // per level, the task's node numbers
+    BlockPathStats block;                             // the block path's share
 };
 
-// The task-queue launches of hlbvh2_top_level.cu, warps in a shuffled order.
+// How the emulation splits the levels: tasks of more than block_min
+// clusters take the block path (the device's kTopBlockTaskMin; lower values
+// send more tasks through it), whose threads stride by block_stride.
+struct TopSchedule {
+    uint32_t block_min = hlbvh2::kTopBlockTaskMin;
+    uint32_t block_stride = kTaskBlock;
+};
+
+// The task-queue launches of hlbvh2_top_level.cu: per level, the large
+// tasks' blocks in a shuffled order, then the small tasks' warps in a
+// shuffled order; two queues (small, large) ping-pong.
 QueueTop run_top_task_queues(std::vector<TopCluster> clusters, uint32_t top_base, uint32_t seed,
-                             Consider consider = hlbvh2::consider) {
+                             Consider consider = hlbvh2::consider, TopSchedule schedule = {}) {
     const uint32_t count = static_cast<uint32_t>(clusters.size());
     QueueTop top;
     if (count < 2) return top;
     top.refs.assign(2 * size_t{count - 1}, kUnset);
     std::vector<TopCluster> buffer[2] = {std::move(clusters), std::vector<TopCluster>(count)};
-    std::vector<TopTask> queue[2] = {{TopTask{0, count, 0}}, {}};
+    const bool root_is_large = count > schedule.block_min;
+    std::vector<TopTask> queue[2], large_queue[2];
+    (root_is_large ? large_queue[0] : queue[0]).push_back(TopTask{0, count, 0});
+    const size_t large_capacity = std::max(1u, count / (schedule.block_min + 1));
     std::mt19937 rng(seed);
     int side = 0;
-    while (!queue[side].empty()) {
+    while (!queue[side].empty() || !large_queue[side].empty()) {
         const std::vector<TopTask>& input = queue[side];
+        const std::vector<TopTask>& large_input = large_queue[side];
         std::vector<TopTask>& output = queue[1 - side];
+        std::vector<TopTask>& large_output = large_queue[1 - side];
         output.assign(count / 2, TopTask{kUnset, kUnset, kUnset});
+        large_output.clear();
         uint32_t tail = 0;
-        std::vector<uint32_t> nodes(input.size(), kUnset);
+        std::vector<uint32_t> nodes(large_input.size() + input.size(), kUnset);  // large tasks' first
+        std::vector<uint32_t> blocks(large_input.size());
+        std::iota(blocks.begin(), blocks.end(), 0u);
+        std::shuffle(blocks.begin(), blocks.end(), rng);
+        for (uint32_t block : blocks) {
+            TopTask children[2];
+            const uint32_t inner = emulate_large_top_task(large_input[block], buffer[side].data(),
+                                                          buffer[1 - side].data(), top_base, top.refs.data(),
+                                                          children, consider, schedule.block_stride, rng, top.block);
+            nodes[block] = large_input[block].node;
+            for (uint32_t k = 0; k < inner; ++k) {
+                if (children[k].end - children[k].first > schedule.block_min) {
+                    large_output.push_back(children[k]);
+                } else {
+                    output[tail++] = children[k];
+                }
+            }
+        }
+        EXPECT_LE(large_output.size(), large_capacity);
         std::vector<uint32_t> warps((input.size() + kTasksPerWarp - 1) / kTasksPerWarp);
         std::iota(warps.begin(), warps.end(), 0u);
         std::shuffle(warps.begin(), warps.end(), rng);
@@ -495,9 +648,10 @@ QueueTop run_top_task_queues(std::vector<TopCluster> clusters, uint32_t top_base
             for (uint32_t group = 0; group < kTasksPerWarp; ++group) {
                 const size_t at = size_t{warp} * kTasksPerWarp + group;
                 if (at >= input.size()) continue;
+                EXPECT_LE(input[at].end - input[at].first, schedule.block_min) << "a large task in the small queue";
                 inner[group] = emulate_top_task(input[at], buffer[side].data(), buffer[1 - side].data(), top_base,
                                                 top.refs.data(), children[group], consider);
-                nodes[at] = input[at].node;
+                nodes[large_input.size() + at] = input[at].node;
                 one_or_more |= (inner[group] >= 1 ? 1u : 0u) << (group * kLanes);
                 two |= (inner[group] == 2 ? 1u : 0u) << (group * kLanes);
             }
@@ -511,6 +665,7 @@ QueueTop run_top_task_queues(std::vector<TopCluster> clusters, uint32_t top_base
         output.resize(tail);
         top.level_nodes.push_back(std::move(nodes));
         queue[side].clear();
+        large_queue[side].clear();
         side = 1 - side;
     }
     return top;
@@ -606,10 +761,16 @@ TEST(Hlbvh2DeviceLogic, TopLevelTaskQueuesBuildTheCpuTopLevel) {
             const std::vector<uint32_t> expected = build_hlbvh2_top_level(cpu_clusters, n - 1);
             ASSERT_EQ(expected.size(), clusters.size() > 1 ? 2 * (clusters.size() - 1) : 0u);
             // Two warp schedules (the second seed depends on the leaf size: four in all).
+            // With leaves of 1, a third sends every task of 3 or more clusters through the block path.
             QueueTop top;
-            for (uint32_t seed : {1u, 2u + leaf_size}) {
-                top = run_top_task_queues(clusters, n - 1, seed);
+            for (uint32_t seed : {1u, 2u + leaf_size, 7u}) {
+                if (seed == 7u && leaf_size != 1) continue;
+                const TopSchedule schedule{.block_min = seed == 7u ? 2u : hlbvh2::kTopBlockTaskMin};
+                top = run_top_task_queues(clusters, n - 1, seed, hlbvh2::consider, schedule);
                 EXPECT_EQ(top.refs, expected);
+                EXPECT_EQ(top.block.bin_mismatches, 0u);
+                EXPECT_EQ(top.block.bad_slots, 0u);
+                if (clusters.size() > schedule.block_min) EXPECT_GT(top.block.tasks, 0u);
                 size_t nodes = 0;
                 for (const auto& level : top.level_nodes) nodes += level.size();
                 EXPECT_EQ(nodes, clusters.size() > 1 ? clusters.size() - 1 : 0u) << "every task is one top node";
@@ -631,6 +792,9 @@ TEST(Hlbvh2DeviceLogic, TopLevelOfRandomAndExtremeClusters) {
             std::vector<TopCluster> cpu = clusters;
             const uint32_t top_base = 64 * count;
             EXPECT_EQ(run_top_task_queues(clusters, top_base, count).refs, build_hlbvh2_top_level(cpu, top_base));
+            const QueueTop blocks = run_top_task_queues(clusters, top_base, count, hlbvh2::consider, {.block_min = 2});
+            EXPECT_EQ(blocks.refs, build_hlbvh2_top_level(cpu, top_base)) << "block path only";
+            EXPECT_EQ(blocks.block.bin_mismatches, 0u);
             for (TopCluster& c : clusters) {
                 c.box = clusters[0].box;
                 c.triangles = 3;
@@ -638,6 +802,84 @@ TEST(Hlbvh2DeviceLogic, TopLevelOfRandomAndExtremeClusters) {
             cpu = clusters;
             EXPECT_EQ(run_top_task_queues(clusters, top_base, count + 1).refs, build_hlbvh2_top_level(cpu, top_base));
         }
+    }
+}
+
+TEST(Hlbvh2DeviceLogic, TopLevelBlockPathIgnoresSignsOfZero) {
+    // Flat clusters whose z bounds are zeros of mixed signs: the key bins'
+    // min / max may pick another zero than the CPU's unions (-0 orders below
+    // +0 there), which must change no cost and no choice.
+    for (uint32_t count : {300u, 3000u}) {
+        std::vector<TopCluster> clusters = random_clusters(count, count + 5, 1.0f);
+        for (uint32_t c = 0; c < count; ++c) {
+            clusters[c].box.lo.z = c % 2 != 0 ? -0.0f : 0.0f;
+            clusters[c].box.hi.z = c % 3 != 0 ? 0.0f : -0.0f;
+            if (c % 5 == 0) clusters[c].box.lo.x = clusters[c].box.hi.x = c % 10 == 0 ? -0.0f : 0.0f;
+        }
+        std::vector<TopCluster> cpu = clusters;
+        const std::vector<uint32_t> expected = build_hlbvh2_top_level(cpu, 64 * count);
+        for (uint32_t block_min : {2u, hlbvh2::kTopBlockTaskMin}) {
+            const QueueTop top = run_top_task_queues(clusters, 64 * count, block_min, hlbvh2::consider, {.block_min = block_min});
+            EXPECT_EQ(top.refs, expected);
+            EXPECT_EQ(top.block.bin_mismatches, 0u);
+            EXPECT_GT(top.block.tasks, 0u);
+            if (block_min == 2) EXPECT_GT(top.block.zero_signs, 0u) << "no zero of another sign was met";
+        }
+    }
+}
+
+// A soup spread over the whole grid: thousands of occupied 15-bit cells, so
+// the first levels' tasks (up to ~30,000 clusters) take the block path.
+struct SpreadSoup {
+    SceneGeometry geometry;
+    SortedClusters sorted;
+    QueueForest forest;
+    std::vector<TopCluster> clusters;
+};
+const SpreadSoup& spread_soup() {
+    static const SpreadSoup soup = [] {
+        SpreadSoup s;
+        s.geometry = test::make_triangle_soup(60000, 11, {Vec3f(-20.0f), Vec3f(20.0f)}, 0.1f);
+        s.sorted = sort_and_cluster(s.geometry.triangles);
+        s.forest = run_work_queues(s.sorted, 4, 3);
+        std::vector<Box3f> inner_boxes;
+        s.clusters = top_clusters(s.sorted, s.forest, inner_boxes);
+        return s;
+    }();
+    return soup;
+}
+
+TEST(Hlbvh2DeviceLogic, TopLevelBlockPathOnASpreadSoup) {
+    const SpreadSoup& soup = spread_soup();
+    ASSERT_GE(soup.clusters.size(), 5000u);
+    const uint32_t n = static_cast<uint32_t>(soup.sorted.keys.size());
+    std::vector<TopCluster> cpu = soup.clusters;
+    const std::vector<uint32_t> expected = build_hlbvh2_top_level(cpu, n - 1);
+    QueueTop top;
+    for (uint32_t seed : {1u, 2u, 3u}) {
+        top = run_top_task_queues(soup.clusters, n - 1, seed);
+        EXPECT_EQ(top.refs, expected);
+        EXPECT_EQ(top.block.bin_mismatches, 0u);
+        EXPECT_EQ(top.block.bad_slots, 0u);
+        EXPECT_GE(top.block.tasks, soup.clusters.size() / (2 * hlbvh2::kTopBlockTaskMin)) << "the block path ran";
+        EXPECT_EQ(top.level_nodes[0].size(), 1u);
+    }
+    const BuildOptions options{.max_leaf_size = 4};
+    EXPECT_TRUE(same_bvh(build_hlbvh2(soup.geometry.triangles, options),
+                         emit_hlbvh2_forest(soup.geometry.triangles, options, to_forest(soup.sorted, soup.forest, top.refs))));
+}
+
+TEST(Hlbvh2DeviceLogic, WrongBlockStrideIsCaught) {
+    const SpreadSoup& soup = spread_soup();
+    const uint32_t n = static_cast<uint32_t>(soup.sorted.keys.size());
+    std::vector<TopCluster> cpu = soup.clusters;
+    const std::vector<uint32_t> expected = build_hlbvh2_top_level(cpu, n - 1);
+    // One too few: some clusters binned twice; one too many: some never.
+    for (uint32_t stride : {kTaskBlock - 1, kTaskBlock + 1}) {
+        SCOPED_TRACE("stride " + std::to_string(stride));
+        const QueueTop wrong = run_top_task_queues(soup.clusters, n - 1, 1, hlbvh2::consider, {.block_stride = stride});
+        EXPECT_GT(wrong.block.bin_mismatches, 0u);
+        EXPECT_NE(wrong.refs, expected);
     }
 }
 

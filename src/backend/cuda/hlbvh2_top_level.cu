@@ -20,8 +20,17 @@
 //     >= 2 clusters are enqueued at a warp-local prefix (two ballots + popc)
 //     after one atomicAdd per warp on the output tail. Cluster buffers and
 //     queues ping-pong; no global scan.
+//     Large tasks (more than kTopBlockTaskMin clusters: the first levels,
+//     where the 8 lanes' binning is serial in the cluster count) have their
+//     own queue and, per level, their own launch: one thread block per task,
+//     its threads binning strided clusters into shared bins by integer
+//     atomics on order-preserving float keys, 8 lanes choosing the split as
+//     above, a block-wide scan (cub::BlockScan) ranking the stable
+//     partition. The tree is the same: only who computes each step changes.
 //  3. the top nodes' boxes bottom-up, one launch per level, deepest first.
 #include <cuda_runtime.h>
+
+#include <cub/block/block_scan.cuh>
 
 #include <algorithm>
 
@@ -42,6 +51,9 @@ constexpr uint32_t kFullMask = 0xffffffffu;
 constexpr uint32_t kLanes = hlbvh2::kTopLanes;     // threads per task
 constexpr uint32_t kTasksPerWarp = kWarp / kLanes;
 constexpr uint32_t kMaxQueueBlocks = 1024;         // warps loop over the queue beyond this
+constexpr uint32_t kTopTaskBlock = 256;            // threads per large task (the block path)
+constexpr uint32_t kTaskBlockWarps = kTopTaskBlock / kWarp;
+static_assert(kTopTaskBlock % kWarp == 0, "the block path's warps are full");
 static_assert(kWarp % kLanes == 0, "tasks do not straddle warps");
 
 uint32_t blocks_for(uint64_t threads) { return static_cast<uint32_t>((threads + kBlockSize - 1) / kBlockSize); }
@@ -80,6 +92,45 @@ __device__ TopBin shuffle_bin_down(uint32_t mask, const TopBin& b, uint32_t delt
     return r;
 }
 
+// The split of a task from its bins, by its 8 lanes (`mask`: theirs;
+// bins[axis]: the bin `lane` of each axis): prefix and suffix unions by
+// shuffles, plane `lane`'s cost on each axis, then every lane folds the 21
+// candidates in the CPU's order. Returns the same split on every lane and
+// sets *left_count (count / 2 when there is no plane, as the CPU).
+__device__ hlbvh2::TopSplit choose_split_lanes(uint32_t mask, uint32_t lane, const TopBin bins[3],
+                                               const hlbvh2::CellBounds& bounds, uint32_t count,
+                                               uint32_t* left_count) {
+    // Plane `lane` of each axis: the bins below it against those from it on.
+    float cost[3];
+    bool valid[3];
+    uint32_t left_clusters[3];
+    for (int axis = 0; axis < 3; ++axis) {
+        TopBin below = bins[axis], above = bins[axis];  // inclusive prefix and suffix
+        for (uint32_t d = 1; d < kLanes; d *= 2) {
+            const TopBin up = shuffle_bin_up(mask, below, d), down = shuffle_bin_down(mask, above, d);
+            if (lane >= d) below = hlbvh2::merge_bins(up, below);
+            if (lane + d < kLanes) above = hlbvh2::merge_bins(above, down);
+        }
+        TopBin left = shuffle_bin_up(mask, below, 1);
+        if (lane == 0) left = TopBin{};
+        cost[axis] = 0.0f;
+        valid[axis] = lane >= 1 && lane < hlbvh2::axis_bins(bounds, axis) && hlbvh2::plane_cost(left, above, &cost[axis]);
+        left_clusters[axis] = left.clusters;
+    }
+    // Every lane folds the candidates in the CPU's order: the same choice everywhere.
+    hlbvh2::TopSplit split;
+    *left_count = count / 2;  // no plane (clusters sharing a cell): halve, as the CPU
+    for (int axis = 0; axis < 3; ++axis) {
+        for (uint32_t plane = 1; plane < kLanes; ++plane) {
+            const float c = __shfl_sync(mask, cost[axis], plane, kLanes);
+            const bool v = __shfl_sync(mask, valid[axis] ? 1 : 0, plane, kLanes) != 0;
+            const uint32_t lc = __shfl_sync(mask, left_clusters[axis], plane, kLanes);
+            if (v && hlbvh2::consider(split, c, axis, plane)) *left_count = lc;
+        }
+    }
+    return split;
+}
+
 // One task by its 8 lanes (`mask`: theirs; `lane`: 0..7 within the task).
 // Returns, on every lane, the number of inner children to enqueue and
 // fills `children` with them.
@@ -100,34 +151,8 @@ __device__ uint32_t process_top_task(uint32_t mask, uint32_t lane, uint32_t grou
     // This lane's bin on each axis.
     TopBin bins[3];
     hlbvh2::bin_task_lane(in, task.first, task.end, bounds, lane, bins);
-    // Plane `lane` of each axis: the bins below it against those from it on.
-    float cost[3];
-    bool valid[3];
-    uint32_t left_clusters[3];
-    for (int axis = 0; axis < 3; ++axis) {
-        TopBin below = bins[axis], above = bins[axis];  // inclusive prefix and suffix
-        for (uint32_t d = 1; d < kLanes; d *= 2) {
-            const TopBin up = shuffle_bin_up(mask, below, d), down = shuffle_bin_down(mask, above, d);
-            if (lane >= d) below = hlbvh2::merge_bins(up, below);
-            if (lane + d < kLanes) above = hlbvh2::merge_bins(above, down);
-        }
-        TopBin left = shuffle_bin_up(mask, below, 1);
-        if (lane == 0) left = TopBin{};
-        cost[axis] = 0.0f;
-        valid[axis] = lane >= 1 && lane < hlbvh2::axis_bins(bounds, axis) && hlbvh2::plane_cost(left, above, &cost[axis]);
-        left_clusters[axis] = left.clusters;
-    }
-    // Every lane folds the candidates in the CPU's order: the same choice everywhere.
-    hlbvh2::TopSplit split;
-    uint32_t left_count = count / 2;  // no plane (clusters sharing a cell): halve, as the CPU
-    for (int axis = 0; axis < 3; ++axis) {
-        for (uint32_t plane = 1; plane < kLanes; ++plane) {
-            const float c = __shfl_sync(mask, cost[axis], plane, kLanes);
-            const bool v = __shfl_sync(mask, valid[axis] ? 1 : 0, plane, kLanes) != 0;
-            const uint32_t lc = __shfl_sync(mask, left_clusters[axis], plane, kLanes);
-            if (v && hlbvh2::consider(split, c, axis, plane)) left_count = lc;
-        }
-    }
+    uint32_t left_count = 0;
+    const hlbvh2::TopSplit split = choose_split_lanes(mask, lane, bins, bounds, count, &left_count);
     // Stable partition into `out`, 8 clusters at a time.
     const uint32_t right_count = count - left_count;
     const uint32_t below_lane = (1u << lane) - 1u;
@@ -139,14 +164,12 @@ __device__ uint32_t process_top_task(uint32_t mask, uint32_t lane, uint32_t grou
         bool left = false;
         if (has) {
             c = in[i];
-            left = split.axis >= 0 ? hlbvh2::goes_left(c, bounds, split) : i - task.first < left_count;
+            left = hlbvh2::cluster_goes_left(c, i, task, bounds, split, left_count);
         }
         const uint32_t left_bits = (__ballot_sync(mask, left) >> (group * kLanes)) & ((1u << kLanes) - 1u);
         if (has) {
             const uint32_t lefts_before = lefts + static_cast<uint32_t>(__popc(left_bits & below_lane));
-            const uint32_t at = left ? task.first + lefts_before
-                                     : task.first + left_count + (i - task.first - lefts_before);
-            out[at] = c;
+            out[hlbvh2::partition_slot(task, left_count, i, lefts_before, left)] = c;
             // A lone cluster is its side's child: its root is the reference.
             if (left && left_count == 1) top_refs[2 * task.node] = c.root;
             if (!left && right_count == 1) top_refs[2 * task.node + 1] = c.root;
@@ -164,9 +187,10 @@ __device__ uint32_t process_top_task(uint32_t mask, uint32_t lane, uint32_t grou
     return inner;
 }
 
-// Stage 2: one level of the top tree. counters[0]: the input head,
-// counters[1]: the output tail; both zero at launch. Clusters of the
-// level's tasks are read from `in` and partitioned into `out`.
+// Stage 2a: the level's small tasks (at most kTopBlockTaskMin clusters:
+// their children are small too). counters[0]: the input head, counters[1]:
+// the small output tail; both zero at launch. Clusters of the level's tasks
+// are read from `in` and partitioned into `out`.
 __global__ void top_level_kernel(const TopCluster* in, TopCluster* out, const TopTask* input, uint32_t count,
                                  TopTask* output, uint32_t* counters, uint32_t top_base, uint32_t* top_refs,
                                  uint32_t* level_nodes) {
@@ -201,16 +225,143 @@ __global__ void top_level_kernel(const TopCluster* in, TopCluster* out, const To
     }
 }
 
+// The block path's shared-memory atomics for strided_bin_keys.
+struct SharedAtomics {
+    __device__ void min(uint32_t* word, uint32_t value) const { atomicMin(word, value); }
+    __device__ void max(uint32_t* word, uint32_t value) const { atomicMax(word, value); }
+    __device__ void add(uint32_t* word, uint32_t value) const { atomicAdd(word, value); }
+};
+
+// Stage 2b: the level's large tasks (more than kTopBlockTaskMin clusters),
+// one thread block each (large_input[blockIdx.x]). Every thread bins a
+// strided share of the clusters into its warp's shared bins (integer-key
+// atomics: exact, so any order gives bin_task's bins up to zero signs; a
+// bin set per warp spreads the contention), the 8 lanes of warp 0 merge the
+// warps' bins and choose the split as the small path does, then the block
+// partitions stably, kTopTaskBlock clusters at a time, each cluster's slot
+// from a block-wide exclusive scan of the left flags. Children of more than
+// kTopBlockTaskMin clusters go to the next level's large queue, the others
+// to its small queue: one atomicAdd on each tail used.
+__global__ void __launch_bounds__(kTopTaskBlock) top_large_task_kernel(
+    const TopCluster* in, TopCluster* out, const TopTask* large_input, TopTask* small_output, TopTask* large_output,
+    uint32_t* counters, uint32_t top_base, uint32_t* top_refs, uint32_t* level_nodes) {
+    using BlockScan = cub::BlockScan<uint32_t, kTopTaskBlock>;
+    __shared__ hlbvh2::TopBinKeys warp_bins[kTaskBlockWarps][3][hlbvh2::kTopBins];
+    __shared__ uint32_t cell_lo[3], cell_hi[3];
+    __shared__ hlbvh2::TopSplit shared_split;
+    __shared__ uint32_t shared_left_count;
+    __shared__ typename BlockScan::TempStorage scan_storage;
+
+    const uint32_t tid = threadIdx.x, warp = tid / kWarp, warp_lane = tid % kWarp;
+    const TopTask task = large_input[blockIdx.x];
+    const uint32_t count = task.end - task.first;
+    hlbvh2::TopBinKeys* flat_bins = &warp_bins[0][0][0];
+    for (uint32_t b = tid; b < kTaskBlockWarps * 3 * hlbvh2::kTopBins; b += kTopTaskBlock) {
+        flat_bins[b] = hlbvh2::empty_bin_keys();
+    }
+    if (tid < 3) {
+        cell_lo[tid] = hlbvh2::kTopGrid;
+        cell_hi[tid] = 0;
+    }
+    __syncthreads();
+    // Cell bounds: strided, a warp butterfly, one shared atomic per warp and axis.
+    hlbvh2::CellBounds bounds = hlbvh2::strided_cell_bounds(in, task.first, task.end, tid, kTopTaskBlock);
+    for (uint32_t d = kWarp / 2; d > 0; d /= 2) {
+        hlbvh2::CellBounds other;
+        for (int axis = 0; axis < 3; ++axis) {
+            other.lo[axis] = __shfl_xor_sync(kFullMask, bounds.lo[axis], d);
+            other.hi[axis] = __shfl_xor_sync(kFullMask, bounds.hi[axis], d);
+        }
+        hlbvh2::merge(bounds, other);
+    }
+    if (warp_lane == 0) {
+        for (int axis = 0; axis < 3; ++axis) {
+            atomicMin(&cell_lo[axis], bounds.lo[axis]);
+            atomicMax(&cell_hi[axis], bounds.hi[axis]);
+        }
+    }
+    __syncthreads();
+    for (int axis = 0; axis < 3; ++axis) {
+        bounds.lo[axis] = cell_lo[axis];
+        bounds.hi[axis] = cell_hi[axis];
+    }
+    SharedAtomics atomics;
+    hlbvh2::strided_bin_keys(in, task.first, task.end, tid, kTopTaskBlock, bounds, warp_bins[warp], atomics);
+    __syncthreads();
+    if (tid < kLanes) {  // lanes 0..7 of warp 0: lane `tid` owns bin `tid` of each axis
+        TopBin bins[3];
+        for (int axis = 0; axis < 3; ++axis) {
+            hlbvh2::TopBinKeys keys = warp_bins[0][axis][tid];
+            for (uint32_t w = 1; w < kTaskBlockWarps; ++w) hlbvh2::merge_keys(keys, warp_bins[w][axis][tid]);
+            bins[axis] = hlbvh2::decode_bin(keys);
+        }
+        uint32_t left_count = 0;
+        const hlbvh2::TopSplit split =
+            choose_split_lanes((1u << kLanes) - 1u, tid, bins, bounds, count, &left_count);
+        if (tid == 0) {
+            shared_split = split;
+            shared_left_count = left_count;
+        }
+    }
+    __syncthreads();
+    const hlbvh2::TopSplit split = shared_split;
+    const uint32_t left_count = shared_left_count, right_count = count - left_count;
+    // Stable partition into `out`, a block's worth of clusters at a time.
+    uint32_t lefts = 0;
+    for (uint32_t chunk = task.first; chunk < task.end; chunk += kTopTaskBlock) {
+        const uint32_t i = chunk + tid;
+        const bool has = i < task.end;
+        TopCluster c;
+        bool left = false;
+        if (has) {
+            c = in[i];
+            left = hlbvh2::cluster_goes_left(c, i, task, bounds, split, left_count);
+        }
+        uint32_t before = 0, chunk_lefts = 0;
+        BlockScan(scan_storage).ExclusiveSum(left ? 1u : 0u, before, chunk_lefts);
+        if (has) {
+            out[hlbvh2::partition_slot(task, left_count, i, lefts + before, left)] = c;
+            if (left && left_count == 1) top_refs[2 * task.node] = c.root;
+            if (!left && right_count == 1) top_refs[2 * task.node + 1] = c.root;
+        }
+        lefts += chunk_lefts;
+        __syncthreads();  // the scan's storage is reused by the next chunk
+    }
+    if (tid == 0) {
+        level_nodes[blockIdx.x] = task.node;
+        TopTask halves[2];
+        hlbvh2::child_tasks(task, left_count, halves);
+        bool large[2] = {false, false}, inner[2] = {false, false};
+        uint32_t large_count = 0, small_count = 0;
+        for (int side = 0; side < 2; ++side) {
+            const uint32_t size = halves[side].end - halves[side].first;
+            if (size < 2) continue;
+            top_refs[2 * task.node + side] = top_base + halves[side].node;
+            inner[side] = true;
+            large[side] = size > hlbvh2::kTopBlockTaskMin;
+            if (large[side]) {
+                ++large_count;
+            } else {
+                ++small_count;
+            }
+        }
+        uint32_t small_at = small_count != 0 ? atomicAdd(&counters[1], small_count) : 0;
+        uint32_t large_at = large_count != 0 ? atomicAdd(&counters[2], large_count) : 0;
+        for (int side = 0; side < 2; ++side) {
+            if (!inner[side]) continue;
+            if (large[side]) {
+                large_output[large_at++] = halves[side];
+            } else {
+                small_output[small_at++] = halves[side];
+            }
+        }
+    }
+}
+
 // Stage 3: one level's top boxes; the deeper levels are final.
 __global__ void top_boxes_kernel(hlbvh2::TopBoxView view, const uint32_t* level_nodes, uint32_t count) {
     const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
     if (i < count) hlbvh2::top_node_box(view, level_nodes[i]);
-}
-
-uint32_t download_value(const uint32_t* device_value) {
-    uint32_t value = 0;
-    RF_CUDA_CHECK(cudaMemcpy(&value, device_value, sizeof value, cudaMemcpyDeviceToHost));
-    return value;
 }
 
 }  // namespace
@@ -221,43 +372,66 @@ void build_top_level_on_device(const DeviceTopLevelInput& in, MemoryMeter& meter
     if (clusters < 2) throw Error("HLBVH2 device top level: fewer than 2 clusters");
     const uint32_t top_nodes = clusters - 1;
     const uint32_t top_base = in.n - 1;
-    // Tasks hold >= 2 clusters each, disjoint: a level has at most clusters / 2.
+    // Tasks hold >= 2 clusters each, disjoint: a level has at most clusters / 2
+    // small ones and clusters / (kTopBlockTaskMin + 1) large ones.
     const uint32_t capacity = clusters / 2;
+    const uint32_t large_capacity = std::max(1u, clusters / (hlbvh2::kTopBlockTaskMin + 1));
     DeviceBuffer<TopCluster> cluster_buffer[2] = {DeviceBuffer<TopCluster>("HLBVH2: top clusters A"),
                                                   DeviceBuffer<TopCluster>("HLBVH2: top clusters B")};
     DeviceBuffer<TopTask> queue[2] = {DeviceBuffer<TopTask>("HLBVH2: top task queue A"),
                                       DeviceBuffer<TopTask>("HLBVH2: top task queue B")};
+    DeviceBuffer<TopTask> large_queue[2] = {DeviceBuffer<TopTask>("HLBVH2: top large task queue A"),
+                                            DeviceBuffer<TopTask>("HLBVH2: top large task queue B")};
     DeviceBuffer<uint32_t> level_nodes("HLBVH2: top level nodes"), counters("HLBVH2: top queue counters");
     meter.allocate(cluster_buffer[0], clusters);
     meter.allocate(cluster_buffer[1], clusters);
     meter.allocate(queue[0], capacity);
     meter.allocate(queue[1], capacity);
+    meter.allocate(large_queue[0], large_capacity);
+    meter.allocate(large_queue[1], large_capacity);
     meter.allocate(level_nodes, top_nodes);  // every task is a distinct top node
-    meter.allocate(counters, 2);
+    meter.allocate(counters, 3);  // small head, small tail, large tail
     meter.allocate(out.top_refs, 2 * size_t{top_nodes});
     meter.allocate(out.top_boxes, top_nodes);
 
     timer.start();
-    top_clusters_kernel<<<blocks_for(clusters), kBlockSize>>>(in, cluster_buffer[0].data(), queue[0].data());
+    const bool root_is_large = clusters > hlbvh2::kTopBlockTaskMin;
+    top_clusters_kernel<<<blocks_for(clusters), kBlockSize>>>(
+        in, cluster_buffer[0].data(), root_is_large ? large_queue[0].data() : queue[0].data());
     RF_CUDA_CHECK(cudaGetLastError());
     std::vector<uint32_t> level_base;
     out.level_sizes.clear();
-    uint32_t count = 1, base = 0;
-    int side = 0;  // the level's input clusters and queue
-    while (count != 0) {
+    uint32_t small = root_is_large ? 0 : 1, large = root_is_large ? 1 : 0, base = 0;
+    int side = 0;  // the level's input clusters and queues
+    while (small + large != 0) {
+        const uint32_t count = small + large;
         if (base + size_t{count} > top_nodes) throw Error("HLBVH2: top levels overran their node list");
         out.level_sizes.push_back(count);
         level_base.push_back(base);
         RF_CUDA_CHECK(cudaMemsetAsync(counters.data(), 0, counters.bytes()));
-        const uint32_t warps = (count + kTasksPerWarp - 1) / kTasksPerWarp;
-        const uint32_t blocks = std::min(blocks_for(uint64_t{warps} * kWarp), kMaxQueueBlocks);
-        top_level_kernel<<<blocks, kBlockSize>>>(cluster_buffer[side].data(), cluster_buffer[1 - side].data(),
-                                                 queue[side].data(), count, queue[1 - side].data(), counters.data(),
-                                                 top_base, out.top_refs.data(), level_nodes.data() + base);
-        RF_CUDA_CHECK(cudaGetLastError());
+        // The level's nodes: its large tasks' first, then its small tasks'.
+        if (large != 0) {
+            top_large_task_kernel<<<large, kTopTaskBlock>>>(
+                cluster_buffer[side].data(), cluster_buffer[1 - side].data(), large_queue[side].data(),
+                queue[1 - side].data(), large_queue[1 - side].data(), counters.data(), top_base,
+                out.top_refs.data(), level_nodes.data() + base);
+            RF_CUDA_CHECK(cudaGetLastError());
+        }
+        if (small != 0) {
+            const uint32_t warps = (small + kTasksPerWarp - 1) / kTasksPerWarp;
+            const uint32_t blocks = std::min(blocks_for(uint64_t{warps} * kWarp), kMaxQueueBlocks);
+            top_level_kernel<<<blocks, kBlockSize>>>(cluster_buffer[side].data(), cluster_buffer[1 - side].data(),
+                                                     queue[side].data(), small, queue[1 - side].data(),
+                                                     counters.data(), top_base, out.top_refs.data(),
+                                                     level_nodes.data() + base + large);
+            RF_CUDA_CHECK(cudaGetLastError());
+        }
         base += count;
-        count = download_value(counters.data() + 1);  // the next level's size (waits for this one)
-        if (count > capacity) throw Error("HLBVH2: top task queue overflow");
+        uint32_t next[3] = {};  // the next level's sizes (waits for this one)
+        RF_CUDA_CHECK(cudaMemcpy(next, counters.data(), sizeof next, cudaMemcpyDeviceToHost));
+        small = next[1];
+        large = next[2];
+        if (small > capacity || large > large_capacity) throw Error("HLBVH2: top task queue overflow");
         side = 1 - side;
     }
     if (base != top_nodes) throw Error("HLBVH2: the top levels made the wrong number of nodes");
@@ -265,6 +439,8 @@ void build_top_level_on_device(const DeviceTopLevelInput& in, MemoryMeter& meter
     stages.top_levels = static_cast<uint32_t>(out.level_sizes.size());
     meter.release(queue[0]);
     meter.release(queue[1]);
+    meter.release(large_queue[0]);
+    meter.release(large_queue[1]);
     meter.release(cluster_buffer[0]);
     meter.release(cluster_buffer[1]);
 

@@ -34,7 +34,8 @@ struct DeviceTopLevel {
     std::vector<uint32_t> level_sizes;  // tasks (= top nodes) per task-queue level, level 0 = the root
 };
 
-// Builds the top level: one launch per level, kTopLanes threads per task,
+// Builds the top level: per level, one launch for its large tasks (a thread
+// block each) and one for the others (kTopLanes threads per task),
 // the same tree as the CPU's (build_hlbvh2_top_level), then the top nodes'
 // boxes bottom-up, one launch per level, deepest first. Sets stages.top_ms
 // (the task-queue levels) and stages.top_levels, and adds the top boxes'

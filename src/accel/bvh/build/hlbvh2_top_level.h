@@ -27,6 +27,14 @@
 //  - child_tasks(): the children's ranges and node numbers.
 //  - top_node_box(): a top node's box from its children's, for the device's
 //    bottom-up pass (level by level, deepest first).
+//  - large tasks (more than kTopBlockTaskMin clusters) are run on the device
+//    by a whole thread block: every thread bins a strided share of the
+//    clusters into shared bins kept as integer keys (ordered_key: atomicMin /
+//    atomicMax on keys are float min / max; counts by atomicAdd), merged
+//    and decoded into TopBins for the split; then the stable partition by a
+//    block-wide scan (partition_slot). The bins equal bin_task's up to the
+//    sign of zero in a box bound, which never changes an extent's magnitude,
+//    an area's or a cost's, nor the outcome of a comparison (-0 == +0).
 // Child references are those of morton::RawTree: a bottom inner node index,
 // kLeafRef | sorted position, or a top node's top_base + k.
 // No std:: here: plain pointers, RF_HDI.
@@ -36,6 +44,7 @@
 
 #include "accel/bvh/build/hlbvh2_tasks.h"
 #include "core/rounded_arithmetic.h"
+#include "rayforge/core/float_bits.h"
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/box.h"
 
@@ -45,6 +54,11 @@ inline constexpr uint32_t kTopGrid = 32;  // 2^5 cells per axis: the 15-bit clus
 inline constexpr uint32_t kTopBins = 8;   // up to 8 bins (7 planes) per axis
 inline constexpr uint32_t kTopLanes = 8;  // device threads per task: one per bin
 static_assert(kTopLanes == kTopBins, "a device lane owns one bin per axis");
+// Tasks of more clusters than this are binned and partitioned by a whole
+// thread block on the device (256 threads: each has at least one cluster);
+// at or below it, 8 lanes reading every cluster take a few hundred loads,
+// less than a block's barriers and shared-memory setup cost.
+inline constexpr uint32_t kTopBlockTaskMin = 256;
 
 struct TopCluster {
     Box3f box;           // of its triangles
@@ -155,6 +169,90 @@ RF_HDI CellBounds strided_cell_bounds(const TopCluster* clusters, uint32_t first
     CellBounds b = empty_cell_bounds();
     for (uint32_t i = first + lane; i < end; i += stride) grow(b, clusters[i].cells);
     return b;
+}
+
+// ---- The block path's shared bins ----
+
+// A float as an unsigned key of the same order (negatives' bits inverted,
+// positives' sign bit set): integer min / max of keys are float min / max
+// for every non-NaN value, -0 ordering just below +0.
+RF_HDI uint32_t ordered_key(float f) {
+    const uint32_t u = float_to_bits(f);
+    return (u & 0x80000000u) != 0 ? ~u : u | 0x80000000u;
+}
+RF_HDI float key_value(uint32_t key) {
+    return bits_to_float((key & 0x80000000u) != 0 ? key & 0x7fffffffu : ~key);
+}
+
+// A bin as shared-memory words: box bounds as ordered keys, counts.
+struct TopBinKeys {
+    uint32_t lo[3];
+    uint32_t hi[3];
+    uint32_t triangles;
+    uint32_t clusters;
+};
+// An empty bin: the keys of Box3f{}'s bounds (+-FLT_MAX, not infinities, so
+// that min / max with infinite bounds keep bin_task's results).
+RF_HDI TopBinKeys empty_bin_keys() {
+    const Box3f empty{};
+    return {{ordered_key(empty.lo.x), ordered_key(empty.lo.y), ordered_key(empty.lo.z)},
+            {ordered_key(empty.hi.x), ordered_key(empty.hi.y), ordered_key(empty.hi.z)},
+            0u,
+            0u};
+}
+RF_HDI void merge_keys(TopBinKeys& a, const TopBinKeys& b) {
+    for (int d = 0; d < 3; ++d) {
+        a.lo[d] = b.lo[d] < a.lo[d] ? b.lo[d] : a.lo[d];
+        a.hi[d] = b.hi[d] > a.hi[d] ? b.hi[d] : a.hi[d];
+    }
+    a.triangles += b.triangles;
+    a.clusters += b.clusters;
+}
+RF_HDI TopBin decode_bin(const TopBinKeys& k) {
+    TopBin bin;
+    bin.box.lo = Vec3f(key_value(k.lo[0]), key_value(k.lo[1]), key_value(k.lo[2]));
+    bin.box.hi = Vec3f(key_value(k.hi[0]), key_value(k.hi[1]), key_value(k.hi[2]));
+    bin.triangles = k.triangles;
+    bin.clusters = k.clusters;
+    return bin;
+}
+
+// One block thread's share of a large task's binning: clusters first +
+// thread, first + thread + stride, ... < end, each added to its bin of every
+// axis with `atomics` (min, max, add on a uint32_t word: shared-memory
+// atomics on the device, plain updates in the CPU's emulation).
+template <class Atomics>
+RF_HDI void strided_bin_keys(const TopCluster* clusters, uint32_t first, uint32_t end, uint32_t thread,
+                             uint32_t stride, const CellBounds& b, TopBinKeys bins[3][kTopBins], Atomics& atomics) {
+    uint32_t count[3];
+    for (int axis = 0; axis < 3; ++axis) count[axis] = axis_bins(b, axis);
+    for (uint32_t i = first + thread; i < end; i += stride) {
+        const TopCluster& c = clusters[i];
+        const uint32_t lo[3] = {ordered_key(c.box.lo.x), ordered_key(c.box.lo.y), ordered_key(c.box.lo.z)};
+        const uint32_t hi[3] = {ordered_key(c.box.hi.x), ordered_key(c.box.hi.y), ordered_key(c.box.hi.z)};
+        for (int axis = 0; axis < 3; ++axis) {
+            if (count[axis] == 0) continue;
+            TopBinKeys& bin = bins[axis][bin_index(c.cells, b, axis, count[axis])];
+            for (int d = 0; d < 3; ++d) {
+                atomics.min(&bin.lo[d], lo[d]);
+                atomics.max(&bin.hi[d], hi[d]);
+            }
+            atomics.add(&bin.triangles, c.triangles);
+            atomics.add(&bin.clusters, 1u);
+        }
+    }
+}
+
+// Which side cluster i of a task goes to: by the plane, or, with no plane
+// (all clusters in one cell), the first left_count of them.
+RF_HDI bool cluster_goes_left(const TopCluster& c, uint32_t i, const TopTask& task, const CellBounds& b,
+                              const TopSplit& split, uint32_t left_count) {
+    return split.axis >= 0 ? goes_left(c, b, split) : i - task.first < left_count;
+}
+// Where the stable partition puts cluster i, with lefts_before clusters of
+// the task before it going left.
+RF_HDI uint32_t partition_slot(const TopTask& task, uint32_t left_count, uint32_t i, uint32_t lefts_before, bool left) {
+    return left ? task.first + lefts_before : task.first + left_count + (i - task.first - lefts_before);
 }
 
 // Every bin of a task, sequentially (the CPU): bins[axis][0 .. axis_bins).
