@@ -402,7 +402,7 @@ GridFrame cpu_frame(const std::vector<GridRef>& refs) {
 }
 
 bool same_refs(const std::vector<GridRef>& a, const std::vector<GridRef>& b) {
-    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(GridRef)) == 0;
+    return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(GridRef)) == 0);
 }
 
 TEST(GridBvhDeviceLogic, ReferencesAfterSplittingEqualCpuWithinTheBudget) {

@@ -235,7 +235,7 @@ Hlbvh2Forest to_forest(const SortedClusters& s, const QueueForest& f, std::vecto
 
 bool same_bvh(const Bvh& a, const Bvh& b) {
     return a.nodes.size() == b.nodes.size() && a.prim_indices == b.prim_indices &&
-           std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(a.nodes[0])) == 0;
+           (a.nodes.empty() || std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(a.nodes[0])) == 0);
 }
 
 TEST(Hlbvh2DeviceLogic, WorkQueuesBuildTheCpuBottomTrees) {

@@ -126,7 +126,8 @@ Clustering emulate_device(std::span<const Triangle> triangles, int radius_option
 
 bool same_bvh(const Bvh& a, const Bvh& b) {
     return a.prim_indices == b.prim_indices && a.nodes.size() == b.nodes.size() &&
-           std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(a.nodes[0])) == 0;
+           (a.nodes.empty() ||  // memcmp must not see the null data() of empty vectors
+            std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(a.nodes[0])) == 0);
 }
 
 Bvh emit(std::span<const Triangle> triangles, const BuildOptions& options, Clustering&& c) {
