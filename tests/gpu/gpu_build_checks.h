@@ -6,13 +6,16 @@
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <random>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "../accel_test_scenes.h"
+#include "accel/brute_force.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/backend/cuda.h"
+#include "trace/bvh_traversal.h"
 
 namespace rf::gpu_build_test {
 
@@ -60,6 +63,33 @@ inline void expect_same_bvh(const Bvh& expected, const Bvh& got, const std::stri
                  expected.nodes[i].first != got.nodes[i].first || expected.nodes[i].count != got.nodes[i].count;
     }
     EXPECT_EQ(wrong, 0u) << what << ": nodes that differ";
+}
+
+// The soup the hit checks trace, and 4,000 random rays through and around it.
+inline SceneGeometry hit_test_soup() {
+    return test::make_triangle_soup(5000, 6, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.7f);
+}
+
+// Closest hits through `bvh` (over `soup`) equal brute force: hit or miss
+// and t (the same triangle tests in another order give the same t, maybe
+// another triangle at it); at least a tenth of the rays hit.
+inline void expect_hits_equal_brute_force(const SceneGeometry& soup, const Bvh& bvh, const std::string& what) {
+    const BruteForceAccel brute(soup);
+    std::mt19937 rng(17);
+    std::uniform_real_distribution<float> u(-12.0f, 12.0f);
+    const BvhView view{bvh.nodes.data(), bvh.prim_indices.data(), soup.triangles.data(),
+                       static_cast<uint32_t>(bvh.nodes.size())};
+    size_t mismatches = 0, hits = 0;
+    for (int i = 0; i < 4000; ++i) {
+        Ray ray;
+        ray.org = Vec3f(u(rng), u(rng), u(rng));
+        ray.dir = normalize(Vec3f(u(rng), u(rng), u(rng)) - ray.org + Vec3f(1e-3f, 0.0f, 0.0f));
+        const Hit expected = brute.intersect(ray), got = bvh_intersect(view, ray);
+        hits += expected.found();
+        mismatches += expected.found() != got.found() || (expected.found() && expected.t != got.t);
+    }
+    EXPECT_GT(hits, 400u) << what;
+    EXPECT_EQ(mismatches, 0u) << what;
 }
 
 }  // namespace rf::gpu_build_test

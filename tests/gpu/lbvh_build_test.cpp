@@ -8,7 +8,6 @@
 
 #include <cmath>
 #include <cstring>
-#include <random>
 #include <string>
 #include <vector>
 
@@ -22,7 +21,6 @@
 #include "rayforge/backend/cuda.h"
 #include "rayforge/backend/cuda_build.h"
 #include "rayforge/core/error.h"
-#include "trace/bvh_traversal.h"
 
 namespace rf {
 namespace {
@@ -136,29 +134,10 @@ TEST(GpuLbvhBuild, StagesAndPeakMemoryAreReported) {
 
 TEST(GpuLbvhBuild, HitsEqualBruteForce) {
     RF_REQUIRE_DEVICE();
-    const SceneGeometry soup = test::make_triangle_soup(5000, 6, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.7f);
-    const BruteForceAccel brute(soup);
-    std::mt19937 rng(17);
-    std::uniform_real_distribution<float> u(-12.0f, 12.0f);
-    std::vector<Ray> rays(4000);
-    for (Ray& r : rays) {
-        r.org = Vec3f(u(rng), u(rng), u(rng));
-        r.dir = normalize(Vec3f(u(rng), u(rng), u(rng)) - r.org + Vec3f(1e-3f, 0.0f, 0.0f));
-    }
-    for (int bits : {30, 63}) {
-        const Bvh bvh = cuda::build_lbvh_on_device(soup.triangles, {}, bits);
-        const BvhView view{bvh.nodes.data(), bvh.prim_indices.data(), soup.triangles.data(),
-                           static_cast<uint32_t>(bvh.nodes.size())};
-        size_t mismatches = 0, hits = 0;
-        for (const Ray& ray : rays) {
-            const Hit expected = brute.intersect(ray), got = bvh_intersect(view, ray);
-            hits += expected.found();
-            // The same triangle tests in another order: the same t, maybe another triangle at it.
-            mismatches += expected.found() != got.found() || (expected.found() && expected.t != got.t);
-        }
-        EXPECT_GT(hits, rays.size() / 10);
-        EXPECT_EQ(mismatches, 0u) << bits << " bits";
-    }
+    const SceneGeometry soup = gpu_build_test::hit_test_soup();
+    for (int bits : {30, 63})
+        gpu_build_test::expect_hits_equal_brute_force(soup, cuda::build_lbvh_on_device(soup.triangles, {}, bits),
+                                                      std::to_string(bits) + " bits");
 }
 
 }  // namespace

@@ -7,7 +7,6 @@
 // is filled. Skips with a message when no CUDA device is present.
 #include <gtest/gtest.h>
 
-#include <random>
 #include <string>
 #include <vector>
 
@@ -20,7 +19,6 @@
 #include "backend/cuda/ploc_build.h"
 #include "rayforge/backend/cuda.h"
 #include "rayforge/backend/cuda_build.h"
-#include "trace/bvh_traversal.h"
 
 namespace rf {
 namespace {
@@ -132,26 +130,8 @@ TEST(GpuPlocBuild, StagesAndPeakMemoryAreReported) {
 
 TEST(GpuPlocBuild, HitsEqualBruteForce) {
     RF_REQUIRE_DEVICE();
-    const SceneGeometry soup = test::make_triangle_soup(5000, 6, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.7f);
-    const BruteForceAccel brute(soup);
-    std::mt19937 rng(17);
-    std::uniform_real_distribution<float> u(-12.0f, 12.0f);
-    std::vector<Ray> rays(4000);
-    for (Ray& r : rays) {
-        r.org = Vec3f(u(rng), u(rng), u(rng));
-        r.dir = normalize(Vec3f(u(rng), u(rng), u(rng)) - r.org + Vec3f(1e-3f, 0.0f, 0.0f));
-    }
-    const Bvh bvh = cuda::build_ploc_on_device(soup.triangles, {});
-    const BvhView view{bvh.nodes.data(), bvh.prim_indices.data(), soup.triangles.data(),
-                       static_cast<uint32_t>(bvh.nodes.size())};
-    size_t mismatches = 0, hits = 0;
-    for (const Ray& ray : rays) {
-        const Hit expected = brute.intersect(ray), got = bvh_intersect(view, ray);
-        hits += expected.found();
-        mismatches += expected.found() != got.found() || (expected.found() && expected.t != got.t);
-    }
-    EXPECT_GT(hits, rays.size() / 10);
-    EXPECT_EQ(mismatches, 0u);
+    const SceneGeometry soup = gpu_build_test::hit_test_soup();
+    gpu_build_test::expect_hits_equal_brute_force(soup, cuda::build_ploc_on_device(soup.triangles, {}), "ploc");
 }
 
 }  // namespace
