@@ -161,4 +161,29 @@ inline SceneGeometry make_nasty_geometry(uint32_t seed) {
     return g;
 }
 
+// Point triangles whose 63-bit Morton codes are 1^i 0 0..0 for i = 0..62,
+// plus `duplicates` at the all-ones code: a Karras tree over them is a chain
+// of 63 levels with a balanced tree of the duplicates hanging below, deeper
+// than kBvhMaxDepth. A point at (2^21, 2^21, 2^21) fixes the centroid bounds
+// to [0, 2^21]^3, so that the grid cells are exactly the unit cells.
+inline SceneGeometry make_morton_chain(int duplicates) {
+    SceneGeometry g;
+    auto add_code = [&](uint64_t code) {
+        float cell[3] = {0, 0, 0};
+        for (int axis = 0; axis < 3; ++axis) {
+            uint32_t v = 0;
+            for (int k = 0; k < 21; ++k) v |= static_cast<uint32_t>((code >> (3 * k + 2 - axis)) & 1u) << k;
+            cell[axis] = static_cast<float>(v) + 0.5f;
+        }
+        const Vec3f p(cell[0], cell[1], cell[2]);
+        append(g, {p, p, p});
+    };
+    const uint64_t all_ones = (uint64_t{1} << 63) - 1;
+    for (int i = 0; i < 63; ++i) add_code(i == 0 ? 0 : (all_ones >> (63 - i)) << (63 - i));
+    for (int i = 0; i < duplicates; ++i) add_code(all_ones);
+    const Vec3f corner(static_cast<float>(1u << 21));
+    append(g, {corner, corner, corner});
+    return g;
+}
+
 }  // namespace rf::test

@@ -518,6 +518,13 @@ TEST(BenchGpu, DeviceBuildReportListsTheStagesThatRan) {
     for (const char* part : {"device build 5.000 ms", "bounds 0.500", "boxes 0.750", "peak 3.00 MiB", "123 nodes",
                              "SAH 45.50", "7 clusters", "host 7.00 ms"})
         EXPECT_NE(line.find(part), std::string::npos) << part << " in " << line;
+    // A device emission is the last device stage and counts in the device total.
+    s.device_emit_ms = 0.5;
+    const bench::GpuBuildStages emitted = bench::describe_device_build(s, 123, 45.5);
+    ASSERT_EQ(emitted.device_stages.size(), 6u);
+    EXPECT_EQ(emitted.device_stages.back().first, "emission");
+    EXPECT_DOUBLE_EQ(emitted.device_ms, 5.5);
+    s.device_emit_ms = 0.0;
     // Grids have no SAH; host builds say so.
     EXPECT_EQ(bench::format_device_build(bench::describe_device_build(s, 8, std::nan(""))).find("SAH"),
               std::string::npos);

@@ -15,7 +15,7 @@ GpuBuildStages describe_device_build(const cuda::DeviceBuildStages& s, size_t no
         {"inner nodes", s.inner_nodes_ms},        {"bottom", s.bottom_ms},   {"top", s.top_ms},
         {"ploc", s.ploc_ms},                      {"hierarchy", s.hierarchy_ms},
         {"leaves", s.leaf_finish_ms},             {"cell ranges", s.cell_ranges_ms},
-        {"proximity", s.proximity_ms},            {"boxes", s.boxes_ms}};
+        {"proximity", s.proximity_ms},            {"boxes", s.boxes_ms},     {"emission", s.device_emit_ms}};
     for (const auto& [name, ms] : stages)
         if (ms > 0.0) out.device_stages.emplace_back(name, ms);
     out.device_ms = s.device_total_ms();

@@ -142,7 +142,9 @@ TEST(GpuHlbvh2Build, StagesAreReported) {
     EXPECT_GT(stages.bottom_ms, 0.0);
     EXPECT_GT(stages.boxes_ms, 0.0);
     EXPECT_GT(stages.top_ms, 0.0);
-    EXPECT_GT(stages.emit_ms, 0.0);
+    EXPECT_GT(stages.device_emit_ms, 0.0);
+    EXPECT_TRUE(stages.emitted_on_device);
+    EXPECT_EQ(stages.emit_ms, 0.0);
     EXPECT_GT(stages.cluster_count, 1u);
     EXPECT_GT(stages.bottom_levels, 1u);
     EXPECT_GT(stages.top_levels, 1u);

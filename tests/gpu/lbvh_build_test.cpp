@@ -122,13 +122,34 @@ TEST(GpuLbvhBuild, StagesAndPeakMemoryAreReported) {
         const Bvh bvh = cuda::build_lbvh_on_device(soup.triangles, {}, bits, &stages);
         EXPECT_FALSE(bvh.nodes.empty());
         for (double ms : {stages.upload_ms, stages.bounds_ms, stages.morton_ms, stages.sort_ms, stages.inner_nodes_ms,
-                          stages.boxes_ms, stages.download_ms, stages.emit_ms}) {
+                          stages.device_emit_ms, stages.download_ms}) {
             EXPECT_GT(ms, 0.0);
         }
-        EXPECT_DOUBLE_EQ(stages.device_total_ms(),
-                         stages.bounds_ms + stages.morton_ms + stages.sort_ms + stages.inner_nodes_ms + stages.boxes_ms);
+        // The device emitted the BVH (it computes the boxes itself, so the box pass is skipped).
+        EXPECT_TRUE(stages.emitted_on_device);
+        EXPECT_EQ(stages.emit_ms, 0.0);
+        EXPECT_EQ(stages.boxes_ms, 0.0);
+        EXPECT_DOUBLE_EQ(stages.device_total_ms(), stages.bounds_ms + stages.morton_ms + stages.sort_ms +
+                                                       stages.inner_nodes_ms + stages.device_emit_ms);
         // At least the triangles, or the boxes plus the tree, were on the device at once.
         EXPECT_GE(stages.peak_device_bytes, soup.triangles.size() * sizeof(Triangle));
+    }
+}
+
+// The device leaves trees deeper than kBvhMaxDepth to the host's
+// depth-limited emitter; the BVH is still the CPU's.
+TEST(GpuLbvhBuild, TreesDeeperThanTheLimitAreEmittedByTheHost) {
+    RF_REQUIRE_DEVICE();
+    const SceneGeometry chain = test::make_morton_chain(2000);
+    for (int leaf_size : {1, 4}) {
+        const BuildOptions options{.max_leaf_size = leaf_size};
+        cuda::DeviceBuildStages stages;
+        expect_same_bvh(build_lbvh(chain.triangles, options, 63),
+                        cuda::build_lbvh_on_device(chain.triangles, options, 63, &stages),
+                        "Morton chain, leaves of " + std::to_string(leaf_size));
+        EXPECT_FALSE(stages.emitted_on_device);
+        EXPECT_GT(stages.emit_ms, 0.0);
+        EXPECT_GT(stages.device_emit_ms, 0.0);  // the bottom-up pass ran before the depth check
     }
 }
 

@@ -119,12 +119,14 @@ TEST(GpuPlocBuild, StagesAndPeakMemoryAreReported) {
     const Bvh bvh = cuda::build_ploc_on_device(soup.triangles, {}, &stages);
     EXPECT_FALSE(bvh.nodes.empty());
     for (double ms : {stages.upload_ms, stages.bounds_ms, stages.morton_ms, stages.sort_ms, stages.ploc_ms,
-                      stages.download_ms, stages.emit_ms}) {
+                      stages.device_emit_ms, stages.download_ms}) {
         EXPECT_GT(ms, 0.0);
     }
+    EXPECT_TRUE(stages.emitted_on_device);
+    EXPECT_EQ(stages.emit_ms, 0.0);
     EXPECT_GT(stages.ploc_iterations, 1u);
     EXPECT_DOUBLE_EQ(stages.device_total_ms(),
-                     stages.bounds_ms + stages.morton_ms + stages.sort_ms + stages.ploc_ms);
+                     stages.bounds_ms + stages.morton_ms + stages.sort_ms + stages.ploc_ms + stages.device_emit_ms);
     EXPECT_GE(stages.peak_device_bytes, soup.triangles.size() * sizeof(Triangle));
 }
 

@@ -21,8 +21,10 @@ struct DeviceBuildStages {
     double sort_ms = 0.0;         // radix sort of (code, triangle) pairs
     double inner_nodes_ms = 0.0;  // Karras's inner-node construction
     double boxes_ms = 0.0;        // bottom-up boxes with atomic counters
-    double download_ms = 0.0;     // the raw tree back to the host
-    double emit_ms = 0.0;         // host: leaf collapse and canonical emission
+    double download_ms = 0.0;     // the result back to the host (the canonical BVH, or the raw tree)
+    double device_emit_ms = 0.0;  // LBVH, HLBVH2, PLOC: leaf collapse and canonical layout on the device
+    double emit_ms = 0.0;         // host: leaf collapse and canonical emission (when the device did not)
+    bool emitted_on_device = false; // LBVH, HLBVH2, PLOC: false when the tree was too deep and the host emitted it
     size_t peak_device_bytes = 0; // sum of the live device buffers at the peak
     // HLBVH2 only (zero for LBVH):
     double clusters_ms = 0.0;     // compaction of runs of equal 15-bit prefixes, the level-0 tasks
@@ -56,7 +58,7 @@ struct DeviceBuildStages {
     // the transfers, the host's emission and optimizer, or a layout conversion).
     [[nodiscard]] double device_total_ms() const {
         return bounds_ms + morton_ms + sort_ms + inner_nodes_ms + clusters_ms + bottom_ms + top_ms + boxes_ms + ploc_ms +
-               partial_triangles_ms + grid0_ms + coarse_levels_ms + hierarchy_ms + leaf_finish_ms + cell_pairs_ms +
+               device_emit_ms + partial_triangles_ms + grid0_ms + coarse_levels_ms + hierarchy_ms + leaf_finish_ms + cell_pairs_ms +
                cell_ranges_ms + proximity_ms;
     }
 };
@@ -74,7 +76,8 @@ Bvh build_bvh_on_device(std::span<const Triangle> triangles, const BuildOptions&
 // LBVH (Karras 2012) on device `device`: the same BVH as rf::build_lbvh with
 // the same options and Morton bits (30 or 63): same nodes, same primitive
 // order. The device computes boxes, codes, the sort, the radix tree and its
-// boxes; the host collapses leaves by the SAH and writes the canonical layout.
+// boxes, then collapses leaves by the SAH and writes the canonical layout
+// (the host does the last two when the tree is deeper than kBvhMaxDepth).
 // Throws rf::Error for invalid bits or CUDA failures (out of memory names the buffer).
 Bvh build_lbvh_on_device(std::span<const Triangle> triangles, const BuildOptions& options, int morton_bits,
                          DeviceBuildStages* stages = nullptr, int device = 0);
@@ -84,8 +87,9 @@ Bvh build_lbvh_on_device(std::span<const Triangle> triangles, const BuildOptions
 // The device sorts 30-bit codes once, compacts the 15-bit clusters, builds
 // the bottom levels by work queues and the top level over the clusters by
 // task queues (the grid SAH of ch. 4 on the top grid, 8 threads per task),
-// with the boxes of every level; the host refits the raw tree and writes the
-// canonical layout. 0 and 1 triangles are handled on the host. Throws
+// with the boxes of every level, then the leaf collapse and the canonical
+// layout (the host does those when the tree is deeper than kBvhMaxDepth,
+// and checks the forest then). 0 and 1 triangles are handled on the host. Throws
 // rf::Error for CUDA failures (out of memory names the buffer).
 Bvh build_hlbvh2_on_device(std::span<const Triangle> triangles, const BuildOptions& options,
                            DeviceBuildStages* stages = nullptr, int device = 0);

@@ -21,9 +21,13 @@
 //  5. the top level over the clusters by task queues (hlbvh2_top_level.cu:
 //     the grid SAH of ch. 4 with the top grid only, 8 lanes per task, the
 //     CPU's tree by construction), then the top nodes' boxes bottom-up.
-//  6. the raw tree (order, references, clusters, top level) comes back; the
-//     host refits it (box, count, SAH cost, leaf collapse per node) and
-//     emits the canonical BVH (emit_hlbvh2_forest).
+//  6. emission on the device (raw_tree_emit.cu): box, count, SAH cost and
+//     leaf collapse per node bottom-up, the canonical layout, and the BVH
+//     back to the host. Slots no split used are marked (references set to
+//     kNoChild before step 3). A tree deeper than kBvhMaxDepth, or one leaf,
+//     comes back raw (order, references, clusters, top level) and the host
+//     checks, refits and emits it (emit_hlbvh2_forest). Either way the BVH
+//     is build_hlbvh2's.
 // Stages are timed with CUDA events; buffers are counted by a MemoryMeter.
 #include <cuda_runtime.h>
 
@@ -38,6 +42,7 @@
 #include "accel/bvh/build/hlbvh2_emit.h"
 #include "accel/bvh/build/hlbvh2_tasks.h"
 #include "backend/cuda/device_buffer.h"
+#include "backend/cuda/raw_tree_emit.h"
 #include "backend/cuda/hlbvh2_build.h"
 #include "backend/cuda/hlbvh2_top_level.h"
 #include "backend/cuda/morton_sort.h"
@@ -124,9 +129,12 @@ uint32_t download_value(const uint32_t* device_value) {
     return value;
 }
 
-// The device pipeline for n >= 2 triangles.
-void build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, DeviceBuildStages& stages,
-                  DeviceHlbvh2Forest& out, bool raw) {
+// The device pipeline for n >= 2 triangles. `raw`: the raw forest comes
+// back whole. Otherwise, with `options`, the device emits the BVH into `bvh`
+// and returns true; false when it could not (too deep, or one leaf), and
+// then the forest came back in `out`.
+bool build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, DeviceBuildStages& stages,
+                  DeviceHlbvh2Forest& out, bool raw, const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
     MemoryMeter meter;
     EventTimer timer;
@@ -182,6 +190,8 @@ void build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
     uint32_t count = clusters, base = 0;
     int in = 0;
     timer.start();
+    // Split positions no task reaches leave their node slot unused: marked for the emission.
+    RF_CUDA_CHECK(cudaMemsetAsync(refs.data(), 0xff, refs.bytes()));
     while (count != 0) {
         if (base + size_t{count} > level_nodes.size()) throw Error("HLBVH2: bottom levels overran their node list");
         level_sizes.push_back(count);
@@ -234,7 +244,29 @@ void build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
     }
     stages.peak_device_bytes = meter.peak();
 
-    // 6. The raw tree for the host's refit and emission.
+    // 6. Emission on the device.
+    if (!raw) {
+        const uint32_t root = clusters >= 2 ? n - 1 : download_value(refs.data() + 2 * (size_t{n} - 1));
+        if ((root & hlbvh2::kLeafRef) == 0) {
+            meter.release(inner_boxes);
+            meter.release(cluster_boxes);
+            meter.release(counters);
+            DeviceRawTree tree;
+            tree.children = refs.data();
+            tree.high_children = clusters >= 2 ? top.top_refs.data() : nullptr;
+            tree.high_base = n - 1;
+            tree.node_slots = n - 1 + (clusters - 1);
+            tree.root = root;
+            tree.primitives = n;
+            tree.boxes = sorted.boxes.data();
+            tree.boxes_by_triangle = true;
+            tree.order = sorted.order.data();
+            tree.leaf_runs = leaf_runs.data();
+            if (emit_raw_tree_on_device(tree, *options, "HLBVH2", meter, timer, stages, *bvh)) return true;
+        }
+    }
+
+    // The raw tree for the host's refit and emission.
     timer.start();
     out.forest.order = download_all(sorted.order, n);
     out.forest.refs = download_all(refs, ref_count);
@@ -248,17 +280,19 @@ void build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
         if (clusters >= 2) out.top_boxes = download_all(top.top_boxes, clusters - 1);
         out.top_level_sizes = top.level_sizes;
     }
-    stages.download_ms = timer.stop_ms();
+    stages.download_ms += timer.stop_ms();
+    return false;
 }
 
-void build_raw(std::span<const Triangle> triangles, uint32_t leaf_size, DeviceBuildStages& stages, int device,
-               DeviceHlbvh2Forest& out, bool raw) {
+// Returns true when the device emitted the BVH into *bvh (options and bvh given).
+bool build_raw(std::span<const Triangle> triangles, uint32_t leaf_size, DeviceBuildStages& stages, int device,
+               DeviceHlbvh2Forest& out, bool raw, const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
     if (triangles.size() >= hlbvh2::kLeafRef / 2) throw Error("HLBVH2 device build: more than 2^30-1 triangles");
     if (leaf_size < 1 || leaf_size > 255) throw Error("HLBVH2 device build: leaf size must be in [1, 255]");
-    if (triangles.size() < 2) return;  // no inner nodes: the host does it
+    if (triangles.size() < 2) return false;  // no inner nodes: the host does it
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
-    build_forest(triangles, leaf_size, stages, out, raw);
+    return build_forest(triangles, leaf_size, stages, out, raw, options, bvh);
 }
 
 }  // namespace
@@ -278,9 +312,14 @@ Bvh build_hlbvh2_on_device(std::span<const Triangle> triangles, const BuildOptio
     s = {};
     if (triangles.size() < 2) return build_hlbvh2(triangles, options);  // 0 or 1 triangles: nothing to queue
     DeviceHlbvh2Forest raw;
-    build_raw(triangles, static_cast<uint32_t>(std::max(options.max_leaf_size, 1)), s, device, raw, false);
+    Bvh bvh;
+    if (build_raw(triangles, static_cast<uint32_t>(std::max(options.max_leaf_size, 1)), s, device, raw, false,
+                  &options, &bvh)) {
+        s.emitted_on_device = true;
+        return bvh;
+    }
     Hlbvh2Stages host;
-    Bvh bvh = emit_hlbvh2_forest(triangles, options, std::move(raw.forest), &host);
+    bvh = emit_hlbvh2_forest(triangles, options, std::move(raw.forest), &host);
     s.emit_ms = host.top_ms + host.emit_ms;  // the host checks and finalizes the device's top level
     return bvh;
 }

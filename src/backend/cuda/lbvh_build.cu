@@ -12,9 +12,13 @@
 //  4. inner:   one thread per inner node, karras::build_inner, parent links.
 //  5. boxes:   one thread per leaf walks up; an atomic counter per inner node
 //     lets only the second arrival go on (karras::propagate_boxes_from_leaf).
-//  6. The order and the child references go back to the host, which decides
-//     the SAH leaf collapse and writes the canonical BVH (emit_karras_tree,
-//     the CPU LBVH's own refit and emitter), so the BVH is build_lbvh's.
+//  6. emission: the SAH leaf collapse and the canonical layout on the device
+//     (raw_tree_emit.cu, with the parent links of step 4; it recomputes the
+//     boxes, so a build for a BVH skips step 5), and the BVH back to the
+//     host. A tree deeper than kBvhMaxDepth goes back raw instead, and the
+//     host emits it (emit_karras_tree, the CPU LBVH's own refit and emitter,
+//     whose depth-limited rebuild the device does not do). Either way the
+//     BVH is build_lbvh's.
 // Stages are timed with CUDA events around their kernels only; buffers are
 // allocated and freed between stages so the peak holds only what one stage
 // needs.
@@ -31,6 +35,7 @@
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/lbvh_build.h"
 #include "backend/cuda/morton_sort.h"
+#include "backend/cuda/raw_tree_emit.h"
 #include "rayforge/backend/cuda.h"
 #include "rayforge/core/error.h"
 
@@ -57,11 +62,13 @@ __global__ void boxes_kernel(karras::BoxPassView tree, uint32_t n) {
     karras::propagate_boxes_from_leaf<karras::AtomicArrival>(tree, i);
 }
 
-// The device pipeline for n >= 2 triangles. `raw` (when not null) receives
-// every array of the tree; otherwise only the order and the children come back.
+// The device pipeline for n >= 2 triangles. `raw`: every array of the tree
+// comes back in `out`. Otherwise, with `options`, the device emits the BVH
+// into `bvh` and returns true; false when the tree was too deep, and then
+// only the order and the children came back in `out`.
 template <class Key>
-void build_on_device(std::span<const Triangle> triangles, DeviceBuildStages& stages, DeviceKarrasTree& out,
-                     bool raw) {
+bool build_on_device(std::span<const Triangle> triangles, DeviceBuildStages& stages, DeviceKarrasTree& out, bool raw,
+                     const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
     MemoryMeter meter;
     EventTimer timer;
@@ -85,6 +92,30 @@ void build_on_device(std::span<const Triangle> triangles, DeviceBuildStages& sta
     stages.inner_nodes_ms = timer.stop_ms();
     meter.release(sorted.keys);
 
+    if (!raw) {
+        // 6. Emission on the device; it computes every box itself.
+        DeviceRawTree tree;
+        tree.children = children.data();
+        tree.node_slots = n - 1;
+        tree.root = 0;
+        tree.primitives = n;
+        tree.boxes = boxes.data();
+        tree.boxes_by_triangle = true;
+        tree.order = order.data();
+        tree.node_parent = inner_parent.data();
+        tree.leaf_parent = leaf_parent.data();
+        if (emit_raw_tree_on_device(tree, *options, "LBVH", meter, timer, stages, *bvh)) {
+            stages.peak_device_bytes = meter.peak();
+            return true;
+        }
+        timer.start();
+        out.order = download_all(order, n);
+        out.children = download_all(children, 2 * size_t{n - 1});
+        stages.download_ms += timer.stop_ms();
+        stages.peak_device_bytes = meter.peak();
+        return false;
+    }
+
     // 5. Bottom-up boxes.
     DeviceBuffer<Box3f> inner_boxes("LBVH: inner node boxes");
     DeviceBuffer<uint32_t> arrivals("LBVH: arrival counters");
@@ -98,18 +129,17 @@ void build_on_device(std::span<const Triangle> triangles, DeviceBuildStages& sta
     stages.boxes_ms = timer.stop_ms();
     stages.peak_device_bytes = meter.peak();
 
-    // 6. The tree back to the host.
+    // The raw tree back to the host.
     timer.start();
     out.order = download_all(order, n);
     out.children = download_all(children, 2 * size_t{n - 1});
-    if (raw) {
-        out.inner_parent = download_all(inner_parent, n - 1);
-        out.leaf_parent = download_all(leaf_parent, n);
-        out.arrivals = download_all(arrivals, n - 1);
-        out.inner_boxes = download_all(inner_boxes, n - 1);
-        out.triangle_boxes = download_all(boxes, n);
-    }
+    out.inner_parent = download_all(inner_parent, n - 1);
+    out.leaf_parent = download_all(leaf_parent, n);
+    out.arrivals = download_all(arrivals, n - 1);
+    out.inner_boxes = download_all(inner_boxes, n - 1);
+    out.triangle_boxes = download_all(boxes, n);
     stages.download_ms = timer.stop_ms();
+    return false;
 }
 
 void check_input(std::span<const Triangle> triangles, int morton_bits) {
@@ -119,21 +149,19 @@ void check_input(std::span<const Triangle> triangles, int morton_bits) {
     if (triangles.size() >= karras::kLeafRef) throw Error("Morton BVH build: more than 2^31-1 triangles");
 }
 
-void build_raw(std::span<const Triangle> triangles, int morton_bits, DeviceBuildStages& stages, int device,
-               DeviceKarrasTree& out, bool raw) {
+// Returns true when the device emitted the BVH into *bvh (options and bvh given).
+bool build_raw(std::span<const Triangle> triangles, int morton_bits, DeviceBuildStages& stages, int device,
+               DeviceKarrasTree& out, bool raw, const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
     check_input(triangles, morton_bits);
     const size_t n = triangles.size();
     if (n < 2) {  // no inner nodes: nothing for the device to do
         out.order.assign(n, 0u);
-        return;
+        return false;
     }
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
-    if (morton_bits == 30) {
-        build_on_device<uint32_t>(triangles, stages, out, raw);
-    } else {
-        build_on_device<uint64_t>(triangles, stages, out, raw);
-    }
+    if (morton_bits == 30) return build_on_device<uint32_t>(triangles, stages, out, raw, options, bvh);
+    return build_on_device<uint64_t>(triangles, stages, out, raw, options, bvh);
 }
 
 }  // namespace
@@ -152,9 +180,13 @@ Bvh build_lbvh_on_device(std::span<const Triangle> triangles, const BuildOptions
     DeviceBuildStages& s = stages ? *stages : local;
     s = {};
     DeviceKarrasTree tree;
-    build_raw(triangles, morton_bits, s, device, tree, false);
+    Bvh bvh;
+    if (build_raw(triangles, morton_bits, s, device, tree, false, &options, &bvh)) {
+        s.emitted_on_device = true;
+        return bvh;
+    }
     const auto start = std::chrono::steady_clock::now();
-    Bvh bvh = emit_karras_tree(triangles, options, std::move(tree.order), tree.children);
+    bvh = emit_karras_tree(triangles, options, std::move(tree.order), tree.children);
     s.emit_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return bvh;
 }

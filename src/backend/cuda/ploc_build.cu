@@ -22,10 +22,12 @@
 //     c. merge and compaction: one thread per cluster (compact_cluster):
 //        the lower end of a mutual pair writes the new node (children, box)
 //        and puts it at its position; other survivors move.
-//  4. the order, the children and the nodes per iteration come back; the
-//     host refits (box, count, SAH cost, leaf collapse per node, iteration
-//     by iteration) and emits the canonical BVH (emit_ploc_tree, the CPU
-//     PLOC's own), so the BVH is build_ploc's.
+//  4. emission on the device (raw_tree_emit.cu): boxes, counts, SAH costs
+//     and leaf collapse bottom-up, the canonical layout, and the BVH back to
+//     the host; so the triangle boxes stay until then. A tree deeper than
+//     kBvhMaxDepth comes back raw (order, children, nodes per iteration) and
+//     the host refits and emits it (emit_ploc_tree, the CPU PLOC's own).
+//     Either way the BVH is build_ploc's.
 // Stages are timed with CUDA events; buffers are counted by a MemoryMeter.
 #include <cuda_runtime.h>
 
@@ -38,6 +40,7 @@
 #include "accel/bvh/build/ploc_emit.h"
 #include "accel/bvh/build/ploc_steps.h"
 #include "backend/cuda/device_buffer.h"
+#include "backend/cuda/raw_tree_emit.h"
 #include "backend/cuda/morton_sort.h"
 #include "backend/cuda/ploc_build.h"
 #include "rayforge/backend/cuda.h"
@@ -119,9 +122,11 @@ double elapsed_ms(std::chrono::steady_clock::time_point start) {
 }
 
 // The device pipeline for n >= 2 triangles. `raw`: the node boxes are kept
-// and come back too.
-void build_on_device(std::span<const Triangle> triangles, uint32_t radius, DeviceBuildStages& stages,
-                     DevicePlocTree& out, bool raw) {
+// and the raw tree comes back. Otherwise, with `options`, the device emits
+// the BVH into `bvh` and returns true; false when the tree was too deep, and
+// then the raw tree came back in `out`.
+bool build_on_device(std::span<const Triangle> triangles, uint32_t radius, DeviceBuildStages& stages,
+                     DevicePlocTree& out, bool raw, const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
     MemoryMeter meter;
     EventTimer timer;
@@ -144,7 +149,7 @@ void build_on_device(std::span<const Triangle> triangles, uint32_t radius, Devic
     initial_clusters_kernel<<<blocks_for(n), kBlockSize>>>(sorted.boxes.data(), sorted.order.data(), n,
                                                            refs[0].data(), boxes[0].data());
     stages.ploc_ms = timer.stop_ms();
-    meter.release(sorted.boxes);
+    if (raw) meter.release(sorted.boxes);  // the device emission needs them
 
     // 3. The iterations.
     DeviceBuffer<uint32_t> neighbour("PLOC: nearest neighbours"), children("PLOC: child references");
@@ -200,25 +205,48 @@ void build_on_device(std::span<const Triangle> triangles, uint32_t radius, Devic
     stages.ploc_iterations = static_cast<uint32_t>(out.iteration_nodes.size());
     stages.peak_device_bytes = meter.peak();
 
-    // 4. The clustering back to the host.
+    // 4. Emission on the device.
+    if (!raw) {
+        for (int b = 0; b < 2; ++b) {
+            meter.release(refs[b]);
+            meter.release(boxes[b]);
+        }
+        meter.release(neighbour);
+        meter.release(flags);
+        meter.release(prefix);
+        meter.release(temp);
+        DeviceRawTree tree;
+        tree.children = children.data();
+        tree.node_slots = n - 1;
+        tree.root = n - 2;
+        tree.primitives = n;
+        tree.boxes = sorted.boxes.data();
+        tree.boxes_by_triangle = true;
+        tree.order = sorted.order.data();
+        if (emit_raw_tree_on_device(tree, *options, "PLOC", meter, timer, stages, *bvh)) return true;
+    }
+
+    // The clustering back to the host.
     timer.start();
     out.order = download_all(sorted.order, n);
     out.children = download_all(children, 2 * size_t{n - 1});
     if (raw) out.node_boxes = download_all(node_boxes, n - 1);
-    stages.download_ms = timer.stop_ms();
+    stages.download_ms += timer.stop_ms();
+    return false;
 }
 
-void build_raw(std::span<const Triangle> triangles, int radius, DeviceBuildStages& stages, int device,
-               DevicePlocTree& out, bool raw) {
+// Returns true when the device emitted the BVH into *bvh (options and bvh given).
+bool build_raw(std::span<const Triangle> triangles, int radius, DeviceBuildStages& stages, int device,
+               DevicePlocTree& out, bool raw, const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
     if (triangles.size() >= ploc::kLeafRef) throw Error("PLOC on the device: more than 2^31-1 triangles");
     const size_t n = triangles.size();
     if (n < 2) {  // no merges: nothing for the device to do
         out.order.assign(n, 0u);
-        return;
+        return false;
     }
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
-    build_on_device(triangles, ploc::clamp_radius(radius), stages, out, raw);
+    return build_on_device(triangles, ploc::clamp_radius(radius), stages, out, raw, options, bvh);
 }
 
 }  // namespace
@@ -237,9 +265,13 @@ Bvh build_ploc_on_device(std::span<const Triangle> triangles, const BuildOptions
     DeviceBuildStages& s = stages ? *stages : local;
     s = {};
     DevicePlocTree tree;
-    build_raw(triangles, options.ploc_radius, s, device, tree, false);
+    Bvh bvh;
+    if (build_raw(triangles, options.ploc_radius, s, device, tree, false, &options, &bvh)) {
+        s.emitted_on_device = true;
+        return bvh;
+    }
     const auto start = std::chrono::steady_clock::now();
-    Bvh bvh = emit_ploc_tree(triangles, options, std::move(tree.order), tree.children, tree.iteration_nodes);
+    bvh = emit_ploc_tree(triangles, options, std::move(tree.order), tree.children, tree.iteration_nodes);
     s.emit_ms = elapsed_ms(start);
     return bvh;
 }

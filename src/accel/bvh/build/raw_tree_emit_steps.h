@@ -1,0 +1,277 @@
+// The canonical emission of a Morton-family raw tree (morton_tree.h's
+// RawTree: LBVH, HLBVH2, PLOC) as per-element steps, written once for both
+// backends: the CUDA builders run them as three launches
+// (backend/cuda/raw_tree_emit.cu), the CPU tests replay them in shuffled
+// order against RawTree::emit. The result is RawTree::emit's, bit for bit,
+// for every tree whose emitted height stays within kBvhMaxDepth (deeper
+// trees go to the host, whose emitter rebuilds the offending subtrees).
+//
+//  1. scatter_parents(): one thread per node slot records itself as its
+//     children's parent (slots a builder left unused hold kNoChild).
+//  2. finalize_from_leaf(): one thread per leaf walks up; as in Karras's
+//     box pass, an arrival counter per node lets only the second child's
+//     thread go on, and it computes the node's box, primitive count, SAH
+//     cost, emitted size and height and the leaf collapse exactly as
+//     RawTree::finalize_impl does (same operations, each rounded once).
+//  3. place_element(): one thread per node or leaf walks to the root,
+//     summing what lies to its left: the output position of a node (depth
+//     first, siblings adjacent: a left child's children start 2 after its
+//     parent's, a right child's after its left sibling's subtree), and the
+//     first primitive slot of a leaf; it writes its own output node unless
+//     an ancestor is collapsed, and a leaf always writes its primitives.
+//     O(depth) per element, with no pass over levels.
+//
+// References: an inner node slot, or kLeafRef | the sorted position of a
+// leaf run's first primitive. No std:: here: plain pointers, RF_HDI.
+#pragma once
+
+#include <cstdint>
+
+#include "accel/bvh/build/karras_tree.h"
+#include "core/rounded_arithmetic.h"
+#include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/core/host_device.h"
+#include "rayforge/math/box.h"
+
+namespace rf::raw_emit {
+
+inline constexpr uint32_t kLeafRef = karras::kLeafRef;  // == morton::kLeafRef
+inline constexpr uint32_t kNoParent = 0xffffffffu;      // the root's, and non-leaf positions'
+inline constexpr uint32_t kNoChild = 0xffffffffu;       // a node slot the builder did not use
+inline constexpr uint32_t kCollapsed = 1;               // == morton::kCollapsed: emitted as one leaf
+
+RF_HDI bool is_leaf_ref(uint32_t ref) { return (ref & kLeafRef) != 0; }
+
+// A node's finalized values, as morton::RawNode holds them.
+struct NodeInfo {
+    Box3f box;
+    uint32_t count;     // primitives below
+    float cost;         // SAH cost of the subtree as emitted (half areas, unnormalised)
+    uint32_t out_size;  // output nodes of the subtree
+    uint32_t height;    // (height << 1) | collapsed: inner nodes on the longest emitted path
+};
+static_assert(sizeof(NodeInfo) == 40);
+
+RF_HDI uint32_t info_height(const NodeInfo& info) { return info.height >> 1; }
+RF_HDI bool info_collapsed(const NodeInfo& info) { return (info.height & kCollapsed) != 0; }
+
+struct Costs {
+    float traversal;
+    float intersection;
+    uint32_t max_leaf_size;  // 1 .. 255
+};
+
+// The tree and the emitter's work arrays. Node slots [0, high_base) take
+// their child pairs from `children`, slots [high_base, node_slots) from
+// `high_children` (HLBVH2's top level lives in its own array).
+struct RawTreeView {
+    const uint32_t* children;       // 2 per node slot below high_base
+    const uint32_t* high_children;  // 2 per node slot from high_base on (may be null when none)
+    uint32_t high_base;
+    uint32_t node_slots;
+    uint32_t root;                  // reference
+    uint32_t primitives;            // n
+    const Box3f* boxes;             // per triangle when boxes_by_triangle, else per sorted position
+    bool boxes_by_triangle;
+    const uint32_t* order;          // sorted position -> triangle
+    const uint8_t* leaf_runs;       // run size per leaf start, or null: every leaf one primitive
+    uint32_t* node_parent;          // node_slots, kNoParent before scatter_parents
+    uint32_t* leaf_parent;          // n, kNoParent before scatter_parents
+    NodeInfo* info;                 // node_slots, written by finalize_from_leaf
+    uint32_t* arrivals;             // node_slots, zero before finalize_from_leaf
+    Costs costs;
+};
+
+RF_HDI const uint32_t* child_pair(const RawTreeView& t, uint32_t node) {
+    return node < t.high_base ? t.children + 2 * static_cast<uint64_t>(node)
+                              : t.high_children + 2 * static_cast<uint64_t>(node - t.high_base);
+}
+
+// x*y + y*z + z*x, each operation rounded once (morton::half_area's bits).
+RF_HDI float half_area(const Box3f& b) {
+    const float x = b.hi.x - b.lo.x, y = b.hi.y - b.lo.y, z = b.hi.z - b.lo.z;
+    return add_rn(add_rn(mul_rn(x, y), mul_rn(y, z)), mul_rn(z, x));
+}
+
+RF_HDI uint32_t run_size(const RawTreeView& t, uint32_t first) {
+    return t.leaf_runs != nullptr ? t.leaf_runs[first] : 1u;
+}
+
+RF_HDI Box3f position_box(const RawTreeView& t, uint32_t position) {
+    return t.boxes[t.boxes_by_triangle ? t.order[position] : position];
+}
+
+// The values of leaf run `first` (RawTree::info for a leaf reference).
+RF_HDI NodeInfo leaf_info(const RawTreeView& t, uint32_t first) {
+    const uint32_t n = run_size(t, first);
+    Box3f box = position_box(t, first);
+    for (uint32_t i = 1; i < n; ++i) box = karras::box_union(box, position_box(t, first + i));
+    NodeInfo info;
+    info.box = box;
+    info.count = n;
+    info.cost = mul_rn(mul_rn(t.costs.intersection, half_area(box)), static_cast<float>(n));
+    info.out_size = 1;
+    info.height = 0;
+    return info;
+}
+
+// A node's values another thread wrote (L1 bypassed on the device, as
+// karras::load_shared_box does).
+RF_HDI NodeInfo load_shared_info(const NodeInfo* p) {
+#if defined(__CUDA_ARCH__)
+    NodeInfo info;
+    info.box = karras::load_shared_box(&p->box);
+    info.count = __ldcg(&p->count);
+    info.cost = __ldcg(&p->cost);
+    info.out_size = __ldcg(&p->out_size);
+    info.height = __ldcg(&p->height);
+    return info;
+#else
+    return *p;
+#endif
+}
+
+// Step 1, for node slot `node`.
+RF_HDI void scatter_parents(const RawTreeView& t, uint32_t node) {
+    const uint32_t* pair = child_pair(t, node);
+    for (int side = 0; side < 2; ++side) {
+        const uint32_t child = pair[side];
+        if (child == kNoChild) return;  // an unused slot has no children at all
+        if (is_leaf_ref(child)) {
+            t.leaf_parent[child & ~kLeafRef] = node;
+        } else {
+            t.node_parent[child] = node;
+        }
+    }
+}
+
+// RawTree::finalize_impl: node values from its children's.
+RF_HDI NodeInfo combine(const Costs& costs, const NodeInfo& a, const NodeInfo& b) {
+    NodeInfo node;
+    node.box = karras::box_union(a.box, b.box);
+    node.count = a.count + b.count;
+    const float area = half_area(node.box);
+    const float split_cost = add_rn(add_rn(mul_rn(costs.traversal, area), a.cost), b.cost);
+    if (node.count <= costs.max_leaf_size) {
+        const float leaf_cost = mul_rn(mul_rn(costs.intersection, area), static_cast<float>(node.count));
+        if (!(leaf_cost > split_cost)) {
+            node.cost = leaf_cost;
+            node.out_size = 1;
+            node.height = kCollapsed;
+            return node;
+        }
+    }
+    node.cost = split_cost;
+    node.out_size = 1 + a.out_size + b.out_size;
+    const uint32_t ha = info_height(a), hb = info_height(b);
+    node.height = (1 + (ha > hb ? ha : hb)) << 1;
+    return node;
+}
+
+// Step 2, for sorted position `position` (threads of non-leaf positions
+// return at once). `Arrival` as in karras::propagate_boxes_from_leaf.
+template <class Arrival>
+RF_HDI void finalize_from_leaf(const RawTreeView& t, uint32_t position) {
+    uint32_t node = t.leaf_parent[position];
+    if (node == kNoParent) return;  // not a leaf start, or the whole tree is one leaf
+    uint32_t from = kLeafRef | position;
+    NodeInfo info = leaf_info(t, position);
+    while (node != kNoParent) {
+        if (Arrival::arrive(&t.arrivals[node]) == 0) return;
+        const uint32_t* pair = child_pair(t, node);
+        const uint32_t left = pair[0], right = pair[1];
+        const bool from_left = left == from;
+        const uint32_t sibling = from_left ? right : left;
+        const NodeInfo other =
+            is_leaf_ref(sibling) ? leaf_info(t, sibling & ~kLeafRef) : load_shared_info(&t.info[sibling]);
+        info = from_left ? combine(t.costs, info, other) : combine(t.costs, other, info);
+        t.info[node] = info;
+        from = node;
+        node = t.node_parent[node];
+    }
+}
+
+// Whether the emission can run on the device: a tree whose emitted height
+// exceeds kBvhMaxDepth needs the host's depth-limited rebuild.
+RF_HDI bool fits_depth_limit(const NodeInfo& root) {
+    return info_collapsed(root) || info_height(root) <= static_cast<uint32_t>(kBvhMaxDepth);
+}
+
+// Where an element lands: the output node it writes (when emitted), the
+// first output node of its children, its first primitive slot.
+struct Placement {
+    uint32_t at;
+    uint32_t child_base;
+    uint32_t slot;
+    bool emitted;  // no ancestor is collapsed
+};
+
+// The walk of step 3 from element `ref` (a node slot or a leaf reference;
+// finalize_from_leaf has run for the whole tree) to the root.
+RF_HDI Placement place(const RawTreeView& t, uint32_t ref) {
+    Placement p{0, 1, 0, true};
+    uint32_t parent = is_leaf_ref(ref) ? t.leaf_parent[ref & ~kLeafRef] : t.node_parent[ref];
+    if (parent == kNoParent) return p;  // the root
+    uint32_t from = ref;
+    uint32_t first_step = 0, side = 0;
+    bool first = true;
+    while (parent != kNoParent) {
+        const uint32_t* pair = child_pair(t, parent);
+        const uint32_t left = pair[0];
+        uint32_t step = 2;  // a left child's children follow its sibling pair
+        const bool right = left != from;
+        if (right) {
+            // A right child's children follow its left sibling's subtree.
+            const bool leaf = is_leaf_ref(left);
+            const uint32_t left_count = leaf ? run_size(t, left & ~kLeafRef) : t.info[left].count;
+            const uint32_t left_size = leaf ? 1u : t.info[left].out_size;
+            step = 1 + left_size;
+            p.slot += left_count;
+        }
+        if (first) {
+            first_step = step;
+            side = right ? 1u : 0u;
+            first = false;
+        }
+        if (info_collapsed(t.info[parent])) p.emitted = false;
+        p.child_base += step;
+        from = parent;
+        parent = t.node_parent[parent];
+    }
+    p.at = p.child_base - first_step + side;  // its parent's child_base, plus its side
+    return p;
+}
+
+// Step 3 for node slot `node` (a slot no leaf reached is skipped).
+RF_HDI void place_node(const RawTreeView& t, uint32_t node, BvhNode* nodes) {
+    if (t.node_parent[node] == kNoParent && t.root != node) return;  // unused slot
+    const Placement p = place(t, node);
+    if (!p.emitted) return;
+    const NodeInfo& info = t.info[node];
+    BvhNode& out = nodes[p.at];
+    out.bounds = info.box;
+    if (info_collapsed(info)) {
+        out.first = p.slot;
+        out.count = info.count;
+    } else {
+        out.first = p.child_base;
+        out.count = 0;
+    }
+}
+
+// Step 3 for sorted position `position` (non-leaf positions return at once).
+RF_HDI void place_leaf(const RawTreeView& t, uint32_t position, BvhNode* nodes, uint32_t* prim_indices) {
+    const uint32_t ref = kLeafRef | position;
+    if (t.leaf_parent[position] == kNoParent && t.root != ref) return;
+    const Placement p = place(t, ref);
+    const uint32_t n = run_size(t, position);
+    for (uint32_t i = 0; i < n; ++i) prim_indices[p.slot + i] = t.order[position + i];
+    if (!p.emitted) return;
+    const NodeInfo info = leaf_info(t, position);
+    BvhNode& out = nodes[p.at];
+    out.bounds = info.box;
+    out.first = p.slot;
+    out.count = n;
+}
+
+}  // namespace rf::raw_emit

@@ -1,0 +1,125 @@
+// Canonical emission of a Morton-family raw tree on the device: the three
+// launches of accel/bvh/build/raw_tree_emit_steps.h (parents, the bottom-up
+// finalize with arrival counters, the placement walk), then the nodes and
+// primitive indices back to the host. Only the root's values cross to the
+// host in between: its output size sizes the node buffer, and its height
+// says whether the depth limit sends the tree to the host's emitter.
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <string>
+
+#include "accel/bvh/build/raw_tree_emit_steps.h"
+#include "backend/cuda/cuda_check.h"
+#include "backend/cuda/raw_tree_emit.h"
+#include "rayforge/core/error.h"
+
+namespace rf::cuda {
+namespace {
+
+constexpr int kBlockSize = 256;
+
+uint32_t blocks_for(uint64_t threads) { return static_cast<uint32_t>((threads + kBlockSize - 1) / kBlockSize); }
+
+__global__ void scatter_parents_kernel(raw_emit::RawTreeView tree) {
+    const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
+    if (i < tree.node_slots) raw_emit::scatter_parents(tree, i);
+}
+
+__global__ void finalize_kernel(raw_emit::RawTreeView tree) {
+    const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
+    if (i < tree.primitives) raw_emit::finalize_from_leaf<karras::AtomicArrival>(tree, i);
+}
+
+// Threads [0, node_slots) place nodes, the rest leaf positions.
+__global__ void place_kernel(raw_emit::RawTreeView tree, BvhNode* nodes, uint32_t* prim_indices) {
+    const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
+    if (i < tree.node_slots) {
+        raw_emit::place_node(tree, i, nodes);
+    } else if (i - tree.node_slots < tree.primitives) {
+        raw_emit::place_leaf(tree, i - tree.node_slots, nodes, prim_indices);
+    }
+}
+
+}  // namespace
+
+bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& options, const std::string& label,
+                             MemoryMeter& meter, EventTimer& timer, DeviceBuildStages& stages, Bvh& out) {
+    const uint32_t n = tree.primitives, slots = tree.node_slots;
+    DeviceBuffer<uint32_t> node_parent(label + ": emission node parents"), leaf_parent(label + ": emission leaf parents"),
+        arrivals(label + ": emission arrival counters");
+    DeviceBuffer<raw_emit::NodeInfo> info(label + ": emission node values");
+    raw_emit::RawTreeView view{};
+    view.children = tree.children;
+    view.high_children = tree.high_children;
+    view.high_base = tree.high_children != nullptr ? tree.high_base : slots;
+    view.node_slots = slots;
+    view.root = tree.root;
+    view.primitives = n;
+    view.boxes = tree.boxes;
+    view.boxes_by_triangle = tree.boxes_by_triangle;
+    view.order = tree.order;
+    view.leaf_runs = tree.leaf_runs;
+    view.costs = {options.traversal_cost, options.intersection_cost,
+                  static_cast<uint32_t>(std::clamp(options.max_leaf_size, 1, 255))};
+    const bool own_parents = tree.node_parent == nullptr;
+    if (own_parents) {
+        meter.allocate(node_parent, slots);
+        meter.allocate(leaf_parent, n);
+        view.node_parent = node_parent.data();
+        view.leaf_parent = leaf_parent.data();
+    } else {
+        // Read only by the emitter; the view's pointers are shared with the builder's arrays.
+        view.node_parent = const_cast<uint32_t*>(tree.node_parent);
+        view.leaf_parent = const_cast<uint32_t*>(tree.leaf_parent);
+    }
+    meter.allocate(info, slots);
+    meter.allocate(arrivals, slots);
+    view.info = info.data();
+    view.arrivals = arrivals.data();
+
+    timer.start();
+    if (own_parents) {
+        RF_CUDA_CHECK(cudaMemsetAsync(node_parent.data(), 0xff, node_parent.bytes()));
+        RF_CUDA_CHECK(cudaMemsetAsync(leaf_parent.data(), 0xff, leaf_parent.bytes()));
+        scatter_parents_kernel<<<blocks_for(slots), kBlockSize>>>(view);
+    }
+    RF_CUDA_CHECK(cudaMemsetAsync(arrivals.data(), 0, arrivals.bytes()));
+    finalize_kernel<<<blocks_for(n), kBlockSize>>>(view);
+    stages.device_emit_ms += timer.stop_ms();
+    meter.release(arrivals);
+
+    // The root's values decide the rest (n >= 2, so the root is a node).
+    if (raw_emit::is_leaf_ref(tree.root) || tree.root >= slots) {
+        throw Error(label + " device emission: the root is not a node");
+    }
+    raw_emit::NodeInfo root{};
+    RF_CUDA_CHECK(cudaMemcpy(&root, info.data() + tree.root, sizeof root, cudaMemcpyDeviceToHost));
+    if (root.count != n) {
+        throw Error(label + " device emission: the tree holds " + std::to_string(root.count) + " of " +
+                    std::to_string(n) + " primitives");
+    }
+    if (!raw_emit::fits_depth_limit(root)) return false;
+
+    DeviceBuffer<BvhNode> nodes(label + ": BVH nodes");
+    DeviceBuffer<uint32_t> prims(label + ": BVH primitive indices");
+    meter.allocate(nodes, root.out_size);
+    meter.allocate(prims, n);
+    timer.start();
+    place_kernel<<<blocks_for(uint64_t{slots} + n), kBlockSize>>>(view, nodes.data(), prims.data());
+    stages.device_emit_ms += timer.stop_ms();
+    meter.release(info);
+    meter.release(node_parent);
+    meter.release(leaf_parent);
+    stages.peak_device_bytes = std::max(stages.peak_device_bytes, meter.peak());
+
+    timer.start();
+    out.nodes.resize(root.out_size);
+    out.prim_indices.resize(n);
+    nodes.download(out.nodes);
+    prims.download(out.prim_indices);
+    stages.download_ms += timer.stop_ms();
+    return true;
+}
+
+}  // namespace rf::cuda

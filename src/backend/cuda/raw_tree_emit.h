@@ -1,0 +1,47 @@
+// Internal face of the device emission of Morton-family raw trees
+// (raw_tree_emit.cu; the steps are accel/bvh/build/raw_tree_emit_steps.h):
+// the LBVH, HLBVH2 and PLOC device builders hand over the tree they left in
+// device memory and get the canonical BVH back, leaf collapse and layout
+// done on the device.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "backend/cuda/morton_sort.h"
+#include "rayforge/accel/accel.h"
+#include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/backend/cuda_build.h"
+#include "rayforge/math/box.h"
+
+namespace rf::cuda {
+
+// Device pointers; see raw_emit::RawTreeView for the encoding.
+struct DeviceRawTree {
+    const uint32_t* children = nullptr;       // 2 per node slot below high_base (unused slots: kNoChild)
+    const uint32_t* high_children = nullptr;  // 2 per node slot from high_base on
+    uint32_t high_base = 0;
+    uint32_t node_slots = 0;
+    uint32_t root = 0;                        // reference
+    uint32_t primitives = 0;                  // n >= 2
+    const Box3f* boxes = nullptr;
+    bool boxes_by_triangle = true;
+    const uint32_t* order = nullptr;
+    const uint8_t* leaf_runs = nullptr;       // null: every leaf one primitive
+    // Parent links the builder already has (LBVH): both or neither. The
+    // emitter scatters its own otherwise.
+    const uint32_t* node_parent = nullptr;
+    const uint32_t* leaf_parent = nullptr;
+};
+
+// Finalizes every node (box, count, SAH cost, leaf collapse) and writes the
+// canonical BVH into `out`: RawTree::emit's result for the same tree.
+// Returns false, with `out` untouched, when the emitted tree would be deeper
+// than kBvhMaxDepth: the caller then emits on the host, whose depth-limited
+// rebuild this emitter does not do. Adds the device time to
+// stages.device_emit_ms and the download to stages.download_ms; buffers
+// (named after `label`) go through `meter`.
+bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& options, const std::string& label,
+                             MemoryMeter& meter, EventTimer& timer, DeviceBuildStages& stages, Bvh& out);
+
+}  // namespace rf::cuda
