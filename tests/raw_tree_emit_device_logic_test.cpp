@@ -11,15 +11,20 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <numeric>
 #include <random>
 #include <string>
 #include <vector>
 
+#include "accel/bvh/build/hlbvh2.h"
 #include "accel/bvh/build/karras_tree.h"
+#include "accel/bvh/build/lbvh.h"
 #include "accel/bvh/build/lbvh_emit.h"
 #include "accel/bvh/build/morton_tree.h"
+#include "accel/bvh/build/ploc.h"
 #include "accel/bvh/build/raw_tree_emit_steps.h"
 #include "accel_test_scenes.h"
 
@@ -356,6 +361,77 @@ TEST(RawTreeEmitDeviceLogic, DeliberateBugIsCaught) {
     ASSERT_FALSE(host.needs_rebuild);
     const Emulated buggy = emulate<FirstArrivalContinues>(g.triangles, options, in, 5);
     EXPECT_FALSE(buggy.fits && same_bvh(buggy.bvh, host.bvh));
+}
+
+uint64_t bvh_hash(const Bvh& bvh) {
+    uint64_t h = 1469598103934665603ull;  // FNV-1a
+    auto eat = [&](const void* p, size_t bytes) {
+        const auto* b = static_cast<const unsigned char*>(p);
+        for (size_t i = 0; i < bytes; ++i) h = (h ^ b[i]) * 1099511628211ull;
+    };
+    for (const BvhNode& n : bvh.nodes) {
+        eat(&n.bounds, sizeof n.bounds);
+        eat(&n.first, sizeof n.first);
+        eat(&n.count, sizeof n.count);
+    }
+    eat(bvh.prim_indices.data(), bvh.prim_indices.size() * sizeof(uint32_t));
+    return h;
+}
+
+// The CPU Morton builders now finalize nodes through raw_emit::combine, the
+// device emission's own step. Their output is pinned by hashes taken before
+// that change, so sharing the step cannot have moved a bit.
+// RF_PRINT_MORTON_HASHES=1 prints the hashes (to re-pin after an intended change).
+TEST(RawTreeEmitDeviceLogic, CpuMortonBuildersOutputIsPinned) {
+    const bool print = std::getenv("RF_PRINT_MORTON_HASHES") != nullptr;
+    const std::vector<uint64_t> expected = {
+        0x49b09d3fa091310aull,
+        0x49b09d3fa091310aull,
+        0xe6032acb1284caeaull,
+        0xd9ad08bcb899ec72ull,
+        0x2ab3fc9c6c62f3a9ull,
+        0x2ab3fc9c6c62f3a9ull,
+        0x3f9a068887953d84ull,
+        0xe007cd535dce7004ull,
+        0xf9203fdb05eec9a0ull,
+        0xf9203fdb05eec9a0ull,
+        0xbc6af1462e98a0d0ull,
+        0x4b9be60e8521d327ull,
+        0x7d99cc2728b01cb8ull,
+        0x7d99cc2728b01cb8ull,
+        0x4d5f1cda72a9f9a8ull,
+        0x48183000b6bd6ab8ull,
+        0x7abab3e6b3a7ffe3ull,
+        0x7abab3e6b3a7ffe3ull,
+        0x1ad7ac045c3d0a6bull,
+        0x4f78cf825572be31ull,
+        0xaa0e7ca34058f811ull,
+        0xaa0e7ca34058f811ull,
+        0x239e3c58adbc9664ull,
+        0x2f7f7c685996beaeull,
+    };
+    const SceneGeometry sphere = test::to_geometry(test::make_icosphere(4));
+    const SceneGeometry soup = mixed_triangles(4000, 13);
+    const SceneGeometry nasty = test::make_nasty_geometry(3);
+    size_t k = 0;
+    for (const SceneGeometry* g : {&sphere, &soup, &nasty}) {
+        for (int variant = 0; variant < 2; ++variant) {
+            BuildOptions options;
+            options.max_leaf_size = variant == 0 ? 4 : 7;
+            options.traversal_cost = variant == 0 ? 1.0f : 1.3f;
+            options.intersection_cost = variant == 0 ? 1.0f : 0.7f;
+            const uint64_t hashes[] = {bvh_hash(build_lbvh(g->triangles, options, 30)),
+                                       bvh_hash(build_lbvh(g->triangles, options, 63)),
+                                       bvh_hash(build_hlbvh2(g->triangles, options)),
+                                       bvh_hash(build_ploc(g->triangles, options))};
+            for (uint64_t h : hashes) {
+                if (print) std::printf("        0x%016llxull,\n", static_cast<unsigned long long>(h));
+                if (k < expected.size()) EXPECT_EQ(expected[k], h) << "hash " << k;
+                ++k;
+            }
+        }
+    }
+    EXPECT_EQ(k, expected.size());
 }
 
 }  // namespace

@@ -155,8 +155,7 @@ int balanced_levels(uint32_t count, uint32_t leaf_size) {
 RawTree::RawTree(std::span<const Triangle> tris, const BuildOptions& options)
     : triangles(tris),
       max_leaf_size_(static_cast<uint32_t>(std::clamp(options.max_leaf_size, 1, 255))),
-      traversal_cost_(options.traversal_cost),
-      intersection_cost_(options.intersection_cost) {}
+      costs_{options.traversal_cost, options.intersection_cost, max_leaf_size_} {}
 
 void RawTree::set_order(std::vector<uint32_t>&& sorted) {
     order = std::move(sorted);

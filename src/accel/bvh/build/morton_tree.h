@@ -19,6 +19,7 @@
 
 #include "accel/bvh/build/karras_tree.h"
 #include "accel/bvh/build/morton_buffer.h"
+#include "accel/bvh/build/raw_tree_emit_steps.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/scene/scene_geometry.h"
@@ -33,11 +34,6 @@ inline bool is_leaf_ref(uint32_t ref) { return (ref & kLeafRef) != 0; }
 // Box growth with std::min/max semantics (single instructions; inputs are
 // finite): the one the device builders use too.
 using karras::box_union;
-// Surface area without the empty-box test (boxes here are never empty).
-inline float half_area(const Box3f& b) {
-    const float x = b.hi.x - b.lo.x, y = b.hi.y - b.lo.y, z = b.hi.z - b.lo.z;
-    return x * y + y * z + z * x;
-}
 
 struct RawNode {
     // Left uninitialised when a node array is sized (finalize() sets every
@@ -131,15 +127,11 @@ public:
     std::vector<RawNode> nodes;
 
 private:
-    struct Info {
-        Box3f box;
-        uint32_t count;
-        float cost;
-        uint32_t out_size;
-        uint32_t height;
-    };
+    // A child's values in the shared emission's terms (raw_tree_emit_steps.h),
+    // so the host and the device emission compute nodes with the same code.
     template <bool kLeafRuns>
-    [[nodiscard, gnu::always_inline]] Info info(uint32_t ref) const {
+    [[nodiscard, gnu::always_inline]] raw_emit::NodeInfo info(uint32_t ref) const {
+        raw_emit::NodeInfo info;
         if (is_leaf_ref(ref)) {
             const uint32_t first = ref & ~kLeafRef;
             Box3f box = boxes[first];
@@ -148,36 +140,34 @@ private:
                 n = leaf_run_[first];
                 for (uint32_t i = 1; i < n; ++i) box = box_union(box, boxes[first + i]);
             }
-            return {box, n, intersection_cost_ * half_area(box) * static_cast<float>(n), 1, 0};
+            info.box = box;
+            info.count = n;
+            info.cost = raw_emit::leaf_cost(costs_, box, n);
+            info.out_size = 1;
+            info.height = 0;
+            return info;
         }
         const RawNode& node = nodes[ref];
-        return {node.box, node.count, node.cost, node.out_size, node.height};
+        info.box = node.box;
+        info.count = node.count;
+        info.cost = node.cost;
+        info.out_size = node.out_size;
+        info.height = static_cast<uint32_t>(node.height) << 1;
+        return info;
     }
+    // Karras 2013-style collapse: one leaf where the SAH prefers it (raw_emit::combine).
     template <bool kLeafRuns>
     [[gnu::always_inline]] void finalize_impl(uint32_t index, uint32_t left, uint32_t right) {
-        const Info a = info<kLeafRuns>(left), b = info<kLeafRuns>(right);
+        const raw_emit::NodeInfo result = raw_emit::combine(costs_, info<kLeafRuns>(left), info<kLeafRuns>(right));
         RawNode& node = nodes[index];
         node.child[0] = left;
         node.child[1] = right;
-        node.box = box_union(a.box, b.box);
-        node.count = a.count + b.count;
-        const float area = half_area(node.box);
-        const float split_cost = traversal_cost_ * area + a.cost + b.cost;
-        node.flags = 0;
-        if (node.count <= max_leaf_size_) {
-            // Karras 2013-style collapse: one leaf where the SAH prefers it.
-            const float leaf_cost = intersection_cost_ * area * static_cast<float>(node.count);
-            if (!(leaf_cost > split_cost)) {
-                node.cost = leaf_cost;
-                node.out_size = 1;
-                node.height = 0;
-                node.flags = kCollapsed;
-                return;
-            }
-        }
-        node.cost = split_cost;
-        node.out_size = 1 + a.out_size + b.out_size;
-        node.height = static_cast<uint16_t>(std::min<uint32_t>(1 + std::max(a.height, b.height), 0xffff));
+        node.box = result.box;
+        node.count = result.count;
+        node.cost = result.cost;
+        node.out_size = result.out_size;
+        node.height = static_cast<uint16_t>(std::min<uint32_t>(raw_emit::info_height(result), 0xffff));
+        node.flags = raw_emit::info_collapsed(result) ? kCollapsed : 0;
     }
     // Hidden: called only inside the library, so the (recursive) calls skip the PLT.
 #define RF_MORTON_INTERNAL [[gnu::visibility("hidden")]]
@@ -195,8 +185,7 @@ private:
 #undef RF_MORTON_INTERNAL
 
     uint32_t max_leaf_size_;
-    float traversal_cost_;
-    float intersection_cost_;
+    raw_emit::Costs costs_;
     bool leaf_runs_ = false;   // false: every leaf run is one primitive
     Buffer<uint8_t> leaf_run_;
 };

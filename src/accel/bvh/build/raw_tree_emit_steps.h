@@ -11,8 +11,9 @@
 //  2. finalize_from_leaf(): one thread per leaf walks up; as in Karras's
 //     box pass, an arrival counter per node lets only the second child's
 //     thread go on, and it computes the node's box, primitive count, SAH
-//     cost, emitted size and height and the leaf collapse exactly as
-//     RawTree::finalize_impl does (same operations, each rounded once).
+//     cost, emitted size and height and the leaf collapse with combine(),
+//     the function RawTree::finalize runs on the host (each product and sum
+//     rounded once, so both backends get the same bits).
 //  3. place_element(): one thread per node or leaf walks to the root,
 //     summing what lies to its left: the output position of a node (depth
 //     first, siblings adjacent: a left child's children start 2 after its
@@ -101,6 +102,11 @@ RF_HDI Box3f position_box(const RawTreeView& t, uint32_t position) {
     return t.boxes[t.boxes_by_triangle ? t.order[position] : position];
 }
 
+// SAH cost of `count` primitives in one leaf of box `box` (unnormalised).
+RF_HDI float leaf_cost(const Costs& costs, const Box3f& box, uint32_t count) {
+    return mul_rn(mul_rn(costs.intersection, half_area(box)), static_cast<float>(count));
+}
+
 // The values of leaf run `first` (RawTree::info for a leaf reference).
 RF_HDI NodeInfo leaf_info(const RawTreeView& t, uint32_t first) {
     const uint32_t n = run_size(t, first);
@@ -109,7 +115,7 @@ RF_HDI NodeInfo leaf_info(const RawTreeView& t, uint32_t first) {
     NodeInfo info;
     info.box = box;
     info.count = n;
-    info.cost = mul_rn(mul_rn(t.costs.intersection, half_area(box)), static_cast<float>(n));
+    info.cost = leaf_cost(t.costs, box, n);
     info.out_size = 1;
     info.height = 0;
     return info;
@@ -145,7 +151,7 @@ RF_HDI void scatter_parents(const RawTreeView& t, uint32_t node) {
     }
 }
 
-// RawTree::finalize_impl: node values from its children's.
+// A node's values from its children's (RawTree::finalize runs this too).
 RF_HDI NodeInfo combine(const Costs& costs, const NodeInfo& a, const NodeInfo& b) {
     NodeInfo node;
     node.box = karras::box_union(a.box, b.box);
@@ -153,9 +159,9 @@ RF_HDI NodeInfo combine(const Costs& costs, const NodeInfo& a, const NodeInfo& b
     const float area = half_area(node.box);
     const float split_cost = add_rn(add_rn(mul_rn(costs.traversal, area), a.cost), b.cost);
     if (node.count <= costs.max_leaf_size) {
-        const float leaf_cost = mul_rn(mul_rn(costs.intersection, area), static_cast<float>(node.count));
-        if (!(leaf_cost > split_cost)) {
-            node.cost = leaf_cost;
+        const float as_leaf = mul_rn(mul_rn(costs.intersection, area), static_cast<float>(node.count));
+        if (!(as_leaf > split_cost)) {
+            node.cost = as_leaf;
             node.out_size = 1;
             node.height = kCollapsed;
             return node;
