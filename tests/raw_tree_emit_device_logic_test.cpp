@@ -2,8 +2,8 @@
 // raw_tree_emit_steps.h, run by backend/cuda/raw_tree_emit.cu) replayed on
 // the CPU the way the kernels run it: parents scattered per node slot, one
 // bottom-up walker per leaf with "second arrival continues" counters, and
-// one placement walk per node and leaf, each launch's threads in shuffled
-// order. The result must be morton::RawTree::emit's, bit for bit, on random
+// the top-down emission one level (launch) at a time, each launch's threads
+// in shuffled order. The result must be morton::RawTree::emit's, bit for bit, on random
 // trees (any leaf order, as PLOC makes; leaf runs, as HLBVH2 makes; unused
 // node slots and a separate top-level array, as HLBVH2 numbers them) and on
 // the LBVH's Karras trees; trees deeper than kBvhMaxDepth must be refused
@@ -38,6 +38,13 @@ using raw_emit::kNoParent;
 // One thread at a time: the first arrival reads 0 and stops.
 struct SequentialArrival {
     static uint32_t arrive(uint32_t* counter) { return (*counter)++; }
+};
+struct SequentialCounter {
+    static uint32_t add(uint32_t* counter, uint32_t n) {
+        const uint32_t before = *counter;
+        *counter += n;
+        return before;
+    }
 };
 // A deliberate bug: the first arrival goes on instead of the second, so a
 // node is computed before its other child is final.
@@ -121,13 +128,28 @@ Emulated emulate(std::span<const Triangle> triangles, const BuildOptions& option
     BvhNode poison;
     std::memset(static_cast<void*>(&poison), 0xcd, sizeof poison);
     std::fill(out.bvh.nodes.begin(), out.bvh.nodes.end(), poison);
-    for (uint32_t e : shuffled(slots + n)) {
-        if (e < slots) {
-            raw_emit::place_node(view, e, out.bvh.nodes.data());
-        } else {
-            raw_emit::place_leaf(view, e - slots, out.bvh.nodes.data(), out.bvh.prim_indices.data());
-        }
+    if (leaf_root) {
+        std::vector<raw_emit::EmitItem> next(1);
+        uint32_t next_count = 0;
+        raw_emit::emit_item<SequentialCounter>(view, raw_emit::root_item(in.root), out.bvh.nodes.data(),
+                                               out.bvh.prim_indices.data(), next.data(), &next_count);
+        EXPECT_EQ(next_count, 0u);
+        return out;
     }
+    // One launch per level, its items in shuffled order.
+    const uint32_t levels = raw_emit::emit_levels(info[in.root]);
+    std::vector<raw_emit::EmitItem> items{raw_emit::root_item(in.root)};
+    for (uint32_t level = 0; level < levels; ++level) {
+        std::vector<raw_emit::EmitItem> next(info[in.root].out_size);
+        uint32_t next_count = 0;
+        for (uint32_t i : shuffled(static_cast<uint32_t>(items.size()))) {
+            raw_emit::emit_item<SequentialCounter>(view, items[i], out.bvh.nodes.data(), out.bvh.prim_indices.data(),
+                                                   next.data(), &next_count);
+        }
+        next.resize(next_count);
+        items = std::move(next);
+    }
+    EXPECT_TRUE(items.empty()) << "items queued below the root's height";
     return out;
 }
 

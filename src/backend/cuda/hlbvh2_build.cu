@@ -251,6 +251,11 @@ bool build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
             meter.release(inner_boxes);
             meter.release(cluster_boxes);
             meter.release(counters);
+            // The emission needs only the tree; the host's fallback gets the clusters from here.
+            out.forest.cluster_begin = download_all(cluster_begin, clusters);
+            out.forest.cluster_prefix = download_all(prefix, clusters);
+            meter.release(cluster_begin);
+            meter.release(prefix);
             DeviceRawTree tree;
             tree.children = refs.data();
             tree.high_children = clusters >= 2 ? top.top_refs.data() : nullptr;
@@ -270,9 +275,11 @@ bool build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
     timer.start();
     out.forest.order = download_all(sorted.order, n);
     out.forest.refs = download_all(refs, ref_count);
-    out.forest.cluster_begin = download_all(cluster_begin, clusters);
+    if (out.forest.cluster_begin.empty()) {  // not already taken before the device emission
+        out.forest.cluster_begin = download_all(cluster_begin, clusters);
+        out.forest.cluster_prefix = download_all(prefix, clusters);
+    }
     out.forest.cluster_begin.push_back(n);
-    out.forest.cluster_prefix = download_all(prefix, clusters);
     if (clusters >= 2) out.forest.top_refs = download_all(top.top_refs, 2 * (size_t{clusters} - 1));
     if (raw) {
         out.cluster_boxes = download_all(cluster_boxes, clusters);

@@ -1,9 +1,10 @@
-// Canonical emission of a Morton-family raw tree on the device: the three
-// launches of accel/bvh/build/raw_tree_emit_steps.h (parents, the bottom-up
-// finalize with arrival counters, the placement walk), then the nodes and
-// primitive indices back to the host. Only the root's values cross to the
-// host in between: its output size sizes the node buffer, and its height
-// says whether the depth limit sends the tree to the host's emitter.
+// Canonical emission of a Morton-family raw tree on the device: the steps of
+// accel/bvh/build/raw_tree_emit_steps.h (parents, the bottom-up finalize
+// with arrival counters, then one launch per level top down), then the
+// nodes and primitive indices back to the host. Only the root's values
+// cross to the host in between: its output size sizes the node buffer, its
+// height says whether the depth limit sends the tree to the host's emitter,
+// and otherwise how many level launches follow, back to back.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -31,13 +32,19 @@ __global__ void finalize_kernel(raw_emit::RawTreeView tree) {
     if (i < tree.primitives) raw_emit::finalize_from_leaf<karras::AtomicArrival>(tree, i);
 }
 
-// Threads [0, node_slots) place nodes, the rest leaf positions.
-__global__ void place_kernel(raw_emit::RawTreeView tree, BvhNode* nodes, uint32_t* prim_indices) {
-    const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
-    if (i < tree.node_slots) {
-        raw_emit::place_node(tree, i, nodes);
-    } else if (i - tree.node_slots < tree.primitives) {
-        raw_emit::place_leaf(tree, i - tree.node_slots, nodes, prim_indices);
+struct AtomicCounter {
+    __device__ static uint32_t add(uint32_t* counter, uint32_t n) { return atomicAdd(counter, n); }
+};
+
+// One level of the top-down emission. The grid is fixed (launched before
+// the level's size is known, with no host round trip between levels), so
+// threads stride over the level's items.
+__global__ void emit_level_kernel(raw_emit::RawTreeView tree, const raw_emit::EmitItem* items, const uint32_t* count,
+                                  raw_emit::EmitItem* next, uint32_t* next_count, BvhNode* nodes,
+                                  uint32_t* prim_indices) {
+    const uint32_t items_in_level = *count;
+    for (uint32_t i = blockIdx.x * kBlockSize + threadIdx.x; i < items_in_level; i += gridDim.x * kBlockSize) {
+        raw_emit::emit_item<AtomicCounter>(tree, items[i], nodes, prim_indices, next, next_count);
     }
 }
 
@@ -101,13 +108,38 @@ bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& opti
     }
     if (!raw_emit::fits_depth_limit(root)) return false;
 
+    // Top down, one launch per level; a level holds at most out_size items.
+    const uint32_t levels = raw_emit::emit_levels(root);
     DeviceBuffer<BvhNode> nodes(label + ": BVH nodes");
-    DeviceBuffer<uint32_t> prims(label + ": BVH primitive indices");
+    DeviceBuffer<uint32_t> prims(label + ": BVH primitive indices"), counts(label + ": emission level sizes");
+    DeviceBuffer<raw_emit::EmitItem> items[2] = {DeviceBuffer<raw_emit::EmitItem>(label + ": emission level A"),
+                                                 DeviceBuffer<raw_emit::EmitItem>(label + ": emission level B")};
     meter.allocate(nodes, root.out_size);
     meter.allocate(prims, n);
+    meter.allocate(counts, size_t{levels} + 1);
+    meter.allocate(items[0], root.out_size);
+    meter.allocate(items[1], root.out_size);
+    int device = 0, processors = 1;
+    RF_CUDA_CHECK(cudaGetDevice(&device));
+    RF_CUDA_CHECK(cudaDeviceGetAttribute(&processors, cudaDevAttrMultiProcessorCount, device));
+    const uint32_t grid = std::min(blocks_for(root.out_size), static_cast<uint32_t>(processors) * 8u);
+    const raw_emit::EmitItem first = raw_emit::root_item(tree.root);
+    const uint32_t one = 1;
     timer.start();
-    place_kernel<<<blocks_for(uint64_t{slots} + n), kBlockSize>>>(view, nodes.data(), prims.data());
+    RF_CUDA_CHECK(cudaMemsetAsync(counts.data(), 0, counts.bytes()));
+    RF_CUDA_CHECK(cudaMemcpyAsync(counts.data(), &one, sizeof one, cudaMemcpyHostToDevice));
+    RF_CUDA_CHECK(cudaMemcpyAsync(items[0].data(), &first, sizeof first, cudaMemcpyHostToDevice));
+    for (uint32_t level = 0; level < levels; ++level) {
+        emit_level_kernel<<<grid, kBlockSize>>>(view, items[level & 1].data(), counts.data() + level,
+                                                items[(level + 1) & 1].data(), counts.data() + level + 1, nodes.data(),
+                                                prims.data());
+    }
     stages.device_emit_ms += timer.stop_ms();
+    uint32_t left_over = 0;  // items queued below the last level: none in a tree of that height
+    RF_CUDA_CHECK(cudaMemcpy(&left_over, counts.data() + levels, sizeof left_over, cudaMemcpyDeviceToHost));
+    if (left_over != 0) throw Error(label + " device emission: the tree is deeper than its root's height");
+    for (auto* buffer : {&items[0], &items[1]}) meter.release(*buffer);
+    meter.release(counts);
     meter.release(info);
     meter.release(node_parent);
     meter.release(leaf_parent);

@@ -14,13 +14,14 @@
 //     cost, emitted size and height and the leaf collapse with combine(),
 //     the function RawTree::finalize runs on the host (each product and sum
 //     rounded once, so both backends get the same bits).
-//  3. place_element(): one thread per node or leaf walks to the root,
-//     summing what lies to its left: the output position of a node (depth
-//     first, siblings adjacent: a left child's children start 2 after its
-//     parent's, a right child's after its left sibling's subtree), and the
-//     first primitive slot of a leaf; it writes its own output node unless
-//     an ancestor is collapsed, and a leaf always writes its primitives.
-//     O(depth) per element, with no pass over levels.
+//  3. emit_item(): top down, one launch per level of the emitted tree (at
+//     most kBvhMaxDepth + 1, known from the root's height), one thread per
+//     item of the level: the item writes its output node (depth first,
+//     siblings adjacent: a left child's children start 2 after its parent's,
+//     a right child's after its left sibling's subtree, as RawTree::emit
+//     places them) and queues its children with one atomicAdd; a leaf or a
+//     collapsed node writes its primitives, left to right. Each emitted node
+//     is visited once, and nothing below a collapsed node is queued.
 //
 // References: an inner node slot, or kLeafRef | the sorted position of a
 // leaf run's first primitive. No std:: here: plain pointers, RF_HDI.
@@ -203,81 +204,93 @@ RF_HDI bool fits_depth_limit(const NodeInfo& root) {
     return info_collapsed(root) || info_height(root) <= static_cast<uint32_t>(kBvhMaxDepth);
 }
 
-// Where an element lands: the output node it writes (when emitted), the
-// first output node of its children, its first primitive slot.
-struct Placement {
+// One node of the top-down emission: the raw tree element (a node slot or a
+// leaf reference), its output node, the first output node of its children
+// and its first primitive slot.
+struct EmitItem {
+    uint32_t ref;
     uint32_t at;
     uint32_t child_base;
     uint32_t slot;
-    bool emitted;  // no ancestor is collapsed
 };
 
-// The walk of step 3 from element `ref` (a node slot or a leaf reference;
-// finalize_from_leaf has run for the whole tree) to the root.
-RF_HDI Placement place(const RawTreeView& t, uint32_t ref) {
-    Placement p{0, 1, 0, true};
-    uint32_t parent = is_leaf_ref(ref) ? t.leaf_parent[ref & ~kLeafRef] : t.node_parent[ref];
-    if (parent == kNoParent) return p;  // the root
-    uint32_t from = ref;
-    uint32_t first_step = 0, side = 0;
-    bool first = true;
-    while (parent != kNoParent) {
-        const uint32_t* pair = child_pair(t, parent);
-        const uint32_t left = pair[0];
-        uint32_t step = 2;  // a left child's children follow its sibling pair
-        const bool right = left != from;
-        if (right) {
-            // A right child's children follow its left sibling's subtree.
-            const bool leaf = is_leaf_ref(left);
-            const uint32_t left_count = leaf ? run_size(t, left & ~kLeafRef) : t.info[left].count;
-            const uint32_t left_size = leaf ? 1u : t.info[left].out_size;
-            step = 1 + left_size;
-            p.slot += left_count;
-        }
-        if (first) {
-            first_step = step;
-            side = right ? 1u : 0u;
-            first = false;
-        }
-        if (info_collapsed(t.info[parent])) p.emitted = false;
-        p.child_base += step;
-        from = parent;
-        parent = t.node_parent[parent];
-    }
-    p.at = p.child_base - first_step + side;  // its parent's child_base, plus its side
-    return p;
+// The root's item: output node 0, its children from 1, primitives from 0.
+RF_HDI EmitItem root_item(uint32_t root) { return EmitItem{root, 0u, 1u, 0u}; }
+
+// Writes the primitives of leaf run `first` from prim_indices[*slot] on.
+RF_HDI void write_leaf_prims(const RawTreeView& t, uint32_t first, uint32_t* prim_indices, uint32_t* slot) {
+    const uint32_t n = run_size(t, first);
+    for (uint32_t i = 0; i < n; ++i) prim_indices[(*slot)++] = t.order[first + i];
 }
 
-// Step 3 for node slot `node` (a slot no leaf reached is skipped).
-RF_HDI void place_node(const RawTreeView& t, uint32_t node, BvhNode* nodes) {
-    if (t.node_parent[node] == kNoParent && t.root != node) return;  // unused slot
-    const Placement p = place(t, node);
-    if (!p.emitted) return;
-    const NodeInfo& info = t.info[node];
-    BvhNode& out = nodes[p.at];
+// The primitives below `node`, left to right, from prim_indices[slot] on: a
+// walk without a stack (parent links lead back up), so a thread needs no
+// local memory for it however the collapsed subtree is shaped.
+RF_HDI void write_subtree_prims(const RawTreeView& t, uint32_t node, uint32_t* prim_indices, uint32_t slot) {
+    constexpr uint32_t kFromAbove = 0xfffffffeu;  // neither a node nor a leaf reference
+    uint32_t current = node, from = kFromAbove;
+    for (;;) {
+        const uint32_t* pair = child_pair(t, current);
+        if (from == kFromAbove || from == pair[0]) {
+            const uint32_t child = pair[from == kFromAbove ? 0 : 1];
+            if (is_leaf_ref(child)) {
+                write_leaf_prims(t, child & ~kLeafRef, prim_indices, &slot);
+                from = child;  // as if back from it
+            } else {
+                current = child;
+                from = kFromAbove;
+            }
+            continue;
+        }
+        if (current == node) return;  // back from the right child of the subtree's root
+        from = current;
+        current = t.node_parent[current];
+    }
+}
+
+// Step 3 for one item of a level (the root's level first): writes its output
+// node (and, for a leaf or a collapsed node, its primitives) and, for an
+// inner node, appends its two children to the next level: the left child's
+// children follow its sibling pair, the right child's follow the left
+// child's subtree. `Counter::add(uint32_t* counter, uint32_t n)` returns the
+// count before adding (an atomicAdd on the device); the order of a level's
+// items does not matter, as every item carries its own positions.
+template <class Counter>
+RF_HDI void emit_item(const RawTreeView& t, const EmitItem& item, BvhNode* nodes, uint32_t* prim_indices,
+                      EmitItem* next, uint32_t* next_count) {
+    BvhNode& out = nodes[item.at];
+    if (is_leaf_ref(item.ref)) {
+        const uint32_t first = item.ref & ~kLeafRef;
+        const NodeInfo info = leaf_info(t, first);
+        out.bounds = info.box;
+        out.first = item.slot;
+        out.count = info.count;
+        uint32_t slot = item.slot;
+        write_leaf_prims(t, first, prim_indices, &slot);
+        return;
+    }
+    const NodeInfo& info = t.info[item.ref];
     out.bounds = info.box;
     if (info_collapsed(info)) {
-        out.first = p.slot;
+        out.first = item.slot;
         out.count = info.count;
-    } else {
-        out.first = p.child_base;
-        out.count = 0;
+        write_subtree_prims(t, item.ref, prim_indices, item.slot);
+        return;
     }
+    out.first = item.child_base;
+    out.count = 0;
+    const uint32_t* pair = child_pair(t, item.ref);
+    const uint32_t left = pair[0], right = pair[1];
+    const bool left_leaf = is_leaf_ref(left);
+    const uint32_t left_count = left_leaf ? run_size(t, left & ~kLeafRef) : t.info[left].count;
+    const uint32_t left_size = left_leaf ? 1u : t.info[left].out_size;
+    const uint32_t at = Counter::add(next_count, 2u);
+    next[at] = EmitItem{left, item.child_base, item.child_base + 2, item.slot};
+    next[at + 1] = EmitItem{right, item.child_base + 1, item.child_base + 1 + left_size, item.slot + left_count};
 }
 
-// Step 3 for sorted position `position` (non-leaf positions return at once).
-RF_HDI void place_leaf(const RawTreeView& t, uint32_t position, BvhNode* nodes, uint32_t* prim_indices) {
-    const uint32_t ref = kLeafRef | position;
-    if (t.leaf_parent[position] == kNoParent && t.root != ref) return;
-    const Placement p = place(t, ref);
-    const uint32_t n = run_size(t, position);
-    for (uint32_t i = 0; i < n; ++i) prim_indices[p.slot + i] = t.order[position + i];
-    if (!p.emitted) return;
-    const NodeInfo info = leaf_info(t, position);
-    BvhNode& out = nodes[p.at];
-    out.bounds = info.box;
-    out.first = p.slot;
-    out.count = n;
-}
+// Levels of items step 3 runs (the root's level 0 included), from the root's
+// values; fits_depth_limit(root) holds.
+RF_HDI uint32_t emit_levels(const NodeInfo& root) { return info_collapsed(root) ? 1u : info_height(root) + 1u; }
 
 }  // namespace rf::raw_emit
