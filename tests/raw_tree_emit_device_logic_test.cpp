@@ -146,6 +146,7 @@ Emulated emulate(std::span<const Triangle> triangles, const BuildOptions& option
             raw_emit::emit_item<SequentialCounter>(view, items[i], out.bvh.nodes.data(), out.bvh.prim_indices.data(),
                                                    next.data(), &next_count);
         }
+        EXPECT_LE(next_count, (info[in.root].out_size + 1) / 2) << "a level wider than the device's buffers";
         next.resize(next_count);
         items = std::move(next);
     }

@@ -95,6 +95,10 @@ bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& opti
     finalize_kernel<<<blocks_for(n), kBlockSize>>>(view);
     stages.device_emit_ms += timer.stop_ms();
     meter.release(arrivals);
+    if (own_parents) {  // the top-down pass walks only node parents
+        meter.release(leaf_parent);
+        view.leaf_parent = nullptr;
+    }
 
     // The root's values decide the rest (n >= 2, so the root is a node).
     if (raw_emit::is_leaf_ref(tree.root) || tree.root >= slots) {
@@ -108,7 +112,8 @@ bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& opti
     }
     if (!raw_emit::fits_depth_limit(root)) return false;
 
-    // Top down, one launch per level; a level holds at most out_size items.
+    // Top down, one launch per level; a level holds at most as many items as
+    // the emitted tree has leaves, (out_size + 1) / 2.
     const uint32_t levels = raw_emit::emit_levels(root);
     DeviceBuffer<BvhNode> nodes(label + ": BVH nodes");
     DeviceBuffer<uint32_t> prims(label + ": BVH primitive indices"), counts(label + ": emission level sizes");
@@ -117,12 +122,13 @@ bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& opti
     meter.allocate(nodes, root.out_size);
     meter.allocate(prims, n);
     meter.allocate(counts, size_t{levels} + 1);
-    meter.allocate(items[0], root.out_size);
-    meter.allocate(items[1], root.out_size);
+    const uint32_t widest = (root.out_size + 1) / 2;
+    meter.allocate(items[0], widest);
+    meter.allocate(items[1], widest);
     int device = 0, processors = 1;
     RF_CUDA_CHECK(cudaGetDevice(&device));
     RF_CUDA_CHECK(cudaDeviceGetAttribute(&processors, cudaDevAttrMultiProcessorCount, device));
-    const uint32_t grid = std::min(blocks_for(root.out_size), static_cast<uint32_t>(processors) * 8u);
+    const uint32_t grid = std::min(blocks_for(widest), static_cast<uint32_t>(processors) * 8u);
     const raw_emit::EmitItem first = raw_emit::root_item(tree.root);
     const uint32_t one = 1;
     timer.start();
@@ -142,7 +148,6 @@ bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& opti
     meter.release(counts);
     meter.release(info);
     meter.release(node_parent);
-    meter.release(leaf_parent);
     stages.peak_device_bytes = std::max(stages.peak_device_bytes, meter.peak());
 
     timer.start();
