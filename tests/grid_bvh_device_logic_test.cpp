@@ -3,8 +3,11 @@
 // src/accel/bvh/build/grid_bvh_steps.h run in the device's schedule
 // (shuffled thread orders, per-warp atomics, 8 threads per task) must give
 // the CPU builder's references, sorted keys, sparse grid, hierarchy, leaf
-// groups and, through the host emission, the same Bvh. Also: the CPU builder's output is
-// pinned by hashes taken before its steps were factored out.
+// groups and, through the host emission, the same Bvh. The leaf finishing
+// and canonical emission of grid_bvh_finish_steps.h (one thread per leaf,
+// per-level kernels) equal a recursive reference of the CPU's finishing and,
+// in shuffled thread orders, give build_grid_bvh's Bvh. Also: the CPU
+// builder's output is pinned by hashes taken before its steps were factored out.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -21,6 +24,7 @@
 
 #include "accel/bvh/build/grid_bvh.h"
 #include "accel/bvh/build/grid_bvh_emit.h"
+#include "accel/bvh/build/grid_bvh_finish_steps.h"
 #include "accel/bvh/build/grid_bvh_partial_triangles.h"
 #include "accel/bvh/build/grid_bvh_sparse_grid.h"
 #include "accel/bvh/build/grid_bvh_steps.h"
@@ -546,6 +550,434 @@ TEST(GridBvhDeviceLogic, MalformedHierarchyIsRejected) {
     const uint64_t expected = bvh_hash(build_grid_bvh(soup.triangles, BuildOptions{}, false));
     EXPECT_EQ(expected, bvh_hash(emit_grid_bvh_hierarchy(soup.triangles, BuildOptions{}, false, std::move(h))));
     EXPECT_EQ(expected, bvh_hash(emit_grid_bvh_hierarchy(soup.triangles, BuildOptions{}, false, std::move(grouped))));
+}
+
+// ---- leaf finishing and emission on the device (grid_bvh_finish_steps.h) ----
+
+using gridbvh::FinishOptions;
+using gridbvh::kDeviceFinishRefs;
+using gridbvh::LeafSummary;
+
+// The CPU builder's leaf finishing as it was written before the shared
+// steps, recursive and with the standard algorithms (stable_partition,
+// clamp, Box3f::surface_area, a full std::sort for the median): the
+// reference the shared iterative steps must reproduce.
+struct RecursiveFinish {
+    FinishOptions o;
+    std::vector<BvhNode> nodes;
+    std::vector<uint32_t> prims;
+
+    static uint32_t split_binned(GridRef* refs, uint32_t count, const Box3f& centroids, float& cost) {
+        const Vec3f extent = centroids.extent();
+        int best_axis = -1, best_bin = 0;
+        float best_cost = 0.0f;
+        for (int a = 0; a < 3; ++a) {
+            if (!(extent[a] > 0.0f)) continue;
+            const float scale = 8.0f * (1.0f - 0x1p-20f) / extent[a];
+            Box3f box[8];
+            uint32_t n_in[8] = {};
+            for (uint32_t i = 0; i < count; ++i) {
+                const int b = std::clamp(int((refs[i].centroid()[a] - centroids.lo[a]) * scale), 0, 7);
+                box[b] = {gridbvh::vmin(box[b].lo, refs[i].lo), gridbvh::vmax(box[b].hi, refs[i].hi)};
+                ++n_in[b];
+            }
+            float right_area[8];
+            uint32_t right_count[8];
+            Box3f acc;
+            uint32_t n = 0;
+            for (int i = 7; i > 0; --i) {
+                acc = {gridbvh::vmin(acc.lo, box[i].lo), gridbvh::vmax(acc.hi, box[i].hi)};
+                n += n_in[i];
+                right_area[i] = acc.surface_area();
+                right_count[i] = n;
+            }
+            acc = Box3f{};
+            n = 0;
+            for (int i = 1; i < 8; ++i) {
+                acc = {gridbvh::vmin(acc.lo, box[i - 1].lo), gridbvh::vmax(acc.hi, box[i - 1].hi)};
+                n += n_in[i - 1];
+                if (n == 0 || right_count[i] == 0) continue;
+                const float c = acc.surface_area() * float(n) + right_area[i] * float(right_count[i]);
+                if (best_axis < 0 || c < best_cost) {
+                    best_axis = a;
+                    best_bin = i;
+                    best_cost = c;
+                }
+            }
+        }
+        if (best_axis < 0) return 0;
+        cost = best_cost;
+        const float scale = 8.0f * (1.0f - 0x1p-20f) / extent[best_axis];
+        return uint32_t(std::stable_partition(refs, refs + count, [&](const GridRef& r) {
+                            return std::clamp(int((r.centroid()[best_axis] - centroids.lo[best_axis]) * scale), 0, 7) <
+                                   best_bin;
+                        }) -
+                        refs);
+    }
+    static void bounds(const GridRef* refs, uint32_t count, Box3f& b, Box3f& c) {
+        b = c = Box3f{};
+        for (uint32_t i = 0; i < count; ++i) {
+            b = {gridbvh::vmin(b.lo, refs[i].lo), gridbvh::vmax(b.hi, refs[i].hi)};
+            c = {gridbvh::vmin(c.lo, refs[i].centroid()), gridbvh::vmax(c.hi, refs[i].centroid())};
+        }
+    }
+    bool cheaper_as_leaf(float area, float cost, uint32_t count) const {
+        return o.traversal_cost * area + o.intersection_cost * cost >= o.intersection_cost * area * float(count);
+    }
+    void build(GridRef* refs, uint32_t count, int depth, uint32_t node) {
+        Box3f b, c;
+        bounds(refs, count, b, c);
+        nodes[node].bounds = b;
+        float cost = 0.0f;
+        uint32_t mid = count > 1 ? split_binned(refs, count, c, cost) : 0;
+        const bool no_split = mid == 0 || mid == count;
+        if (count <= o.max_leaf_size && (no_split || cheaper_as_leaf(b.surface_area(), cost, count))) {
+            nodes[node].first = uint32_t(prims.size());
+            nodes[node].count = count;
+            for (uint32_t i = 0; i < count; ++i) prims.push_back(refs[i].prim);
+            return;
+        }
+        if (no_split || depth + 1 + gridbvh::median_levels(std::max(mid, count - mid), o.max_leaf_size) > kBvhMaxDepth) {
+            mid = count / 2;
+            if (c.extent().x > 0.0f || c.extent().y > 0.0f || c.extent().z > 0.0f) {
+                const int axis = c.largest_axis();
+                std::sort(refs, refs + count, [axis](const GridRef& x, const GridRef& y) {
+                    const float cx = x.lo[axis] + x.hi[axis], cy = y.lo[axis] + y.hi[axis];
+                    return cx < cy || (cx == cy && x.prim < y.prim);
+                });
+            }
+        }
+        const uint32_t pair = uint32_t(nodes.size());
+        nodes.resize(pair + 2);
+        nodes[node].first = pair;
+        nodes[node].count = 0;
+        build(refs, mid, depth + 1, pair);
+        build(refs + mid, count - mid, depth + 1, pair + 1);
+    }
+    // The leaf over references `ids` of `all`.
+    LeafSummary finish(std::vector<uint32_t> ids, const std::vector<GridRef>& all, int depth) {
+        std::sort(ids.begin(), ids.end());
+        std::vector<GridRef> refs;
+        for (uint32_t id : ids) refs.push_back(all[id]);
+        std::stable_sort(refs.begin(), refs.end(), [](const GridRef& a, const GridRef& b) { return a.prim < b.prim; });
+        size_t out = 0;
+        for (size_t i = 0; i < refs.size(); ++i) {
+            if (out > 0 && refs[out - 1].prim == refs[i].prim) {
+                refs[out - 1].lo = gridbvh::vmin(refs[out - 1].lo, refs[i].lo);
+                refs[out - 1].hi = gridbvh::vmax(refs[out - 1].hi, refs[i].hi);
+            } else {
+                refs[out++] = refs[i];
+            }
+        }
+        refs.resize(out);
+        const uint32_t count = uint32_t(out);
+        nodes.clear();
+        prims.clear();
+        bool keep = count <= o.max_leaf_size;
+        if (keep && count > 1) {
+            Box3f b, c;
+            bounds(refs.data(), count, b, c);
+            float cost = 0.0f;
+            const uint32_t mid = split_binned(refs.data(), count, c, cost);
+            keep = mid == 0 || mid == count || cheaper_as_leaf(b.surface_area(), cost, count);
+        }
+        if (keep) {
+            Box3f b, c;
+            bounds(refs.data(), count, b, c);
+            for (const GridRef& r : refs) prims.push_back(r.prim);
+            return LeafSummary{b, 1, count};
+        }
+        nodes.resize(1);
+        build(refs.data(), count, depth, 0);
+        return LeafSummary{nodes[0].bounds, uint32_t(nodes.size()), count};
+    }
+};
+
+bool same_bytes(const void* a, const void* b, size_t bytes) { return bytes == 0 || std::memcmp(a, b, bytes) == 0; }
+
+// `count` references over a small pool of triangles (parts of one triangle
+// recur), with boxes from one of several families: random, all equal
+// (coincident centroids), a few distinct positions, or slivers on one axis.
+std::vector<GridRef> random_leaf_refs(uint32_t count, std::mt19937& rng) {
+    std::uniform_real_distribution<float> u(-5.0f, 5.0f), s(0.0f, 0.5f);
+    const int family = int(rng() % 4);
+    const uint32_t pool = 1 + rng() % (2 * count);
+    std::vector<GridRef> refs(count);
+    const Vec3f fixed(u(rng), u(rng), u(rng));
+    for (GridRef& r : refs) {
+        Vec3f lo(u(rng), u(rng), u(rng));
+        if (family == 1) lo = fixed;
+        if (family == 2) lo = Vec3f(float(rng() % 3), 0.0f, float(rng() % 2));
+        if (family == 3) lo = Vec3f(u(rng), 1.0f, 1.0f);
+        const Vec3f size = family == 1 ? Vec3f(0.25f) : Vec3f(s(rng), s(rng), s(rng));
+        r = GridRef{lo, uint32_t(rng() % pool), lo + size, 0};
+    }
+    return refs;
+}
+
+FinishOptions random_finish_options(std::mt19937& rng) {
+    const float costs[][2] = {{1.0f, 1.0f}, {1.0f, 2.0f}, {3.0f, 1.0f}, {0.5f, 1.5f}};
+    const auto& c = costs[rng() % 4];
+    return FinishOptions{1 + uint32_t(rng() % 8), c[0], c[1]};
+}
+
+TEST(GridBvhDeviceLogic, SharedLeafFinishingEqualsTheRecursiveCpuFinishing) {
+    std::mt19937 rng(21);
+    size_t trees = 0, medians_near_limit = 0;
+    for (int trial = 0; trial < 3000; ++trial) {
+        const uint32_t count = 1 + uint32_t(rng() % kDeviceFinishRefs);
+        const std::vector<GridRef> all = random_leaf_refs(count, rng);
+        std::vector<uint32_t> ids(count);
+        std::iota(ids.begin(), ids.end(), 0u);
+        std::shuffle(ids.begin(), ids.end(), rng);  // the device's group order is free
+        const FinishOptions options = random_finish_options(rng);
+        const int depth = trial % 3 == 0 ? kBvhMaxDepth - int(rng() % 4) : int(rng() % kBvhMaxDepth);
+        RecursiveFinish cpu{options, {}, {}};
+        const LeafSummary expected = cpu.finish(ids, all, depth);
+        std::vector<BvhNode> nodes(2 * count, BvhNode{Box3f{}, 0xdeadbeefu, 0xdeadbeefu});
+        std::vector<uint32_t> prims(count, 0xdeadbeefu);
+        const LeafSummary got =
+            gridbvh::finish_small_leaf(all.data(), ids.data(), count, depth, options, nodes.data(), prims.data());
+        ASSERT_TRUE(same_bytes(&expected, &got, sizeof got)) << "trial " << trial;
+        ASSERT_TRUE(same_bytes(cpu.prims.data(), prims.data(), cpu.prims.size() * sizeof(uint32_t))) << "trial " << trial;
+        if (got.node_count > 1) {
+            ++trees;
+            medians_near_limit += depth + 2 > kBvhMaxDepth;
+            ASSERT_EQ(cpu.nodes.size(), got.node_count);
+            ASSERT_TRUE(same_bytes(cpu.nodes.data(), nodes.data(), cpu.nodes.size() * sizeof(BvhNode))) << "trial " << trial;
+        }
+    }
+    EXPECT_GT(trees, 500u);
+    EXPECT_GT(medians_near_limit, 50u);
+}
+
+// The sort of the median on large ranges, as the CPU builder runs it.
+struct StdSortOnAxis {
+    void operator()(GridRef* refs, uint32_t count, int axis) const {
+        std::sort(refs, refs + count, [axis](const GridRef& a, const GridRef& b) { return gridbvh::median_before(a, b, axis); });
+    }
+};
+
+// The shared iterative build in growable buffers (any leaf size).
+LeafSummary finish_any_leaf(const std::vector<GridRef>& all, std::vector<uint32_t> ids, int depth, const FinishOptions& o,
+                            std::vector<BvhNode>& nodes, std::vector<uint32_t>& prims) {
+    const uint32_t count = uint32_t(ids.size());
+    std::sort(ids.begin(), ids.end());
+    std::vector<GridRef> refs(count), scratch(count);
+    std::vector<gridbvh::LocalTask> stack(count + 1);
+    for (uint32_t i = 0; i < count; ++i) refs[i] = all[ids[i]];
+    nodes.assign(2 * size_t{count}, BvhNode{});
+    prims.assign(count, 0u);
+    return gridbvh::finish_gathered_leaf(refs.data(), count, depth, o, scratch.data(), stack.data(), nodes.data(),
+                                         prims.data(), StdSortOnAxis{});
+}
+
+TEST(GridBvhDeviceLogic, SharedIterativeBuildEqualsTheRecursionOnLargeLeaves) {
+    std::mt19937 rng(22);
+    for (const uint32_t count : {65u, 300u, 2000u, 9000u}) {
+        for (int trial = 0; trial < 3; ++trial) {
+            const std::vector<GridRef> all = random_leaf_refs(count, rng);
+            std::vector<uint32_t> ids(count);
+            std::iota(ids.begin(), ids.end(), 0u);
+            std::shuffle(ids.begin(), ids.end(), rng);
+            const FinishOptions options = random_finish_options(rng);
+            const int depth = trial == 0 ? kBvhMaxDepth - 12 : trial * 5;
+            RecursiveFinish cpu{options, {}, {}};
+            const LeafSummary expected = cpu.finish(ids, all, depth);
+            std::vector<BvhNode> nodes;
+            std::vector<uint32_t> prims;
+            const LeafSummary got = finish_any_leaf(all, ids, depth, options, nodes, prims);
+            ASSERT_TRUE(same_bytes(&expected, &got, sizeof got)) << count << " trial " << trial;
+            EXPECT_TRUE(same_bytes(cpu.prims.data(), prims.data(), cpu.prims.size() * sizeof(uint32_t))) << count;
+            if (got.node_count > 1) {
+                EXPECT_TRUE(same_bytes(cpu.nodes.data(), nodes.data(), cpu.nodes.size() * sizeof(BvhNode))) << count;
+            }
+        }
+    }
+}
+
+// Steps 7-8 as grid_bvh_build.cu runs them, every launch in a shuffled
+// thread order: the oversized-leaf check; finish_leaves_kernel (one thread
+// per leaf, slots at 2 leaf_begin / leaf_begin); emit_sizes_kernel per level
+// from the deepest; the root's position, emit_positions_kernel per level
+// from the root; emit_copy_kernel. Returns false (nothing emitted) when a
+// leaf is too large for one thread, unless `large_leaves_too` finishes those
+// with the shared iterative build in growable buffers. `bug` breaks one
+// step on purpose (1: sizes from the root level down; 2: a leaf's local tree
+// with its root's children swapped, as if its stack popped the right child
+// first; 3: positions from the deepest level up).
+struct EmulatedEmission {
+    bool emitted = false;
+    Bvh bvh;
+};
+
+EmulatedEmission device_emission(const GridHierarchy& h, const BuildOptions& options, std::mt19937& rng,
+                                 bool large_leaves_too = false, int bug = 0) {
+    EmulatedEmission result;
+    const uint32_t n = uint32_t(h.refs.size()), leaf_count = uint32_t(h.leaves.size());
+    const uint32_t nodes = h.level_offset.back();
+    bool oversized = false;
+    for (uint32_t l : shuffled(leaf_count, rng)) oversized |= h.leaf_begin[l + 1] - h.leaf_begin[l] > kDeviceFinishRefs;
+    if (oversized && !large_leaves_too) return result;
+    const FinishOptions finish{uint32_t(std::max(1, options.max_leaf_size)), options.traversal_cost,
+                               options.intersection_cost};
+    std::vector<LeafSummary> summaries(leaf_count);
+    std::vector<BvhNode> leaf_nodes(2 * size_t{n}, BvhNode{Box3f{}, 0xdeadbeefu, 0xdeadbeefu});
+    std::vector<uint32_t> leaf_prims(n, 0xdeadbeefu);
+    for (uint32_t l : shuffled(leaf_count, rng)) {
+        const uint32_t begin = h.leaf_begin[l], count = h.leaf_begin[l + 1] - begin;
+        if (count > kDeviceFinishRefs) {
+            std::vector<BvhNode> local_nodes;
+            std::vector<uint32_t> local_prims;
+            const std::vector<uint32_t> ids(h.leaf_refs.begin() + begin, h.leaf_refs.begin() + begin + count);
+            summaries[l] = finish_any_leaf(h.refs, ids, h.leaves[l].depth, finish, local_nodes, local_prims);
+            std::copy_n(local_nodes.begin(), summaries[l].node_count, leaf_nodes.begin() + 2 * size_t{begin});
+            std::copy_n(local_prims.begin(), summaries[l].prim_count, leaf_prims.begin() + begin);
+            continue;
+        }
+        summaries[l] = gridbvh::finish_small_leaf(h.refs.data(), h.leaf_refs.data() + begin, count, h.leaves[l].depth, finish,
+                                                  leaf_nodes.data() + 2 * size_t{begin}, leaf_prims.data() + begin);
+        if (bug == 2 && summaries[l].node_count > 1) {
+            // The root's children swapped, as if the stack popped the right one first.
+            BvhNode* local = leaf_nodes.data() + 2 * size_t{begin};
+            std::swap(local[local[0].first], local[local[0].first + 1]);
+        }
+    }
+    std::vector<gridbvh::SubtreeSize> sizes(nodes, gridbvh::SubtreeSize{0xdeadbeefu, 0xdeadbeefu});
+    std::vector<Box3f> boxes(nodes);
+    std::vector<gridbvh::EmitPosition> at(nodes, gridbvh::EmitPosition{0xdeadbeefu, 0xdeadbeefu, 0xdeadbeefu});
+    const size_t levels = h.level_offset.size() - 1;
+    for (size_t k = 0; k < levels; ++k) {
+        const size_t l = bug == 1 ? k : levels - 1 - k;
+        const uint32_t first = h.level_offset[l], end = h.level_offset[l + 1];
+        for (uint32_t i : shuffled(end - first, rng)) {
+            gridbvh::emit_size_and_box(first + i, h.hnodes.data(), summaries.data(), sizes.data(), boxes.data());
+        }
+    }
+    at[0] = gridbvh::root_position();
+    for (size_t k = 0; k < levels; ++k) {
+        const size_t l = bug == 3 ? levels - 1 - k : k;
+        const uint32_t first = h.level_offset[l], end = h.level_offset[l + 1];
+        for (uint32_t i : shuffled(end - first, rng)) gridbvh::emit_positions(first + i, h.hnodes.data(), sizes.data(), at.data());
+    }
+    if (sizes[0].nodes > 4 * size_t{n} || sizes[0].prims > size_t{n}) return result;  // garbage (a bug): nothing to copy
+    result.bvh.nodes.assign(sizes[0].nodes, BvhNode{Box3f{}, 0xdeadbeefu, 0xdeadbeefu});
+    result.bvh.prim_indices.assign(sizes[0].prims, 0xdeadbeefu);
+    for (uint32_t hn : shuffled(nodes, rng)) {
+        const uint32_t first = h.hnodes[hn];
+        if (!(first & gridbvh::kLeafBit)) {
+            if (at[hn].pos < result.bvh.nodes.size()) gridbvh::emit_inner_node(boxes[hn], at[hn], result.bvh.nodes.data());
+            continue;
+        }
+        const uint32_t leaf = first & ~gridbvh::kLeafBit, begin = h.leaf_begin[leaf];
+        const LeafSummary& s = summaries[leaf];
+        if (at[hn].pos >= result.bvh.nodes.size() || size_t{at[hn].desc} + s.node_count > result.bvh.nodes.size() + 1 ||
+            size_t{at[hn].prim_base} + s.prim_count > result.bvh.prim_indices.size()) {
+            continue;  // out of range (a bug)
+        }
+        gridbvh::emit_leaf(s, leaf_nodes.data() + 2 * size_t{begin}, leaf_prims.data() + begin, at[hn],
+                           result.bvh.nodes.data(), result.bvh.prim_indices.data());
+    }
+    result.emitted = true;
+    return result;
+}
+
+// The device schedule up to the leaf groups (steps 1-6).
+GridHierarchy device_groups(std::span<const Triangle> tris, const BuildOptions& options, bool split, std::mt19937& rng) {
+    DeviceRefs dev = device_references(tris, split, options.split_budget, rng);
+    const DeviceGrid g = device_grid(dev, rng);
+    GridHierarchy h = device_hierarchy(std::move(dev), g, uint32_t(std::max(1, options.max_leaf_size)), rng);
+    group_by_leaf(h, rng);
+    return h;
+}
+
+// Thousands of small distinct triangles in one Grid0 cell (two far corners
+// stretch the scene box): one leaf too large for a device thread, and for
+// the CPU's serial recursion (its halves are built in parallel).
+SceneGeometry make_crowded_cell(int count, uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(0.0f, 0.02f);
+    SceneGeometry g;
+    test::append(g, {Vec3f(-1000.0f), Vec3f(-1000.0f), Vec3f(-1000.0f)});
+    test::append(g, {Vec3f(1000.0f), Vec3f(1000.0f), Vec3f(1000.0f)});
+    for (int i = 0; i < count; ++i) {
+        const Vec3f a(u(rng), u(rng), u(rng));
+        test::append(g, {a, a + Vec3f(0.001f, 0.0f, 0.0f), a + Vec3f(0.0f, 0.001f, 0.0f)});
+    }
+    return g;
+}
+
+TEST(GridBvhDeviceLogic, DeviceEmissionGivesTheCpuBvh) {
+    std::mt19937 rng(23);
+    std::vector<GoldenScene> scenes = golden_scenes();
+    SceneGeometry point;  // 200 references in one Grid0 cell: over the device's cap
+    for (int i = 0; i < 200; ++i) test::append(point, {Vec3f(3.0f), Vec3f(3.0f), Vec3f(3.0f)});
+    scenes.push_back({"crowded point", std::move(point)});
+    size_t emitted = 0, fell_back = 0;
+    for (const GoldenScene& scene : scenes) {
+        for (const bool split : {false, true}) {
+            for (const int leaf : {1, 4, 8}) {
+                const BuildOptions options{.max_leaf_size = leaf, .traversal_cost = leaf == 8 ? 2.0f : 1.0f,
+                                           .split_budget = 0.5f};
+                const std::string what = scene.name + (split ? " split" : "") + " leaf " + std::to_string(leaf);
+                const Bvh cpu = build_grid_bvh(scene.geometry.triangles, options, split);
+                const GridHierarchy h = device_groups(scene.geometry.triangles, options, split, rng);
+                const EmulatedEmission dev = device_emission(h, options, rng);
+                if (!dev.emitted) {
+                    ++fell_back;
+                    EXPECT_EQ(scene.name, "crowded point") << what << ": only the crowded cell falls back";
+                    EXPECT_TRUE(same_bvh(cpu, device_emission(h, options, rng, true).bvh)) << what;
+                    continue;
+                }
+                ++emitted;
+                EXPECT_TRUE(same_bvh(cpu, dev.bvh)) << what;
+            }
+        }
+    }
+    EXPECT_EQ(fell_back, 6u);
+    EXPECT_EQ(emitted, 6u * (scenes.size() - 1));  // "one point" (50 references in one cell) fits
+}
+
+TEST(GridBvhDeviceLogic, CrowdedCellFallsBackAndTheSharedBuildStillEqualsCpu) {
+    std::mt19937 rng(24);
+    // 200 identical triangles: one Grid0 cell over the device's cap.
+    SceneGeometry same;
+    for (int i = 0; i < 200; ++i) test::append(same, {Vec3f(1, 0, 0), Vec3f(0, 1, 0), Vec3f(0, 0, 1)});
+    const BuildOptions options{};
+    GridHierarchy h = device_groups(same.triangles, options, false, rng);
+    EXPECT_FALSE(device_emission(h, options, rng).emitted);
+    EXPECT_TRUE(same_bvh(build_grid_bvh(same.triangles, options, false), device_emission(h, options, rng, true).bvh));
+    // The host fallback (what the device build then runs) gives the CPU's BVH.
+    EXPECT_TRUE(same_bvh(build_grid_bvh(same.triangles, options, false),
+                         emit_grid_bvh_hierarchy(same.triangles, options, false, std::move(h))));
+    // A leaf of 6,000 distinct references: built by the CPU in parallel halves.
+    const SceneGeometry crowded = make_crowded_cell(6000, 25);
+    for (const bool split : {false, true}) {
+        GridBvhStages stages;
+        const Bvh cpu = build_grid_bvh(crowded.triangles, options, split, &stages);
+        EXPECT_GT(stages.large_leaves, 0u);
+        const GridHierarchy hc = device_groups(crowded.triangles, options, split, rng);
+        uint32_t largest = 0;
+        for (size_t l = 0; l + 1 < hc.leaf_begin.size(); ++l) largest = std::max(largest, hc.leaf_begin[l + 1] - hc.leaf_begin[l]);
+        EXPECT_GT(largest, 4096u);
+        EXPECT_FALSE(device_emission(hc, options, rng).emitted);
+        EXPECT_TRUE(same_bvh(cpu, device_emission(hc, options, rng, true).bvh)) << split;
+    }
+}
+
+TEST(GridBvhDeviceLogic, BrokenEmissionStepsAreCaught) {
+    std::mt19937 rng(26);
+    const SceneGeometry soup = test::make_triangle_soup(3000, 27, Box3f{Vec3f(-5.0f), Vec3f(5.0f)}, 0.3f);
+    const BuildOptions options{.max_leaf_size = 8, .split_budget = 0.5f};
+    for (const bool split : {false, true}) {
+        const Bvh cpu = build_grid_bvh(soup.triangles, options, split);
+        const GridHierarchy h = device_groups(soup.triangles, options, split, rng);
+        EXPECT_TRUE(same_bvh(cpu, device_emission(h, options, rng).bvh));
+        for (const int bug : {1, 2, 3}) {
+            const EmulatedEmission broken = device_emission(h, options, rng, false, bug);
+            EXPECT_FALSE(broken.emitted && same_bvh(cpu, broken.bvh)) << "bug " << bug << (split ? " split" : "");
+        }
+    }
 }
 
 }  // namespace

@@ -3,8 +3,11 @@
 // compaction, EmitHierarchy by task queues) against rf::build_grid_bvh: the
 // same BVH (nodes bit for bit and primitive order) for both variants on
 // soups, a sphere, long slivers and the degenerate inputs; GridBvhSplit's
-// references the CPU's count and within the budget exactly; the stage
-// report filled. Skips with a message when no CUDA device is present.
+// references the CPU's count and within the budget exactly; the leaf
+// finishing and canonical emission on the device (grid_bvh_finish_steps.h)
+// on every scene whose leaves fit one thread, the host's when a crowded cell
+// does not; the stage report filled. Skips with a message when no CUDA
+// device is present.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -53,9 +56,12 @@ TEST(GpuGridBvhBuild, SameBvhAsCpuForBothVariants) {
         for (const bool split : {false, true}) {
             for (const int leaf_size : {1, 4}) {
                 const BuildOptions options{.max_leaf_size = leaf_size, .split_budget = 0.5f};
+                const std::string what = scene.name + (split ? ", split" : "") + ", leaves of " + std::to_string(leaf_size);
+                cuda::DeviceBuildStages stages;
                 expect_same_bvh(build_grid_bvh(scene.geometry.triangles, options, split),
-                                cuda::build_grid_bvh_on_device(scene.geometry.triangles, options, split),
-                                scene.name + (split ? ", split" : "") + ", leaves of " + std::to_string(leaf_size));
+                                cuda::build_grid_bvh_on_device(scene.geometry.triangles, options, split, &stages), what);
+                // Only "one point" (1000 references in one Grid0 cell) has a leaf over the device's cap.
+                EXPECT_EQ(stages.emitted_on_device, scene.name != "one point") << what;
             }
         }
     }
@@ -104,11 +110,30 @@ TEST(GpuGridBvhBuild, StagesAreReported) {
     EXPECT_GT(s.hierarchy_ms, 0.0);
     EXPECT_GT(s.download_ms, 0.0);
     EXPECT_GT(s.leaf_finish_ms, 0.0);
-    EXPECT_GT(s.emit_ms, 0.0);
+    EXPECT_TRUE(s.emitted_on_device);
+    EXPECT_GT(s.device_emit_ms, 0.0);
+    EXPECT_EQ(s.emit_ms, 0.0);  // no host emission
     EXPECT_GT(s.device_total_ms(), 0.0);
     EXPECT_EQ(s.references, cpu.references);
     EXPECT_EQ(s.occupied_top_cells, cpu.occupied_top_cells);
     EXPECT_GT(s.peak_device_bytes, s.references * 32);
+}
+
+TEST(GpuGridBvhBuild, CrowdedCellFallsBackToTheHostEmission) {
+    RF_REQUIRE_DEVICE();
+    // 200 identical triangles: one Grid0 cell, one leaf over kDeviceFinishRefs.
+    SceneGeometry same;
+    for (int i = 0; i < 200; ++i) test::append(same, {Vec3f(1, 0, 0), Vec3f(0, 1, 0), Vec3f(0, 0, 1)});
+    for (const bool split : {false, true}) {
+        cuda::DeviceBuildStages s;
+        const Bvh got = cuda::build_grid_bvh_on_device(same.triangles, BuildOptions{}, split, &s);
+        expect_same_bvh(build_grid_bvh(same.triangles, BuildOptions{}, split), got,
+                        std::string("200 identical triangles") + (split ? ", split" : ""));
+        EXPECT_FALSE(s.emitted_on_device);
+        EXPECT_EQ(s.device_emit_ms, 0.0);
+        EXPECT_GT(s.emit_ms, 0.0);
+        EXPECT_GT(s.download_ms, 0.0);
+    }
 }
 
 }  // namespace

@@ -22,9 +22,11 @@ struct DeviceBuildStages {
     double inner_nodes_ms = 0.0;  // Karras's inner-node construction
     double boxes_ms = 0.0;        // bottom-up boxes with atomic counters
     double download_ms = 0.0;     // the result back to the host (the canonical BVH, or the raw tree)
-    double device_emit_ms = 0.0;  // LBVH, HLBVH2, PLOC: leaf collapse and canonical layout on the device
+    double device_emit_ms = 0.0;  // LBVH, HLBVH2, PLOC: leaf collapse and canonical layout on the device;
+                                  // GridBvh: subtree sizes, boxes, positions and the canonical layout
     double emit_ms = 0.0;         // host: leaf collapse and canonical emission (when the device did not)
-    bool emitted_on_device = false; // LBVH, HLBVH2, PLOC: false when the tree was too deep and the host emitted it
+    bool emitted_on_device = false; // false when the host emitted: LBVH, HLBVH2, PLOC trees deeper than
+                                    // kBvhMaxDepth; GridBvh leaves of more than 64 references (crowded cells)
     size_t peak_device_bytes = 0; // sum of the live device buffers at the peak
     // HLBVH2 only (zero for LBVH):
     double clusters_ms = 0.0;     // compaction of runs of equal 15-bit prefixes, the level-0 tasks

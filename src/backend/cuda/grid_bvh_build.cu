@@ -33,10 +33,20 @@
 //     reference descends the hierarchy with its Grid0 cell
 //     (leaf_of_reference), one stable cub::DeviceRadixSort of (leaf,
 //     reference), one thread per sorted position writing the leaf ranges.
-//  7. (host) leaf finishing (merging of parts, leaves over max_leaf_size
-//     split by the binned SAH) and the boxes bottom-up with the canonical
-//     emission: the CPU builder's own code (emit_grid_bvh_hierarchy) on the
-//     downloaded references, hierarchy and leaf groups.
+//  7. leaf finishing (grid_bvh_finish_steps.h): one thread per leaf sorts
+//     its reference ids, gathers the references into local arrays, merges
+//     the parts of one triangle, and keeps them as one leaf or splits them
+//     (leaves over max_leaf_size, or where the SAH says so) by the binned
+//     SAH with an explicit stack, into per-leaf slots at its reference range
+//     (2 nodes and 1 triangle per reference, so no scan is needed).
+//  8. canonical emission, one thread per hierarchy node and one launch per
+//     tree level (levelOffset of Algorithm 4.1): subtree sizes and boxes
+//     bottom-up, positions top-down, then one copy kernel writing the
+//     BvhNodes and triangle indices; only the BVH is downloaded.
+// A leaf of more than kDeviceFinishRefs references (a crowded Grid0 cell or
+// the depth limit) does not fit one thread: then 7-8 run on the host, the
+// CPU builder's own code (emit_grid_bvh_hierarchy) on the downloaded
+// references, hierarchy and leaf groups (stages.emitted_on_device = false).
 // Stages are timed with CUDA events; buffers are counted by a MemoryMeter.
 #include <cuda_runtime.h>
 
@@ -53,6 +63,7 @@
 
 #include "accel/bvh/build/grid_bvh.h"
 #include "accel/bvh/build/grid_bvh_emit.h"
+#include "accel/bvh/build/grid_bvh_finish_steps.h"
 #include "accel/bvh/build/grid_bvh_steps.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/event_timer.h"
@@ -65,6 +76,10 @@ namespace rf::cuda {
 namespace {
 
 using gridbvh::CellBox;
+using gridbvh::EmitPosition;
+using gridbvh::FinishOptions;
+using gridbvh::LeafSummary;
+using gridbvh::SubtreeSize;
 using gridbvh::GridFrame;
 using gridbvh::GridRef;
 using gridbvh::NodeRegion;
@@ -359,9 +374,65 @@ __global__ void leaf_begin_kernel(const uint32_t* sorted_leaf, uint32_t n, uint3
     }
 }
 
-// The device pipeline for n >= 1 triangles; fills `hierarchy` for the host emission.
-void build_on_device(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles,
-                     DeviceBuildStages& stages, GridHierarchy& hierarchy) {
+// ---- 7. leaf finishing ----
+
+// One thread per leaf: raises the flag when the leaf has more references
+// than one thread can finish.
+__global__ void oversized_leaf_kernel(const uint32_t* leaf_begin, uint32_t leaf_count, uint32_t* oversized) {
+    const uint32_t l = blockIdx.x * kBlockSize + threadIdx.x;
+    if (l < leaf_count && leaf_begin[l + 1] - leaf_begin[l] > gridbvh::kDeviceFinishRefs) *oversized = 1;
+}
+
+// One thread per leaf: the shared finishing into the leaf's slots, nodes at
+// 2 leaf_begin[l] (room for 2 count - 1) and triangles at leaf_begin[l].
+__global__ void finish_leaves_kernel(const GridRef* refs, const uint32_t* leaf_refs, const uint32_t* leaf_begin,
+                                     const SplitTask* leaves, uint32_t leaf_count, FinishOptions options,
+                                     LeafSummary* summaries, BvhNode* leaf_nodes, uint32_t* leaf_prims) {
+    const uint32_t l = blockIdx.x * kBlockSize + threadIdx.x;
+    if (l >= leaf_count) return;
+    const uint32_t begin = leaf_begin[l];
+    summaries[l] = gridbvh::finish_small_leaf(refs, leaf_refs + begin, leaf_begin[l + 1] - begin, leaves[l].depth,
+                                              options, leaf_nodes + 2 * size_t{begin}, leaf_prims + begin);
+}
+
+// ---- 8. canonical emission ----
+
+// Hierarchy nodes [first, end) of one level: sizes and boxes from the level below.
+__global__ void emit_sizes_kernel(const uint32_t* hnodes, const LeafSummary* summaries, uint32_t first, uint32_t end,
+                                  SubtreeSize* sizes, Box3f* boxes) {
+    const uint32_t h = first + blockIdx.x * kBlockSize + threadIdx.x;
+    if (h < end) gridbvh::emit_size_and_box(h, hnodes, summaries, sizes, boxes);
+}
+
+// Hierarchy nodes [first, end) of one level place their children.
+__global__ void emit_positions_kernel(const uint32_t* hnodes, const SubtreeSize* sizes, uint32_t first, uint32_t end,
+                                      EmitPosition* at) {
+    const uint32_t h = first + blockIdx.x * kBlockSize + threadIdx.x;
+    if (h < end) gridbvh::emit_positions(h, hnodes, sizes, at);
+}
+
+// One thread per hierarchy node: its BvhNode, or its leaf's nodes and triangles.
+__global__ void emit_copy_kernel(const uint32_t* hnodes, uint32_t node_count, const Box3f* boxes, const EmitPosition* at,
+                                 const LeafSummary* summaries, const uint32_t* leaf_begin, const BvhNode* leaf_nodes,
+                                 const uint32_t* leaf_prims, BvhNode* out_nodes, uint32_t* out_prims) {
+    const uint32_t h = blockIdx.x * kBlockSize + threadIdx.x;
+    if (h >= node_count) return;
+    const uint32_t first = hnodes[h];
+    if (!(first & gridbvh::kLeafBit)) {
+        gridbvh::emit_inner_node(boxes[h], at[h], out_nodes);
+        return;
+    }
+    const uint32_t leaf = first & ~gridbvh::kLeafBit;
+    const uint32_t begin = leaf_begin[leaf];
+    gridbvh::emit_leaf(summaries[leaf], leaf_nodes + 2 * size_t{begin}, leaf_prims + begin, at[h], out_nodes,
+                       out_prims);
+}
+
+// The device pipeline for n >= 1 triangles: returns true with the BVH in
+// `bvh` when the device emitted it, false with `hierarchy` filled for the
+// host emission when a leaf was too large for one thread.
+bool build_on_device(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles,
+                     DeviceBuildStages& stages, GridHierarchy& hierarchy, Bvh& bvh) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
     const uint32_t leaf_size = static_cast<uint32_t>(std::max(1, options.max_leaf_size));
     MemoryMeter meter;
@@ -606,22 +677,89 @@ void build_on_device(std::span<const Triangle> triangles, const BuildOptions& op
                                                   leaf_bits));
     leaf_begin_kernel<<<blocks_for(ref_count), kBlockSize>>>(leaf_keys.Current(), ref_count, leaf_count,
                                                              leaf_begin.data());
-    stages.leaf_finish_ms = timer.stop_ms();  // the host's finishing is added later
+    meter.release(leaf_of[0]);
+    meter.release(leaf_of[1]);
+    const int grouped = leaf_values.Current() == leaf_ids[0].data() ? 0 : 1;
+    meter.release(leaf_ids[1 - grouped]);
+    DeviceBuffer<uint32_t> oversized("GridBvh: oversized leaf flag");
+    meter.allocate(oversized, 1);
+    RF_CUDA_CHECK(cudaMemsetAsync(oversized.data(), 0, oversized.bytes()));
+    oversized_leaf_kernel<<<blocks_for(leaf_count), kBlockSize>>>(leaf_begin.data(), leaf_count, oversized.data());
+    const bool fits = download_value(oversized.data()) == 0;
+    meter.release(oversized);
+    const uint32_t nodes = level_offset.back();
+
+    if (!fits) {
+        // A leaf too large for one thread: the host finishes and emits.
+        stages.leaf_finish_ms = timer.stop_ms();  // the host's finishing is added later
+        stages.peak_device_bytes = meter.peak();
+        timer.start();
+        hierarchy.frame = frame;
+        hierarchy.refs = download_all(refs, ref_count);
+        hierarchy.hnodes = download_all(hnodes, nodes);
+        hierarchy.regions = download_all(regions, nodes);
+        hierarchy.leaves = download_all(leaves, leaf_count);
+        hierarchy.level_offset = std::move(level_offset);
+        hierarchy.leaf_refs = download_all(leaf_ids[grouped], ref_count);
+        hierarchy.leaf_begin = download_all(leaf_begin, size_t{leaf_count} + 1);
+        stages.download_ms = timer.stop_ms();
+        return false;
+    }
+
+    // 7. Leaf finishing: per-leaf slots at the leaf's reference range.
+    meter.release(regions);
+    DeviceBuffer<LeafSummary> summaries("GridBvh: finished leaves");
+    DeviceBuffer<BvhNode> leaf_nodes("GridBvh: leaf subtrees");
+    DeviceBuffer<uint32_t> leaf_prims("GridBvh: leaf triangles");
+    meter.allocate(summaries, leaf_count);
+    meter.allocate(leaf_nodes, 2 * size_t{ref_count});
+    meter.allocate(leaf_prims, ref_count);
+    const FinishOptions finish{leaf_size, options.traversal_cost, options.intersection_cost};
+    finish_leaves_kernel<<<blocks_for(leaf_count), kBlockSize>>>(refs.data(), leaf_ids[grouped].data(),
+                                                                 leaf_begin.data(), leaves.data(), leaf_count, finish,
+                                                                 summaries.data(), leaf_nodes.data(), leaf_prims.data());
+    stages.leaf_finish_ms = timer.stop_ms();
+    meter.release(refs);
+    meter.release(leaf_ids[grouped]);
+    meter.release(leaves);
+
+    // 8. Emission: sizes and boxes bottom-up, positions top-down, the copy.
+    DeviceBuffer<SubtreeSize> sizes("GridBvh: subtree sizes");
+    DeviceBuffer<Box3f> node_boxes("GridBvh: hierarchy boxes");
+    DeviceBuffer<EmitPosition> at("GridBvh: emission positions");
+    meter.allocate(sizes, nodes);
+    meter.allocate(node_boxes, nodes);
+    meter.allocate(at, nodes);
+    const size_t levels = level_offset.size() - 1;
+    timer.start();
+    for (size_t l = levels; l-- > 0;) {
+        const uint32_t first = level_offset[l], end = level_offset[l + 1];
+        emit_sizes_kernel<<<blocks_for(end - first), kBlockSize>>>(hnodes.data(), summaries.data(), first, end,
+                                                                   sizes.data(), node_boxes.data());
+    }
+    const SubtreeSize total = download_value(sizes.data());
+    const EmitPosition root_at = gridbvh::root_position();
+    RF_CUDA_CHECK(cudaMemcpy(at.data(), &root_at, sizeof root_at, cudaMemcpyHostToDevice));
+    for (size_t l = 0; l < levels; ++l) {
+        const uint32_t first = level_offset[l], end = level_offset[l + 1];
+        emit_positions_kernel<<<blocks_for(end - first), kBlockSize>>>(hnodes.data(), sizes.data(), first, end,
+                                                                       at.data());
+    }
+    DeviceBuffer<BvhNode> out_nodes("GridBvh: BVH nodes");
+    DeviceBuffer<uint32_t> out_prims("GridBvh: BVH primitive indices");
+    meter.allocate(out_nodes, total.nodes);
+    meter.allocate(out_prims, total.prims);
+    emit_copy_kernel<<<blocks_for(nodes), kBlockSize>>>(hnodes.data(), nodes, node_boxes.data(), at.data(), summaries.data(),
+                                                        leaf_begin.data(), leaf_nodes.data(), leaf_prims.data(),
+                                                        out_nodes.data(), out_prims.data());
+    stages.device_emit_ms = timer.stop_ms();
     stages.peak_device_bytes = meter.peak();
 
-    // 7. What the host's leaf finishing and emission need.
-    const uint32_t nodes = level_offset.back();
-    const int grouped = leaf_values.Current() == leaf_ids[0].data() ? 0 : 1;
     timer.start();
-    hierarchy.frame = frame;
-    hierarchy.refs = download_all(refs, ref_count);
-    hierarchy.hnodes = download_all(hnodes, nodes);
-    hierarchy.regions = download_all(regions, nodes);
-    hierarchy.leaves = download_all(leaves, leaf_count);
-    hierarchy.level_offset = std::move(level_offset);
-    hierarchy.leaf_refs = download_all(leaf_ids[grouped], ref_count);
-    hierarchy.leaf_begin = download_all(leaf_begin, size_t{leaf_count} + 1);
+    bvh.nodes = download_all(out_nodes, total.nodes);
+    bvh.prim_indices = download_all(out_prims, total.prims);
     stages.download_ms = timer.stop_ms();
+    return true;
 }
 
 }  // namespace
@@ -637,9 +775,11 @@ Bvh build_grid_bvh_on_device(std::span<const Triangle> triangles, const BuildOpt
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
     GridHierarchy hierarchy;
-    build_on_device(triangles, options, partial_triangles, s, hierarchy);
+    Bvh bvh;
+    s.emitted_on_device = build_on_device(triangles, options, partial_triangles, s, hierarchy, bvh);
+    if (s.emitted_on_device) return bvh;
     GridBvhStages host;
-    Bvh bvh = emit_grid_bvh_hierarchy(triangles, options, partial_triangles, std::move(hierarchy), &host);
+    bvh = emit_grid_bvh_hierarchy(triangles, options, partial_triangles, std::move(hierarchy), &host);
     s.leaf_finish_ms += host.leaf_finish_ms;  // device gathering + (host) merging and splitting of leaves
     s.emit_ms = host.emission_ms;            // (host): boxes bottom-up and the canonical layout
     return bvh;

@@ -33,9 +33,14 @@
 //    depth-first layout of rf::Bvh.
 //
 // The per-task step of 3 (process_task), the cell keys and the sparse-grid
-// reads are grid_bvh_steps.h's, shared with the CUDA builder
-// (backend/cuda/grid_bvh_build.cu), which hands its hierarchy to steps 4-5
-// here through emit_grid_bvh_hierarchy (grid_bvh_emit.h).
+// reads are grid_bvh_steps.h's; the per-leaf finishing of 4 (for leaves of
+// up to kDeviceFinishRefs references, the ones one device thread can take)
+// and the per-node steps of 5 are grid_bvh_finish_steps.h's: both shared
+// with the CUDA builder (backend/cuda/grid_bvh_build.cu), which hands its
+// hierarchy to steps 4-5 here through emit_grid_bvh_hierarchy
+// (grid_bvh_emit.h) only when a leaf is too large for one thread. Larger
+// leaves are built here recursively (their halves in parallel) over the same
+// per-node step, with the same result as the shared iterative build.
 //
 // Depth: a grid split at depth d is taken only if d + 1 + the halving levels
 // of its larger side stay within kBvhMaxDepth; otherwise the task becomes a
@@ -53,6 +58,7 @@
 #include <utility>
 #include <vector>
 
+#include "accel/bvh/build/grid_bvh_finish_steps.h"
 #include "accel/bvh/build/grid_bvh_partial_triangles.h"
 #include "accel/bvh/build/grid_bvh_sparse_grid.h"
 #include "core/parallel.h"
@@ -63,15 +69,19 @@ namespace rf {
 namespace {
 
 using gridbvh::CellBox;
+using gridbvh::EmitPosition;
+using gridbvh::FinishOptions;
 using gridbvh::GridFrame;
 using gridbvh::GridRef;
+using gridbvh::kDeviceFinishRefs;
 using gridbvh::kLeafBit;
-using gridbvh::median_levels;
+using gridbvh::LeafSummary;
+using gridbvh::LocalSplit;
 using gridbvh::NodeRegion;
 using gridbvh::SparseGrid;
 using gridbvh::SplitTask;
+using gridbvh::SubtreeSize;
 using gridbvh::TaskOutcome;
-constexpr int kFinishBins = 8;
 constexpr uint32_t kParallelFinishSize = 4096;  // references per large-leaf subtree to build as two tasks
 
 double ms_since(std::chrono::steady_clock::time_point start) {
@@ -87,16 +97,25 @@ inline Vec3f vmax(const Vec3f& a, const Vec3f& b) {
     return {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)};
 }
 
-// A finished leaf of the grid hierarchy. Usually one BvhNode whose triangle
-// indices sit in leaf_prims_ at its reference range; a large leaf gets a small
-// tree in canonical relative layout (node 0 its root; inner `first` is a local
-// node index, leaf `first` a local slot) and its own triangle indices.
+// The subtree of a finished leaf that is more than one node, in canonical
+// relative layout (node 0 its root; inner `first` is a local node index,
+// leaf `first` a local slot). Its triangles end up in leaf_prims_ at the
+// leaf's reference range, like those of a single-node leaf; `prims` only
+// collects them while a large leaf is built recursively.
 struct LocalTree {
-    Box3f box;
-    uint32_t prim_count = 0;
-    uint32_t node_count = 1;
-    std::vector<BvhNode> nodes;   // empty for a single leaf
-    std::vector<uint32_t> prims;  // empty for a single leaf
+    std::vector<BvhNode> nodes;
+    std::vector<uint32_t> prims;
+};
+
+// The median split's sort: the shared insertion sort for short ranges,
+// std::sort for long ones; median_before is a total order, so both give the
+// same sequence.
+struct SortOnAxis {
+    void operator()(GridRef* refs, uint32_t count, int axis) const {
+        if (count <= kDeviceFinishRefs) return gridbvh::InsertionSortOnAxis{}(refs, count, axis);
+        std::sort(refs, refs + count,
+                  [axis](const GridRef& a, const GridRef& b) { return gridbvh::median_before(a, b, axis); });
+    }
 };
 
 class GridBvhBuilder {
@@ -277,41 +296,60 @@ private:
         if (leaf_begin_.empty()) group_by_leaf();  // else grouped already (by the device)
         trees_.clear();
         trees_.resize(leaf_count);
+        summaries_.assign(leaf_count, LeafSummary{});
         budgeted_resize(leaf_prims_, n, "GridBvh: leaf triangles");
+        const FinishOptions options = finish_options();
         std::atomic<size_t> large{0};
         parallel::for_range(0u, leaf_count, 64u, [&](uint32_t lo, uint32_t hi) {
-            std::vector<GridRef> refs;
+            std::vector<GridRef> refs, scratch;
+            BvhNode small_tree[2 * kDeviceFinishRefs];
             for (uint32_t l = lo; l < hi; ++l) {
-                // Reference order within a leaf is fixed by sorting, whatever
-                // the order the scatter above ran in.
-                uint32_t* begin = leaf_refs_.data() + leaf_begin_[l];
-                uint32_t* end = leaf_refs_.data() + leaf_begin_[l + 1];
-                std::sort(begin, end);
-                refs.clear();
-                for (const uint32_t* r = begin; r != end; ++r) refs.push_back(refs_[*r]);
-                merge_parts(refs);
-                LocalTree& tree = trees_[l];
-                tree.prim_count = uint32_t(refs.size());
-                if (refs.size() <= max_leaf_size_ && keep_as_leaf(refs.data(), uint32_t(refs.size()))) {
-                    Box3f box;
-                    for (size_t k = 0; k < refs.size(); ++k) {
-                        box = {vmin(box.lo, refs[k].lo), vmax(box.hi, refs[k].hi)};
-                        leaf_prims_[leaf_begin_[l] + k] = refs[k].prim;
-                    }
-                    tree.box = box;
-                    tree.node_count = 1;
-                    continue;
+                const uint32_t begin = leaf_begin_[l], count = leaf_begin_[l + 1] - begin;
+                uint32_t* prims = leaf_prims_.data() + begin;
+                LeafSummary s;
+                if (count <= kDeviceFinishRefs) {
+                    // What one device thread runs for this leaf.
+                    s = gridbvh::finish_small_leaf(refs_.data(), leaf_refs_.data() + begin, count, leaves_[l].depth,
+                                                   options, small_tree, prims);
+                    if (s.node_count > 1) trees_[l].nodes.assign(small_tree, small_tree + s.node_count);
+                } else {
+                    s = finish_large_leaf(l, refs, scratch, prims);
                 }
-                if (refs.size() > max_leaf_size_) large.fetch_add(1, std::memory_order_relaxed);
-                tree.nodes.reserve(2 * refs.size() - 1);
-                tree.prims.reserve(refs.size());
-                tree.nodes.resize(1);
-                build_local(tree, refs.data(), uint32_t(refs.size()), leaves_[l].depth, 0);
-                tree.box = tree.nodes[0].bounds;
-                tree.node_count = uint32_t(tree.nodes.size());
+                if (s.prim_count > max_leaf_size_) large.fetch_add(1, std::memory_order_relaxed);
+                summaries_[l] = s;
             }
         });
         stages_.large_leaves = large.load();
+    }
+
+    FinishOptions finish_options() const { return FinishOptions{max_leaf_size_, traversal_cost_, intersection_cost_}; }
+
+    // A leaf of more than kDeviceFinishRefs references: the same steps as
+    // finish_small_leaf, in growable buffers, the tree built recursively.
+    LeafSummary finish_large_leaf(uint32_t l, std::vector<GridRef>& refs, std::vector<GridRef>& scratch,
+                                  uint32_t* prims) {
+        // Reference order within a leaf is fixed by sorting, whatever the
+        // order the grouping ran in.
+        uint32_t* begin = leaf_refs_.data() + leaf_begin_[l];
+        uint32_t* end = leaf_refs_.data() + leaf_begin_[l + 1];
+        std::sort(begin, end);
+        refs.clear();
+        for (const uint32_t* r = begin; r != end; ++r) refs.push_back(refs_[*r]);
+        const uint32_t count = gridbvh::merge_parts(refs.data(), uint32_t(refs.size()));
+        refs.resize(count);
+        scratch.resize(count);
+        const FinishOptions options = finish_options();
+        if (count <= max_leaf_size_ && gridbvh::keep_as_leaf(refs.data(), count, options, scratch.data())) {
+            return gridbvh::single_leaf(refs.data(), count, prims);
+        }
+        LocalTree& tree = trees_[l];
+        tree.nodes.reserve(2 * size_t{count} - 1);
+        tree.prims.reserve(count);
+        tree.nodes.resize(1);
+        build_local(tree, refs.data(), scratch.data(), count, leaves_[l].depth, 0);
+        std::copy(tree.prims.begin(), tree.prims.end(), prims);
+        tree.prims = {};
+        return LeafSummary{tree.nodes[0].bounds, uint32_t(tree.nodes.size()), count};
     }
 
     // Each reference's leaf (descent with its Grid0 cell), then the
@@ -344,79 +382,27 @@ private:
         });
     }
 
-    // Parts of one triangle in one leaf become one reference (union box).
-    static void merge_parts(std::vector<GridRef>& refs) {
-        // Stable insertion sort by triangle: leaves are small.
-        for (size_t i = 1; i < refs.size(); ++i) {
-            const GridRef r = refs[i];
-            size_t j = i;
-            for (; j > 0 && refs[j - 1].prim > r.prim; --j) refs[j] = refs[j - 1];
-            refs[j] = r;
-        }
-        size_t out = 0;
-        for (size_t i = 0; i < refs.size(); ++i) {
-            if (out > 0 && refs[out - 1].prim == refs[i].prim) {
-                refs[out - 1].lo = vmin(refs[out - 1].lo, refs[i].lo);
-                refs[out - 1].hi = vmax(refs[out - 1].hi, refs[i].hi);
-            } else {
-                refs[out++] = refs[i];
-            }
-        }
-        refs.resize(out);
-    }
-
-    // Whether `count` (<= max_leaf_size) references stay one leaf: unless a
-    // binned split is cheaper by the SAH (C_trav, C_int of the options), as
-    // in the binned builder. May reorder the references.
-    bool keep_as_leaf(GridRef* refs, uint32_t count) const {
-        if (count <= 1) return true;
-        Box3f bounds, centroids;
-        for (uint32_t i = 0; i < count; ++i) {
-            bounds = {vmin(bounds.lo, refs[i].lo), vmax(bounds.hi, refs[i].hi)};
-            const Vec3f c = refs[i].centroid();
-            centroids = {vmin(centroids.lo, c), vmax(centroids.hi, c)};
-        }
-        float cost = 0.0f;
-        const uint32_t mid = split_binned(refs, count, centroids, cost);
-        const float area = bounds.surface_area();
-        return mid == 0 || mid == count ||
-               traversal_cost_ * area + intersection_cost_ * cost >= intersection_cost_ * area * float(count);
-    }
-
-    // Builds tree.nodes[node] over refs[0, count) at tree depth `depth`:
-    // binned SAH over centroids with SAH termination, leaves of at most
-    // max_leaf_size, median splits when the depth limit comes near or all
-    // centroids coincide. Large ranges build their halves as parallel tasks
-    // into separate trees, joined in canonical order.
-    void build_local(LocalTree& tree, GridRef* refs, uint32_t count, int depth, uint32_t node) const {
-        Box3f bounds, centroids;
-        for (uint32_t i = 0; i < count; ++i) {
-            bounds = {vmin(bounds.lo, refs[i].lo), vmax(bounds.hi, refs[i].hi)};
-            const Vec3f c = refs[i].centroid();
-            centroids = {vmin(centroids.lo, c), vmax(centroids.hi, c)};
-        }
-        tree.nodes[node].bounds = bounds;
-        float cost = 0.0f;
-        uint32_t mid = count > 1 ? split_binned(refs, count, centroids, cost) : 0;
-        const bool no_split = mid == 0 || mid == count;
-        const float area = bounds.surface_area();
-        if (count <= max_leaf_size_ &&
-            (no_split || traversal_cost_ * area + intersection_cost_ * cost >= intersection_cost_ * area * float(count))) {
+    // Builds tree.nodes[node] over refs[0, count) at tree depth `depth` by
+    // the shared per-node step (gridbvh::split_local_node), in the order of
+    // gridbvh::build_local_tree. Large ranges build their halves as parallel
+    // tasks into separate trees, joined in canonical order. `scratch` runs
+    // alongside `refs` (disjoint for the two halves).
+    void build_local(LocalTree& tree, GridRef* refs, GridRef* scratch, uint32_t count, int depth, uint32_t node) const {
+        const LocalSplit s = gridbvh::split_local_node(refs, count, depth, finish_options(), scratch, SortOnAxis{});
+        tree.nodes[node].bounds = s.bounds;
+        if (s.leaf) {
             tree.nodes[node].first = uint32_t(tree.prims.size());
             tree.nodes[node].count = count;
             for (uint32_t i = 0; i < count; ++i) tree.prims.push_back(refs[i].prim);
             return;
         }
-        const uint32_t larger = std::max(mid, count - mid);
-        if (no_split || depth + 1 + median_levels(larger, max_leaf_size_) > kBvhMaxDepth) {
-            mid = split_median(refs, count, centroids);
-        }
+        const uint32_t mid = s.mid;
         if (count > kParallelFinishSize) {
             LocalTree left, right;
             left.nodes.resize(1);
             right.nodes.resize(1);
-            parallel::invoke([&] { build_local(left, refs, mid, depth + 1, 0); },
-                             [&] { build_local(right, refs + mid, count - mid, depth + 1, 0); });
+            parallel::invoke([&] { build_local(left, refs, scratch, mid, depth + 1, 0); },
+                             [&] { build_local(right, refs + mid, scratch + mid, count - mid, depth + 1, 0); });
             append_children(tree, node, left, right);
             return;
         }
@@ -424,8 +410,8 @@ private:
         tree.nodes.resize(pair + 2);
         tree.nodes[node].first = pair;
         tree.nodes[node].count = 0;
-        build_local(tree, refs, mid, depth + 1, pair);
-        build_local(tree, refs + mid, count - mid, depth + 1, pair + 1);
+        build_local(tree, refs, scratch, mid, depth + 1, pair);
+        build_local(tree, refs + mid, scratch + mid, count - mid, depth + 1, pair + 1);
     }
 
     // Appends two separately built subtrees as the children of tree.nodes[node]:
@@ -451,147 +437,39 @@ private:
         tree.prims.insert(tree.prims.end(), right.prims.begin(), right.prims.end());
     }
 
-    // Binned SAH over the references' centroids; returns the left count
-    // after partitioning (0 when no split separates them).
-    static uint32_t split_binned(GridRef* refs, uint32_t count, const Box3f& centroids, float& cost) {
-        struct Bin {
-            Box3f box;
-            uint32_t count = 0;
-        };
-        const Vec3f extent = centroids.extent();
-        int best_axis = -1, best_bin = 0;
-        float best_cost = 0.0f;
-        for (int a = 0; a < 3; ++a) {
-            if (!(extent[a] > 0.0f)) continue;
-            const float scale = float(kFinishBins) * (1.0f - 0x1p-20f) / extent[a];
-            Bin bins[kFinishBins];
-            for (uint32_t i = 0; i < count; ++i) {
-                const int b = std::clamp(int((refs[i].centroid()[a] - centroids.lo[a]) * scale), 0, kFinishBins - 1);
-                bins[b].box = {vmin(bins[b].box.lo, refs[i].lo), vmax(bins[b].box.hi, refs[i].hi)};
-                ++bins[b].count;
-            }
-            float right_area[kFinishBins];
-            uint32_t right_count[kFinishBins];
-            Box3f acc;
-            uint32_t n = 0;
-            for (int i = kFinishBins - 1; i > 0; --i) {
-                acc = {vmin(acc.lo, bins[i].box.lo), vmax(acc.hi, bins[i].box.hi)};
-                n += bins[i].count;
-                right_area[i] = acc.surface_area();
-                right_count[i] = n;
-            }
-            acc = Box3f{};
-            n = 0;
-            for (int i = 1; i < kFinishBins; ++i) {
-                acc = {vmin(acc.lo, bins[i - 1].box.lo), vmax(acc.hi, bins[i - 1].box.hi)};
-                n += bins[i - 1].count;
-                if (n == 0 || right_count[i] == 0) continue;
-                const float cost = acc.surface_area() * float(n) + right_area[i] * float(right_count[i]);
-                if (best_axis < 0 || cost < best_cost) {
-                    best_axis = a;
-                    best_bin = i;
-                    best_cost = cost;
-                }
-            }
-        }
-        if (best_axis < 0) return 0;
-        cost = best_cost;
-        const float scale = float(kFinishBins) * (1.0f - 0x1p-20f) / extent[best_axis];
-        auto goes_left = [&](const GridRef& r) {
-            return std::clamp(int((r.centroid()[best_axis] - centroids.lo[best_axis]) * scale), 0, kFinishBins - 1) <
-                   best_bin;
-        };
-        return uint32_t(std::stable_partition(refs, refs + count, goes_left) - refs);
-    }
-
-    // Object median on the widest centroid axis (ties by triangle index;
-    // merged parts make indices unique); halves by position when all
-    // centroids coincide.
-    static uint32_t split_median(GridRef* refs, uint32_t count, const Box3f& centroids) {
-        const uint32_t mid = count / 2;
-        const Vec3f extent = centroids.extent();
-        if (extent.x > 0.0f || extent.y > 0.0f || extent.z > 0.0f) {
-            const int axis = centroids.largest_axis();
-            std::nth_element(refs, refs + mid, refs + count, [axis](const GridRef& a, const GridRef& b) {
-                const float ca = a.lo[axis] + a.hi[axis], cb = b.lo[axis] + b.hi[axis];
-                return ca < cb || (ca == cb && a.prim < b.prim);
-            });
-        }
-        return mid;
-    }
-
-    // Boxes and sizes bottom-up per tree level, positions top-down, then the copy.
+    // Sizes and boxes bottom-up per tree level, positions top-down, then the
+    // copy: the shared per-node steps, one level at a time as on the device.
     void emit_canonical(Bvh& bvh) const {
         const size_t count = hnodes_.size();
-        std::vector<uint32_t> sub_nodes(count), sub_prims(count), pos(count), desc(count), prim_base(count);
+        std::vector<SubtreeSize> size(count);
         std::vector<Box3f> box(count);
+        std::vector<EmitPosition> at(count);
         const size_t levels = level_offset_.size() - 1;
         for (size_t l = levels; l-- > 0;) {
-            parallel::for_range(size_t{level_offset_[l]}, size_t{level_offset_[l + 1]}, size_t{1024},
-                                [&](size_t lo, size_t hi) {
-                                    for (size_t h = lo; h < hi; ++h) {
-                                        const uint32_t first = hnodes_[h];
-                                        if (first & kLeafBit) {
-                                            const LocalTree& t = trees_[first & ~kLeafBit];
-                                            sub_nodes[h] = t.node_count;
-                                            sub_prims[h] = t.prim_count;
-                                            box[h] = t.box;
-                                        } else {
-                                            sub_nodes[h] = 1 + sub_nodes[first] + sub_nodes[first + 1];
-                                            sub_prims[h] = sub_prims[first] + sub_prims[first + 1];
-                                            box[h] = merge(box[first], box[first + 1]);
-                                        }
-                                    }
-                                });
+            parallel::for_range(level_offset_[l], level_offset_[l + 1], 1024u, [&](uint32_t lo, uint32_t hi) {
+                for (uint32_t h = lo; h < hi; ++h) {
+                    gridbvh::emit_size_and_box(h, hnodes_.data(), summaries_.data(), size.data(), box.data());
+                }
+            });
         }
-        pos[0] = 0;
-        desc[0] = 1;
-        prim_base[0] = 0;
+        at[0] = gridbvh::root_position();
         for (size_t l = 0; l < levels; ++l) {
-            parallel::for_range(size_t{level_offset_[l]}, size_t{level_offset_[l + 1]}, size_t{1024},
-                                [&](size_t lo, size_t hi) {
-                                    for (size_t h = lo; h < hi; ++h) {
-                                        const uint32_t first = hnodes_[h];
-                                        if (first & kLeafBit) continue;
-                                        const uint32_t left = first, right = first + 1;
-                                        pos[left] = desc[h];
-                                        pos[right] = desc[h] + 1;
-                                        desc[left] = desc[h] + 2;
-                                        desc[right] = desc[left] + sub_nodes[left] - 1;
-                                        prim_base[left] = prim_base[h];
-                                        prim_base[right] = prim_base[h] + sub_prims[left];
-                                    }
-                                });
+            parallel::for_range(level_offset_[l], level_offset_[l + 1], 1024u, [&](uint32_t lo, uint32_t hi) {
+                for (uint32_t h = lo; h < hi; ++h) gridbvh::emit_positions(h, hnodes_.data(), size.data(), at.data());
+            });
         }
-        budgeted_resize(bvh.nodes, sub_nodes[0], "BVH nodes");
-        budgeted_resize(bvh.prim_indices, sub_prims[0], "BVH primitive indices");
-        parallel::for_range(size_t{0}, count, size_t{1024}, [&](size_t lo, size_t hi) {
-            for (size_t h = lo; h < hi; ++h) {
+        budgeted_resize(bvh.nodes, size[0].nodes, "BVH nodes");
+        budgeted_resize(bvh.prim_indices, size[0].prims, "BVH primitive indices");
+        parallel::for_range(0u, uint32_t(count), 1024u, [&](uint32_t lo, uint32_t hi) {
+            for (uint32_t h = lo; h < hi; ++h) {
                 const uint32_t first = hnodes_[h];
                 if (!(first & kLeafBit)) {
-                    BvhNode& out = bvh.nodes[pos[h]];
-                    out.bounds = box[h];
-                    out.first = desc[h];
-                    out.count = 0;
+                    gridbvh::emit_inner_node(box[h], at[h], bvh.nodes.data());
                     continue;
                 }
                 const uint32_t leaf = first & ~kLeafBit;
-                const LocalTree& t = trees_[leaf];
-                if (t.nodes.empty()) {
-                    BvhNode& out = bvh.nodes[pos[h]];
-                    out.bounds = t.box;
-                    out.first = prim_base[h];
-                    out.count = t.prim_count;
-                    std::copy_n(leaf_prims_.begin() + leaf_begin_[leaf], t.prim_count,
-                                bvh.prim_indices.begin() + prim_base[h]);
-                    continue;
-                }
-                for (size_t j = 0; j < t.nodes.size(); ++j) {
-                    BvhNode node = t.nodes[j];
-                    node.first = node.is_leaf() ? prim_base[h] + node.first : desc[h] + node.first - 1;
-                    bvh.nodes[j == 0 ? pos[h] : desc[h] + j - 1] = node;
-                }
-                std::copy(t.prims.begin(), t.prims.end(), bvh.prim_indices.begin() + prim_base[h]);
+                gridbvh::emit_leaf(summaries_[leaf], trees_[leaf].nodes.data(), leaf_prims_.data() + leaf_begin_[leaf],
+                                   at[h], bvh.nodes.data(), bvh.prim_indices.data());
             }
         });
     }
@@ -613,8 +491,9 @@ private:
     std::vector<NodeRegion> regions_;     // per hierarchy node: its IBB at creation
     std::vector<uint32_t> leaf_begin_;    // per leaf task, plus an end: its range in leaf_refs_
     std::vector<uint32_t> leaf_refs_;     // reference indices grouped by leaf
-    std::vector<uint32_t> leaf_prims_;    // triangle indices of single-node leaves, at their range
-    std::vector<LocalTree> trees_;        // per leaf task: its finished subtree
+    std::vector<uint32_t> leaf_prims_;    // per leaf task, at its range in leaf_refs_: its triangles in leaf order
+    std::vector<LeafSummary> summaries_;  // per leaf task: box, node and triangle counts
+    std::vector<LocalTree> trees_;        // per leaf task: its subtree when more than one node
 };
 
 }  // namespace

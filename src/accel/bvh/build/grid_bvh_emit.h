@@ -3,7 +3,9 @@
 // given the references and the grid hierarchy of EmitHierarchy (Algorithm
 // 4.1), the CPU builder's own leaf finishing (reference shuffling, merging
 // of parts, splitting of leaves over max_leaf_size) and canonical emission
-// give rf::build_grid_bvh's BVH.
+// give rf::build_grid_bvh's BVH. The device finishes and emits by itself
+// (grid_bvh_finish_steps.h) unless a leaf holds more than
+// gridbvh::kDeviceFinishRefs references; then it hands over here.
 #pragma once
 
 #include <cstdint>
