@@ -1,59 +1,74 @@
 #!/usr/bin/env bash
-# On a CUDA machine without package access (the device machine): unpacks
-# .gpu-debs/ (made by scripts/gpu-bundle.sh) into a private prefix, builds
-# the CLI and the gpu tests, runs `ctest -L gpu`, then the GPU benchmarks of
-# issues 6 and 7, writing everything to $OUT (or ./gpu-out).
+# On a CUDA machine without package access (the device machine): runs the
+# gpu tests and the GPU benchmarks of issues 6 and 7, writing everything to
+# $OUT (or ./gpu-out).
 #   scripts/gpu-run.sh [tests|bench|builds|memcheck|all]   (default all;
 #   memcheck runs some gpu tests under compute-sanitizer; builds times every
 #   device builder on the Stanford Dragon and on 2 and 15 copies of it, the
 #   sizes of seed 000's table 5.1, when shared/scenes is there)
-# A cold build plus tests plus bench may not fit one 10-minute call: run
-# `tests` first and `bench` in a second call (build-gpu/ stays while the
-# machine is warm).
+# Binaries: those staged in .gpu-prebuilt/ by scripts/gpu-prebuild.sh when
+# they were built from these sources (carry .gpu-prebuilt: no build here);
+# otherwise it unpacks .gpu-debs/ (scripts/gpu-bundle.sh) into a private
+# prefix and builds the CLI and the gpu tests in build-gpu/. A cold build
+# may not fit one 10-minute call: build-gpu/ stays while the machine is
+# warm, so run the same command again.
 set -uo pipefail
 test_rc=0 bench_rc=0 path_rc=0 build_rc=0 builds_rc=0
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 what="${1:-all}"
 out="${OUT:-$ROOT/gpu-out}"
 mkdir -p "$out"
-prefix=/tmp/rayforge-debs
-mkdir -p "$prefix"
-shopt -s nullglob
-debs=("$ROOT"/.gpu-debs/*.deb)
-if ((${#debs[@]} == 0)); then
-  echo "gpu-run.sh: no packages in $ROOT/.gpu-debs: run scripts/gpu-bundle.sh here and carry .gpu-debs" >&2
-  exit 2
-fi
-for f in "${debs[@]}"; do dpkg-deb -x "$f" "$prefix" || { echo "gpu-run.sh: cannot unpack $f" >&2; exit 2; }; done
-lib="$prefix/usr/lib/x86_64-linux-gnu"
-export CMAKE_PREFIX_PATH="$prefix/usr:$lib/cmake${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
-# Multiarch headers (libjpeg's jconfig.h) live one level down.
-export CPATH="$prefix/usr/include:$prefix/usr/include/x86_64-linux-gnu${CPATH:+:$CPATH}"
-export LIBRARY_PATH="$lib${LIBRARY_PATH:+:$LIBRARY_PATH}"
-export LD_LIBRARY_PATH="$lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
-export PATH="$prefix/usr/bin:$PATH"
-# .pc files say prefix=/usr: the sysroot puts the unpacked tree in front.
-export PKG_CONFIG_PATH="$lib/pkgconfig:$prefix/usr/share/pkgconfig"
-export PKG_CONFIG_SYSROOT_DIR="$prefix"
-
+# The digest of the sources the binaries come from (no git on the device).
+source_digest() {
+  (cd "$ROOT" && find src include apps bench tests cmake CMakeLists.txt -type f | LC_ALL=C sort | xargs sha1sum | sha1sum | cut -d' ' -f1)
+}
+prebuilt="$ROOT/.gpu-prebuilt"
 nvidia-smi > "$out/nvidia-smi.txt" 2>&1
-build="$ROOT/build-gpu"
-{
-  cmake -S "$ROOT" -B "$build" -DCMAKE_BUILD_TYPE=Release -DRAYFORGE_BUILD_BENCHMARKS=OFF \
-    -DCMAKE_CUDA_ARCHITECTURES=90 &&
-  cmake --build "$build" -j"$(nproc)" --target rayforge_cli rayforge_gpu_tests
-} > "$out/build.txt" 2>&1 || { tail -40 "$out/build.txt"; exit 1; }
-rf="$build/bin/rayforge"
+if [[ -x "$prebuilt/bin/rayforge" && -f "$prebuilt/SOURCES" && "$(cat "$prebuilt/SOURCES")" == "$(source_digest)" ]]; then
+  echo "gpu-run.sh: using the binaries of .gpu-prebuilt (built from these sources)"
+  export LD_LIBRARY_PATH="$prebuilt/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+  rf="$prebuilt/bin/rayforge"
+  gpu_tests="$prebuilt/bin/rayforge_gpu_tests"
+else
+  [[ -d "$prebuilt" ]] && echo "gpu-run.sh: .gpu-prebuilt was built from other sources: building here"
+  prefix=/tmp/rayforge-debs
+  mkdir -p "$prefix"
+  shopt -s nullglob
+  debs=("$ROOT"/.gpu-debs/*.deb)
+  if ((${#debs[@]} == 0)); then
+    echo "gpu-run.sh: no packages in $ROOT/.gpu-debs: run scripts/gpu-bundle.sh (or scripts/gpu-prebuild.sh) here and carry the folder" >&2
+    exit 2
+  fi
+  for f in "${debs[@]}"; do dpkg-deb -x "$f" "$prefix" || { echo "gpu-run.sh: cannot unpack $f" >&2; exit 2; }; done
+  lib="$prefix/usr/lib/x86_64-linux-gnu"
+  export CMAKE_PREFIX_PATH="$prefix/usr:$lib/cmake${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
+  # Multiarch headers (libjpeg's jconfig.h) live one level down.
+  export CPATH="$prefix/usr/include:$prefix/usr/include/x86_64-linux-gnu${CPATH:+:$CPATH}"
+  export LIBRARY_PATH="$lib${LIBRARY_PATH:+:$LIBRARY_PATH}"
+  export LD_LIBRARY_PATH="$lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+  export PATH="$prefix/usr/bin:$PATH"
+  # .pc files say prefix=/usr: the sysroot puts the unpacked tree in front.
+  export PKG_CONFIG_PATH="$lib/pkgconfig:$prefix/usr/share/pkgconfig"
+  export PKG_CONFIG_SYSROOT_DIR="$prefix"
+  build="$ROOT/build-gpu"
+  {
+    cmake -S "$ROOT" -B "$build" -DCMAKE_BUILD_TYPE=Release -DRAYFORGE_BUILD_BENCHMARKS=OFF \
+      -DCMAKE_CUDA_ARCHITECTURES=90 &&
+    cmake --build "$build" -j"$(nproc)" --target rayforge_cli rayforge_gpu_tests
+  } > "$out/build.txt" 2>&1 || { tail -40 "$out/build.txt"; exit 1; }
+  rf="$build/bin/rayforge"
+  gpu_tests=$(find "$build" -name rayforge_gpu_tests -type f | head -1)
+fi
 "$rf" info --devices | tee "$out/devices.txt"
 
 if [[ "$what" == all || "$what" == tests ]]; then
-  (cd "$build" && ctest -L gpu --output-on-failure) > "$out/gpu-tests.txt" 2>&1
+  # The gpu-labelled tests are this one binary's.
+  (cd "$ROOT" && "$gpu_tests") > "$out/gpu-tests.txt" 2>&1
   test_rc=$?
   echo "gpu tests: rc=$test_rc"; tail -15 "$out/gpu-tests.txt"
 fi
 if [[ "$what" == memcheck ]]; then
   # Device memory errors and races (compute-sanitizer ships with the toolkit).
-  gpu_tests=$(find "$build" -name rayforge_gpu_tests -type f | head -1)
   compute-sanitizer --tool memcheck --error-exitcode 3 "$gpu_tests" \
     --gtest_filter='GpuDeviceTracer.*:GpuRenderer.AovsAndCallbacks:GpuRenderer.RaySortingChangesNothing' \
     > "$out/memcheck.txt" 2>&1

@@ -85,6 +85,7 @@ struct BoxRay {
             if (std::fabs(d) < tiny) d = std::copysign(tiny, d);
             const float rcp = 1.0f / d;
 #else
+            (void)coord_scale;  // only the FMA form shifts the planes by a scale-relative margin
             const float rcp = 1.0f / ray.dir[axis];
 #endif
             const int negative = rcp < 0.0f ? 1 : 0;
