@@ -29,6 +29,7 @@
 #include "accel/bvh/build/grid_bvh_sparse_grid.h"
 #include "accel/bvh/build/grid_bvh_steps.h"
 #include "accel_test_scenes.h"
+#include "bvh_hash.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
 
@@ -44,21 +45,7 @@ using gridbvh::SplitTask;
 using gridbvh::TaskBins;
 using gridbvh::TaskOutcome;
 
-// FNV-1a over the nodes (boxes bit for bit, links, counts) and primitive order.
-uint64_t bvh_hash(const Bvh& bvh) {
-    uint64_t h = 1469598103934665603ull;
-    auto eat = [&](const void* p, size_t bytes) {
-        const auto* b = static_cast<const unsigned char*>(p);
-        for (size_t i = 0; i < bytes; ++i) h = (h ^ b[i]) * 1099511628211ull;
-    };
-    for (const BvhNode& n : bvh.nodes) {
-        eat(&n.bounds, sizeof n.bounds);
-        eat(&n.first, sizeof n.first);
-        eat(&n.count, sizeof n.count);
-    }
-    eat(bvh.prim_indices.data(), bvh.prim_indices.size() * sizeof(uint32_t));
-    return h;
-}
+using test::bvh_hash;
 
 SceneGeometry make_diagonal_slivers(int count, uint32_t seed) {
     std::mt19937 rng(seed);

@@ -27,6 +27,7 @@
 #include "accel/bvh/build/ploc.h"
 #include "accel/bvh/build/raw_tree_emit_steps.h"
 #include "accel_test_scenes.h"
+#include "bvh_hash.h"
 
 namespace rf {
 namespace {
@@ -61,15 +62,7 @@ struct RawInput {
     std::vector<uint8_t> runs;            // per leaf start; empty: single-primitive leaves
 };
 
-// morton_tree.cpp's triangle box (the same min/max order, so signed zeros agree).
-Box3f triangle_box(const Triangle& t) {
-    Box3f b;
-    b.lo = Vec3f(std::min(t.v0.x, std::min(t.v1.x, t.v2.x)), std::min(t.v0.y, std::min(t.v1.y, t.v2.y)),
-                 std::min(t.v0.z, std::min(t.v1.z, t.v2.z)));
-    b.hi = Vec3f(std::max(t.v0.x, std::max(t.v1.x, t.v2.x)), std::max(t.v0.y, std::max(t.v1.y, t.v2.y)),
-                 std::max(t.v0.z, std::max(t.v1.z, t.v2.z)));
-    return b;
-}
+using morton::triangle_box;
 
 struct Emulated {
     bool fits = false;
@@ -386,20 +379,7 @@ TEST(RawTreeEmitDeviceLogic, DeliberateBugIsCaught) {
     EXPECT_FALSE(buggy.fits && same_bvh(buggy.bvh, host.bvh));
 }
 
-uint64_t bvh_hash(const Bvh& bvh) {
-    uint64_t h = 1469598103934665603ull;  // FNV-1a
-    auto eat = [&](const void* p, size_t bytes) {
-        const auto* b = static_cast<const unsigned char*>(p);
-        for (size_t i = 0; i < bytes; ++i) h = (h ^ b[i]) * 1099511628211ull;
-    };
-    for (const BvhNode& n : bvh.nodes) {
-        eat(&n.bounds, sizeof n.bounds);
-        eat(&n.first, sizeof n.first);
-        eat(&n.count, sizeof n.count);
-    }
-    eat(bvh.prim_indices.data(), bvh.prim_indices.size() * sizeof(uint32_t));
-    return h;
-}
+using test::bvh_hash;
 
 // The CPU Morton builders now finalize nodes through raw_emit::combine, the
 // device emission's own step. Their output is pinned by hashes taken before

@@ -21,14 +21,6 @@ namespace {
 constexpr uint32_t kGrain = 16 * 1024;
 constexpr uint32_t kParallelEmitCount = 4096;  // primitives per subtree to emit as its own task
 
-inline Box3f triangle_box(const Triangle& t) {
-    Box3f b;
-    b.lo = Vec3f(std::min(t.v0.x, std::min(t.v1.x, t.v2.x)), std::min(t.v0.y, std::min(t.v1.y, t.v2.y)),
-                 std::min(t.v0.z, std::min(t.v1.z, t.v2.z)));
-    b.hi = Vec3f(std::max(t.v0.x, std::max(t.v1.x, t.v2.x)), std::max(t.v0.y, std::max(t.v1.y, t.v2.y)),
-                 std::max(t.v0.z, std::max(t.v1.z, t.v2.z)));
-    return b;
-}
 inline Vec3f box_center(const Box3f& b) { return (b.lo + b.hi) * 0.5f; }
 
 // Centroid bounds of the triangles (box centres); writes each triangle's box

@@ -35,6 +35,17 @@ inline bool is_leaf_ref(uint32_t ref) { return (ref & kLeafRef) != 0; }
 // finite): the one the device builders use too.
 using karras::box_union;
 
+// A triangle's box as the Morton builders compute it (this min/max order;
+// the device's morton_sort.cu mirrors it, so signed zeros agree).
+inline Box3f triangle_box(const Triangle& t) {
+    Box3f b;
+    b.lo = Vec3f(std::min(t.v0.x, std::min(t.v1.x, t.v2.x)), std::min(t.v0.y, std::min(t.v1.y, t.v2.y)),
+                 std::min(t.v0.z, std::min(t.v1.z, t.v2.z)));
+    b.hi = Vec3f(std::max(t.v0.x, std::max(t.v1.x, t.v2.x)), std::max(t.v0.y, std::max(t.v1.y, t.v2.y)),
+                 std::max(t.v0.z, std::max(t.v1.z, t.v2.z)));
+    return b;
+}
+
 struct RawNode {
     // Left uninitialised when a node array is sized (finalize() sets every
     // field the emitter reads); the union keeps Box3f's constructor out.
