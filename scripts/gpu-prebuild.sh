@@ -6,8 +6,9 @@
 # they need into .gpu-prebuilt/ (git-ignored, about 40 MB: it fits the
 # device call's carry limit). A cold build on the device takes longer than
 # one 10-minute call (renderer.cu alone compiles for well over 5 minutes).
+# Also stages compressed benchmark scenes in .gpu-scenes/ (about 14 MB).
 # Then, on the device: scripts/gpu-run.sh [tests|bench|builds|memcheck|all]
-# with .gpu-prebuilt carried; it uses the staged binaries when they were
+# with .gpu-prebuilt and .gpu-scenes carried; it uses the staged binaries when they were
 # built from the sources it finds there (a digest of src, include, apps,
 # bench, tests and the CMake files), else it builds.
 #   scripts/gpu-prebuild.sh            (build folder: build-gpu-prebuilt/)
@@ -47,3 +48,23 @@ done
 echo "$sources" > "$stage/SOURCES"
 git -C "$ROOT" rev-parse HEAD > "$stage/COMMIT" 2> /dev/null || true
 echo "gpu-prebuild.sh: $(du -sh "$stage" | cut -f1) in $stage ($(ls "$stage/lib" | wc -l) libraries), $(($(date +%s) - start)) s"
+
+# The benchmark scenes, compressed to fit the carry limit with the binaries:
+# Crytek Sponza without its textures (they do not change ray throughput and
+# would not fit) and the Stanford Dragon, with views.json. gpu-run.sh unpacks
+# them into shared/scenes on the device.
+scenes="${RAYFORGE_SCENES:-$ROOT/../shared/scenes}"
+if [[ -f "$scenes/views.json" ]]; then
+  rm -rf "$ROOT/.gpu-scenes"
+  mkdir -p "$ROOT/.gpu-scenes"
+  cp "$scenes/views.json" "$ROOT/.gpu-scenes/"
+  for file in crytek-sponza/sponza.obj crytek-sponza/sponza.mtl stanford-dragon/dragon_vrip.ply; do
+    if [[ -f "$scenes/$file" ]]; then
+      mkdir -p "$ROOT/.gpu-scenes/$(dirname "$file")"
+      gzip -c -6 "$scenes/$file" > "$ROOT/.gpu-scenes/$file.gz"
+    fi
+  done
+  echo "gpu-prebuild.sh: $(du -sh "$ROOT/.gpu-scenes" | cut -f1) of scenes in $ROOT/.gpu-scenes (carry it too)"
+else
+  echo "gpu-prebuild.sh: no $scenes/views.json: no scenes staged (the bench falls back to built-in scenes)"
+fi

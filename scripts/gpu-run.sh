@@ -24,6 +24,16 @@ source_digest() {
 }
 prebuilt="$ROOT/.gpu-prebuilt"
 nvidia-smi > "$out/nvidia-smi.txt" 2>&1
+# Scenes staged by gpu-prebuild.sh: unpacked where the bench looks for them.
+if [[ -d "$ROOT/.gpu-scenes" && ! -f "$ROOT/shared/scenes/views.json" ]]; then
+  mkdir -p "$ROOT/shared/scenes"
+  cp "$ROOT/.gpu-scenes/views.json" "$ROOT/shared/scenes/"
+  (cd "$ROOT/.gpu-scenes" && find . -name '*.gz') | while read -r packed; do
+    mkdir -p "$ROOT/shared/scenes/$(dirname "$packed")"
+    gunzip -c "$ROOT/.gpu-scenes/$packed" > "$ROOT/shared/scenes/${packed%.gz}"
+  done
+  echo "gpu-run.sh: scenes unpacked from .gpu-scenes into shared/scenes"
+fi
 if [[ -x "$prebuilt/bin/rayforge" && -f "$prebuilt/SOURCES" && "$(cat "$prebuilt/SOURCES")" == "$(source_digest)" ]]; then
   echo "gpu-run.sh: using the binaries of .gpu-prebuilt (built from these sources)"
   export LD_LIBRARY_PATH="$prebuilt/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
