@@ -18,6 +18,10 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 what="${1:-all}"
 out="${OUT:-$ROOT/gpu-out}"
 mkdir -p "$out"
+# At most 8 files come back from a device call: $out holds only the logs
+# (nvidia-smi.txt, build.txt, gpu-tests.txt or memcheck.txt, bench-rays.txt
+# and .json, bench-path.txt, bench-seed000.txt, builds.txt); the rest goes here.
+scratch=$(mktemp -d)
 # The digest of the sources the binaries come from (no git on the device).
 source_digest() {
   (cd "$ROOT" && find src include apps bench tests cmake CMakeLists.txt -type f | LC_ALL=C sort | xargs sha1sum | sha1sum | cut -d' ' -f1)
@@ -69,7 +73,7 @@ else
   rf="$build/bin/rayforge"
   gpu_tests=$(find "$build" -name rayforge_gpu_tests -type f | head -1)
 fi
-"$rf" info --devices | tee "$out/devices.txt"
+"$rf" info --devices | tee -a "$out/nvidia-smi.txt"
 
 if [[ "$what" == all || "$what" == tests ]]; then
   # The gpu-labelled tests are this one binary's.
@@ -107,7 +111,7 @@ if [[ "$what" == all || "$what" == builds ]]; then
   dragon="$ROOT/shared/scenes/stanford-dragon/dragon_vrip.ply"
   if [[ -f "$dragon" ]]; then
     for copies in 1 2 15; do
-      scene="$out/dragon-x$copies.json"
+      scene="$scratch/dragon-x$copies.json"
       {
         printf '{"meshes": ['
         for ((i = 0; i < copies; ++i)); do
