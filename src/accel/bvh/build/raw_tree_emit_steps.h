@@ -1,6 +1,6 @@
 // The canonical emission of a Morton-family raw tree (morton_tree.h's
 // RawTree: LBVH, HLBVH2, PLOC) as per-element steps, written once for both
-// backends: the CUDA builders run them as three launches
+// backends: the CUDA builders run them in three stages
 // (backend/cuda/raw_tree_emit.cu), the CPU tests replay them in shuffled
 // order against RawTree::emit. The result is RawTree::emit's, bit for bit,
 // for every tree whose emitted height stays within kBvhMaxDepth (deeper
