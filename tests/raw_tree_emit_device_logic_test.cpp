@@ -70,9 +70,11 @@ struct Emulated {
     std::vector<raw_emit::NodeInfo> info;  // per node slot, after the bottom-up pass
 };
 
+// `sparse`: node values stored for the used slots only, through the prefix
+// sum of used_slot() (as the device does for HLBVH2).
 template <class Arrival = SequentialArrival>
 Emulated emulate(std::span<const Triangle> triangles, const BuildOptions& options, const RawInput& in,
-                 uint32_t seed) {
+                 uint32_t seed, bool sparse = false) {
     const uint32_t n = static_cast<uint32_t>(in.order.size());
     const uint32_t slots = static_cast<uint32_t>(in.children.size() / 2);
     std::vector<Box3f> boxes(n);  // per triangle, as the device keeps them
@@ -109,14 +111,29 @@ Emulated emulate(std::span<const Triangle> triangles, const BuildOptions& option
         return ids;
     };
     for (uint32_t s : shuffled(slots)) raw_emit::scatter_parents(view, s);
+    std::vector<uint32_t> dense;
+    if (sparse) {
+        dense.assign(size_t{slots} + 1, 0u);
+        for (uint32_t s = 0; s < slots; ++s) dense[s + 1] = dense[s] + raw_emit::used_slot(view, s);
+        info.assign(dense[slots], raw_emit::NodeInfo{});
+        std::memset(static_cast<void*>(info.data()), 0xcd, info.size() * sizeof(raw_emit::NodeInfo));
+        arrivals.assign(dense[slots], 0u);
+        view.dense = dense.data();
+        view.info = info.data();
+        view.arrivals = arrivals.data();
+    }
     for (uint32_t p : shuffled(n)) raw_emit::finalize_from_leaf<Arrival>(view, p);
 
     Emulated out;
-    out.info = info;
+    // Per slot, for the comparison with the host (unused slots stay poisoned).
+    out.info.assign(slots, raw_emit::NodeInfo{});
+    for (uint32_t s = 0; s < slots; ++s) {
+        if (raw_emit::used_slot(view, s)) out.info[s] = raw_emit::node_info(view, s);
+    }
     const bool leaf_root = raw_emit::is_leaf_ref(in.root);
-    out.fits = leaf_root || raw_emit::fits_depth_limit(info[in.root]);
+    out.fits = leaf_root || raw_emit::fits_depth_limit(raw_emit::node_info(view, in.root));
     if (!out.fits) return out;
-    out.bvh.nodes.resize(leaf_root ? 1u : info[in.root].out_size);
+    out.bvh.nodes.resize(leaf_root ? 1u : raw_emit::node_info(view, in.root).out_size);
     out.bvh.prim_indices.assign(n, 0xdeadbeefu);
     BvhNode poison;
     std::memset(static_cast<void*>(&poison), 0xcd, sizeof poison);
@@ -130,16 +147,17 @@ Emulated emulate(std::span<const Triangle> triangles, const BuildOptions& option
         return out;
     }
     // One launch per level, its items in shuffled order.
-    const uint32_t levels = raw_emit::emit_levels(info[in.root]);
+    const raw_emit::NodeInfo root = raw_emit::node_info(view, in.root);
+    const uint32_t levels = raw_emit::emit_levels(root);
     std::vector<raw_emit::EmitItem> items{raw_emit::root_item(in.root)};
     for (uint32_t level = 0; level < levels; ++level) {
-        std::vector<raw_emit::EmitItem> next(info[in.root].out_size);
+        std::vector<raw_emit::EmitItem> next(root.out_size);
         uint32_t next_count = 0;
         for (uint32_t i : shuffled(static_cast<uint32_t>(items.size()))) {
             raw_emit::emit_item<SequentialCounter>(view, items[i], out.bvh.nodes.data(), out.bvh.prim_indices.data(),
                                                    next.data(), &next_count);
         }
-        EXPECT_LE(next_count, (info[in.root].out_size + 1) / 2) << "a level wider than the device's buffers";
+        EXPECT_LE(next_count, (root.out_size + 1) / 2) << "a level wider than the device's buffers";
         next.resize(next_count);
         items = std::move(next);
     }
@@ -286,11 +304,14 @@ void expect_same_values(const Emulated& device, const HostEmission& host, const 
 void check_against_host(const SceneGeometry& g, const BuildOptions& options, const RawInput& in, uint32_t seed,
                         const std::string& what) {
     const HostEmission host = host_emit(g.triangles, options, in);
-    const Emulated device = emulate(g.triangles, options, in, seed);
-    expect_same_values(device, host, what);
-    ASSERT_EQ(device.fits, !host.needs_rebuild) << what;
-    if (device.fits) {
-        EXPECT_TRUE(same_bvh(device.bvh, host.bvh)) << what;
+    for (bool sparse : {false, true}) {
+        const std::string case_name = what + (sparse ? ", values by used slot" : "");
+        const Emulated device = emulate(g.triangles, options, in, seed, sparse);
+        expect_same_values(device, host, case_name);
+        ASSERT_EQ(device.fits, !host.needs_rebuild) << case_name;
+        if (device.fits) {
+            EXPECT_TRUE(same_bvh(device.bvh, host.bvh)) << case_name;
+        }
     }
 }
 

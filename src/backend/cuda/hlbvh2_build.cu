@@ -267,6 +267,7 @@ bool build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
             tree.boxes_by_triangle = true;
             tree.order = sorted.order.data();
             tree.leaf_runs = leaf_runs.data();
+            tree.sparse_slots = true;  // leaf runs leave most split positions without a node
             if (emit_raw_tree_on_device(tree, *options, "HLBVH2", meter, timer, stages, *bvh)) return true;
         }
     }

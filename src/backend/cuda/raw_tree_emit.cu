@@ -7,6 +7,8 @@
 // and otherwise how many level launches follow, back to back.
 #include <cuda_runtime.h>
 
+#include <cub/device/device_scan.cuh>
+
 #include <algorithm>
 #include <string>
 
@@ -25,6 +27,11 @@ uint32_t blocks_for(uint64_t threads) { return static_cast<uint32_t>((threads + 
 __global__ void scatter_parents_kernel(raw_emit::RawTreeView tree) {
     const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
     if (i < tree.node_slots) raw_emit::scatter_parents(tree, i);
+}
+
+__global__ void used_slots_kernel(raw_emit::RawTreeView tree, uint32_t* used) {
+    const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
+    if (i < tree.node_slots) used[i] = raw_emit::used_slot(tree, i);
 }
 
 __global__ void finalize_kernel(raw_emit::RawTreeView tree) {
@@ -80,10 +87,18 @@ bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& opti
         view.node_parent = const_cast<uint32_t*>(tree.node_parent);
         view.leaf_parent = const_cast<uint32_t*>(tree.leaf_parent);
     }
-    meter.allocate(info, slots);
-    meter.allocate(arrivals, slots);
-    view.info = info.data();
-    view.arrivals = arrivals.data();
+
+    // Sparse numberings: node values only for the slots in use (allocated
+    // here, outside the timed kernels).
+    DeviceBuffer<uint32_t> dense(label + ": emission value indices"), used(label + ": emission used slots");
+    DeviceBuffer<uint8_t> scan_temp(label + ": emission scan temporary storage");
+    size_t temp_bytes = 0;
+    if (tree.sparse_slots) {
+        meter.allocate(used, size_t{slots} + 1);
+        meter.allocate(dense, size_t{slots} + 1);
+        RF_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, used.data(), dense.data(), slots + 1));
+        meter.allocate(scan_temp, temp_bytes > 0 ? temp_bytes : 1);
+    }
 
     timer.start();
     if (own_parents) {
@@ -91,6 +106,26 @@ bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& opti
         RF_CUDA_CHECK(cudaMemsetAsync(leaf_parent.data(), 0xff, leaf_parent.bytes()));
         scatter_parents_kernel<<<blocks_for(slots), kBlockSize>>>(view);
     }
+    uint32_t values = slots;
+    if (tree.sparse_slots) {
+        RF_CUDA_CHECK(cudaMemsetAsync(used.data() + slots, 0, sizeof(uint32_t)));
+        used_slots_kernel<<<blocks_for(slots), kBlockSize>>>(view, used.data());
+        RF_CUDA_CHECK(
+            cub::DeviceScan::ExclusiveSum(scan_temp.data(), temp_bytes, used.data(), dense.data(), slots + 1));
+    }
+    stages.device_emit_ms += timer.stop_ms();
+    if (tree.sparse_slots) {
+        RF_CUDA_CHECK(cudaMemcpy(&values, dense.data() + slots, sizeof values, cudaMemcpyDeviceToHost));
+        meter.release(scan_temp);
+        meter.release(used);
+        view.dense = dense.data();
+    }
+    meter.allocate(info, values);
+    meter.allocate(arrivals, values);
+    view.info = info.data();
+    view.arrivals = arrivals.data();
+
+    timer.start();
     RF_CUDA_CHECK(cudaMemsetAsync(arrivals.data(), 0, arrivals.bytes()));
     finalize_kernel<<<blocks_for(n), kBlockSize>>>(view);
     stages.device_emit_ms += timer.stop_ms();
@@ -105,7 +140,11 @@ bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& opti
         throw Error(label + " device emission: the root is not a node");
     }
     raw_emit::NodeInfo root{};
-    RF_CUDA_CHECK(cudaMemcpy(&root, info.data() + tree.root, sizeof root, cudaMemcpyDeviceToHost));
+    uint32_t root_value = tree.root;
+    if (view.dense != nullptr) {
+        RF_CUDA_CHECK(cudaMemcpy(&root_value, dense.data() + tree.root, sizeof root_value, cudaMemcpyDeviceToHost));
+    }
+    RF_CUDA_CHECK(cudaMemcpy(&root, info.data() + root_value, sizeof root, cudaMemcpyDeviceToHost));
     if (root.count != n) {
         throw Error(label + " device emission: the tree holds " + std::to_string(root.count) + " of " +
                     std::to_string(n) + " primitives");
@@ -147,6 +186,7 @@ bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& opti
     for (auto* buffer : {&items[0], &items[1]}) meter.release(*buffer);
     meter.release(counts);
     meter.release(info);
+    meter.release(dense);
     meter.release(node_parent);
     stages.peak_device_bytes = std::max(stages.peak_device_bytes, meter.peak());
 

@@ -28,6 +28,10 @@ struct DeviceRawTree {
     bool boxes_by_triangle = true;
     const uint32_t* order = nullptr;
     const uint8_t* leaf_runs = nullptr;       // null: every leaf one primitive
+    // Most node slots unused (HLBVH2 numbers a node by its split position):
+    // node values are then stored for the used slots only, through a prefix
+    // sum of the used ones.
+    bool sparse_slots = false;
     // Parent links the builder already has (LBVH): both or neither. The
     // emitter scatters its own otherwise.
     const uint32_t* node_parent = nullptr;

@@ -7,7 +7,10 @@
 // trees go to the host, whose emitter rebuilds the offending subtrees).
 //
 //  1. scatter_parents(): one thread per node slot records itself as its
-//     children's parent (slots a builder left unused hold kNoChild).
+//     children's parent (slots a builder left unused hold kNoChild). For a
+//     sparse numbering (HLBVH2 uses about a third of its slots), a prefix
+//     sum of used_slot() then gives each used slot its place in the arrays
+//     of node values (RawTreeView::dense).
 //  2. finalize_from_leaf(): one thread per leaf walks up; as in Karras's
 //     box pass, an arrival counter per node lets only the second child's
 //     thread go on, and it computes the node's box, primitive count, SAH
@@ -79,10 +82,17 @@ struct RawTreeView {
     const uint8_t* leaf_runs;       // run size per leaf start, or null: every leaf one primitive
     uint32_t* node_parent;          // node_slots, kNoParent before scatter_parents
     uint32_t* leaf_parent;          // n, kNoParent before scatter_parents
-    NodeInfo* info;                 // node_slots, written by finalize_from_leaf
-    uint32_t* arrivals;             // node_slots, zero before finalize_from_leaf
+    // Where a node slot's values live: dense[slot] (the exclusive prefix sum
+    // of used_slot(), so a builder that leaves most slots unused, as HLBVH2
+    // does, pays for the used ones only), or the slot itself when null.
+    const uint32_t* dense;
+    NodeInfo* info;                 // per value index, written by finalize_from_leaf
+    uint32_t* arrivals;             // per value index, zero before finalize_from_leaf
     Costs costs;
 };
+
+RF_HDI uint32_t value_index(const RawTreeView& t, uint32_t node) { return t.dense != nullptr ? t.dense[node] : node; }
+RF_HDI const NodeInfo& node_info(const RawTreeView& t, uint32_t node) { return t.info[value_index(t, node)]; }
 
 RF_HDI const uint32_t* child_pair(const RawTreeView& t, uint32_t node) {
     return node < t.high_base ? t.children + 2 * static_cast<uint64_t>(node)
@@ -152,6 +162,12 @@ RF_HDI void scatter_parents(const RawTreeView& t, uint32_t node) {
     }
 }
 
+// After scatter_parents: whether node slot `node` is in the tree (1) or
+// unused (0), the input of the prefix sum that gives RawTreeView::dense.
+RF_HDI uint32_t used_slot(const RawTreeView& t, uint32_t node) {
+    return t.node_parent[node] != kNoParent || t.root == node ? 1u : 0u;
+}
+
 // A node's values from its children's (RawTree::finalize runs this too).
 RF_HDI NodeInfo combine(const Costs& costs, const NodeInfo& a, const NodeInfo& b) {
     NodeInfo node;
@@ -184,15 +200,16 @@ RF_HDI void finalize_from_leaf(const RawTreeView& t, uint32_t position) {
     uint32_t from = kLeafRef | position;
     NodeInfo info = leaf_info(t, position);
     while (node != kNoParent) {
-        if (Arrival::arrive(&t.arrivals[node]) == 0) return;
+        const uint32_t value = value_index(t, node);
+        if (Arrival::arrive(&t.arrivals[value]) == 0) return;
         const uint32_t* pair = child_pair(t, node);
         const uint32_t left = pair[0], right = pair[1];
         const bool from_left = left == from;
         const uint32_t sibling = from_left ? right : left;
         const NodeInfo other =
-            is_leaf_ref(sibling) ? leaf_info(t, sibling & ~kLeafRef) : load_shared_info(&t.info[sibling]);
+            is_leaf_ref(sibling) ? leaf_info(t, sibling & ~kLeafRef) : load_shared_info(&t.info[value_index(t, sibling)]);
         info = from_left ? combine(t.costs, info, other) : combine(t.costs, other, info);
-        t.info[node] = info;
+        t.info[value] = info;
         from = node;
         node = t.node_parent[node];
     }
@@ -269,7 +286,7 @@ RF_HDI void emit_item(const RawTreeView& t, const EmitItem& item, BvhNode* nodes
         write_leaf_prims(t, first, prim_indices, &slot);
         return;
     }
-    const NodeInfo& info = t.info[item.ref];
+    const NodeInfo& info = node_info(t, item.ref);
     out.bounds = info.box;
     if (info_collapsed(info)) {
         out.first = item.slot;
@@ -282,8 +299,8 @@ RF_HDI void emit_item(const RawTreeView& t, const EmitItem& item, BvhNode* nodes
     const uint32_t* pair = child_pair(t, item.ref);
     const uint32_t left = pair[0], right = pair[1];
     const bool left_leaf = is_leaf_ref(left);
-    const uint32_t left_count = left_leaf ? run_size(t, left & ~kLeafRef) : t.info[left].count;
-    const uint32_t left_size = left_leaf ? 1u : t.info[left].out_size;
+    const uint32_t left_count = left_leaf ? run_size(t, left & ~kLeafRef) : node_info(t, left).count;
+    const uint32_t left_size = left_leaf ? 1u : node_info(t, left).out_size;
     const uint32_t at = Counter::add(next_count, 2u);
     next[at] = EmitItem{left, item.child_base, item.child_base + 2, item.slot};
     next[at + 1] = EmitItem{right, item.child_base + 1, item.child_base + 1 + left_size, item.slot + left_count};
