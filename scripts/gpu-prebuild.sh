@@ -1,13 +1,16 @@
 #!/usr/bin/env bash
 # Prepares a GPU session without a build on the device: compiles the CLI and
-# the gpu tests here for sm_90 (H100 / H200), portable CPU code (no
-# -march=native: the device machine's CPU may differ) and no Embree (the
+# the gpu tests here for sm_90 (H100 / H200), host code for x86-64-v3 (AVX2 +
+# FMA, which every H100/H200 host has; not -march=native: the device
+# machine's CPU may differ; and not baseline x86-64, whose host code would
+# take the non-FMA branch of src/trace/triangle_intersect.h while the device
+# takes the FMA one, breaking the bit-exact comparisons) and no Embree (the
 # device runs use --embree none), and stages them with the shared libraries
 # they need into .gpu-prebuilt/ (git-ignored, about 40 MB: it fits the
 # device call's carry limit). A cold build on the device takes longer than
 # one 10-minute call (renderer.cu alone compiles for well over 5 minutes).
 # Also stages compressed benchmark scenes in .gpu-scenes/ (about 14 MB).
-# Then, on the device: scripts/gpu-run.sh [tests|bench|builds|memcheck|all]
+# Then, on the device: scripts/gpu-run.sh [tests|sanitizers|bench|builds|all]
 # with .gpu-prebuilt and .gpu-scenes carried; it uses the staged binaries when they were
 # built from the sources it finds there (a digest of src, include, apps,
 # bench, tests and the CMake files), else it builds.
@@ -21,7 +24,7 @@ command -v nvcc > /dev/null || { echo "gpu-prebuild.sh: nvcc not found: the CUDA
 start=$(date +%s)
 sources=$(cd "$ROOT" && find src include apps bench tests cmake CMakeLists.txt -type f | LC_ALL=C sort | xargs sha1sum |
   sha1sum | cut -d' ' -f1)
-cmake -S "$ROOT" -B "$build" -DCMAKE_BUILD_TYPE=Release -DRAYFORGE_NATIVE=OFF -DRAYFORGE_BUILD_BENCHMARKS=OFF \
+cmake -S "$ROOT" -B "$build" -DCMAKE_BUILD_TYPE=Release -DRAYFORGE_NATIVE=OFF -DRAYFORGE_MARCH=x86-64-v3 -DRAYFORGE_BUILD_BENCHMARKS=OFF \
   -DCMAKE_CUDA_ARCHITECTURES=90 -DCMAKE_DISABLE_FIND_PACKAGE_embree=TRUE > /dev/null
 cmake --build "$build" -j "$jobs" --target rayforge_cli rayforge_gpu_tests
 rf="$build/bin/rayforge"

@@ -1,60 +1,113 @@
 #!/usr/bin/env bash
-# On a CUDA machine without package access (the device machine): runs the
-# gpu tests and the GPU benchmarks of issues 6 and 7, writing everything to
-# $OUT (or ./gpu-out).
-#   scripts/gpu-run.sh [tests|bench|builds|memcheck|all]   (default all;
-#   memcheck runs some gpu tests under compute-sanitizer; builds times every
-#   device builder on the Stanford Dragon and on 2 and 15 copies of it, the
-#   sizes of seed 000's table 5.1, when shared/scenes is there)
+# The GPU pass, on a CUDA machine without package access (the device
+# machine), writing its logs to $OUT (or ./gpu-out):
+#   scripts/gpu-run.sh [STEP...]      default: all
+# Steps, in the order of a first GPU run (docs/gpu.md says what to read off each):
+#   tests       every gpu test; fails when any test fails or is skipped
+#   sanitizers  memcheck, synccheck and racecheck (each a step of its own)
+#   memcheck | synccheck | racecheck   one compute-sanitizer tool
+#   bench       GPU rays (every kernel, protocol ray sets), path tracing, seed 000's builders
+#   builds      every device builder on the Stanford Dragon and 2 and 15 copies of it
+#   all         tests sanitizers bench builds
+# Every run first checks the runtime (`rayforge info --devices`). Each step
+# prints one line, "gpu-run: STEP: ok|FAIL|UNAVAILABLE[: why]", also kept in
+# $OUT/summary.txt. RAYFORGE_REQUIRE_GPU=1 is exported: a gpu test that finds
+# no device fails instead of skipping. Exit status: 0 when every step is ok,
+# 1 when one failed, 3 when none failed but a sanitizer was unavailable on
+# this runtime.
 # Binaries: those staged in .gpu-prebuilt/ by scripts/gpu-prebuild.sh when
 # they were built from these sources (carry .gpu-prebuilt: no build here);
 # otherwise it unpacks .gpu-debs/ (scripts/gpu-bundle.sh) into a private
 # prefix and builds the CLI and the gpu tests in build-gpu/. A cold build
 # may not fit one 10-minute call: build-gpu/ stays while the machine is
 # warm, so run the same command again.
+# RAYFORGE_SANITIZER_TIMEOUT: seconds per sanitizer tool (default 150).
 set -uo pipefail
-test_rc=0 bench_rc=0 path_rc=0 build_rc=0 builds_rc=0
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-what="${1:-all}"
 out="${OUT:-$ROOT/gpu-out}"
 mkdir -p "$out"
-# At most 8 files come back from a device call: $out holds only the logs
-# (nvidia-smi.txt, build.txt, gpu-tests.txt or memcheck.txt, bench-rays.txt
-# and .json, bench-path.txt, bench-seed000.txt, builds.txt); the rest goes here.
+export RAYFORGE_REQUIRE_GPU=1
+# At most 8 files come back from a device call: $out holds summary.txt
+# (the step lines, nvidia-smi, the device listing), build.txt, gpu-tests.txt,
+# sanitizers.txt, bench-rays.txt and .json, bench-render.txt and builds.txt;
+# the rest goes to a scratch folder.
 scratch=$(mktemp -d)
+summary="$out/summary.txt"
+: > "$summary"
+
+steps=()
+for arg in "${@:-all}"; do
+  case "$arg" in
+    all) steps+=(tests memcheck synccheck racecheck bench builds) ;;
+    sanitizers) steps+=(memcheck synccheck racecheck) ;;
+    tests | memcheck | synccheck | racecheck | bench | builds) steps+=("$arg") ;;
+    *) echo "usage: $0 [tests|sanitizers|memcheck|synccheck|racecheck|bench|builds|all]..." >&2; exit 2 ;;
+  esac
+done
+
+failed=0 unavailable=0
+# report STEP ok|FAIL|UNAVAILABLE [WHY]: the step's one line.
+report() {
+  local line="gpu-run: $1: $2${3:+: $3}"
+  echo "$line"
+  echo "$line" >> "$summary"
+  case "$2" in
+    ok) ;;
+    UNAVAILABLE) unavailable=1 ;;
+    *) failed=1 ;;
+  esac
+}
+
 # The digest of the sources the binaries come from (no git on the device).
 source_digest() {
   (cd "$ROOT" && find src include apps bench tests cmake CMakeLists.txt -type f | LC_ALL=C sort | xargs sha1sum | sha1sum | cut -d' ' -f1)
 }
-prebuilt="$ROOT/.gpu-prebuilt"
-nvidia-smi > "$out/nvidia-smi.txt" 2>&1
-# Scenes staged by gpu-prebuild.sh: unpacked where the bench looks for them.
-if [[ -d "$ROOT/.gpu-scenes" && ! -f "$ROOT/shared/scenes/views.json" ]]; then
-  mkdir -p "$ROOT/shared/scenes"
-  cp "$ROOT/.gpu-scenes/views.json" "$ROOT/shared/scenes/"
-  (cd "$ROOT/.gpu-scenes" && find . -name '*.gz') | while read -r packed; do
-    mkdir -p "$ROOT/shared/scenes/$(dirname "$packed")"
-    gunzip -c "$ROOT/.gpu-scenes/$packed" > "$ROOT/shared/scenes/${packed%.gz}"
-  done
-  echo "gpu-run.sh: scenes unpacked from .gpu-scenes into shared/scenes"
-fi
-if [[ -x "$prebuilt/bin/rayforge" && -f "$prebuilt/SOURCES" && "$(cat "$prebuilt/SOURCES")" == "$(source_digest)" ]]; then
-  echo "gpu-run.sh: using the binaries of .gpu-prebuilt (built from these sources)"
-  export LD_LIBRARY_PATH="$prebuilt/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
-  rf="$prebuilt/bin/rayforge"
-  gpu_tests="$prebuilt/bin/rayforge_gpu_tests"
-else
+
+# The instruction sets the prebuilt host code was compiled for (x86-64-v3).
+cpu_runs_prebuilt() {
+  local flag
+  for flag in avx2 fma bmi2 f16c movbe; do grep -qw "$flag" /proc/cpuinfo || return 1; done
+}
+
+# Sets $rf and $gpu_tests: the staged binaries, or a build here.
+# RAYFORGE_GPU_RUN_BINARIES=DIR (for tests/gpu_run_script_test.sh) takes
+# DIR/rayforge and DIR/rayforge_gpu_tests as they are.
+find_binaries() {
+  if [[ -n "${RAYFORGE_GPU_RUN_BINARIES:-}" ]]; then
+    rf="$RAYFORGE_GPU_RUN_BINARIES/rayforge"
+    gpu_tests="$RAYFORGE_GPU_RUN_BINARIES/rayforge_gpu_tests"
+    return 0
+  fi
+  local prebuilt="$ROOT/.gpu-prebuilt"
+  if [[ -x "$prebuilt/bin/rayforge" && -f "$prebuilt/SOURCES" && "$(cat "$prebuilt/SOURCES")" == "$(source_digest)" ]]; then
+    if ! cpu_runs_prebuilt; then
+      report binaries FAIL "this CPU lacks AVX2/FMA/BMI2 (x86-64-v3), which the binaries of .gpu-prebuilt need"
+      return 1
+    fi
+    echo "gpu-run.sh: using the binaries of .gpu-prebuilt (built from these sources, commit $(cat "$prebuilt/COMMIT" 2> /dev/null))"
+    export LD_LIBRARY_PATH="$prebuilt/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+    rf="$prebuilt/bin/rayforge"
+    gpu_tests="$prebuilt/bin/rayforge_gpu_tests"
+    return 0
+  fi
   [[ -d "$prebuilt" ]] && echo "gpu-run.sh: .gpu-prebuilt was built from other sources: building here"
-  prefix=/tmp/rayforge-debs
+  build_here
+}
+
+build_here() {
+  local prefix=/tmp/rayforge-debs f
   mkdir -p "$prefix"
   shopt -s nullglob
-  debs=("$ROOT"/.gpu-debs/*.deb)
+  local debs=("$ROOT"/.gpu-debs/*.deb)
+  shopt -u nullglob
   if ((${#debs[@]} == 0)); then
-    echo "gpu-run.sh: no packages in $ROOT/.gpu-debs: run scripts/gpu-bundle.sh (or scripts/gpu-prebuild.sh) here and carry the folder" >&2
-    exit 2
+    report binaries FAIL "no .gpu-prebuilt from these sources and no packages in .gpu-debs: run scripts/gpu-prebuild.sh (or gpu-bundle.sh) here and carry the folder"
+    return 1
   fi
-  for f in "${debs[@]}"; do dpkg-deb -x "$f" "$prefix" || { echo "gpu-run.sh: cannot unpack $f" >&2; exit 2; }; done
-  lib="$prefix/usr/lib/x86_64-linux-gnu"
+  for f in "${debs[@]}"; do
+    dpkg-deb -x "$f" "$prefix" || { report binaries FAIL "cannot unpack $f"; return 1; }
+  done
+  local lib="$prefix/usr/lib/x86_64-linux-gnu"
   export CMAKE_PREFIX_PATH="$prefix/usr:$lib/cmake${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
   # Multiarch headers (libjpeg's jconfig.h) live one level down.
   export CPATH="$prefix/usr/include:$prefix/usr/include/x86_64-linux-gnu${CPATH:+:$CPATH}"
@@ -64,73 +117,200 @@ else
   # .pc files say prefix=/usr: the sysroot puts the unpacked tree in front.
   export PKG_CONFIG_PATH="$lib/pkgconfig:$prefix/usr/share/pkgconfig"
   export PKG_CONFIG_SYSROOT_DIR="$prefix"
-  build="$ROOT/build-gpu"
-  {
+  local build="$ROOT/build-gpu"
+  if ! {
     cmake -S "$ROOT" -B "$build" -DCMAKE_BUILD_TYPE=Release -DRAYFORGE_BUILD_BENCHMARKS=OFF \
       -DCMAKE_CUDA_ARCHITECTURES=90 &&
-    cmake --build "$build" -j"$(nproc)" --target rayforge_cli rayforge_gpu_tests
-  } > "$out/build.txt" 2>&1 || { tail -40 "$out/build.txt"; exit 1; }
+      cmake --build "$build" -j"$(nproc)" --target rayforge_cli rayforge_gpu_tests
+  } > "$out/build.txt" 2>&1; then
+    tail -40 "$out/build.txt"
+    report binaries FAIL "the build failed (build.txt)"
+    return 1
+  fi
   rf="$build/bin/rayforge"
   gpu_tests=$(find "$build" -name rayforge_gpu_tests -type f | head -1)
-fi
-"$rf" info --devices | tee -a "$out/nvidia-smi.txt"
+}
 
-if [[ "$what" == all || "$what" == tests ]]; then
-  # The gpu-labelled tests are this one binary's.
-  (cd "$ROOT" && "$gpu_tests") > "$out/gpu-tests.txt" 2>&1
-  test_rc=$?
-  echo "gpu tests: rc=$test_rc"; tail -15 "$out/gpu-tests.txt"
-fi
-if [[ "$what" == memcheck ]]; then
-  # Device memory errors and races (compute-sanitizer ships with the toolkit).
-  compute-sanitizer --tool memcheck --error-exitcode 3 "$gpu_tests" \
-    --gtest_filter='GpuDeviceTracer.*:GpuRenderer.AovsAndCallbacks:GpuRenderer.RaySortingChangesNothing' \
-    > "$out/memcheck.txt" 2>&1
-  test_rc=$?
-  echo "memcheck: rc=$test_rc"; tail -15 "$out/memcheck.txt"
-fi
-if [[ "$what" == all || "$what" == bench ]]; then
-  scenes=(--scene builtin:cornell)
+# Sets $no_device: "" when the runtime lists a device, else why not.
+check_runtime() {
+  { echo "== nvidia-smi"; nvidia-smi 2>&1; echo "== rayforge info --devices"; } >> "$summary"
+  local listing
+  listing=$("$rf" info --devices 2>&1)
+  echo "$listing" | tee -a "$summary"
+  if grep -q '^cuda:[0-9]' <<< "$listing"; then
+    no_device=""
+    report runtime ok "$(grep -m1 '^cuda:' <<< "$listing")"
+  else
+    no_device=$(sed -n 's/^CUDA devices: none (\(.*\))$/\1/p' <<< "$listing")
+    no_device="${no_device:-$listing}"
+    report runtime FAIL "no CUDA device: $no_device"
+  fi
+}
+
+# A gtest summary count: gtest_count FILE PASSED|SKIPPED|FAILED.
+gtest_count() {
+  local label
+  case "$2" in PASSED) label='PASSED  ' ;; SKIPPED) label='SKIPPED ' ;; FAILED) label='FAILED  ' ;; esac
+  sed -n "s/^\[  $label\] \([0-9]*\) tests\{0,1\}[,.].*/\1/p" "$1" | tail -1
+}
+
+step_tests() {
+  local log="$out/gpu-tests.txt"
+  (cd "$ROOT" && "$gpu_tests") > "$log" 2>&1
+  local rc=$? passed skipped failures first
+  passed=$(gtest_count "$log" PASSED) skipped=$(gtest_count "$log" SKIPPED) failures=$(gtest_count "$log" FAILED)
+  passed=${passed:-0} skipped=${skipped:-0} failures=${failures:-0}
+  local counts="$passed passed, $failures failed, $skipped skipped"
+  if ((rc == 0 && skipped == 0 && passed > 0)); then
+    report tests ok "$counts"
+  elif ((rc == 0 && skipped > 0)); then
+    report tests FAIL "$counts: a skipped gpu test tested nothing ($(grep -m1 -o 'no CUDA device: .*' "$log" || echo see gpu-tests.txt))"
+  else
+    first=$(grep -m1 -o 'no CUDA device: .*' "$log" || grep -m1 -B1 '^\[  FAILED  \]' "$log" | head -1)
+    report tests FAIL "$counts, exit $rc (${first:-see gpu-tests.txt})"
+  fi
+}
+
+# The tests each sanitizer tool runs: the tracers and renderer (global
+# memory), and the builders, whose kernels hold the shared-memory and
+# partial-mask warp code (split_level_kernel, the HLBVH2 top-level task
+# kernels, window_neighbours_kernel).
+builder_tests='GpuHlbvh2Build.DeviceTopLevelIsTheCpuTopLevel:GpuGridBvhBuild.SameBvhAsCpuForBothVariants:GpuPlocBuild.DeviceClusteringAndNodeBoxes'
+sanitizer_filter() {
+  case "$1" in
+    memcheck) echo "GpuDeviceTracer.*:GpuRenderer.AovsAndCallbacks:GpuRenderer.RaySortingChangesNothing:$builder_tests" ;;
+    *) echo "$builder_tests" ;;
+  esac
+}
+
+step_sanitizer() {
+  local tool=$1 log="$out/sanitizers.txt" limit="${RAYFORGE_SANITIZER_TIMEOUT:-150}"
+  if [[ -n "$no_device" ]]; then
+    report "$tool" FAIL "not run: no CUDA device: $no_device"
+    return
+  fi
+  local sanitizer
+  sanitizer=$(command -v compute-sanitizer || ls /usr/local/cuda/bin/compute-sanitizer \
+    /usr/local/cuda/compute-sanitizer/compute-sanitizer 2> /dev/null | head -1)
+  if [[ -z "$sanitizer" ]]; then
+    report "$tool" UNAVAILABLE "compute-sanitizer not found (it ships with the CUDA toolkit)"
+    return
+  fi
+  # A trivial run first: some sandboxed runtimes refuse the sanitizer ("device
+  # not supported", then error 999 at the first allocation). That is the
+  # runtime's limit, not a memory error of ours.
+  local probe="$scratch/probe-$tool.txt"
+  (cd "$ROOT" && timeout 120 "$sanitizer" --tool "$tool" --error-exitcode 3 "$gpu_tests" \
+    --gtest_filter=GpuProbe.UploadLaunchDownload) > "$probe" 2>&1
+  local rc=$?
+  { echo "== $tool probe (exit $rc)"; cat "$probe"; } >> "$log"
+  if ((rc != 0)); then
+    if grep -qiE 'not supported|error 999|cudaErrorUnknown|unknown error|unable to attach|injection' "$probe"; then
+      report "$tool" UNAVAILABLE "compute-sanitizer unavailable on this runtime ($(grep -m1 -iE 'not supported|999|unknown error|unable to attach|injection' "$probe" | cut -c1-160))"
+    else
+      report "$tool" FAIL "the sanitizer's probe run failed, exit $rc (sanitizers.txt)"
+    fi
+    return
+  fi
+  local run="$scratch/run-$tool.txt" filter
+  filter=$(sanitizer_filter "$tool")
+  (cd "$ROOT" && timeout "$limit" "$sanitizer" --tool "$tool" --error-exitcode 3 "$gpu_tests" \
+    --gtest_filter="$filter") > "$run" 2>&1
+  rc=$?
+  { echo "== $tool on $filter (exit $rc)"; cat "$run"; } >> "$log"
+  local errors
+  errors=$(sed -n 's/.*ERROR SUMMARY: \([0-9]*\) error.*/\1/p' "$run" | tail -1)
+  case $rc in
+    0) report "$tool" ok "ERROR SUMMARY: ${errors:-0} errors" ;;
+    124) report "$tool" FAIL "timed out after $limit s (RAYFORGE_SANITIZER_TIMEOUT)" ;;
+    3) report "$tool" FAIL "${errors:-some} errors reported (sanitizers.txt)" ;;
+    *) report "$tool" FAIL "a test failed under the sanitizer, exit $rc (sanitizers.txt)" ;;
+  esac
+}
+
+# Scenes staged by gpu-prebuild.sh: unpacked where the bench looks for them.
+unpack_scenes() {
+  [[ -d "$ROOT/.gpu-scenes" && ! -f "$ROOT/shared/scenes/views.json" ]] || return 0
+  mkdir -p "$ROOT/shared/scenes"
+  cp "$ROOT/.gpu-scenes/views.json" "$ROOT/shared/scenes/"
+  local packed
+  (cd "$ROOT/.gpu-scenes" && find . -name '*.gz') | while read -r packed; do
+    mkdir -p "$ROOT/shared/scenes/$(dirname "$packed")"
+    gunzip -c "$ROOT/.gpu-scenes/$packed" > "$ROOT/shared/scenes/${packed%.gz}"
+  done
+  echo "gpu-run.sh: scenes unpacked from .gpu-scenes into shared/scenes"
+}
+
+step_bench() {
+  if [[ -n "$no_device" ]]; then
+    report bench FAIL "not run: no CUDA device: $no_device"
+    return
+  fi
+  local scenes=(--scene builtin:cornell) why=()
   [[ -d "$ROOT/shared/scenes" ]] && scenes=(--scenes-dir "$ROOT/shared/scenes" --scene sponza)
   "$rf" bench "${scenes[@]}" --device cuda --gpu-kernel all --rays primary,diffuse,shadow,ao --embree none \
-    --reps 5 --json "$out/bench-rays.json" > "$out/bench-rays.txt" 2>&1
-  bench_rc=$?
-  echo "bench rays: rc=$bench_rc"; tail -25 "$out/bench-rays.txt"
-  "$rf" bench "${scenes[@]}" --device cuda --integrator path --max-depth 4 --res 1024x768 --reps 20 \
-    > "$out/bench-path.txt" 2>&1
-  path_rc=$?
-  echo "bench path: rc=$path_rc"; tail -8 "$out/bench-path.txt"
-  # Seed 000's builders: GPU rows and the device LBVH's stage breakdown (issue 7).
-  "$rf" bench --preset seed000 "${scenes[@]}" --device cuda --embree none > "$out/bench-seed000.txt" 2>&1
-  build_rc=$?
-  echo "bench seed000: rc=$build_rc"; tail -8 "$out/bench-seed000.txt"
-fi
-if [[ "$what" == all || "$what" == builds ]]; then
-  # Issue 7's targets: 871K (Dragon), 1.74M (2 dragons; the table's 1.76M)
-  # and 13.1M (15 dragons; the table's 12.7M) triangles.
-  dragon="$ROOT/shared/scenes/stanford-dragon/dragon_vrip.ply"
-  if [[ -f "$dragon" ]]; then
-    for copies in 1 2 15; do
-      scene="$scratch/dragon-x$copies.json"
-      {
-        printf '{"meshes": ['
-        for ((i = 0; i < copies; ++i)); do
-          ((i > 0)) && printf ', '
-          printf '{"file": "%s", "transform": {"translate": [%d, 0, 0]}}' "$dragon" $((i * 1))
-        done
-        printf ']}\n'
-      } > "$scene"
-      for builder in lbvh30 lbvh63 hlbvh2 ploc gridbvh gridbvh-split; do
-        "$rf" build "$scene" --device cuda --builder "$builder" --reps 5 --convert cwbvh \
-          >> "$out/builds.txt" 2>&1 || builds_rc=1
-      done
-      "$rf" build "$scene" --device cuda --accel grid-proximity --reps 5 >> "$out/builds.txt" 2>&1 || builds_rc=1
-      "$rf" build "$scene" --device cpu --builder sbvh --reps 1 >> "$out/builds.txt" 2>&1 || builds_rc=1
-    done
-    echo "builds: rc=$builds_rc"; grep -E "median|error" "$out/builds.txt"
+    --reps 5 --json "$out/bench-rays.json" > "$out/bench-rays.txt" 2>&1 || why+=("rays")
+  {
+    echo "== path tracing"
+    "$rf" bench "${scenes[@]}" --device cuda --integrator path --max-depth 4 --res 1024x768 --reps 20 || why+=("path")
+    echo "== seed 000's builders"
+    "$rf" bench --preset seed000 "${scenes[@]}" --device cuda --embree none || why+=("seed000")
+  } > "$out/bench-render.txt" 2>&1
+  if ((${#why[@]} == 0)); then
+    report bench ok "${scenes[*]}"
   else
-    echo "builds: skipped, no $dragon (copy the Stanford Dragon into shared/scenes)"
+    report bench FAIL "failed: ${why[*]} (bench-rays.txt, bench-render.txt)"
   fi
+}
+
+# Seed 000's table 5.1 sizes: 871K (Dragon), 1.74M (2 dragons; the table's
+# 1.76M) and 13.1M (15 dragons; the table's 12.7M) triangles.
+step_builds() {
+  if [[ -n "$no_device" ]]; then
+    report builds FAIL "not run: no CUDA device: $no_device"
+    return
+  fi
+  local dragon="$ROOT/shared/scenes/stanford-dragon/dragon_vrip.ply" log="$out/builds.txt" rc=0
+  if [[ ! -f "$dragon" ]]; then
+    report builds FAIL "no $dragon (carry .gpu-scenes from scripts/gpu-prebuild.sh)"
+    return
+  fi
+  local copies i builder scene
+  for copies in 1 2 15; do
+    scene="$scratch/dragon-x$copies.json"
+    {
+      printf '{"meshes": ['
+      for ((i = 0; i < copies; ++i)); do
+        ((i > 0)) && printf ', '
+        printf '{"file": "%s", "transform": {"translate": [%d, 0, 0]}}' "$dragon" "$i"
+      done
+      printf ']}\n'
+    } > "$scene"
+    for builder in lbvh30 lbvh63 hlbvh2 ploc gridbvh gridbvh-split; do
+      "$rf" build "$scene" --device cuda --builder "$builder" --reps 5 --convert cwbvh >> "$log" 2>&1 || rc=1
+    done
+    "$rf" build "$scene" --device cuda --accel grid-proximity --reps 5 >> "$log" 2>&1 || rc=1
+    "$rf" build "$scene" --device cpu --builder sbvh --reps 1 >> "$log" 2>&1 || rc=1
+  done
+  if ((rc == 0)); then report builds ok "$(grep -c median "$log") timed builds"; else report builds FAIL "$(grep -m1 error "$log")"; fi
+}
+
+if find_binaries; then
+  check_runtime
+  unpack_scenes
+  for step in "${steps[@]}"; do
+    case "$step" in
+      tests) step_tests ;;
+      memcheck | synccheck | racecheck) step_sanitizer "$step" ;;
+      bench) step_bench ;;
+      builds) step_builds ;;
+    esac
+  done
+else
+  for step in "${steps[@]}"; do report "$step" FAIL "not run: no binaries"; done
 fi
-# Non-zero when any step failed, so the caller sees it in the exit status.
-exit $(( test_rc || bench_rc || path_rc || build_rc || builds_rc ))
+rm -rf "$scratch"
+echo "gpu-run.sh: summary in $summary"
+if ((failed)); then exit 1; fi
+if ((unavailable)); then exit 3; fi
+exit 0

@@ -27,14 +27,14 @@ std::string cuda_version(int version) {
 
 void print_devices() {
 #ifdef RAYFORGE_HAS_CUDA
-    const std::vector<cuda::DeviceInfo> devices = cuda::list_devices();
-    if (devices.empty()) {
-        const std::string reason = cuda::device_unavailable_reason();
-        std::printf("CUDA devices: none (%s)\n", reason.empty() ? "the driver reports no device" : reason.c_str());
+    const cuda::DeviceListing listing = cuda::list_devices();
+    if (listing.devices.empty()) {
+        std::printf("CUDA devices: none (%s)\n", listing.error.c_str());
         return;
     }
-    std::printf("CUDA devices: %zu\n", devices.size());
-    for (const cuda::DeviceInfo& d : devices) {
+    std::printf("CUDA devices: %zu\n", listing.devices.size());
+    if (!listing.error.empty()) std::printf("  (not listed: %s)\n", listing.error.c_str());
+    for (const cuda::DeviceInfo& d : listing.devices) {
         std::printf("cuda:%d  %s\n", d.index, d.name.c_str());
         std::printf("  compute capability %d.%d, %d SMs at %d MHz\n", d.compute_major, d.compute_minor,
                     d.multiprocessors, d.clock_mhz);

@@ -19,7 +19,7 @@ bool gpu_bench_available() { return true; }
 void require_gpu_device(int device) { cuda::require_device(device); }
 
 std::string gpu_device_name(int device) {
-    for (const cuda::DeviceInfo& info : cuda::list_devices())
+    for (const cuda::DeviceInfo& info : cuda::list_devices().devices)
         if (info.index == device) return info.name;
     return "";
 }

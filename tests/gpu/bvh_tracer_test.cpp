@@ -6,6 +6,7 @@
 #include <random>
 
 #include "accel/bvh/build/binned_sah.h"
+#include "gpu_test_device.h"
 #include "rayforge/backend/cuda.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
@@ -13,11 +14,6 @@
 
 namespace rf {
 namespace {
-
-bool have_device() { return !cuda::list_devices().empty(); }
-
-#define RF_REQUIRE_DEVICE()                                                                 \
-    if (!have_device()) GTEST_SKIP() << "no CUDA device: " << cuda::device_unavailable_reason()
 
 std::vector<Ray> random_rays(const Box3f& bounds, size_t count, uint32_t seed) {
     std::mt19937 rng(seed);
@@ -36,13 +32,12 @@ std::vector<Ray> random_rays(const Box3f& bounds, size_t count, uint32_t seed) {
 }
 
 TEST(GpuBvhTracer, ListsDevicesWithoutThrowing) {
-    auto devices = cuda::list_devices();
-    if (devices.empty()) {
-        EXPECT_FALSE(cuda::device_unavailable_reason().empty());
-        GTEST_SKIP() << "no CUDA device: " << cuda::device_unavailable_reason();
-    }
-    EXPECT_FALSE(devices[0].name.empty());
-    EXPECT_GT(devices[0].total_memory, 0u);
+    const cuda::DeviceListing listing = cuda::list_devices();
+    // No device is always explained, in the runtime's words.
+    if (listing.devices.empty()) EXPECT_FALSE(listing.error.empty());
+    RF_REQUIRE_DEVICE();
+    EXPECT_FALSE(listing.devices[0].name.empty());
+    EXPECT_GT(listing.devices[0].total_memory, 0u);
 }
 
 TEST(GpuBvhTracer, ClosestAndAnyHitMatchCpu) {

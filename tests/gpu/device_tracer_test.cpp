@@ -13,6 +13,7 @@
 
 #include "accel/brute_force.h"
 #include "backend/cuda/self_test.h"
+#include "gpu_test_device.h"
 #include "rayforge/backend/cuda.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
@@ -20,11 +21,6 @@
 
 namespace rf {
 namespace {
-
-bool have_device() { return !cuda::list_devices().empty(); }
-
-#define RF_REQUIRE_DEVICE() \
-    if (!have_device()) GTEST_SKIP() << "no CUDA device: " << cuda::device_unavailable_reason()
 
 // Camera rays through a jittered 96x72 image, then one cosine-free diffuse
 // bounce from every hit (random directions in the facing hemisphere), then
@@ -178,6 +174,28 @@ TEST(GpuDeviceTracer, EmptySceneAlwaysMisses) {
         tracer.intersect(rays, hits);
         for (const Hit& h : hits) EXPECT_FALSE(h.found());
     }
+}
+
+// The hit comparisons with the CPU are bit-exact only when the host code
+// takes the FMA branch of trace/triangle_intersect.h as the device does: a
+// build for baseline x86-64 (no FMA) would fail them on borderline rays.
+TEST(GpuProbe, HostCodeUsesFmaLikeTheDevice) {
+    RF_REQUIRE_DEVICE();
+#if !defined(__FMA__)
+    FAIL() << "host code compiled without FMA: build with -DRAYFORGE_MARCH=x86-64-v3 (scripts/gpu-prebuild.sh) or "
+              "-march=native on an FMA CPU";
+#endif
+}
+
+// The smallest real use of the device; scripts/gpu-run.sh runs it under
+// compute-sanitizer to probe whether the runtime lets the sanitizer in.
+TEST(GpuProbe, UploadLaunchDownload) {
+    RF_REQUIRE_DEVICE();
+    std::vector<uint32_t> values(1000);
+    for (uint32_t i = 0; i < values.size(); ++i) values[i] = i * 3;
+    const std::vector<uint32_t> result = cuda::self_test::add_on_device(values, 7);
+    ASSERT_EQ(result.size(), values.size());
+    for (uint32_t i = 0; i < values.size(); ++i) EXPECT_EQ(result[i], i * 3 + 7) << i;
 }
 
 TEST(GpuErrors, FailingAllocationNamesTheBufferAndSize) {

@@ -1,5 +1,5 @@
-// What the device-builder tests (tests/gpu/*_build_test.cpp) share: the skip
-// without a device, named test scenes with the degenerate inputs every
+// What the device-builder tests (tests/gpu/*_build_test.cpp) share: the device
+// gate (gpu_test_device.h), named test scenes with the degenerate inputs every
 // builder must survive, and the bit-exact BVH comparison.
 #pragma once
 
@@ -13,17 +13,12 @@
 
 #include "../accel_test_scenes.h"
 #include "accel/brute_force.h"
+#include "gpu_test_device.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/backend/cuda.h"
 #include "trace/bvh_traversal.h"
 
 namespace rf::gpu_build_test {
-
-inline bool have_device() { return !cuda::list_devices().empty(); }
-
-#define RF_REQUIRE_DEVICE()                   \
-    if (!::rf::gpu_build_test::have_device()) \
-    GTEST_SKIP() << "no CUDA device: " << ::rf::cuda::device_unavailable_reason()
 
 inline bool same_box(const Box3f& a, const Box3f& b) { return std::memcmp(&a, &b, sizeof(Box3f)) == 0; }
 

@@ -11,17 +11,13 @@
 #include <string>
 
 #include "rayforge/accel/accel.h"
+#include "gpu_test_device.h"
 #include "rayforge/backend/cuda.h"
 #include "rayforge/io/scene_io.h"
 #include "rayforge/render/render.h"
 
 namespace rf {
 namespace {
-
-bool have_device() { return !cuda::list_devices().empty(); }
-
-#define RF_REQUIRE_DEVICE() \
-    if (!have_device()) GTEST_SKIP() << "no CUDA device: " << cuda::device_unavailable_reason()
 
 struct Rendered {
     Image cpu, gpu;

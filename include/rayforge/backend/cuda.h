@@ -37,10 +37,15 @@ struct DeviceInfo {
     int runtime_version = 0;
 };
 
-// Devices the driver reports; empty (no error) when there is no driver or device.
-std::vector<DeviceInfo> list_devices();
-// Why list_devices() is empty, e.g. "no CUDA-capable device is detected"; "" when devices exist.
-std::string device_unavailable_reason();
+// What the CUDA runtime reports: the devices it can use and, when there are
+// none (or one could not be queried), why, in the runtime's own words, e.g.
+// "cudaGetDeviceCount failed: cudaErrorNoDevice: no CUDA-capable device is
+// detected (driver API 0, runtime 13.0)". Never throws.
+struct DeviceListing {
+    std::vector<DeviceInfo> devices;
+    std::string error;  // "" when every device was listed
+};
+DeviceListing list_devices();
 // Throws rf::Error saying why when device `index` cannot be used.
 void require_device(int index);
 

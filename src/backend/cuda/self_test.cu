@@ -6,6 +6,11 @@ namespace rf::cuda::self_test {
 
 namespace {
 __global__ void empty_kernel() {}
+
+__global__ void add_kernel(uint32_t* values, uint32_t count, uint32_t delta) {
+    const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i < count) values[i] += delta;
+}
 }  // namespace
 
 void allocate_device_buffer(size_t bytes) { DeviceBuffer<unsigned char> buffer("self-test buffer", bytes); }
@@ -13,6 +18,18 @@ void allocate_device_buffer(size_t bytes) { DeviceBuffer<unsigned char> buffer("
 void launch_invalid_kernel() {
     empty_kernel<<<1, 2048>>>();  // more threads per block than any CUDA device allows
     RF_CUDA_CHECK(cudaGetLastError());
+}
+
+std::vector<uint32_t> add_on_device(const std::vector<uint32_t>& values, uint32_t delta) {
+    const auto count = uint32_t(values.size());
+    DeviceBuffer<uint32_t> buffer("self-test values", count);
+    buffer.upload(std::span<const uint32_t>(values));
+    if (count > 0) add_kernel<<<(count + 255) / 256, 256>>>(buffer.data(), count, delta);
+    RF_CUDA_CHECK(cudaGetLastError());
+    RF_CUDA_CHECK(cudaDeviceSynchronize());
+    std::vector<uint32_t> result(count);
+    buffer.download(std::span<uint32_t>(result));
+    return result;
 }
 
 }  // namespace rf::cuda::self_test
