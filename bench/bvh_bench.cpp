@@ -6,8 +6,8 @@
 #include <random>
 #include <vector>
 
-#include "accel/bvh/build/binned_sah.h"
-#include "accel/bvh/build/build_bvh.h"
+#include "accel/bvh/builders/binned_sah.h"
+#include "accel/bvh/builders/build_bvh.h"
 #include "accel/bvh/bvh_accel.h"
 #include "rayforge/accel/accel.h"
 

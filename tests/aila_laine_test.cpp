@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "accel/brute_force.h"
-#include "accel/bvh/build/build_bvh.h"
-#include "accel/bvh/wide/aila_laine_layout.h"
+#include "accel/bvh/builders/build_bvh.h"
+#include "accel/bvh/layout/aila_laine_layout.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
 #include "rayforge/accel/accel.h"

@@ -11,13 +11,13 @@
 
 #include <nlohmann/json.hpp>
 
-#include "accel/bvh/build/build_bvh.h"
+#include "accel/bvh/builders/build_bvh.h"
 #include "accel/bvh/bvh_accel.h"
 #include "accel_test_scenes.h"
 #include "bench_runner.h"
 #include "bench_scenes.h"
 #include "candidates.h"
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 #include "bench_report.h"
 #include "embree_peer.h"
 #include "gpu_bench.h"

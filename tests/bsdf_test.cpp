@@ -11,7 +11,7 @@
 
 #include "render/bsdf.h"
 #include "render/microfacet.h"
-#include "render/random.h"
+#include "math/random.h"
 
 namespace rf {
 namespace {

@@ -20,7 +20,7 @@
 #include "rayforge/scene/camera.h"
 #include "rayforge/scene/scene_geometry.h"
 #include "io/procedural_sky.h"
-#include "render/color.h"
+#include "math/color.h"
 #include "test_paths.h"
 
 namespace rf {

@@ -1,7 +1,7 @@
 // Binned SAH builder: structural invariants of the canonical BVH over
 // several scenes, thread counts, leaf sizes and bin counts; determinism; the
 // SAH metric; empty, single and degenerate inputs.
-#include "accel/bvh/build/binned_sah.h"
+#include "accel/bvh/builders/binned_sah.h"
 
 #include <gtest/gtest.h>
 

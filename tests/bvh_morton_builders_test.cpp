@@ -14,12 +14,12 @@
 #include <vector>
 
 #include "accel/brute_force.h"
-#include "accel/bvh/build/hlbvh2.h"
-#include "accel/bvh/build/lbvh.h"
-#include "accel/bvh/build/morton_code.h"
-#include "accel/bvh/build/morton_radix_sort.h"
-#include "accel/bvh/build/morton_tree.h"
-#include "accel/bvh/build/ploc.h"
+#include "accel/bvh/builders/hlbvh2.h"
+#include "accel/bvh/builders/lbvh.h"
+#include "accel/bvh/builders/morton_code.h"
+#include "accel/bvh/builders/morton_radix_sort.h"
+#include "accel/bvh/builders/morton_tree.h"
+#include "accel/bvh/builders/ploc.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
 #include "rayforge/accel/accel.h"

@@ -12,10 +12,10 @@
 #include <vector>
 
 #include "accel/brute_force.h"
-#include "accel/bvh/build/binned_sah.h"
-#include "accel/bvh/build/build_bvh.h"
-#include "accel/bvh/build/sbvh.h"
-#include "accel/bvh/build/sweep_sah.h"
+#include "accel/bvh/builders/binned_sah.h"
+#include "accel/bvh/builders/build_bvh.h"
+#include "accel/bvh/builders/sbvh.h"
+#include "accel/bvh/builders/sweep_sah.h"
 #include "accel/bvh/optimize/reinsertion.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"

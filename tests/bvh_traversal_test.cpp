@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "accel/brute_force.h"
-#include "accel/bvh/build/build_bvh.h"
+#include "accel/bvh/builders/build_bvh.h"
 #include "accel/bvh/bvh_accel.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"

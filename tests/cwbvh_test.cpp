@@ -19,13 +19,13 @@
 #include <vector>
 
 #include "accel/brute_force.h"
-#include "accel/bvh/build/build_bvh.h"
-#include "accel/bvh/wide/cwbvh_layout.h"
+#include "accel/bvh/builders/build_bvh.h"
+#include "accel/bvh/layout/cwbvh_layout.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
-#include "render/random.h"
+#include "math/random.h"
 #include "trace/bvh_traversal.h"
 #include "trace/cwbvh_traversal.h"
 

@@ -14,7 +14,7 @@
 #include "rayforge/io/image_io.h"
 #include "rayforge/io/scene_io.h"
 #include "rayforge/render/render.h"
-#include "render/color.h"
+#include "math/color.h"
 #include "test_paths.h"
 
 namespace rf {

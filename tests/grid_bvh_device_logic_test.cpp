@@ -1,6 +1,6 @@
 // GridBvh / GridBvhSplit on the device (Garanzha 2014, dissertation ch. 4),
 // checked on the CPU: the shared __host__ __device__ steps of
-// src/accel/bvh/build/grid_bvh_steps.h run in the device's schedule
+// src/accel/bvh/builders/grid_bvh_steps.h run in the device's schedule
 // (shuffled thread orders, per-warp atomics, 8 threads per task) must give
 // the CPU builder's references, sorted keys, sparse grid, hierarchy, leaf
 // groups and, through the host emission, the same Bvh. The leaf finishing
@@ -22,12 +22,12 @@
 #include <string>
 #include <vector>
 
-#include "accel/bvh/build/grid_bvh.h"
-#include "accel/bvh/build/grid_bvh_emit.h"
-#include "accel/bvh/build/grid_bvh_finish_steps.h"
-#include "accel/bvh/build/grid_bvh_partial_triangles.h"
-#include "accel/bvh/build/grid_bvh_sparse_grid.h"
-#include "accel/bvh/build/grid_bvh_steps.h"
+#include "accel/bvh/builders/grid_bvh.h"
+#include "accel/bvh/builders/grid_bvh_emit.h"
+#include "accel/bvh/builders/grid_bvh_finish_steps.h"
+#include "accel/bvh/builders/grid_bvh_partial_triangles.h"
+#include "accel/bvh/builders/grid_bvh_sparse_grid.h"
+#include "accel/bvh/builders/grid_bvh_steps.h"
 #include "accel_test_scenes.h"
 #include "bvh_hash.h"
 #include "rayforge/accel/accel.h"

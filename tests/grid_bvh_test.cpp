@@ -3,7 +3,7 @@
 // boxes), structural invariants of the canonical BVH, depth on pathological
 // input, determinism across thread counts, traversal against brute force, and
 // the SAH gain of partial triangles on long thin triangles.
-#include "accel/bvh/build/grid_bvh.h"
+#include "accel/bvh/builders/grid_bvh.h"
 
 #include <gtest/gtest.h>
 
@@ -19,9 +19,9 @@
 #include <vector>
 
 #include "accel/brute_force.h"
-#include "accel/bvh/build/binned_sah.h"
-#include "accel/bvh/build/grid_bvh_partial_triangles.h"
-#include "accel/bvh/build/grid_bvh_sparse_grid.h"
+#include "accel/bvh/builders/binned_sah.h"
+#include "accel/bvh/builders/grid_bvh_partial_triangles.h"
+#include "accel/bvh/builders/grid_bvh_sparse_grid.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
 #include "rayforge/accel/accel.h"

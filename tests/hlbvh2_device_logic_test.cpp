@@ -1,5 +1,5 @@
 // The per-task logic of the CUDA HLBVH2 (Garanzha 2014 ch. 5; src/accel/bvh/
-// build/hlbvh2_tasks.h) run on the CPU the way the kernels run it: one
+// build/hlbvh2_bottom_steps.h) run on the CPU the way the kernels run it: one
 // launch per level, each "warp" dequeuing 32 tasks at once from the input
 // queue, its lanes splitting with process_task, new tasks placed by the
 // warp-local prefix sum (enqueue_offset) after one add on the output tail,
@@ -8,7 +8,7 @@
 // children), that every primitive is in exactly one leaf, the level-wise
 // bottom-up boxes, and that the host emission (emit_hlbvh2_forest, the
 // device build's host half) gives build_hlbvh2's BVH. A wrong split must fail.
-// The top level (hlbvh2_top_level.h; backend/cuda/hlbvh2_top_level.cu) is run
+// The top level (hlbvh2_top_steps.h; backend/cuda/hlbvh2_top_level.cu) is run
 // the same way: one launch per level, 4 tasks per warp, 8 lanes per task
 // whose shuffles (butterfly bounds, prefix/suffix bin scans, the candidate
 // fold) and ballots (the stable partition, the enqueue) are emulated lane by
@@ -28,11 +28,11 @@
 #include <string>
 #include <vector>
 
-#include "accel/bvh/build/hlbvh2.h"
-#include "accel/bvh/build/hlbvh2_emit.h"
-#include "accel/bvh/build/hlbvh2_tasks.h"
-#include "accel/bvh/build/hlbvh2_top_level.h"
-#include "accel/bvh/build/morton_tree.h"
+#include "accel/bvh/builders/hlbvh2.h"
+#include "accel/bvh/builders/hlbvh2_emit.h"
+#include "accel/bvh/builders/hlbvh2_bottom_steps.h"
+#include "accel/bvh/builders/hlbvh2_top_steps.h"
+#include "accel/bvh/builders/morton_tree.h"
 #include "accel_test_scenes.h"
 #include "rayforge/core/error.h"
 
@@ -486,7 +486,7 @@ struct PlainAtomics {
 };
 
 // Equal as values: zeros of either sign are equal (the only difference the
-// key encoding may make, see hlbvh2_top_level.h).
+// key encoding may make, see hlbvh2_top_steps.h).
 bool same_bin_value(const TopBin& a, const TopBin& b) {
     return a.box.lo.x == b.box.lo.x && a.box.lo.y == b.box.lo.y && a.box.lo.z == b.box.lo.z &&
            a.box.hi.x == b.box.hi.x && a.box.hi.y == b.box.hi.y && a.box.hi.z == b.box.hi.z &&

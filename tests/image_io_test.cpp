@@ -12,7 +12,7 @@
 
 #include "rayforge/core/error.h"
 #include "rayforge/io/image_io.h"
-#include "render/color.h"
+#include "math/color.h"
 #include "test_paths.h"
 
 namespace rf {

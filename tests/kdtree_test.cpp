@@ -19,7 +19,7 @@
 #include "accel/kdtree/polygon_clip.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"

@@ -23,13 +23,13 @@
 #include <type_traits>
 #include <vector>
 
-#include "accel/bvh/build/build_bvh.h"
-#include "accel/bvh/wide/aila_laine_layout.h"
-#include "accel/bvh/wide/aila_laine_steps.h"
-#include "accel/bvh/wide/cwbvh_collapse_steps.h"
-#include "accel/bvh/wide/cwbvh_emit_steps.h"
-#include "accel/bvh/wide/cwbvh_layout.h"
-#include "accel/bvh/wide/cwbvh_refine_steps.h"
+#include "accel/bvh/builders/build_bvh.h"
+#include "accel/bvh/layout/aila_laine_layout.h"
+#include "accel/bvh/layout/aila_laine_steps.h"
+#include "accel/bvh/layout/cwbvh_collapse_steps.h"
+#include "accel/bvh/layout/cwbvh_emit_steps.h"
+#include "accel/bvh/layout/cwbvh_layout.h"
+#include "accel/bvh/layout/cwbvh_refine_steps.h"
 #include "accel_test_scenes.h"
 #include "rayforge/accel/accel.h"
 

@@ -1,5 +1,5 @@
-// The per-thread logic of the CUDA LBVH (Karras 2012; src/accel/bvh/build/
-// karras_tree.h) run on the CPU the way the kernels run it: build_inner for
+// The per-thread logic of the CUDA LBVH (Karras 2012; src/accel/bvh/builders/
+// karras_tree_steps.h) run on the CPU the way the kernels run it: build_inner for
 // every inner node independently (with parent links), then the bottom-up box
 // pass with one walker per leaf, in shuffled orders and on many std::threads,
 // so the "second arrival continues" counter logic is exercised. Checks the
@@ -18,10 +18,10 @@
 #include <thread>
 #include <vector>
 
-#include "accel/bvh/build/karras_tree.h"
-#include "accel/bvh/build/lbvh.h"
-#include "accel/bvh/build/lbvh_emit.h"
-#include "accel/bvh/build/morton_tree.h"
+#include "accel/bvh/builders/karras_tree_steps.h"
+#include "accel/bvh/builders/lbvh.h"
+#include "accel/bvh/builders/lbvh_emit.h"
+#include "accel/bvh/builders/morton_tree.h"
 #include "accel_test_scenes.h"
 #include "rayforge/core/error.h"
 

@@ -13,7 +13,7 @@
 
 #include "rayforge/scene/scene.h"
 #include "rayforge/scene/scene_geometry.h"
-#include "render/color.h"
+#include "math/color.h"
 #include "render/environment_map.h"
 #include "render/light_sampling.h"
 #include "render/light_set.h"

@@ -20,11 +20,11 @@
 #include <vector>
 
 #include "accel_test_scenes.h"
-#include "accel/bvh/build/morton_radix_sort.h"
-#include "accel/bvh/build/morton_tree.h"
-#include "accel/bvh/build/ploc.h"
-#include "accel/bvh/build/ploc_emit.h"
-#include "accel/bvh/build/ploc_steps.h"
+#include "accel/bvh/builders/morton_radix_sort.h"
+#include "accel/bvh/builders/morton_tree.h"
+#include "accel/bvh/builders/ploc.h"
+#include "accel/bvh/builders/ploc_emit.h"
+#include "accel/bvh/builders/ploc_steps.h"
 #include "rayforge/core/error.h"
 
 namespace rf {

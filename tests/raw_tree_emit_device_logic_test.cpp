@@ -1,4 +1,4 @@
-// The device emission of Morton-family raw trees (src/accel/bvh/build/
+// The device emission of Morton-family raw trees (src/accel/bvh/builders/
 // raw_tree_emit_steps.h, run by backend/cuda/raw_tree_emit.cu) replayed on
 // the CPU the way the kernels run it: parents scattered per node slot, one
 // bottom-up walker per leaf with "second arrival continues" counters, and
@@ -19,13 +19,13 @@
 #include <string>
 #include <vector>
 
-#include "accel/bvh/build/hlbvh2.h"
-#include "accel/bvh/build/karras_tree.h"
-#include "accel/bvh/build/lbvh.h"
-#include "accel/bvh/build/lbvh_emit.h"
-#include "accel/bvh/build/morton_tree.h"
-#include "accel/bvh/build/ploc.h"
-#include "accel/bvh/build/raw_tree_emit_steps.h"
+#include "accel/bvh/builders/hlbvh2.h"
+#include "accel/bvh/builders/karras_tree_steps.h"
+#include "accel/bvh/builders/lbvh.h"
+#include "accel/bvh/builders/lbvh_emit.h"
+#include "accel/bvh/builders/morton_tree.h"
+#include "accel/bvh/builders/ploc.h"
+#include "accel/bvh/builders/raw_tree_emit_steps.h"
 #include "accel_test_scenes.h"
 #include "bvh_hash.h"
 

@@ -5,7 +5,7 @@
 #include <cmath>
 
 #include "rayforge/io/scene_io.h"
-#include "render/random.h"
+#include "math/random.h"
 #include "render/shading_triangles.h"
 
 namespace rf {

@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "render/color.h"
+#include "math/color.h"
 #include "render/material_eval.h"
 #include "render/texture_lod.h"
 #include "render/texture_mip.h"

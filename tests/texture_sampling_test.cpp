@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "render/color.h"
+#include "math/color.h"
 #include "render/texture_mip.h"
 #include "render/texture_sampling.h"
 

@@ -18,7 +18,7 @@
 #include "rayforge/io/scene_io.h"
 #include "rayforge/render/render.h"
 #include "render/integrators/path_stages.h"
-#include "render/random.h"
+#include "math/random.h"
 #include "render/ray_sort_key.h"
 #include "render/wavefront_path.h"
 #include "render_test_scene.h"

@@ -10,14 +10,14 @@
 #include <vector>
 
 #include "accel/brute_force.h"
-#include "accel/bvh/build/build_bvh.h"
-#include "accel/bvh/wide/wide_bvh.h"
+#include "accel/bvh/builders/build_bvh.h"
+#include "accel/bvh/layout/wide_bvh.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
-#include "trace/wide_bvh_packet_traversal.h"
-#include "trace/wide_bvh_traversal.h"
+#include "backend/cpu/wide_bvh_packet_traversal.h"
+#include "backend/cpu/wide_bvh_traversal.h"
 
 namespace rf {
 namespace {

@@ -6,7 +6,7 @@
 #include <memory>
 #include <ostream>
 
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 #include "gpu_bench.h"
 #include "rayforge/core/error.h"
 

@@ -7,7 +7,7 @@
 #include <chrono>
 #include <string>
 
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf::bench {

@@ -6,8 +6,8 @@
 #include <limits>
 #include <utility>
 
-#include "accel/bvh/wide/aila_laine_layout.h"
-#include "accel/bvh/wide/cwbvh_layout.h"
+#include "accel/bvh/layout/aila_laine_layout.h"
+#include "accel/bvh/layout/cwbvh_layout.h"
 #include "accel/grid/uniform_grid.h"
 #include "rayforge/backend/cuda_build.h"
 #include "rayforge/core/error.h"

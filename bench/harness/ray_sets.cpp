@@ -2,9 +2,9 @@
 
 #include <cmath>
 
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/core/error.h"
-#include "render/random.h"
+#include "math/random.h"
 #include "render/sampling.h"
 
 namespace rf::bench {

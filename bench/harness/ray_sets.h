@@ -71,7 +71,7 @@ RaySet make_primary_rays(const ViewSetup& view);
 //  - reflection: the mirror direction about that normal, closest hit.
 // Direction k of the primary ray of sample s of pixel p takes its two numbers
 // from rf::RandomStream(p, s * kAoSamplesPerHit + k, kRaySetSeed) (PCG hash,
-// src/render/random.h), so any run regenerates the identical arrays, and the
+// src/math/random.h), so any run regenerates the identical arrays, and the
 // one-sample sets do not change with samples_per_pixel. Secondary rays follow
 // the order of their primaries. Only the kinds listed are produced (in that order).
 std::vector<RaySet> make_ray_sets(const SceneGeometry& geometry, const Accel& reference, const ViewSetup& view,

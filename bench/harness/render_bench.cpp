@@ -6,7 +6,7 @@
 #include <iomanip>
 
 #include "bench_runner.h"
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 #include "gpu_bench.h"
 #include "io/procedural_sky.h"
 #include "ray_sets.h"

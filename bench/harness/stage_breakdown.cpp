@@ -6,10 +6,10 @@
 #include <ostream>
 #include <sstream>
 
-#include "accel/bvh/build/build_bvh.h"
-#include "accel/bvh/build/grid_bvh.h"
-#include "accel/bvh/build/hlbvh2.h"
-#include "core/parallel.h"
+#include "accel/bvh/builders/build_bvh.h"
+#include "accel/bvh/builders/grid_bvh.h"
+#include "accel/bvh/builders/hlbvh2.h"
+#include "backend/cpu/parallel.h"
 #include "gpu_bench.h"
 
 namespace rf::bench {

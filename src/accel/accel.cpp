@@ -1,8 +1,8 @@
 // build_accel: option checking and dispatch; the batched queries every Accel
 // inherits.
-#include "accel/ray_batches.h"
+#include "backend/cpu/ray_batches.h"
 #include "rayforge/accel/accel.h"
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 
 #include <cmath>
 #include <utility>
@@ -11,7 +11,7 @@
 
 #include "accel/accel_factories.h"
 #include "accel/brute_force.h"
-#include "accel/bvh/build/build_bvh.h"
+#include "accel/bvh/builders/build_bvh.h"
 #include "accel/bvh/bvh_accel.h"
 #include "rayforge/core/error.h"
 

@@ -25,7 +25,7 @@ std::unique_ptr<Accel> make_kdtree_accel(const SceneGeometry& geometry, const Bu
 // A built canonical BVH traced in options.layout (Bvh4 or Bvh8): collapses
 // `bvh` and wraps the result. `build_ms` is the time spent building `bvh`;
 // the collapse is timed here and reported as layout_ms (and added to build_ms).
-// `name` is the stats name, e.g. "bvh/sbvh/bvh8". Defined in accel/bvh/wide/wide_bvh_accel.cpp.
+// `name` is the stats name, e.g. "bvh/sbvh/bvh8". Defined in accel/bvh/layout/wide_bvh_accel.cpp.
 std::unique_ptr<Accel> make_wide_bvh_accel(const SceneGeometry& geometry, Bvh bvh, const BuildOptions& options,
                                            double build_ms, std::string name);
 

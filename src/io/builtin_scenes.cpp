@@ -22,7 +22,7 @@
 #include "rayforge/core/error.h"
 #include "io/procedural_sky.h"
 #include "rayforge/io/scene_io.h"
-#include "render/random.h"
+#include "math/random.h"
 
 namespace rf {
 namespace {

@@ -26,7 +26,7 @@
 
 #include "rayforge/core/error.h"
 #include "rayforge/io/image_io.h"
-#include "render/color.h"
+#include "math/color.h"
 
 namespace rf {
 namespace {

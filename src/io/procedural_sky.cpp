@@ -19,7 +19,7 @@
 #include <vector>
 
 #include "rayforge/core/error.h"
-#include "render/color.h"
+#include "math/color.h"
 
 namespace rf {
 namespace {

@@ -18,7 +18,7 @@
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/vec.h"
 #include "rayforge/scene/scene.h"
-#include "render/color.h"
+#include "math/color.h"
 #include "render/sampling.h"
 #include "render/texture_sampling.h"
 

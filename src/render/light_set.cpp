@@ -6,7 +6,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "render/color.h"
+#include "math/color.h"
 #include "render/sampling.h"
 
 namespace rf {

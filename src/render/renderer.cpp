@@ -1,6 +1,6 @@
 // rf::ProgressiveRenderer: each pass adds one sample to every pixel; the
 // image is cut into 16x16 tiles rendered in parallel by TBB. Every sample
-// draws its random numbers from its own counter-based stream (render/random.h)
+// draws its random numbers from its own counter-based stream (math/random.h)
 // keyed by (pixel, pass, seed), and each pixel's sum is added to in pass
 // order, so an image does not depend on the thread count or on which thread
 // renders which tile.
@@ -12,7 +12,7 @@
 #include <mutex>
 #include <string>
 
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 #include "rayforge/render/render.h"
@@ -20,7 +20,7 @@
 #include "render/integrators/normals.h"
 #include "render/integrators/path.h"
 #include "render/integrators/whitted.h"
-#include "render/random.h"
+#include "math/random.h"
 #include "render/scene_view.h"
 #include "render/texture_lod.h"
 #include "render/wavefront_path.h"

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 
 namespace rf {
 namespace {

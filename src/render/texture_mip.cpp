@@ -8,7 +8,7 @@
 #include <cstdint>
 #include <utility>
 
-#include "render/color.h"
+#include "math/color.h"
 #include "render/texture_sampling.h"
 
 namespace rf {

@@ -16,7 +16,7 @@
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/vec.h"
 #include "rayforge/scene/texture.h"
-#include "render/color.h"
+#include "math/color.h"
 
 namespace rf {
 

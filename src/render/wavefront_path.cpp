@@ -8,7 +8,7 @@
 #include <atomic>
 #include <chrono>
 
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 #include "render/ray_sort_key.h"
 
 namespace rf {

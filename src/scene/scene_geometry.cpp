@@ -3,7 +3,7 @@
 #include <cmath>
 #include <string>
 
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 

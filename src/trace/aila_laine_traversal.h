@@ -1,6 +1,6 @@
 // Closest-hit and any-hit traversal of the node-pair layout of Aila and Laine
 // 2009, "Understanding the Efficiency of Ray Traversal on GPUs"
-// (accel/bvh/wide/aila_laine_layout.h), written once for the host and the
+// (accel/bvh/layout/aila_laine_layout.h), written once for the host and the
 // CUDA backend: plain pointers in, no std containers, no exceptions.
 //
 // The loop structure is the paper's speculative "while-while": an inner loop
@@ -25,7 +25,7 @@
 #include <cstdint>
 #include <cstring>
 
-#include "accel/bvh/wide/aila_laine_layout.h"
+#include "accel/bvh/layout/aila_laine_layout.h"
 #include "rayforge/core/float_bits.h"
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/ray.h"

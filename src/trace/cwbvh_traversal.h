@@ -1,5 +1,5 @@
 // Closest-hit and any-hit traversal of the compressed 8-wide BVH
-// (accel/bvh/wide/cwbvh_layout.h) after Algorithm 1 of Ylitie, Karras and
+// (accel/bvh/layout/cwbvh_layout.h) after Algorithm 1 of Ylitie, Karras and
 // Laine 2017, "Efficient Incoherent Ray Traversal on GPUs Through Compressed
 // Wide BVHs", written once for the host and the CUDA backend: plain pointers
 // in, no std containers, no exceptions.
@@ -56,7 +56,7 @@
 #include <cstdint>
 #include <cstring>
 
-#include "accel/bvh/wide/cwbvh_layout.h"
+#include "accel/bvh/layout/cwbvh_layout.h"
 #include "rayforge/core/float_bits.h"
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/ray.h"

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <random>
 
-#include "accel/bvh/build/binned_sah.h"
+#include "accel/bvh/builders/binned_sah.h"
 #include "gpu_test_device.h"
 #include "rayforge/backend/cuda.h"
 #include "rayforge/core/error.h"

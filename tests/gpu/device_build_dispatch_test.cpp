@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "../accel_test_rays.h"
-#include "accel/bvh/build/build_bvh.h"
+#include "accel/bvh/builders/build_bvh.h"
 #include "gpu_build_checks.h"
 #include "rayforge/backend/cuda.h"
 #include "rayforge/backend/cuda_build.h"

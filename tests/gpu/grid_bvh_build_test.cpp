@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "../accel_test_scenes.h"
-#include "accel/bvh/build/grid_bvh.h"
+#include "accel/bvh/builders/grid_bvh.h"
 #include "gpu_build_checks.h"
 #include "rayforge/backend/cuda.h"
 #include "rayforge/backend/cuda_build.h"

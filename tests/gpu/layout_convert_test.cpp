@@ -11,9 +11,9 @@
 #include <vector>
 
 #include "../accel_test_scenes.h"
-#include "accel/bvh/build/build_bvh.h"
-#include "accel/bvh/wide/aila_laine_layout.h"
-#include "accel/bvh/wide/cwbvh_layout.h"
+#include "accel/bvh/builders/build_bvh.h"
+#include "accel/bvh/layout/aila_laine_layout.h"
+#include "accel/bvh/layout/cwbvh_layout.h"
 #include "gpu_build_checks.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/backend/cuda.h"

@@ -1,7 +1,7 @@
-#include "accel/ray_batches.h"
+#include "backend/cpu/ray_batches.h"
 #include "accel/bvh/bvh_accel.h"
 
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf {

@@ -1,5 +1,5 @@
 // make_grid_accel and the batched queries of the uniform grid (seeds 001, 002).
-#include "accel/ray_batches.h"
+#include "backend/cpu/ray_batches.h"
 #include "accel/grid/grid_accel.h"
 
 #include <chrono>
@@ -7,7 +7,7 @@
 #include <string>
 
 #include "accel/accel_factories.h"
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf {

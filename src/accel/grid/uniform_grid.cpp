@@ -13,7 +13,7 @@
 
 #include "accel/grid/proximity_clouds.h"
 #include "accel/grid/uniform_grid_steps.h"
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 

@@ -1,6 +1,6 @@
 // The kd-tree's rf::Accel (seed 002): build timing, the traversal chosen by
 // options.kd_traversal, batches and counted traversals.
-#include "accel/ray_batches.h"
+#include "backend/cpu/ray_batches.h"
 #include "accel/kdtree/kdtree_accel.h"
 
 #include <chrono>
@@ -9,7 +9,7 @@
 
 #include "accel/accel_factories.h"
 #include "accel/kdtree/kdtree_build.h"
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf {

@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "accel/kdtree/polygon_clip.h"
-#include "core/parallel.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 

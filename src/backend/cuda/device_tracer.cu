@@ -19,7 +19,7 @@
 #include <limits>
 
 #include "accel/accel_factories.h"
-#include "accel/bvh/build/build_bvh.h"
+#include "accel/bvh/builders/build_bvh.h"
 #include "accel/grid/uniform_grid.h"
 #include "accel/kdtree/kdtree_build.h"
 #include "backend/cuda/device_tracer_impl.h"

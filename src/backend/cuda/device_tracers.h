@@ -4,8 +4,8 @@
 // the shared host/device traversal of src/trace. Views hold device pointers.
 #pragma once
 
-#include "accel/bvh/wide/aila_laine_layout.h"
-#include "accel/bvh/wide/cwbvh_layout.h"
+#include "accel/bvh/layout/aila_laine_layout.h"
+#include "accel/bvh/layout/cwbvh_layout.h"
 #include "rayforge/core/host_device.h"
 #include "trace/aila_laine_traversal.h"
 #include "trace/bvh_traversal.h"

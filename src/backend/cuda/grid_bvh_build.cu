@@ -1,6 +1,6 @@
 // GridBvh and GridBvhSplit on the device (Garanzha 2014, dissertation ch. 4),
 // building rf::build_grid_bvh's tree through the shared steps of
-// src/accel/bvh/build/grid_bvh_steps.h:
+// src/accel/bvh/builders/grid_bvh_steps.h:
 //  1. references (§4.4): one thread per triangle writes its reference; the
 //     scene box is a cub::DeviceReduce of the reference boxes (min/max are
 //     exact and skip NaN as the CPU's fold does, so any order gives the
@@ -61,10 +61,10 @@
 #include <utility>
 #include <vector>
 
-#include "accel/bvh/build/grid_bvh.h"
-#include "accel/bvh/build/grid_bvh_emit.h"
-#include "accel/bvh/build/grid_bvh_finish_steps.h"
-#include "accel/bvh/build/grid_bvh_steps.h"
+#include "accel/bvh/builders/grid_bvh.h"
+#include "accel/bvh/builders/grid_bvh_emit.h"
+#include "accel/bvh/builders/grid_bvh_finish_steps.h"
+#include "accel/bvh/builders/grid_bvh_steps.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/event_timer.h"
 #include "backend/cuda/morton_sort.h"

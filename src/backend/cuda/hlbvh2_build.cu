@@ -9,7 +9,7 @@
 //  3. bottom levels by work queues, one launch per level: each warp takes 32
 //     tasks with one atomicAdd on the input queue's head (lane 0, broadcast
 //     by shuffle); each thread splits its task with the shared HD step
-//     (hlbvh2_tasks.h process_task: binary search for the first 1 of the
+//     (hlbvh2_bottom_steps.h process_task: binary search for the first 1 of the
 //     highest differing bit; the node is written at index mid - 1, as the CPU
 //     numbers it, so the trees are the CPU's by construction); inner children
 //     are enqueued at a warp-local prefix sum (two ballots + popc) after one
@@ -39,12 +39,12 @@
 #include <utility>
 #include <vector>
 
-#include "accel/bvh/build/hlbvh2_emit.h"
-#include "accel/bvh/build/hlbvh2_tasks.h"
+#include "accel/bvh/builders/hlbvh2_emit.h"
+#include "accel/bvh/builders/hlbvh2_bottom_steps.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/raw_tree_emit.h"
 #include "backend/cuda/hlbvh2_build.h"
-#include "backend/cuda/hlbvh2_top_level.h"
+#include "backend/cuda/hlbvh2_top_steps.h"
 #include "backend/cuda/morton_sort.h"
 #include "rayforge/backend/cuda.h"
 #include "rayforge/core/error.h"

@@ -7,7 +7,7 @@
 #include <span>
 #include <vector>
 
-#include "accel/bvh/build/hlbvh2_emit.h"
+#include "accel/bvh/builders/hlbvh2_emit.h"
 #include "rayforge/backend/cuda_build.h"
 #include "rayforge/math/box.h"
 #include "rayforge/scene/scene_geometry.h"

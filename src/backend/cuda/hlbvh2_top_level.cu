@@ -1,7 +1,7 @@
 // HLBVH2's top level on the device (Garanzha 2014, dissertation ch. 5: the
 // tree over the clusters by the grid-based SAH of ch. 4, §4.3, with the top
 // grid only), building the CPU's tree (hlbvh2.cpp build_hlbvh2_top_level)
-// from the shared steps of accel/bvh/build/hlbvh2_top_level.h:
+// from the shared steps of accel/bvh/builders/hlbvh2_top_steps.h:
 //  1. one thread per cluster: its cell in the 32^3 grid, triangle count,
 //     box and root, in cluster order; the root task (all clusters, node 0).
 //  2. task queues, one launch per level: each warp takes 4 tasks with one
@@ -34,8 +34,8 @@
 
 #include <algorithm>
 
-#include "accel/bvh/build/hlbvh2_top_level.h"
-#include "backend/cuda/hlbvh2_top_level.h"
+#include "accel/bvh/builders/hlbvh2_top_steps.h"
+#include "backend/cuda/hlbvh2_top_steps.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {

@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "accel/bvh/build/hlbvh2_tasks.h"
+#include "accel/bvh/builders/hlbvh2_bottom_steps.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/event_timer.h"
 #include "backend/cuda/morton_sort.h"

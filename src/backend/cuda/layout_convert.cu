@@ -41,13 +41,13 @@
 #include <string>
 #include <vector>
 
-#include "accel/bvh/build/karras_tree.h"
-#include "accel/bvh/wide/aila_laine_layout.h"
-#include "accel/bvh/wide/aila_laine_steps.h"
-#include "accel/bvh/wide/cwbvh_collapse_steps.h"
-#include "accel/bvh/wide/cwbvh_emit_steps.h"
-#include "accel/bvh/wide/cwbvh_layout.h"
-#include "accel/bvh/wide/cwbvh_refine_steps.h"
+#include "accel/bvh/builders/karras_tree_steps.h"
+#include "accel/bvh/layout/aila_laine_layout.h"
+#include "accel/bvh/layout/aila_laine_steps.h"
+#include "accel/bvh/layout/cwbvh_collapse_steps.h"
+#include "accel/bvh/layout/cwbvh_emit_steps.h"
+#include "accel/bvh/layout/cwbvh_layout.h"
+#include "accel/bvh/layout/cwbvh_refine_steps.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/event_timer.h"
 #include "backend/cuda/morton_sort.h"

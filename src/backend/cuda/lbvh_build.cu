@@ -30,8 +30,8 @@
 #include <utility>
 #include <vector>
 
-#include "accel/bvh/build/karras_tree.h"
-#include "accel/bvh/build/lbvh_emit.h"
+#include "accel/bvh/builders/karras_tree_steps.h"
+#include "accel/bvh/builders/lbvh_emit.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/lbvh_build.h"
 #include "backend/cuda/morton_sort.h"

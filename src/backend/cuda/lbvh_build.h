@@ -13,7 +13,7 @@
 
 namespace rf::cuda {
 
-// Indexed as in accel/bvh/build/karras_tree.h; empty arrays for n < 2.
+// Indexed as in accel/bvh/builders/karras_tree_steps.h; empty arrays for n < 2.
 struct DeviceKarrasTree {
     std::vector<uint32_t> order;         // sorted position -> triangle
     std::vector<uint32_t> children;      // 2 (n - 1)

@@ -6,8 +6,8 @@
 #include <algorithm>
 #include <cub/device/device_radix_sort.cuh>
 
-#include "accel/bvh/build/karras_tree.h"
-#include "accel/bvh/build/morton_code.h"
+#include "accel/bvh/builders/karras_tree_steps.h"
+#include "accel/bvh/builders/morton_code.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {

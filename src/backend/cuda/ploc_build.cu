@@ -6,7 +6,7 @@
 //  2. the initial clusters: one thread per sorted position writes its leaf
 //     reference and gathers its triangle's box.
 //  3. per iteration until one cluster is left (sec. 4), over the shared
-//     per-cluster steps of accel/bvh/build/ploc_steps.h:
+//     per-cluster steps of accel/bvh/builders/ploc_steps.h:
 //     a. nearest neighbours (sec. 4.2): one block per 256 clusters loads their
 //        boxes and radius more on each side into shared memory; every pair
 //        with an end in the block is evaluated once (window_pairs_from) and
@@ -37,8 +37,8 @@
 #include <utility>
 #include <vector>
 
-#include "accel/bvh/build/ploc_emit.h"
-#include "accel/bvh/build/ploc_steps.h"
+#include "accel/bvh/builders/ploc_emit.h"
+#include "accel/bvh/builders/ploc_steps.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/raw_tree_emit.h"
 #include "backend/cuda/morton_sort.h"

@@ -13,7 +13,7 @@
 
 namespace rf::cuda {
 
-// Indexed as in accel/bvh/build/ploc_emit.h; empty node arrays for n < 2.
+// Indexed as in accel/bvh/builders/ploc_emit.h; empty node arrays for n < 2.
 struct DevicePlocTree {
     std::vector<uint32_t> order;            // sorted position -> triangle
     std::vector<uint32_t> children;         // 2 (n - 1), nodes in creation order, root n - 2

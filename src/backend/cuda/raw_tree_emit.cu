@@ -1,5 +1,5 @@
 // Canonical emission of a Morton-family raw tree on the device: the steps of
-// accel/bvh/build/raw_tree_emit_steps.h (parents, the bottom-up finalize
+// accel/bvh/builders/raw_tree_emit_steps.h (parents, the bottom-up finalize
 // with arrival counters, then one launch per level top down), then the
 // nodes and primitive indices back to the host. Only the root's values
 // cross to the host in between: its output size sizes the node buffer, its
@@ -12,7 +12,7 @@
 #include <algorithm>
 #include <string>
 
-#include "accel/bvh/build/raw_tree_emit_steps.h"
+#include "accel/bvh/builders/raw_tree_emit_steps.h"
 #include "backend/cuda/cuda_check.h"
 #include "backend/cuda/raw_tree_emit.h"
 #include "rayforge/core/error.h"

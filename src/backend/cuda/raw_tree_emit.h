@@ -1,5 +1,5 @@
 // Internal face of the device emission of Morton-family raw trees
-// (raw_tree_emit.cu; the steps are accel/bvh/build/raw_tree_emit_steps.h):
+// (raw_tree_emit.cu; the steps are accel/bvh/builders/raw_tree_emit_steps.h):
 // the LBVH, HLBVH2 and PLOC device builders hand over the tree they left in
 // device memory and get the canonical BVH back, leaf collapse and layout
 // done on the device.

@@ -4,7 +4,7 @@
 #pragma once
 
 #include "render/integrators/surface_trace.h"
-#include "render/random.h"
+#include "math/random.h"
 #include "render/sampling.h"
 
 namespace rf {

@@ -21,7 +21,7 @@
 #include "render/bsdf.h"
 #include "render/integrators/path_stages.h"
 #include "render/integrators/surface_trace.h"
-#include "render/random.h"
+#include "math/random.h"
 
 namespace rf {
 

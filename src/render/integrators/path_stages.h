@@ -26,7 +26,7 @@
 #include "render/bsdf.h"
 #include "render/integrators/surface_trace.h"
 #include "render/light_sampling.h"
-#include "render/random.h"
+#include "math/random.h"
 #include "render/texture_lod.h"
 
 namespace rf {

@@ -13,7 +13,7 @@
 #include "rayforge/math/ray.h"
 #include "rayforge/scene/scene_geometry.h"
 #include "render/material_eval.h"
-#include "render/random.h"
+#include "math/random.h"
 #include "render/texture_lod.h"
 
 namespace rf {

@@ -30,7 +30,7 @@
 #include "render/area_lights.h"
 #include "render/integrators/surface_trace.h"
 #include "render/light_sampling.h"
-#include "render/random.h"
+#include "math/random.h"
 #include "render/sampling.h"
 
 namespace rf {

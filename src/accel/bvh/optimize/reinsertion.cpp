@@ -23,8 +23,8 @@
 #include <queue>
 #include <vector>
 
-#include "accel/bvh/build/sweep_common.h"
-#include "core/parallel.h"
+#include "accel/bvh/builders/sweep_common.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/core/memory_budget.h"
 
 namespace rf {
