@@ -68,8 +68,8 @@
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/event_timer.h"
 #include "backend/cuda/morton_sort.h"
-#include "rayforge/backend/cuda.h"
-#include "rayforge/backend/cuda_build.h"
+#include "backend/backends.h"
+#include "backend/cuda/device_builders.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {

@@ -46,7 +46,7 @@
 #include "backend/cuda/hlbvh2_build.h"
 #include "backend/cuda/hlbvh2_top_steps.h"
 #include "backend/cuda/morton_sort.h"
-#include "rayforge/backend/cuda.h"
+#include "backend/backends.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {

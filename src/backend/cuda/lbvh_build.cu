@@ -36,7 +36,7 @@
 #include "backend/cuda/lbvh_build.h"
 #include "backend/cuda/morton_sort.h"
 #include "backend/cuda/raw_tree_emit.h"
-#include "rayforge/backend/cuda.h"
+#include "backend/backends.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {

@@ -18,7 +18,7 @@
 
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/event_timer.h"
-#include "rayforge/backend/cuda_build.h"
+#include "backend/cuda/device_builders.h"
 #include "rayforge/math/box.h"
 #include "rayforge/scene/scene_geometry.h"
 

@@ -43,7 +43,7 @@
 #include "backend/cuda/raw_tree_emit.h"
 #include "backend/cuda/morton_sort.h"
 #include "backend/cuda/ploc_build.h"
-#include "rayforge/backend/cuda.h"
+#include "backend/backends.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {

@@ -11,7 +11,7 @@
 #include "backend/cuda/morton_sort.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/accel/bvh/bvh.h"
-#include "rayforge/backend/cuda_build.h"
+#include "backend/cuda/device_builders.h"
 #include "rayforge/math/box.h"
 
 namespace rf::cuda {
