@@ -3,11 +3,11 @@
 //
 // AFF ("Animated File Format") is the scene format of BART, "A Benchmark for
 // Animated Ray Tracing" (J. Lext, U. Assarsson, T. Möller, IEEE CG&A 2001); it
-// extends Eric Haines's NFF 3.9 with meshes, textured and animated triangles, includes, static and
-// keyframe-animated transform blocks. rayforge is static, so the loader
-// evaluates the animation at one time: the start of the animation (`a
-// start end frames`), or 0 when the file has no `a` line; load_aff_at_time
-// picks another time.
+// extends Eric Haines's NFF 3.9 with meshes, textured and animated triangles,
+// includes, static and keyframe-animated transform blocks. rayforge is static,
+// so the loader evaluates the animation at one time: the start of the
+// animation (`a start end frames`), or 0 when the file has no `a` line;
+// load_aff_at_time picks another time.
 //
 // Supported (see docs/scene-format.md for the mapping onto rf::Scene):
 //   comments (# and %, to the end of the line), v (from/at/up/angle/hither/
