@@ -44,7 +44,7 @@
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/raw_tree_emit.h"
 #include "backend/cuda/hlbvh2_build.h"
-#include "backend/cuda/hlbvh2_top_steps.h"
+#include "backend/cuda/hlbvh2_top_level.h"
 #include "backend/cuda/morton_sort.h"
 #include "backend/backends.h"
 #include "rayforge/core/error.h"
