@@ -19,6 +19,7 @@
 #include "accel/bvh/optimize/reinsertion.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/accel/accel.h"
 
 namespace rf {
@@ -238,8 +239,9 @@ TEST(SweepSah, InvariantsHoldForScenesLeafSizesAndThreads) {
         for (int leaf_size : {1, 4, 16}) {
             for (int threads : {1, 2}) {
                 SCOPED_TRACE(scene.name + " leaf " + std::to_string(leaf_size) + " threads " + std::to_string(threads));
-                const Bvh bvh = build_sweep_sah(scene.geometry.triangles,
-                                                BuildOptions{.max_leaf_size = leaf_size, .threads = threads});
+                const Bvh bvh = build_bvh(scene.geometry.triangles, BuildOptions{.builder = Builder::SweepSah,
+                                                                                  .threads = threads,
+                                                                                  .max_leaf_size = leaf_size});
                 check_bvh(bvh, scene.geometry.triangles, leaf_size);
                 EXPECT_TRUE(std::isfinite(bvh.sah_cost()));
             }
@@ -258,9 +260,9 @@ TEST(SweepSah, DepthStaysWithinLimitOnPathologicalInput) {
     const SceneGeometry row = make_geometric_row(900);
     const SceneGeometry overflow = make_overflowing_soup();
     for (int leaf_size : {1, 4}) {
-        const BuildOptions options{.max_leaf_size = leaf_size};
-        check_bvh(build_sweep_sah(row.triangles, options), row.triangles, leaf_size);
-        const TreeShape shape = check_bvh(build_sweep_sah(overflow.triangles, options), overflow.triangles, leaf_size);
+        const BvhBuildConfig config{.max_leaf_size = leaf_size};
+        check_bvh(build_sweep_sah(row.triangles, config), row.triangles, leaf_size);
+        const TreeShape shape = check_bvh(build_sweep_sah(overflow.triangles, config), overflow.triangles, leaf_size);
         EXPECT_LE(shape.max_depth, kBvhMaxDepth);
         EXPECT_GT(shape.max_depth, 50);  // the input really is lopsided
     }
@@ -269,9 +271,9 @@ TEST(SweepSah, DepthStaysWithinLimitOnPathologicalInput) {
 TEST(SweepSah, SameTreeForEveryThreadCount) {
     // Large enough for parallel sorts, axis tasks and subtree tasks.
     const SceneGeometry soup = test::make_triangle_soup(80000, 5, {Vec3f(-100.0f), Vec3f(100.0f)}, 1.0f);
-    const Bvh one = build_sweep_sah(soup.triangles, BuildOptions{.threads = 1});
-    const Bvh two = build_sweep_sah(soup.triangles, BuildOptions{.threads = 2});
-    const Bvh all = build_sweep_sah(soup.triangles, BuildOptions{.threads = 0});
+    const Bvh one = build_bvh(soup.triangles, BuildOptions{.builder = Builder::SweepSah, .threads = 1});
+    const Bvh two = build_bvh(soup.triangles, BuildOptions{.builder = Builder::SweepSah, .threads = 2});
+    const Bvh all = build_bvh(soup.triangles, BuildOptions{.builder = Builder::SweepSah, .threads = 0});
     EXPECT_TRUE(identical(one, two));
     EXPECT_TRUE(identical(one, all));
     check_bvh(one, soup.triangles, 4);
@@ -281,8 +283,9 @@ TEST(SweepSah, SahNoWorseThanBinned) {
     for (const NamedScene& scene : test_scenes()) {
         if (scene.name == "identical" || scene.name == "points" || scene.name == "geometric") continue;
         SCOPED_TRACE(scene.name);
-        const double binned = build_binned_sah(scene.geometry.triangles, BuildOptions{}).sah_cost();
-        const double sweep = build_sweep_sah(scene.geometry.triangles, BuildOptions{}).sah_cost();
+        const double binned =
+            build_binned_sah(scene.geometry.triangles, BvhBuildConfig{}, BinnedSahOptions{}).sah_cost();
+        const double sweep = build_sweep_sah(scene.geometry.triangles, BvhBuildConfig{}).sah_cost();
         EXPECT_LE(sweep, binned * 1.02);
     }
 }
@@ -295,9 +298,9 @@ TEST(SweepSah, MatchesBruteForce) {
 }
 
 TEST(SweepSah, EmptyAndSingleTriangle) {
-    EXPECT_TRUE(build_sweep_sah({}, BuildOptions{}).nodes.empty());
+    EXPECT_TRUE(build_sweep_sah({}, BvhBuildConfig{}).nodes.empty());
     const Triangle tri{Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)};
-    const Bvh one = build_sweep_sah(std::span<const Triangle>(&tri, 1), BuildOptions{});
+    const Bvh one = build_sweep_sah(std::span<const Triangle>(&tri, 1), BvhBuildConfig{});
     ASSERT_EQ(one.nodes.size(), 1u);
     EXPECT_EQ(one.nodes[0].count, 1u);
     EXPECT_TRUE(same_box(one.nodes[0].bounds, tri.bounds()));
@@ -310,8 +313,9 @@ TEST(Sbvh, InvariantsHoldForScenesLeafSizesAndThreads) {
         for (int leaf_size : {1, 4, 16}) {
             for (int threads : {1, 2}) {
                 SCOPED_TRACE(scene.name + " leaf " + std::to_string(leaf_size) + " threads " + std::to_string(threads));
-                const Bvh bvh =
-                    build_sbvh(scene.geometry.triangles, BuildOptions{.max_leaf_size = leaf_size, .threads = threads});
+                const Bvh bvh = build_bvh(scene.geometry.triangles, BuildOptions{.builder = Builder::Sbvh,
+                                                                                  .threads = threads,
+                                                                                  .max_leaf_size = leaf_size});
                 check_bvh(bvh, scene.geometry.triangles, leaf_size, true);
                 check_coverage(bvh, scene.geometry.triangles, 7);
                 EXPECT_LE(bvh.prim_indices.size(), 2 * scene.geometry.triangles.size());  // the reference budget
@@ -325,9 +329,10 @@ TEST(Sbvh, DepthStaysWithinLimitOnPathologicalInput) {
     const SceneGeometry row = make_geometric_row(900);
     const SceneGeometry overflow = make_overflowing_soup();
     for (int leaf_size : {1, 4}) {
-        const BuildOptions options{.max_leaf_size = leaf_size};
-        check_bvh(build_sbvh(row.triangles, options), row.triangles, leaf_size, true);
-        const TreeShape shape = check_bvh(build_sbvh(overflow.triangles, options), overflow.triangles, leaf_size, true);
+        const BvhBuildConfig config{.max_leaf_size = leaf_size};
+        check_bvh(build_sbvh(row.triangles, config, SbvhOptions{}), row.triangles, leaf_size, true);
+        const TreeShape shape =
+            check_bvh(build_sbvh(overflow.triangles, config, SbvhOptions{}), overflow.triangles, leaf_size, true);
         EXPECT_LE(shape.max_depth, kBvhMaxDepth);
         EXPECT_GT(shape.max_depth, 50);
     }
@@ -335,9 +340,9 @@ TEST(Sbvh, DepthStaysWithinLimitOnPathologicalInput) {
 
 TEST(Sbvh, SameTreeForEveryThreadCount) {
     const SceneGeometry soup = test::make_triangle_soup(12000, 6, {Vec3f(-40.0f), Vec3f(40.0f)}, 3.0f);
-    const Bvh one = build_sbvh(soup.triangles, BuildOptions{.threads = 1});
-    const Bvh two = build_sbvh(soup.triangles, BuildOptions{.threads = 2});
-    const Bvh all = build_sbvh(soup.triangles, BuildOptions{.threads = 0});
+    const Bvh one = build_bvh(soup.triangles, BuildOptions{.builder = Builder::Sbvh, .threads = 1});
+    const Bvh two = build_bvh(soup.triangles, BuildOptions{.builder = Builder::Sbvh, .threads = 2});
+    const Bvh all = build_bvh(soup.triangles, BuildOptions{.builder = Builder::Sbvh, .threads = 0});
     EXPECT_GT(one.prim_indices.size(), soup.triangles.size());  // spatial splits happened
     EXPECT_TRUE(identical(one, two));
     EXPECT_TRUE(identical(one, all));
@@ -351,38 +356,38 @@ TEST(Sbvh, BudgetSharingIsDeterministicAndBounded) {
     SceneGeometry mixed = test::make_triangle_soup(8000, 11, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f);
     const SceneGeometry diagonals = make_thin_diagonals(600, 12);
     mixed.triangles.insert(mixed.triangles.end(), diagonals.triangles.begin(), diagonals.triangles.end());
-    const Bvh one = build_sbvh(mixed.triangles, BuildOptions{.threads = 1});
-    const Bvh two = build_sbvh(mixed.triangles, BuildOptions{.threads = 2});
-    const Bvh all = build_sbvh(mixed.triangles, BuildOptions{.threads = 0});
+    const Bvh one = build_bvh(mixed.triangles, BuildOptions{.builder = Builder::Sbvh, .threads = 1});
+    const Bvh two = build_bvh(mixed.triangles, BuildOptions{.builder = Builder::Sbvh, .threads = 2});
+    const Bvh all = build_bvh(mixed.triangles, BuildOptions{.builder = Builder::Sbvh, .threads = 0});
     EXPECT_TRUE(identical(one, two));
     EXPECT_TRUE(identical(one, all));
     check_bvh(one, mixed.triangles, 4, true);
     EXPECT_GT(one.prim_indices.size(), mixed.triangles.size());
     EXPECT_LE(one.prim_indices.size(), 2 * mixed.triangles.size());
-    EXPECT_LT(one.sah_cost(), build_sweep_sah(mixed.triangles, BuildOptions{}).sah_cost());
+    EXPECT_LT(one.sah_cost(), build_sweep_sah(mixed.triangles, BvhBuildConfig{}).sah_cost());
 }
 
 TEST(Sbvh, LowestSahWhereSpatialSplitsMatter) {
     const SceneGeometry diagonals = make_thin_diagonals(3000, 8);
-    const double binned = build_binned_sah(diagonals.triangles, BuildOptions{}).sah_cost();
-    const double sweep = build_sweep_sah(diagonals.triangles, BuildOptions{}).sah_cost();
-    const double sbvh = build_sbvh(diagonals.triangles, BuildOptions{}).sah_cost();
+    const double binned = build_binned_sah(diagonals.triangles, BvhBuildConfig{}, BinnedSahOptions{}).sah_cost();
+    const double sweep = build_sweep_sah(diagonals.triangles, BvhBuildConfig{}).sah_cost();
+    const double sbvh = build_sbvh(diagonals.triangles, BvhBuildConfig{}, SbvhOptions{}).sah_cost();
     EXPECT_LT(sbvh, sweep * 0.9);
     EXPECT_LT(sbvh, binned * 0.9);
     // Elsewhere it is still no worse than the sweep (its object splits are the same sweep).
     for (const NamedScene& scene : test_scenes()) {
         if (scene.name == "identical" || scene.name == "points") continue;
         SCOPED_TRACE(scene.name);
-        const double s = build_sweep_sah(scene.geometry.triangles, BuildOptions{}).sah_cost();
-        EXPECT_LE(build_sbvh(scene.geometry.triangles, BuildOptions{}).sah_cost(), s * 1.001);
+        const double s = build_sweep_sah(scene.geometry.triangles, BvhBuildConfig{}).sah_cost();
+        EXPECT_LE(build_sbvh(scene.geometry.triangles, BvhBuildConfig{}, SbvhOptions{}).sah_cost(), s * 1.001);
     }
 }
 
 TEST(Sbvh, AlphaOneDisablesSpatialSplits) {
     const SceneGeometry diagonals = make_thin_diagonals(1000, 9);
-    const Bvh sbvh = build_sbvh(diagonals.triangles, BuildOptions{.sbvh_alpha = 1.0f});
+    const Bvh sbvh = build_sbvh(diagonals.triangles, BvhBuildConfig{}, SbvhOptions{.alpha = 1.0f});
     EXPECT_EQ(sbvh.prim_indices.size(), diagonals.triangles.size());
-    EXPECT_TRUE(identical(sbvh, build_sweep_sah(diagonals.triangles, BuildOptions{})));
+    EXPECT_TRUE(identical(sbvh, build_sweep_sah(diagonals.triangles, BvhBuildConfig{})));
 }
 
 TEST(Sbvh, MatchesBruteForce) {
@@ -393,9 +398,9 @@ TEST(Sbvh, MatchesBruteForce) {
 }
 
 TEST(Sbvh, EmptyAndSingleTriangle) {
-    EXPECT_TRUE(build_sbvh({}, BuildOptions{}).nodes.empty());
+    EXPECT_TRUE(build_sbvh({}, BvhBuildConfig{}, SbvhOptions{}).nodes.empty());
     const Triangle tri{Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)};
-    const Bvh one = build_sbvh(std::span<const Triangle>(&tri, 1), BuildOptions{});
+    const Bvh one = build_sbvh(std::span<const Triangle>(&tri, 1), BvhBuildConfig{}, SbvhOptions{});
     ASSERT_EQ(one.nodes.size(), 1u);
     EXPECT_EQ(one.prim_indices, std::vector<uint32_t>{0});
     EXPECT_TRUE(same_box(one.nodes[0].bounds, tri.bounds()));
@@ -474,7 +479,8 @@ TEST(BinnedSah, RootSplitMatchesPlainBinning) {
                              std::to_string(seed));
                 const SceneGeometry soup =
                     test::make_triangle_soup(count, 100 + seed, {Vec3f(-10.0f), Vec3f(10.0f)}, 2.0f);
-                const Bvh bvh = build_binned_sah(soup.triangles, BuildOptions{.bin_count = bins, .max_leaf_size = 1});
+                const Bvh bvh = build_binned_sah(soup.triangles, BvhBuildConfig{.max_leaf_size = 1},
+                                                 BinnedSahOptions{.bin_count = bins});
                 const std::vector<uint32_t> expected = reference_left_of_root(soup.triangles, bins);
                 ASSERT_FALSE(expected.empty());
                 ASSERT_FALSE(bvh.nodes[0].is_leaf());
@@ -494,14 +500,14 @@ TEST(Reinsertion, NeverIncreasesSahAndKeepsInvariants) {
     for (const NamedScene& scene : test_scenes()) {
         for (const Builder builder : {Builder::BinnedSah, Builder::SweepSah, Builder::Sbvh}) {
             SCOPED_TRACE(scene.name + " " + to_string(builder));
-            const BuildOptions options{.builder = builder, .max_leaf_size = 2};
+            const BvhBuildConfig config{.max_leaf_size = 2};
             const std::span<const Triangle> tris = scene.geometry.triangles;
-            Bvh bvh = builder == Builder::BinnedSah  ? build_binned_sah(tris, options)
-                      : builder == Builder::SweepSah ? build_sweep_sah(tris, options)
-                                                     : build_sbvh(tris, options);
+            Bvh bvh = builder == Builder::BinnedSah  ? build_binned_sah(tris, config, BinnedSahOptions{})
+                      : builder == Builder::SweepSah ? build_sweep_sah(tris, config)
+                                                     : build_sbvh(tris, config, SbvhOptions{});
             const double before = bvh.sah_cost();
             const size_t leaves = bvh.leaf_count();
-            optimize_reinsertion(bvh, tris, options);
+            optimize_reinsertion(bvh, tris, config.sah, ReinsertionOptions{});
             EXPECT_LE(bvh.sah_cost(), before);
             EXPECT_EQ(bvh.leaf_count(), leaves);
             check_bvh(bvh, tris, 2, builder == Builder::Sbvh);
@@ -515,21 +521,20 @@ TEST(Reinsertion, LowersSahOfPoorTree) {
     const BuildOptions lbvh{.builder = Builder::Lbvh30};
     Bvh bvh = build_bvh(sphere.triangles, lbvh);
     const double before = bvh.sah_cost();
-    optimize_reinsertion(bvh, sphere.triangles, lbvh);
+    optimize_reinsertion(bvh, sphere.triangles, SahCosts{}, ReinsertionOptions{});
     const double after = bvh.sah_cost();
     EXPECT_LT(after, before * 0.97) << before << " -> " << after;
     check_bvh(bvh, sphere.triangles, 4);
 
     // Two bins per axis: spatial-median splits, a poor tree too.
-    const BuildOptions two_bins{.bin_count = 2};
-    Bvh binned = build_binned_sah(sphere.triangles, two_bins);
+    Bvh binned = build_binned_sah(sphere.triangles, BvhBuildConfig{}, BinnedSahOptions{.bin_count = 2});
     const double binned_before = binned.sah_cost();
-    optimize_reinsertion(binned, sphere.triangles, two_bins);
+    optimize_reinsertion(binned, sphere.triangles, SahCosts{}, ReinsertionOptions{});
     EXPECT_LT(binned.sah_cost(), binned_before);
 
     // More batches never do worse than one.
     Bvh once = build_bvh(sphere.triangles, lbvh);
-    optimize_reinsertion(once, sphere.triangles, BuildOptions{.builder = Builder::Lbvh30, .optimize_iterations = 1});
+    optimize_reinsertion(once, sphere.triangles, SahCosts{}, ReinsertionOptions{.iterations = 1});
     EXPECT_LT(once.sah_cost(), before);
     EXPECT_LE(after, once.sah_cost());
 }
@@ -537,26 +542,29 @@ TEST(Reinsertion, LowersSahOfPoorTree) {
 TEST(Reinsertion, DepthStaysWithinLimit) {
     // A tree already close to the depth limit: reinsertion must not push it over.
     const SceneGeometry row = make_geometric_row(900);
-    const BuildOptions options{.bin_count = 2, .max_leaf_size = 1};
-    Bvh bvh = build_binned_sah(row.triangles, options);
+    Bvh bvh = build_binned_sah(row.triangles, BvhBuildConfig{.max_leaf_size = 1}, BinnedSahOptions{.bin_count = 2});
     const double before = bvh.sah_cost();
-    optimize_reinsertion(bvh, row.triangles, BuildOptions{.bin_count = 2, .max_leaf_size = 1, .optimize_iterations = 20});
+    optimize_reinsertion(bvh, row.triangles, SahCosts{}, ReinsertionOptions{.iterations = 20});
     EXPECT_LE(bvh.sah_cost(), before);
     check_bvh(bvh, row.triangles, 1);
     // A tree at the depth limit whose costs are all infinite stays valid.
     const SceneGeometry overflow = make_overflowing_soup();
-    Bvh deep = build_sweep_sah(overflow.triangles, BuildOptions{.max_leaf_size = 1});
-    optimize_reinsertion(deep, overflow.triangles, BuildOptions{.max_leaf_size = 1});
+    Bvh deep = build_sweep_sah(overflow.triangles, BvhBuildConfig{.max_leaf_size = 1});
+    optimize_reinsertion(deep, overflow.triangles, SahCosts{}, ReinsertionOptions{});
     EXPECT_LE(check_bvh(deep, overflow.triangles, 1).max_depth, kBvhMaxDepth);
 }
 
 TEST(Reinsertion, SameTreeForEveryThreadCount) {
     const SceneGeometry soup = test::make_triangle_soup(30000, 11, {Vec3f(-50.0f), Vec3f(50.0f)}, 1.0f);
-    const Bvh base = build_binned_sah(soup.triangles, BuildOptions{.bin_count = 4});
+    const Bvh base = build_binned_sah(soup.triangles, BvhBuildConfig{}, BinnedSahOptions{.bin_count = 4});
     Bvh one = base, two = base, all = base;
-    optimize_reinsertion(one, soup.triangles, BuildOptions{.threads = 1});
-    optimize_reinsertion(two, soup.triangles, BuildOptions{.threads = 2});
-    optimize_reinsertion(all, soup.triangles, BuildOptions{.threads = 0});
+    auto optimize_on = [&](int threads, Bvh& bvh) {
+        parallel::with_threads(threads,
+                               [&] { optimize_reinsertion(bvh, soup.triangles, SahCosts{}, ReinsertionOptions{}); });
+    };
+    optimize_on(1, one);
+    optimize_on(2, two);
+    optimize_on(0, all);
     EXPECT_TRUE(identical(one, two));
     EXPECT_TRUE(identical(one, all));
 }
@@ -564,18 +572,19 @@ TEST(Reinsertion, SameTreeForEveryThreadCount) {
 TEST(Reinsertion, MatchesBruteForce) {
     for (const NamedScene& scene : traversal_scenes()) {
         SCOPED_TRACE(scene.name);
-        compare_with_brute_force(scene.geometry, BuildOptions{.bin_count = 4, .optimize = true}, 1500, 13);
+        compare_with_brute_force(scene.geometry,
+                                 BuildOptions{.binned = {.bin_count = 4}, .reinsertion = {.enabled = true}}, 1500, 13);
     }
 }
 
 TEST(Reinsertion, TinyTreesAreLeftAlone) {
     Bvh empty;
-    optimize_reinsertion(empty, {}, BuildOptions{});
+    optimize_reinsertion(empty, {}, SahCosts{}, ReinsertionOptions{});
     EXPECT_TRUE(empty.nodes.empty());
     const SceneGeometry three = test::make_triangle_soup(3, 12, {Vec3f(-1.0f), Vec3f(1.0f)}, 0.2f);
-    Bvh bvh = build_binned_sah(three.triangles, BuildOptions{.max_leaf_size = 1});
+    Bvh bvh = build_binned_sah(three.triangles, BvhBuildConfig{.max_leaf_size = 1}, BinnedSahOptions{});
     const Bvh before = bvh;
-    optimize_reinsertion(bvh, three.triangles, BuildOptions{.max_leaf_size = 1});
+    optimize_reinsertion(bvh, three.triangles, SahCosts{}, ReinsertionOptions{});
     EXPECT_TRUE(identical(bvh, before));
 }
 

@@ -41,7 +41,7 @@ bench::GpuBuildStages device_build(const SceneGeometry& geometry, const BuildOpt
                                    const std::string& convert) {
     const std::span<const Triangle> triangles(geometry.triangles);
     if (options.structure == Structure::Grid || options.structure == Structure::ProximityGrid)
-        return bench::gpu_build_grid(triangles, options.grid_resolution,
+        return bench::gpu_build_grid(triangles, options.grid.resolution,
                                      options.structure == Structure::ProximityGrid, device);
     Bvh bvh;
     bench::GpuBuildStages build = bench::gpu_build(triangles, options, device, convert.empty() ? nullptr : &bvh);

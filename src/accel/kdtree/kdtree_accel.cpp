@@ -1,5 +1,5 @@
 // The kd-tree's rf::Accel (seed 002): build timing, the traversal chosen by
-// options.kd_traversal, batches and counted traversals.
+// options.kdtree.traversal, batches and counted traversals.
 #include "backend/cpu/ray_batches.h"
 #include "accel/kdtree/kdtree_accel.h"
 
@@ -90,10 +90,12 @@ AccelStats KdTreeAccel::stats() const {
 
 std::unique_ptr<Accel> make_kdtree_accel(const SceneGeometry& geometry, const BuildOptions& options) {
     const auto start = std::chrono::steady_clock::now();
-    KdTree tree = parallel::with_threads(options.threads, [&] { return build_kdtree(geometry.triangles, options); });
+    KdTree tree = parallel::with_threads(options.threads, [&] {
+        return build_kdtree(geometry.triangles, options.sah, options.binned, options.kdtree);
+    });
     const double build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    return std::make_unique<KdTreeAccel>(geometry, std::move(tree), options.kd_traversal, options.kd_short_stack_size,
-                                         build_ms);
+    return std::make_unique<KdTreeAccel>(geometry, std::move(tree), options.kdtree.traversal,
+                                         options.kdtree.short_stack_size, build_ms);
 }
 
 }  // namespace rf

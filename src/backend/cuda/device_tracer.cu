@@ -238,17 +238,17 @@ DeviceTracer::DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, cons
         }
         case GpuKernel::KdShortStack:
         case GpuKernel::KdRestart: {
-            const KdTree tree = build_kdtree(triangles, build);
+            const KdTree tree = build_kdtree(triangles, build.sah, build.binned, build.kdtree);
             const Triangle* device_triangles = upload_triangles();
             impl.kd_nodes.upload(tree.nodes);
             impl.prim_indices.upload(tree.prim_indices);
             const KdTreeView kd{impl.kd_nodes.data(), impl.prim_indices.data(), device_triangles,
-                                uint32_t(tree.nodes.size()), tree.bounds, build.kd_short_stack_size};
+                                uint32_t(tree.nodes.size()), tree.bounds, build.kdtree.short_stack_size};
             impl.kd_short_stack.tree = kd;
             impl.kd_restart.tree = kd;
             stats.node_count = tree.nodes.size();
             stats.leaf_count = tree.leaf_count();
-            stats.sah_cost = tree.sah_cost(build.traversal_cost, build.intersection_cost);
+            stats.sah_cost = tree.sah_cost(build.sah.traversal, build.sah.intersection);
             structure_bytes = tree.memory_bytes();
             break;
         }
@@ -257,9 +257,9 @@ DeviceTracer::DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, cons
             const bool proximity = kernel == GpuKernel::ProximityGrid;
             const UniformGrid grid =
                 build.build_on_device
-                    ? build_uniform_grid_on_device(triangles, build.grid_resolution, proximity, &impl.build_stages,
+                    ? build_uniform_grid_on_device(triangles, build.grid.resolution, proximity, &impl.build_stages,
                                                    device)
-                    : build_uniform_grid(triangles, build.grid_resolution, proximity);
+                    : build_uniform_grid(triangles, build.grid.resolution, proximity);
             impl.build_stages.on_device = build.build_on_device;
             const Triangle* device_triangles = upload_triangles();
             impl.cell_start.upload(grid.cell_start);

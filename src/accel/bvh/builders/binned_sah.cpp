@@ -362,12 +362,12 @@ int median_levels(uint32_t count, uint32_t leaf_size) {
 
 class BinnedSahBuilder {
 public:
-    BinnedSahBuilder(std::span<const Triangle> triangles, const BuildOptions& options)
+    BinnedSahBuilder(std::span<const Triangle> triangles, const BvhBuildConfig& config, const BinnedSahOptions& binned)
         : triangles_(triangles),
-          bin_count_(options.bin_count),
-          max_leaf_size_(static_cast<uint32_t>(options.max_leaf_size)),
-          traversal_cost_(options.traversal_cost),
-          intersection_cost_(options.intersection_cost) {}
+          bin_count_(binned.bin_count),
+          max_leaf_size_(static_cast<uint32_t>(config.max_leaf_size)),
+          traversal_cost_(config.sah.traversal),
+          intersection_cost_(config.sah.intersection) {}
 
     Bvh build() {
         Bvh bvh;
@@ -710,9 +710,10 @@ private:
 
 }  // namespace
 
-Bvh build_binned_sah(std::span<const Triangle> triangles, const BuildOptions& options) {
-    BinnedSahBuilder builder(triangles, options);
-    return parallel::with_threads(options.threads, [&] { return builder.build(); });
+Bvh build_binned_sah(std::span<const Triangle> triangles, const BvhBuildConfig& config,
+                     const BinnedSahOptions& binned) {
+    BinnedSahBuilder builder(triangles, config, binned);
+    return builder.build();
 }
 
 }  // namespace rf

@@ -1,5 +1,6 @@
 // One entry point for every BVH builder: runs the builder named in
-// options.builder, then the optimizer when options.optimize is set.
+// options.builder with its options group, then the optimizer when
+// options.reinsertion.enabled is set, all on at most options.threads threads.
 #pragma once
 
 #include <span>

@@ -6,7 +6,7 @@
 //  - object split: a full SAH sweep over the references sorted by box centre
 //    on each axis;
 //  - spatial split, tried only where the children of the best object split
-//    overlap by more than sbvh_alpha times the root's area: the node's box is
+//    overlap by more than SbvhOptions::alpha times the root's area: the node's box is
 //    cut into slabs per axis (2 per reference, 8 to 32), every reference is
 //    chopped into the slabs it spans (the triangle clipped against the slab
 //    planes, so each piece has a tight box), and a sweep over the slab
@@ -18,7 +18,7 @@
 // best object split's: the binned estimate counts every straddling reference
 // on both sides, and unsplitting often makes a candidate that looked worse
 // the cheaper split.
-// Leaves are made by SAH (traversal_cost, intersection_cost, compared with the
+// Leaves are made by SAH (SahCosts, compared with the
 // chosen split's cost) within max_leaf_size. Memory stays bounded by a
 // reference budget: at most kReferenceBudget (2) times the triangle count. A
 // node gets a share of the spare references and hands what its split does not
@@ -211,12 +211,12 @@ inline int spatial_bins(size_t refs) {
 
 class SbvhBuilder {
 public:
-    SbvhBuilder(std::span<const Triangle> triangles, const BuildOptions& options)
+    SbvhBuilder(std::span<const Triangle> triangles, const BvhBuildConfig& config, const SbvhOptions& sbvh)
         : triangles_(triangles),
-          max_leaf_size_(static_cast<uint32_t>(options.max_leaf_size)),
-          traversal_cost_(options.traversal_cost),
-          intersection_cost_(options.intersection_cost),
-          alpha_(options.sbvh_alpha) {}
+          max_leaf_size_(static_cast<uint32_t>(config.max_leaf_size)),
+          traversal_cost_(config.sah.traversal),
+          intersection_cost_(config.sah.intersection),
+          alpha_(sbvh.alpha) {}
 
     Bvh build() {
         const uint32_t count = checked_index_count("BVH primitive count", triangles_.size());
@@ -594,9 +594,9 @@ private:
 
 }  // namespace
 
-Bvh build_sbvh(std::span<const Triangle> triangles, const BuildOptions& options) {
-    SbvhBuilder builder(triangles, options);
-    return parallel::with_threads(options.threads, [&] { return builder.build(); });
+Bvh build_sbvh(std::span<const Triangle> triangles, const BvhBuildConfig& config, const SbvhOptions& sbvh) {
+    SbvhBuilder builder(triangles, config, sbvh);
+    return builder.build();
 }
 
 }  // namespace rf

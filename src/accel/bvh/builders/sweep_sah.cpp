@@ -44,11 +44,11 @@ struct AxisSplit {
 
 class SweepSahBuilder {
 public:
-    SweepSahBuilder(std::span<const Triangle> triangles, const BuildOptions& options)
+    SweepSahBuilder(std::span<const Triangle> triangles, const BvhBuildConfig& config)
         : triangles_(triangles),
-          max_leaf_size_(static_cast<uint32_t>(options.max_leaf_size)),
-          traversal_cost_(options.traversal_cost),
-          intersection_cost_(options.intersection_cost) {}
+          max_leaf_size_(static_cast<uint32_t>(config.max_leaf_size)),
+          traversal_cost_(config.sah.traversal),
+          intersection_cost_(config.sah.intersection) {}
 
     Bvh build() {
         const uint32_t count = checked_index_count("BVH primitive count", triangles_.size());
@@ -245,9 +245,9 @@ private:
 
 }  // namespace
 
-Bvh build_sweep_sah(std::span<const Triangle> triangles, const BuildOptions& options) {
-    SweepSahBuilder builder(triangles, options);
-    return parallel::with_threads(options.threads, [&] { return builder.build(); });
+Bvh build_sweep_sah(std::span<const Triangle> triangles, const BvhBuildConfig& config) {
+    SweepSahBuilder builder(triangles, config);
+    return builder.build();
 }
 
 }  // namespace rf

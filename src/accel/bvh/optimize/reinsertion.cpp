@@ -12,7 +12,7 @@
 // always among the candidates, so a move never raises the SAH; moves that
 // would push a leaf below kBvhMaxDepth are not considered. Batches repeat
 // until one improves the cost by less than 0.1% (at most kDefaultBatches), or
-// exactly options.optimize_iterations times. Leaves keep their primitives, so
+// exactly ReinsertionOptions::iterations times. Leaves keep their primitives, so
 // only inner node areas change. The result is re-emitted in canonical
 // depth-first order, and kept only if its SAH is not above the input's.
 #include "accel/bvh/optimize/reinsertion.h"
@@ -48,8 +48,8 @@ inline double area(const Box3f& b) { return b.surface_area(); }
 
 class Reinserter {
 public:
-    Reinserter(const Bvh& bvh, const BuildOptions& options)
-        : traversal_cost_(options.traversal_cost), intersection_cost_(options.intersection_cost) {
+    Reinserter(const Bvh& bvh, const SahCosts& sah)
+        : traversal_cost_(sah.traversal), intersection_cost_(sah.intersection) {
         budgeted_resize(nodes_, bvh.nodes.size(), "BVH reinsertion: nodes");
         // Canonical order puts children after their parent, so a reverse pass
         // sees both children before the parent.
@@ -252,16 +252,14 @@ private:
 
 }  // namespace
 
-void optimize_reinsertion(Bvh& bvh, std::span<const Triangle> /*triangles*/, const BuildOptions& options) {
+void optimize_reinsertion(Bvh& bvh, std::span<const Triangle> /*triangles*/, const SahCosts& sah,
+                          const ReinsertionOptions& reinsertion) {
     if (bvh.nodes.size() < 5) return;
-    Bvh optimized = parallel::with_threads(options.threads, [&] {
-        Reinserter reinserter(bvh, options);
-        reinserter.run(options.optimize_iterations);
-        return reinserter.emit(bvh);
-    });
+    Reinserter reinserter(bvh, sah);
+    reinserter.run(reinsertion.iterations);
+    Bvh optimized = reinserter.emit(bvh);
     // Guards against rounding: the input stays unless the SAH really did not rise.
-    if (optimized.sah_cost(options.traversal_cost, options.intersection_cost) <=
-        bvh.sah_cost(options.traversal_cost, options.intersection_cost)) {
+    if (optimized.sah_cost(sah.traversal, sah.intersection) <= bvh.sah_cost(sah.traversal, sah.intersection)) {
         bvh = std::move(optimized);
     }
 }
