@@ -45,7 +45,7 @@
 #include "backend/cuda/device_bvh_builders.h"
 #include "backend/cuda/raw_tree_emit.h"
 #include "backend/cuda/hlbvh2_build.h"
-#include "backend/cuda/hlbvh2_top_steps.h"
+#include "backend/cuda/hlbvh2_top_level.h"
 #include "backend/cuda/morton_sort.h"
 #include "rayforge/backend/cuda.h"
 #include "rayforge/core/error.h"

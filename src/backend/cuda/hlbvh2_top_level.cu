@@ -35,7 +35,7 @@
 #include <algorithm>
 
 #include "accel/bvh/builders/hlbvh2_top_steps.h"
-#include "backend/cuda/hlbvh2_top_steps.h"
+#include "backend/cuda/hlbvh2_top_level.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {
