@@ -72,8 +72,8 @@ struct ReinsertionOptions {
 };
 // Uniform grids.
 struct UniformGridOptions {
-    // Cells on the longest axis; 0 = automatic: Purcell's rule of 4 * n^(1/4)
-    // cells on the shortest axis, cubic cells.
+    // Cells on the longest axis; 0 = automatic: 4 * n^(1/4) cells on the
+    // shortest axis (after Purcell), cubic cells.
     int resolution = 0;
 };
 struct KdTreeOptions {
