@@ -66,6 +66,7 @@
 #include "accel/bvh/builders/grid_bvh_finish_steps.h"
 #include "accel/bvh/builders/grid_bvh_steps.h"
 #include "backend/cuda/device_buffer.h"
+#include "backend/cuda/device_bvh_builders.h"
 #include "backend/cuda/event_timer.h"
 #include "backend/cuda/morton_sort.h"
 #include "backend/backends.h"
@@ -431,10 +432,10 @@ __global__ void emit_copy_kernel(const uint32_t* hnodes, uint32_t node_count, co
 // The device pipeline for n >= 1 triangles: returns true with the BVH in
 // `bvh` when the device emitted it, false with `hierarchy` filled for the
 // host emission when a leaf was too large for one thread.
-bool build_on_device(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles,
-                     DeviceBuildStages& stages, GridHierarchy& hierarchy, Bvh& bvh) {
+bool build_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config, const GridBvhOptions& grid_bvh,
+                     bool partial_triangles, DeviceBuildStages& stages, GridHierarchy& hierarchy, Bvh& bvh) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
-    const uint32_t leaf_size = static_cast<uint32_t>(std::max(1, options.max_leaf_size));
+    const uint32_t leaf_size = static_cast<uint32_t>(std::max(1, config.max_leaf_size));
     MemoryMeter meter;
     EventTimer timer;
     CubTemp temp(meter, "GridBvh: CUB temporary storage");
@@ -463,7 +464,7 @@ bool build_on_device(std::span<const Triangle> triangles, const BuildOptions& op
     uint32_t ref_count = n;
     const float scene_extent = std::max(frame.extent.x, std::max(frame.extent.y, frame.extent.z));
     const float max_width = scene_extent / 128.0f;  // formula 4.1, sceneDividePortion = 1/128
-    const float budget = options.split_budget;
+    const float budget = grid_bvh.split_budget;
     if (partial_triangles && max_width > 0.0f && budget > 0.0f) {
         const uint64_t budget_slots = uint64_t(std::floor(double(budget) * double(n)));
         uint64_t used = 0;
@@ -714,7 +715,7 @@ bool build_on_device(std::span<const Triangle> triangles, const BuildOptions& op
     meter.allocate(summaries, leaf_count);
     meter.allocate(leaf_nodes, 2 * size_t{ref_count});
     meter.allocate(leaf_prims, ref_count);
-    const FinishOptions finish{leaf_size, options.traversal_cost, options.intersection_cost};
+    const FinishOptions finish{leaf_size, config.sah.traversal, config.sah.intersection};
     finish_leaves_kernel<<<blocks_for(leaf_count), kBlockSize>>>(refs.data(), leaf_ids[grouped].data(),
                                                                  leaf_begin.data(), leaves.data(), leaf_count, finish,
                                                                  summaries.data(), leaf_nodes.data(), leaf_prims.data());
@@ -764,22 +765,23 @@ bool build_on_device(std::span<const Triangle> triangles, const BuildOptions& op
 
 }  // namespace
 
-Bvh build_grid_bvh_on_device(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles,
-                             DeviceBuildStages* stages, int device) {
+Bvh build_grid_bvh_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config,
+                             const GridBvhOptions& grid_bvh, bool partial_triangles, DeviceBuildStages* stages,
+                             int device) {
     DeviceBuildStages local;
     DeviceBuildStages& s = stages ? *stages : local;
     s = {};
-    if (triangles.empty()) return build_grid_bvh(triangles, options, partial_triangles);  // nothing to build
+    if (triangles.empty()) return build_grid_bvh(triangles, config, grid_bvh, partial_triangles);  // nothing to build
     if (triangles.size() >= (size_t{1} << 30))  // node and leaf links keep their top bit as the leaf flag
         throw Error("GridBvh device build: 2^30 triangles or more");
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
     GridHierarchy hierarchy;
     Bvh bvh;
-    s.emitted_on_device = build_on_device(triangles, options, partial_triangles, s, hierarchy, bvh);
+    s.emitted_on_device = build_on_device(triangles, config, grid_bvh, partial_triangles, s, hierarchy, bvh);
     if (s.emitted_on_device) return bvh;
     GridBvhStages host;
-    bvh = emit_grid_bvh_hierarchy(triangles, options, partial_triangles, std::move(hierarchy), &host);
+    bvh = emit_grid_bvh_hierarchy(triangles, config, partial_triangles, std::move(hierarchy), &host);
     s.leaf_finish_ms += host.leaf_finish_ms;  // device gathering + (host) merging and splitting of leaves
     s.emit_ms = host.emission_ms;            // (host): boxes bottom-up and the canonical layout
     return bvh;

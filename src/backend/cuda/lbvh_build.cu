@@ -33,6 +33,7 @@
 #include "accel/bvh/builders/karras_tree_steps.h"
 #include "accel/bvh/builders/lbvh_emit.h"
 #include "backend/cuda/device_buffer.h"
+#include "backend/cuda/device_bvh_builders.h"
 #include "backend/cuda/lbvh_build.h"
 #include "backend/cuda/morton_sort.h"
 #include "backend/cuda/raw_tree_emit.h"
@@ -63,12 +64,12 @@ __global__ void boxes_kernel(karras::BoxPassView tree, uint32_t n) {
 }
 
 // The device pipeline for n >= 2 triangles. `raw`: every array of the tree
-// comes back in `out`. Otherwise, with `options`, the device emits the BVH
+// comes back in `out`. Otherwise, with `config`, the device emits the BVH
 // into `bvh` and returns true; false when the tree was too deep, and then
 // only the order and the children came back in `out`.
 template <class Key>
 bool build_on_device(std::span<const Triangle> triangles, DeviceBuildStages& stages, DeviceKarrasTree& out, bool raw,
-                     const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
+                     const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
     MemoryMeter meter;
     EventTimer timer;
@@ -104,7 +105,7 @@ bool build_on_device(std::span<const Triangle> triangles, DeviceBuildStages& sta
         tree.order = order.data();
         tree.node_parent = inner_parent.data();
         tree.leaf_parent = leaf_parent.data();
-        if (emit_raw_tree_on_device(tree, *options, "LBVH", meter, timer, stages, *bvh)) {
+        if (emit_raw_tree_on_device(tree, *config, "LBVH", meter, timer, stages, *bvh)) {
             stages.peak_device_bytes = meter.peak();
             return true;
         }
@@ -149,9 +150,9 @@ void check_input(std::span<const Triangle> triangles, int morton_bits) {
     if (triangles.size() >= karras::kLeafRef) throw Error("Morton BVH build: more than 2^31-1 triangles");
 }
 
-// Returns true when the device emitted the BVH into *bvh (options and bvh given).
+// Returns true when the device emitted the BVH into *bvh (config and bvh given).
 bool build_raw(std::span<const Triangle> triangles, int morton_bits, DeviceBuildStages& stages, int device,
-               DeviceKarrasTree& out, bool raw, const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
+               DeviceKarrasTree& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
     check_input(triangles, morton_bits);
     const size_t n = triangles.size();
     if (n < 2) {  // no inner nodes: nothing for the device to do
@@ -160,8 +161,8 @@ bool build_raw(std::span<const Triangle> triangles, int morton_bits, DeviceBuild
     }
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
-    if (morton_bits == 30) return build_on_device<uint32_t>(triangles, stages, out, raw, options, bvh);
-    return build_on_device<uint64_t>(triangles, stages, out, raw, options, bvh);
+    if (morton_bits == 30) return build_on_device<uint32_t>(triangles, stages, out, raw, config, bvh);
+    return build_on_device<uint64_t>(triangles, stages, out, raw, config, bvh);
 }
 
 }  // namespace
@@ -174,19 +175,19 @@ DeviceKarrasTree build_karras_tree_on_device(std::span<const Triangle> triangles
     return tree;
 }
 
-Bvh build_lbvh_on_device(std::span<const Triangle> triangles, const BuildOptions& options, int morton_bits,
+Bvh build_lbvh_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config, int morton_bits,
                          DeviceBuildStages* stages, int device) {
     DeviceBuildStages local;
     DeviceBuildStages& s = stages ? *stages : local;
     s = {};
     DeviceKarrasTree tree;
     Bvh bvh;
-    if (build_raw(triangles, morton_bits, s, device, tree, false, &options, &bvh)) {
+    if (build_raw(triangles, morton_bits, s, device, tree, false, &config, &bvh)) {
         s.emitted_on_device = true;
         return bvh;
     }
     const auto start = std::chrono::steady_clock::now();
-    bvh = emit_karras_tree(triangles, options, std::move(tree.order), tree.children);
+    bvh = emit_karras_tree(triangles, config, std::move(tree.order), tree.children);
     s.emit_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return bvh;
 }

@@ -40,6 +40,7 @@
 #include "accel/bvh/builders/ploc_emit.h"
 #include "accel/bvh/builders/ploc_steps.h"
 #include "backend/cuda/device_buffer.h"
+#include "backend/cuda/device_bvh_builders.h"
 #include "backend/cuda/raw_tree_emit.h"
 #include "backend/cuda/morton_sort.h"
 #include "backend/cuda/ploc_build.h"
@@ -122,11 +123,11 @@ double elapsed_ms(std::chrono::steady_clock::time_point start) {
 }
 
 // The device pipeline for n >= 2 triangles. `raw`: the node boxes are kept
-// and the raw tree comes back. Otherwise, with `options`, the device emits
+// and the raw tree comes back. Otherwise, with `config`, the device emits
 // the BVH into `bvh` and returns true; false when the tree was too deep, and
 // then the raw tree came back in `out`.
 bool build_on_device(std::span<const Triangle> triangles, uint32_t radius, DeviceBuildStages& stages,
-                     DevicePlocTree& out, bool raw, const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
+                     DevicePlocTree& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
     MemoryMeter meter;
     EventTimer timer;
@@ -223,7 +224,7 @@ bool build_on_device(std::span<const Triangle> triangles, uint32_t radius, Devic
         tree.boxes = sorted.boxes.data();
         tree.boxes_by_triangle = true;
         tree.order = sorted.order.data();
-        if (emit_raw_tree_on_device(tree, *options, "PLOC", meter, timer, stages, *bvh)) return true;
+        if (emit_raw_tree_on_device(tree, *config, "PLOC", meter, timer, stages, *bvh)) return true;
     }
 
     // The clustering back to the host.
@@ -235,9 +236,9 @@ bool build_on_device(std::span<const Triangle> triangles, uint32_t radius, Devic
     return false;
 }
 
-// Returns true when the device emitted the BVH into *bvh (options and bvh given).
+// Returns true when the device emitted the BVH into *bvh (config and bvh given).
 bool build_raw(std::span<const Triangle> triangles, int radius, DeviceBuildStages& stages, int device,
-               DevicePlocTree& out, bool raw, const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
+               DevicePlocTree& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
     if (triangles.size() >= ploc::kLeafRef) throw Error("PLOC on the device: more than 2^31-1 triangles");
     const size_t n = triangles.size();
     if (n < 2) {  // no merges: nothing for the device to do
@@ -246,7 +247,7 @@ bool build_raw(std::span<const Triangle> triangles, int radius, DeviceBuildStage
     }
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
-    return build_on_device(triangles, ploc::clamp_radius(radius), stages, out, raw, options, bvh);
+    return build_on_device(triangles, ploc::clamp_radius(radius), stages, out, raw, config, bvh);
 }
 
 }  // namespace
@@ -259,19 +260,19 @@ DevicePlocTree build_ploc_tree_on_device(std::span<const Triangle> triangles, in
     return tree;
 }
 
-Bvh build_ploc_on_device(std::span<const Triangle> triangles, const BuildOptions& options, DeviceBuildStages* stages,
-                         int device) {
+Bvh build_ploc_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config,
+                         const PlocOptions& ploc_options, DeviceBuildStages* stages, int device) {
     DeviceBuildStages local;
     DeviceBuildStages& s = stages ? *stages : local;
     s = {};
     DevicePlocTree tree;
     Bvh bvh;
-    if (build_raw(triangles, options.ploc_radius, s, device, tree, false, &options, &bvh)) {
+    if (build_raw(triangles, ploc_options.radius, s, device, tree, false, &config, &bvh)) {
         s.emitted_on_device = true;
         return bvh;
     }
     const auto start = std::chrono::steady_clock::now();
-    bvh = emit_ploc_tree(triangles, options, std::move(tree.order), tree.children, tree.iteration_nodes);
+    bvh = emit_ploc_tree(triangles, config, std::move(tree.order), tree.children, tree.iteration_nodes);
     s.emit_ms = elapsed_ms(start);
     return bvh;
 }

@@ -57,7 +57,7 @@ __global__ void emit_level_kernel(raw_emit::RawTreeView tree, const raw_emit::Em
 
 }  // namespace
 
-bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& options, const std::string& label,
+bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BvhBuildConfig& config, const std::string& label,
                              MemoryMeter& meter, EventTimer& timer, DeviceBuildStages& stages, Bvh& out) {
     const uint32_t n = tree.primitives, slots = tree.node_slots;
     DeviceBuffer<uint32_t> node_parent(label + ": emission node parents"), leaf_parent(label + ": emission leaf parents"),
@@ -74,8 +74,8 @@ bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& opti
     view.boxes_by_triangle = tree.boxes_by_triangle;
     view.order = tree.order;
     view.leaf_runs = tree.leaf_runs;
-    view.costs = {options.traversal_cost, options.intersection_cost,
-                  static_cast<uint32_t>(std::clamp(options.max_leaf_size, 1, 255))};
+    view.costs = {config.sah.traversal, config.sah.intersection,
+                  static_cast<uint32_t>(std::clamp(config.max_leaf_size, 1, 255))};
     const bool own_parents = tree.node_parent == nullptr;
     if (own_parents) {
         meter.allocate(node_parent, slots);

@@ -9,7 +9,7 @@
 #include <string>
 
 #include "backend/cuda/morton_sort.h"
-#include "rayforge/accel/accel.h"
+#include "accel/bvh/builders/bvh_build_config.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "backend/cuda/device_builders.h"
 #include "rayforge/math/box.h"
@@ -45,7 +45,7 @@ struct DeviceRawTree {
 // rebuild this emitter does not do. Adds the device time to
 // stages.device_emit_ms and the download to stages.download_ms; buffers
 // (named after `label`) go through `meter`.
-bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& options, const std::string& label,
+bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BvhBuildConfig& config, const std::string& label,
                              MemoryMeter& meter, EventTimer& timer, DeviceBuildStages& stages, Bvh& out);
 
 }  // namespace rf::cuda
