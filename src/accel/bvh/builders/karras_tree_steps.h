@@ -25,6 +25,7 @@
 
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/box.h"
+#include "core/assert.h"
 
 namespace rf::karras {
 
@@ -99,6 +100,7 @@ RF_HDI void build_inner(const Key* keys, uint32_t n, uint32_t index, uint32_t* c
     } while (step > 1);
     const int64_t gamma = i + split * d + (d < 0 ? d : 0);
 
+    RF_ASSERT(gamma >= 0 && gamma + 1 < int64_t(n), "a Karras split outside the key range");
     const uint32_t g = static_cast<uint32_t>(gamma);
     const bool left_is_leaf = (i < j ? i : j) == gamma;
     const bool right_is_leaf = (i > j ? i : j) == gamma + 1;

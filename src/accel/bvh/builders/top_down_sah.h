@@ -34,6 +34,7 @@
 
 #include "accel/bvh/builders/bvh_build_config.h"
 #include "backend/cpu/parallel.h"
+#include "core/assert.h"
 #include "core/huge_pages.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/core/memory_budget.h"
@@ -151,6 +152,8 @@ private:
         } else {
             builder().partition_at_median(task, split, left, right);
         }
+        RF_ASSERT(depth < kBvhMaxDepth, "a top-down build past kBvhMaxDepth: the depth-limit fallback failed");
+        RF_ASSERT(left.count() > 0 && right.count() > 0, "a split with an empty side");
         const uint32_t pair = next_node_.fetch_add(2, std::memory_order_relaxed);
         nodes_[node].first = pair;
         nodes_[node].count = 0;
