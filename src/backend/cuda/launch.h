@@ -1,15 +1,19 @@
 // Kernel launches of the CUDA backend: the block count for N threads (one
 // thread per item, or a capped grid whose threads stride over the items),
 // and launch(), which launches and checks the launch, so a bad
-// configuration fails where it is made with CUDA's own error string. For
-// .cu files only.
+// configuration fails where it is made, naming the kernel, its shape and
+// CUDA's error. For .cu files only.
 #pragma once
 
 #include <cuda_runtime.h>
 
+#include <cxxabi.h>
+
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
+#include <string>
 #include <utility>
 
 #include "backend/cuda/cuda_check.h"
@@ -38,13 +42,31 @@ struct LaunchShape {
     size_t shared_bytes = 0;
 };
 
+// A launch that failed: the error names the kernel (demangled when it can
+// be) and the shape.
+[[noreturn]] inline void throw_launch_error(cudaError_t status, const void* kernel, const LaunchShape& shape) {
+    const char* symbol = nullptr;
+    std::string name = "a kernel";
+    if (cudaFuncGetName(&symbol, kernel) == cudaSuccess && symbol != nullptr) {
+        int demangled_ok = -1;
+        char* demangled = abi::__cxa_demangle(symbol, nullptr, nullptr, &demangled_ok);
+        name = demangled_ok == 0 ? demangled : symbol;
+        std::free(demangled);
+    }
+    const std::string call = "launch of " + name + " (" + std::to_string(shape.blocks) + " blocks of " +
+                             std::to_string(shape.threads) + " threads, " + std::to_string(shape.shared_bytes) +
+                             " bytes of shared memory)";
+    throw_cuda_error(status, call.c_str(), __FILE__, __LINE__);
+}
+
 // Launches `kernel` with `shape` on the default stream and checks the
 // launch; a shape without blocks launches nothing (there is no item).
 template <class... Params, class... Args>
 void launch_shaped(void (*kernel)(Params...), LaunchShape shape, Args&&... args) {
     if (shape.blocks == 0) return;
     kernel<<<shape.blocks, shape.threads, shape.shared_bytes>>>(std::forward<Args>(args)...);
-    RF_CUDA_CHECK(cudaGetLastError());
+    const cudaError_t status = cudaGetLastError();
+    if (status != cudaSuccess) throw_launch_error(status, reinterpret_cast<const void*>(kernel), shape);
 }
 
 // One thread per item: blocks_for(count) blocks of kBlockSize threads.

@@ -28,7 +28,8 @@
 //     kBvhMaxDepth comes back raw (order, children, nodes per iteration) and
 //     the host refits and emits it (emit_ploc_tree, the CPU PLOC's own).
 //     Either way the BVH is build_ploc's.
-// Stages are timed with CUDA events; buffers are counted by a MemoryMeter.
+// Stages are timed with CUDA events; buffers are counted by a MemoryMeter
+// and live in the scope of the stages that use them.
 #include <cuda_runtime.h>
 
 #include <chrono>
