@@ -20,7 +20,7 @@
 #include "backend/cpu/parallel.h"
 #include "bench_report.h"
 #include "embree_peer.h"
-#include "gpu_bench.h"
+#include "device_build_report.h"
 #include "gpu_candidates.h"
 #include "presets.h"
 #include "ray_sets.h"
@@ -470,7 +470,7 @@ TEST(BenchGpuCandidates, EveryKernelGetsABuildAndBuildersMultiplyRows) {
 }
 
 TEST(BenchGpu, RowsWithoutTheBackendFailWithOneReason) {
-    if (bench::gpu_bench_available()) GTEST_SKIP() << "the CUDA backend is built";
+    if (cuda_backend_built()) GTEST_SKIP() << "the CUDA backend is built";
     bench::BenchConfig config;
     config.scenes = {"builtin:cube"};
     config.resolutions = {{8, 8}};
@@ -484,55 +484,46 @@ TEST(BenchGpu, RowsWithoutTheBackendFailWithOneReason) {
     } catch (const Error& e) {
         EXPECT_NE(std::string(e.what()).find("built without the CUDA backend"), std::string::npos) << e.what();
     }
-    const SceneGeometry geometry = SceneGeometry::build(make_builtin_scene("cube"));
-    EXPECT_THROW(bench::GpuTracer(geometry, GpuKernel::Cwbvh, BuildOptions{}, 0), Error);
     EXPECT_EQ(bench::gpu_device_name(0), "");
+    // Every CUDA request through the library gets the same reason.
+    const Scene scene = make_builtin_scene("cube");
+    const SceneGeometry geometry = SceneGeometry::build(scene);
     BuildOptions lbvh;
     lbvh.builder = Builder::Lbvh30;
-    EXPECT_THROW(bench::gpu_build(geometry.triangles, lbvh, 0), Error);
-    EXPECT_THROW(bench::gpu_build_grid(geometry.triangles, 0, true, 0), Error);
-    EXPECT_THROW(bench::gpu_convert_layout(Bvh{}, geometry.triangles, GpuKernel::Cwbvh, 0), Error);
+    lbvh.device = parse_device("cuda");
+    EXPECT_THROW((void)build_accel(geometry, lbvh), Error);
+    EXPECT_THROW((void)build_bvh(geometry.triangles, lbvh), Error);
+    BuildOptions grid;
+    grid.structure = Structure::ProximityGrid;
+    grid.gpu_kernel = GpuKernel::ProximityGrid;
+    grid.device = parse_device("cuda:1");
+    EXPECT_THROW((void)build_accel(geometry, grid), Error);
+    EXPECT_THROW(require_device(parse_device("cuda")), Error);
+    EXPECT_NE(list_cuda_devices().error.find("built without the CUDA backend"), std::string::npos);
+    EXPECT_TRUE(list_cuda_devices().devices.empty());
 }
 
-TEST(BenchGpu, DeviceBuildReportListsTheStagesThatRan) {
-    cuda::DeviceBuildStages s;
-    s.on_device = true;
-    s.bounds_ms = 0.5;
-    s.sort_ms = 1.5;
-    s.clusters_ms = 0.25;
-    s.bottom_ms = 2.0;
-    s.boxes_ms = 0.75;
-    s.emit_ms = 3.0;
-    s.optimize_ms = 4.0;
-    s.peak_device_bytes = 3u << 20;
-    s.cluster_count = 7;
-    s.bottom_levels = 9;
-    const bench::GpuBuildStages b = bench::describe_device_build(s, 123, 45.5);
-    ASSERT_EQ(b.device_stages.size(), 5u);
-    const char* order[] = {"bounds", "sort", "clusters", "bottom", "boxes"};
-    for (size_t i = 0; i < 5; ++i) EXPECT_EQ(b.device_stages[i].first, order[i]);
-    EXPECT_DOUBLE_EQ(b.device_ms, 5.0);
-    EXPECT_DOUBLE_EQ(b.host_ms, 7.0);
-    EXPECT_EQ(b.detail, "7 clusters, 9 bottom levels");
+TEST(BenchGpu, DeviceBuildLineListsTheStagesThatRan) {
+    bench::DeviceBuildSummary b;
+    b.report.on_device = true;
+    b.report.device_stages = {{"bounds", 0.5}, {"sort", 1.5}, {"clusters", 0.25}, {"bottom", 2.0}, {"boxes", 0.75}};
+    b.report.device_ms = 5.0;
+    b.report.host_ms = 7.0;
+    b.report.peak_device_bytes = 3u << 20;
+    b.report.detail = "7 clusters, 9 bottom levels";
+    b.nodes = 123;
+    b.sah_cost = 45.5;
     const std::string line = bench::format_device_build(b);
     for (const char* part : {"device build 5.000 ms", "bounds 0.500", "boxes 0.750", "peak 3.00 MiB", "123 nodes",
                              "SAH 45.50", "7 clusters", "host 7.00 ms"})
         EXPECT_NE(line.find(part), std::string::npos) << part << " in " << line;
-    // A device emission is the last device stage and counts in the device total.
-    s.device_emit_ms = 0.5;
-    const bench::GpuBuildStages emitted = bench::describe_device_build(s, 123, 45.5);
-    ASSERT_EQ(emitted.device_stages.size(), 6u);
-    EXPECT_EQ(emitted.device_stages.back().first, "emission");
-    EXPECT_DOUBLE_EQ(emitted.device_ms, 5.5);
-    s.device_emit_ms = 0.0;
     // Grids have no SAH; host builds say so.
-    EXPECT_EQ(bench::format_device_build(bench::describe_device_build(s, 8, std::nan(""))).find("SAH"),
-              std::string::npos);
-    s.on_device = false;
-    EXPECT_EQ(bench::format_device_build(bench::describe_device_build(s, 8, 1.0)), "built on the host");
-    s.layout_ms = 0.25;
-    EXPECT_EQ(bench::format_device_build(bench::describe_device_build(s, 8, 1.0)),
-              "built on the host, layout converted on the device in 0.250 ms");
+    b.sah_cost = std::nan("");
+    EXPECT_EQ(bench::format_device_build(b).find("SAH"), std::string::npos);
+    b.report.on_device = false;
+    EXPECT_EQ(bench::format_device_build(b), "built on the host");
+    b.report.layout_ms = 0.25;
+    EXPECT_EQ(bench::format_device_build(b), "built on the host, layout converted on the device in 0.250 ms");
 }
 
 // GPU rows as the runner makes them, printed and written next to a CPU row.

@@ -66,9 +66,9 @@ std::vector<Ray> make_lattice_rays(const Box3f& box, int steps) {
     return rays;
 }
 
-std::unique_ptr<KdTreeAccel> make_accel(const SceneGeometry& g, const KdTree& tree, KdTraversal traversal,
+std::unique_ptr<Accel> make_accel(const SceneGeometry& g, const KdTree& tree, KdTraversal traversal,
                                         int short_stack = 4) {
-    return std::make_unique<KdTreeAccel>(g, tree, traversal, short_stack, 0.0);
+    return make_kdtree_accel(g, tree, traversal, short_stack, 0.0);
 }
 
 void expect_same_closest(const Hit& got, const Hit& brute, const Ray& ray, const std::string& what) {
@@ -211,8 +211,8 @@ TEST(KdTreeTraversal, RestartTerminatesOnFlatCells) {
         }
         EXPECT_GT(flat, 0u) << "perfect " << perfect;
         for (KdTraversal traversal : {KdTraversal::Restart, KdTraversal::Pushdown, KdTraversal::ShortStack}) {
-            const auto kd = make_accel(g, tree, traversal, 1);
-            const KdTreeView view = kd->view();
+            const KdTreeView view{tree.nodes.data(), tree.prim_indices.data(), g.triangles.data(),
+                                  uint32_t(tree.nodes.size()), tree.bounds, 1};
             for (const Ray& ray : rays) {
                 // Each leaf is visited at most once per ray, each after at
                 // most one descent: a loop would break these bounds.

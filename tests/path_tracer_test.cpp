@@ -8,6 +8,7 @@
 #include <cmath>
 #include <vector>
 
+#include "rayforge/core/error.h"
 #include "rayforge/render/render.h"
 #include "render_test_scene.h"
 
@@ -234,38 +235,41 @@ TEST(PathTracer, IdenticalWhateverTheThreadCountButSeedMatters) {
     EXPECT_NE(one.pixels, other.pixels);
 }
 
-TEST(ProgressiveRenderer, PassesAccumulateAndCallbacksCanStop) {
+TEST(Renderer, PassesAccumulateAndCallbacksCanStop) {
     TestScene t = furnace_sphere(lambert(0.7f));
     Camera camera = looking_at({0, 0, 3}, {0, 0, 0}, 30.0f);
     RenderOptions o = path_options(16, 16, 8);
-    ProgressiveRenderer renderer(t.scene, t.geometry, *t.accel, camera, o);
-    EXPECT_EQ(renderer.passes(), 0);
+    const auto renderer = make_renderer(t.scene, t.geometry, *t.accel, camera, o);
+    EXPECT_EQ(renderer->passes(), 0);
+    EXPECT_EQ(renderer->device(), Device{});
     int calls = 0;
-    render_progressive(renderer, [&](const ProgressiveRenderer& r) {
+    render_progressive(*renderer, [&](const Renderer& r) {
         ++calls;
         EXPECT_EQ(r.passes(), calls);
+        EXPECT_EQ(r.last_pass().closest_rays, r.stats().closest_rays / uint64_t(calls));
         return calls < 3;
     });
-    EXPECT_EQ(renderer.passes(), 3);
-    EXPECT_EQ(renderer.stats().samples, 3u * 16u * 16u);
-    EXPECT_GT(renderer.stats().closest_rays, renderer.stats().samples);
+    EXPECT_EQ(renderer->passes(), 3);
+    EXPECT_EQ(renderer->stats().samples, 3u * 16u * 16u);
+    EXPECT_GT(renderer->stats().closest_rays, renderer->stats().samples);
+    EXPECT_GT(renderer->last_pass().pass_ms, 0.0);
     // The mean of three passes equals three passes rendered in one go.
     o.spp = 3;
     Image direct = render(t.scene, t.geometry, *t.accel, camera, o);
-    EXPECT_EQ(renderer.image().pixels, direct.pixels);
+    EXPECT_EQ(renderer->image().pixels, direct.pixels);
 }
 
-TEST(ProgressiveRenderer, TimeBudgetStopsEarly) {
+TEST(Renderer, TimeBudgetStopsEarly) {
     TestScene t = furnace_sphere(lambert(0.7f));
     RenderOptions o = path_options(8, 8, 1 << 20);
     o.time_budget_s = 0.05;
-    ProgressiveRenderer renderer(t.scene, t.geometry, *t.accel, looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), o);
-    render_progressive(renderer);
-    EXPECT_GE(renderer.passes(), 1);
-    EXPECT_LT(renderer.passes(), 1 << 20);
+    const auto renderer = make_renderer(t.scene, t.geometry, *t.accel, looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), o);
+    render_progressive(*renderer);
+    EXPECT_GE(renderer->passes(), 1);
+    EXPECT_LT(renderer->passes(), 1 << 20);
 }
 
-TEST(ProgressiveRenderer, AovsDescribeTheFirstHit) {
+TEST(Renderer, AovsDescribeTheFirstHit) {
     TestScene t;
     Material m = lambert(0.25f);
     m.base_color = Vec3f(0.25f, 0.5f, 0.75f);
@@ -275,18 +279,85 @@ TEST(ProgressiveRenderer, AovsDescribeTheFirstHit) {
         RenderOptions o = path_options(3, 3, 2);
         o.integrator = k;
         o.aovs = true;
-        ProgressiveRenderer renderer(t.scene, t.geometry, *t.accel, looking_at({0, 0, 5}, {0, 0, 0}, 1.0f), o);
-        render_progressive(renderer);
-        const Vec3f albedo = renderer.albedo().at(1, 1), normal = renderer.normal().at(1, 1);
+        const auto renderer =
+            make_renderer(t.scene, t.geometry, *t.accel, looking_at({0, 0, 5}, {0, 0, 0}, 1.0f), o);
+        render_progressive(*renderer);
+        const Vec3f albedo = renderer->albedo().at(1, 1), normal = renderer->normal().at(1, 1);
         EXPECT_NEAR(albedo.x, 0.25f, 1e-4f);
         EXPECT_NEAR(albedo.z, 0.75f, 1e-4f);
         EXPECT_NEAR(normal.z, 1.0f, 1e-4f);
-        EXPECT_NEAR(renderer.depth().at(1, 1).x, 5.0f, 1e-3f);
+        EXPECT_NEAR(renderer->depth().at(1, 1).x, 5.0f, 1e-3f);
     }
     RenderOptions o = path_options(3, 3, 1);
-    ProgressiveRenderer plain(t.scene, t.geometry, *t.accel, looking_at({0, 0, 5}, {0, 0, 0}, 1.0f), o);
-    plain.render_pass();
-    EXPECT_EQ(plain.albedo().width, 0);  // AOVs off: nothing accumulated
+    const auto plain = make_renderer(t.scene, t.geometry, *t.accel, looking_at({0, 0, 5}, {0, 0, 0}, 1.0f), o);
+    plain->render_pass();
+    EXPECT_EQ(plain->albedo().width, 0);  // AOVs off: nothing accumulated
+}
+
+// A camera move restarts accumulation: afterwards the renderer draws what a
+// fresh renderer at the new camera draws, to the bit.
+TEST(Renderer, CameraChangeRestartsAccumulation) {
+    TestScene t = furnace_sphere(lambert(0.7f));
+    const Camera near = looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), far = looking_at({1, 1, 6}, {0, 0, 0}, 40.0f);
+    RenderOptions o = path_options(12, 10, 2);
+    const auto renderer = make_renderer(t.scene, t.geometry, *t.accel, near, o);
+    render_progressive(*renderer);
+    const Image before = renderer->image();
+    renderer->set_camera(far);
+    EXPECT_EQ(renderer->passes(), 0);
+    EXPECT_EQ(renderer->stats().samples, 0u);
+    render_progressive(*renderer);
+    EXPECT_EQ(renderer->image().pixels, render(t.scene, t.geometry, *t.accel, far, o).pixels);
+    EXPECT_NE(renderer->image().pixels, before.pixels);
+}
+
+// New options (another integrator and resolution) restart with new films;
+// the device cannot change.
+TEST(Renderer, OptionChangesRestartWithNewFilms) {
+    TestScene t = furnace_sphere(lambert(0.7f));
+    const Camera camera = looking_at({0, 0, 3}, {0, 0, 0}, 30.0f);
+    const auto renderer = make_renderer(t.scene, t.geometry, *t.accel, camera, path_options(8, 8, 2));
+    render_progressive(*renderer);
+    RenderOptions w = path_options(10, 6, 1);
+    w.integrator = IntegratorKind::Whitted;
+    w.aovs = true;
+    renderer->set_options(w);
+    EXPECT_EQ(renderer->passes(), 0);
+    render_progressive(*renderer);
+    EXPECT_EQ(renderer->image().width, 10);
+    EXPECT_EQ(renderer->albedo().height, 6);
+    EXPECT_EQ(renderer->image().pixels, render(t.scene, t.geometry, *t.accel, camera, w).pixels);
+    RenderOptions bad = w;
+    bad.width = 0;
+    EXPECT_THROW(renderer->set_options(bad), Error);
+    RenderOptions elsewhere = w;
+    elsewhere.device = parse_device("cuda:0");
+    EXPECT_THROW(renderer->set_options(elsewhere), Error);
+}
+
+// A material changed in place: scene_changed rebuilds the shading tables,
+// and the next passes render the changed scene as a fresh renderer would.
+TEST(Renderer, SceneChangeRebuildsShadingTables) {
+    TestScene t = furnace_sphere(lambert(0.7f));
+    const Camera camera = looking_at({0, 0, 3}, {0, 0, 0}, 30.0f);
+    const RenderOptions o = path_options(8, 8, 2);
+    const auto renderer = make_renderer(t.scene, t.geometry, *t.accel, camera, o);
+    render_progressive(*renderer);
+    const Image grey = renderer->image();
+    for (Material& m : t.scene.materials) m.base_color = Vec3f(0.2f, 0.9f, 0.3f);
+    renderer->scene_changed(SceneChange::Materials);
+    render_progressive(*renderer);
+    EXPECT_NE(renderer->image().pixels, grey.pixels);
+    EXPECT_EQ(renderer->image().pixels, render(t.scene, t.geometry, *t.accel, camera, o).pixels);
+}
+
+// A renderer lives on one device, and so must its structure.
+TEST(Renderer, DeviceMustMatchTheStructure) {
+    TestScene t = furnace_sphere(lambert(0.7f));
+    RenderOptions o = path_options(4, 4, 1);
+    o.device = parse_device("cuda:0");
+    EXPECT_THROW((void)make_renderer(t.scene, t.geometry, *t.accel, looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), o),
+                 Error);
 }
 
 }  // namespace

@@ -264,8 +264,8 @@ TEST(UniformGrid, BuildIsDeterministicAcrossThreadCounts) {
     const SceneGeometry soup = test::make_triangle_soup(3000, 34, {Vec3f(-5.0f), Vec3f(5.0f)}, 0.6f);
     const auto one = make_grid_accel(soup, BuildOptions{.structure = Structure::ProximityGrid, .threads = 1});
     const auto all = make_grid_accel(soup, BuildOptions{.structure = Structure::ProximityGrid, .threads = 0});
-    const UniformGrid& a = dynamic_cast<const GridAccel&>(*one).grid();
-    const UniformGrid& b = dynamic_cast<const GridAccel&>(*all).grid();
+    const UniformGrid& a = dynamic_cast<const GridAccel&>(*one).structure();
+    const UniformGrid& b = dynamic_cast<const GridAccel&>(*all).structure();
     EXPECT_EQ(a.cell_start, b.cell_start);
     EXPECT_EQ(a.cell_prims, b.cell_prims);
     EXPECT_EQ(a.proximity, b.proximity);
@@ -476,8 +476,8 @@ TEST(ProximityGrid, JumpsVisitFewerCellsWithTheSameHits) {
     const auto plain = make_grid_accel(sparse, BuildOptions{.structure = Structure::Grid, .grid_resolution = 96});
     const auto cloud = make_grid_accel(sparse, BuildOptions{.structure = Structure::ProximityGrid, .grid_resolution = 96});
     const std::vector<Ray> rays = make_rays(sparse, 2000, 10);
-    const GridView plain_view = dynamic_cast<const GridAccel&>(*plain).view();
-    const GridView cloud_view = dynamic_cast<const GridAccel&>(*cloud).view();
+    const GridView plain_view = dynamic_cast<const GridAccel&>(*plain).tracer().grid;
+    const GridView cloud_view = dynamic_cast<const GridAccel&>(*cloud).tracer().grid;
     GridTraversalCounters plain_counts, cloud_counts;
     for (const Ray& ray : rays) {
         const Hit a = grid_intersect_counted(plain_view, ray, plain_counts);

@@ -17,10 +17,10 @@
 
 #include "rayforge/io/scene_io.h"
 #include "rayforge/render/render.h"
-#include "render/integrators/path_stages.h"
+#include "backend/cpu/cpu_wavefront.h"
 #include "math/random.h"
+#include "render/integrators/path_stages.h"
 #include "render/ray_sort_key.h"
-#include "render/wavefront_path.h"
 #include "render_test_scene.h"
 
 namespace rf {
@@ -33,9 +33,9 @@ struct Films {
 
 Films render_films(const Scene& scene, const SceneGeometry& geometry, const Accel& accel, const Camera& camera,
                    const RenderOptions& options) {
-    ProgressiveRenderer renderer(scene, geometry, accel, camera, options);
-    render_progressive(renderer);
-    return {renderer.image(), renderer.albedo(), renderer.normal(), renderer.depth(), renderer.stats()};
+    const auto renderer = make_renderer(scene, geometry, accel, camera, options);
+    render_progressive(*renderer);
+    return {renderer->image(), renderer->albedo(), renderer->normal(), renderer->depth(), renderer->stats()};
 }
 
 // Bit-exact equality, reporting the first pixel that differs.
@@ -194,19 +194,13 @@ TEST(WavefrontPath, ChunksAndQueueStatistics) {
     expect_wavefront_matches(s.scene, s.geometry, *s.accel, s.scene.camera_or_default(), o, "two chunks",
                              sorted_on_two_threads);
 
-    HostSceneView view(s.scene, s.geometry);
-    WavefrontPass pass;
-    pass.accel = s.accel.get();
-    pass.view = &view;
-    pass.camera = CameraFrame::make(s.scene.camera_or_default(), 64, 48);
-    pass.width = 64;
-    pass.height = 48;
-    pass.settings.max_depth = 4;
-    pass.sort_rays = true;
-    pass.sort_bounds = s.geometry.bounds;
-    std::vector<Vec3f> color(64 * 48, Vec3f(0.0f));
-    WavefrontStats stats;
-    render_wavefront_pass(pass, {color.data()}, stats);
+    RenderOptions w = small_path_options(64, 48, 1);
+    w.wavefront = true;
+    w.sort_rays = true;
+    w.max_depth = 4;
+    const auto renderer = make_renderer(s.scene, s.geometry, *s.accel, s.scene.camera_or_default(), w);
+    renderer->render_pass();
+    const PassStats& stats = renderer->last_pass();
     ASSERT_GE(stats.waves.size(), 2u);
     EXPECT_EQ(stats.waves[0].paths, 64u * 48u);
     uint64_t shadows = 0, extended = 0;
@@ -219,7 +213,8 @@ TEST(WavefrontPath, ChunksAndQueueStatistics) {
     EXPECT_GT(shadows, 0u);
     EXPECT_EQ(stats.shadow_rays, shadows);  // an opaque scene: one any-hit query per connection
     EXPECT_EQ(stats.closest_rays, extended);  // and one closest-hit query per extension
-    EXPECT_LE(stats.waves.size(), size_t(pass.settings.max_depth) + 1);
+    EXPECT_LE(stats.waves.size(), size_t(w.max_depth) + 1);
+    EXPECT_GE(stats.sort_ms, 0.0);
 }
 
 TEST(WavefrontPath, DerivedStreamsAreIndependentAndLeaveTheParentAlone) {

@@ -1,7 +1,7 @@
 // `rayforge bench`: every performance figure of the project comes from here
 // (protocol: ../shared/docs/BENCHMARK-PROTOCOL.md, harness: bench/harness/).
 // Tables on stdout, progress on stderr, records in --json FILE. `--device
-// cuda` adds GPU rows (bench/harness/gpu_bench.h).
+// cuda` adds GPU rows (the same structures built and traced on the device).
 #include <iostream>
 #include <set>
 #include <sstream>
@@ -11,7 +11,6 @@
 #include "bench_report.h"
 #include "bench_runner.h"
 #include "commands.h"
-#include "gpu_bench.h"
 #include "presets.h"
 #include "render_bench.h"
 #include "stage_breakdown.h"
@@ -242,15 +241,7 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
     info.command = command_line;
     const DeviceSelection devices = parse_devices(a.devices.empty() ? std::vector<std::string>{"cpu"}
                                                                     : split_list(a.devices));
-    if (devices.gpu && !bench::gpu_bench_available())
-        throw Error("--device " + devices.gpu_text + ": " + kNoCudaBackend);
-    if (devices.gpu) {
-        try {
-            bench::require_gpu_device(devices.gpu_index);
-        } catch (const Error& e) {
-            throw Error("--device " + devices.gpu_text + ": " + e.what());
-        }
-    }
+    if (devices.gpu) require_usable(Device{Device::Kind::Cuda, devices.gpu_index}, "--device " + devices.gpu_text);
     if (!devices.gpu && !a.gpu_kernels.empty()) throw Error("--gpu-kernel: needs --device cuda");
     const bool build_on_device = parse_build_on(a.build_on, devices.gpu);
     std::vector<bench::Candidate> unimplemented;

@@ -1,5 +1,5 @@
 // `rayforge build`: builds a scene's acceleration structure several times
-// and reports each build (issue 7): on the CPU the wall time, SAH cost, nodes
+// and reports each build: on the CPU the wall time, SAH cost, nodes
 // and memory; on a CUDA device (--device cuda) the time of every device
 // stage, the transfers and the host's part, the peak device memory, the SAH
 // cost and the node count, and with --convert the device layout conversion.
@@ -11,9 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "accel/accel_factories.h"
 #include "commands.h"
-#include "gpu_bench.h"
+#include "device_build_report.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/backend/device.h"
 #include "rayforge/core/error.h"
@@ -35,19 +34,26 @@ double median(std::vector<double> values) {
     return n % 2 ? values[n / 2] : 0.5 * (values[n / 2 - 1] + values[n / 2]);
 }
 
-// The device build of `options` (a BVH builder, or a uniform grid), and the
-// layout conversion of the BVH to `convert` when asked.
-bench::GpuBuildStages device_build(const SceneGeometry& geometry, const BuildOptions& options, int device,
-                                   const std::string& convert) {
-    const std::span<const Triangle> triangles(geometry.triangles);
-    if (options.structure == Structure::Grid || options.structure == Structure::ProximityGrid)
-        return bench::gpu_build_grid(triangles, options.grid_resolution,
-                                     options.structure == Structure::ProximityGrid, device);
-    Bvh bvh;
-    bench::GpuBuildStages build = bench::gpu_build(triangles, options, device, convert.empty() ? nullptr : &bvh);
-    if (!convert.empty())
-        build.layout_ms = bench::gpu_convert_layout(bvh, triangles, parse_gpu_kernel(convert), device).layout_ms;
-    return build;
+// The device build of `options` (a BVH builder, or a uniform grid), and,
+// with `convert`, the layout conversion of the BVH on the device.
+bench::DeviceBuildSummary device_build(const SceneGeometry& geometry, BuildOptions options,
+                                       const std::string& convert) {
+    const bool grid = options.structure == Structure::Grid || options.structure == Structure::ProximityGrid;
+    if (grid || !convert.empty()) {
+        if (!grid) options.gpu_kernel = parse_gpu_kernel(convert);
+        const std::unique_ptr<Accel> accel = build_accel(geometry, options);
+        const AccelStats stats = accel->stats();
+        bench::DeviceBuildSummary summary{accel->build_report(), stats.node_count, stats.sah_cost};
+        if (grid)
+            summary.report.detail += (summary.report.detail.empty() ? "" : ", ") + std::to_string(stats.leaf_count) +
+                                     " non-empty cells";
+        return summary;
+    }
+    bench::DeviceBuildSummary summary;
+    const Bvh bvh = build_bvh(geometry.triangles, options, &summary.report);
+    summary.nodes = bvh.nodes.size();
+    summary.sah_cost = bvh.nodes.empty() ? 0.0 : bvh.sah_cost();
+    return summary;
 }
 
 }  // namespace
@@ -73,8 +79,7 @@ CLI::App* add_build_command(CLI::App& app, BuildArgs& a) {
 int run_build(const BuildArgs& a) {
     const Device device = parse_device(a.device);
     require_usable(device, "--device " + a.device);
-    const BuildOptions options = to_build_options(a.accel, a.threads);
-    validate_build_options(options);
+    BuildOptions options = to_build_options(a.accel, a.threads);
     if (!a.convert.empty() && !device.is_cuda()) throw Error("--convert: needs --device cuda");
     if (!a.convert.empty() && options.structure != Structure::Bvh) throw Error("--convert: needs --accel bvh");
     if (device.is_cuda() && options.structure != Structure::Bvh && options.structure != Structure::Grid &&
@@ -82,6 +87,10 @@ int run_build(const BuildArgs& a) {
         throw Error("--device " + a.device + ": " + to_string(options.structure) +
                     " has no device builder (device builders: bvh with lbvh30, lbvh63, hlbvh2, ploc, gridbvh, "
                     "gridbvh-split; grid; grid-proximity)");
+    options.device = device;
+    if (options.structure == Structure::Grid) options.gpu_kernel = GpuKernel::Grid;
+    if (options.structure == Structure::ProximityGrid) options.gpu_kernel = GpuKernel::ProximityGrid;
+    validate_build_options(options);
 
     const Clock::time_point load_start = Clock::now();
     const SceneGeometry geometry = SceneGeometry::build(load_scene(a.scene));
@@ -91,12 +100,12 @@ int run_build(const BuildArgs& a) {
 
     std::vector<double> totals;
     if (device.is_cuda()) {
-        (void)device_build(geometry, options, device.index, a.convert);  // warm-up: module load, first allocations
+        (void)device_build(geometry, options, a.convert);  // warm-up: module load, first allocations
         for (int r = 0; r < a.repetitions; ++r) {
-            const bench::GpuBuildStages build = device_build(geometry, options, device.index, a.convert);
+            const bench::DeviceBuildSummary build = device_build(geometry, options, a.convert);
             std::printf("%s on %s, build %d: %s\n", what.c_str(), to_string(device).c_str(), r + 1,
                         bench::format_device_build(build).c_str());
-            totals.push_back(build.device_ms);
+            totals.push_back(build.report.device_ms);
         }
         std::printf("%s on %s: median device time %.3f ms of %d builds\n", what.c_str(), to_string(device).c_str(),
                     median(totals), a.repetitions);

@@ -2,10 +2,6 @@
 
 #include "rayforge/core/error.h"
 
-#ifdef RAYFORGE_HAS_CUDA
-#include "rayforge/backend/cuda.h"
-#endif
-
 namespace rf::cli {
 
 CLI::Validator device_validator() {
@@ -49,16 +45,11 @@ bool parse_build_on(const std::string& value, bool cuda_device) {
 }
 
 void require_usable(const Device& device, const std::string& option) {
-    if (!device.is_cuda()) return;
-#ifdef RAYFORGE_HAS_CUDA
     try {
-        cuda::require_device(device.index);
+        require_device(device);
     } catch (const Error& e) {
         throw Error(option + ": " + e.what());
     }
-#else
-    throw Error(option + ": " + kNoCudaBackend);
-#endif
 }
 
 }  // namespace rf::cli

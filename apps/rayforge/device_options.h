@@ -1,7 +1,7 @@
 // Where a command runs: the --device and --gpu-kernel options shared by
-// `render` and `bench` (names: rayforge/backend/device.h). Bad names are usage
-// errors in every build; asking for CUDA in a build without the backend is
-// a one-line runtime error.
+// `render`, `build` and `bench` (names: rayforge/backend/device.h). Bad names
+// are usage errors in every build; asking for CUDA in a build without the
+// backend is the library's one-line error.
 #pragma once
 
 #include <CLI/CLI.hpp>
@@ -11,10 +11,6 @@
 #include "rayforge/backend/device.h"
 
 namespace rf::cli {
-
-// The reason every CUDA request fails in a build without the backend.
-inline constexpr const char* kNoCudaBackend =
-    "this rayforge was built without the CUDA backend (nvcc was not found at configure time)";
 
 // Validators for one name (with ->delimiter(','), for each item of a list);
 // `allow_all` also accepts "all".

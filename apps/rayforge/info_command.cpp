@@ -9,32 +9,25 @@
 #include "rayforge/io/scene_io.h"
 #include "rayforge/scene/scene_geometry.h"
 
-#ifdef RAYFORGE_HAS_CUDA
-#include "rayforge/backend/cuda.h"
-#endif
-
 namespace rf::cli {
 namespace {
 
 double mib(size_t bytes) { return double(bytes) / (1024.0 * 1024.0); }
 
-#ifdef RAYFORGE_HAS_CUDA
 // "13.0" from the driver's 13000.
 std::string cuda_version(int version) {
     return std::to_string(version / 1000) + "." + std::to_string((version % 1000) / 10);
 }
-#endif
 
 void print_devices() {
-#ifdef RAYFORGE_HAS_CUDA
-    const cuda::DeviceListing listing = cuda::list_devices();
+    const DeviceListing listing = list_cuda_devices();
     if (listing.devices.empty()) {
         std::printf("CUDA devices: none (%s)\n", listing.error.c_str());
         return;
     }
     std::printf("CUDA devices: %zu\n", listing.devices.size());
     if (!listing.error.empty()) std::printf("  (not listed: %s)\n", listing.error.c_str());
-    for (const cuda::DeviceInfo& d : listing.devices) {
+    for (const DeviceInfo& d : listing.devices) {
         std::printf("cuda:%d  %s\n", d.index, d.name.c_str());
         std::printf("  compute capability %d.%d, %d SMs at %d MHz\n", d.compute_major, d.compute_minor,
                     d.multiprocessors, d.clock_mhz);
@@ -43,10 +36,6 @@ void print_devices() {
         std::printf("  driver %s, runtime %s\n", cuda_version(d.driver_version).c_str(),
                     cuda_version(d.runtime_version).c_str());
     }
-#else
-    std::printf("CUDA devices: none (this rayforge was built without the CUDA backend; nvcc was not found at "
-                "configure time)\n");
-#endif
 }
 
 std::string format_vec(Vec3f v) {

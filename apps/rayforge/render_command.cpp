@@ -1,7 +1,7 @@
 // `rayforge render SCENE -o OUT`: load, build the acceleration structure,
 // render, write; one summary line on stdout, progress on stderr. With
-// `--device cuda` the progressive renderer runs on the CUDA backend
-// (rf::cuda::Renderer), with the same outputs, progress and budgets.
+// `--device cuda` the structure and the renderer live on that device, with
+// the same outputs, progress and budgets.
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -21,11 +21,6 @@
 #include "rayforge/io/scene_io.h"
 #include "rayforge/render/render.h"
 #include "rayforge/scene/scene_geometry.h"
-#include "io/procedural_sky.h"
-
-#ifdef RAYFORGE_HAS_CUDA
-#include "rayforge/backend/cuda.h"
-#endif
 
 namespace rf::cli {
 namespace {
@@ -136,8 +131,6 @@ std::string aov_path(const std::string& output, const std::string& aov) {
     return stem + "." + aov + (pfm ? ".pfm" : ".exr");
 }
 
-// Either renderer: rf::ProgressiveRenderer or rf::cuda::Renderer (same image accessors).
-template <class Renderer>
 void write_outputs(const RenderArgs& a, const Renderer& renderer, const ToneMapping& tone) {
     const Image image = renderer.image();
     for (const std::string& output : a.outputs) {
@@ -158,22 +151,19 @@ struct RenderSummary {
     double build_ms = 0.0;
 };
 
-// The progressive loop of either renderer: progress bar, --save-every
-// previews, the final outputs. `run_passes(renderer, after_pass, progress)`
-// is that renderer's render_progressive.
-template <class Renderer, class RunPasses>
-void render_and_write(const RenderArgs& a, Renderer& renderer, const ToneMapping& tone, RunPasses&& run_passes) {
+// The progressive loop: progress bar, --save-every previews, the final outputs.
+void render_and_write(const RenderArgs& a, Renderer& renderer, const ToneMapping& tone) {
     {
         ProgressBar bar("render");
         ProgressCallback progress;
         if (!a.quiet) progress = [&bar](double fraction) { bar.update(fraction); };
-        std::function<bool(const Renderer&)> after_pass;
+        PassCallback after_pass;
         if (a.save_every > 0)
             after_pass = [&](const Renderer& r) {
                 if (r.passes() % a.save_every == 0 && r.passes() < r.options().spp) write_outputs(a, r, tone);
                 return true;
             };
-        run_passes(renderer, after_pass, progress);
+        render_progressive(renderer, after_pass, progress);
     }
     write_outputs(a, renderer, tone);
 }
@@ -334,41 +324,26 @@ int run_render(const RenderArgs& a) {
                              "(--light to place lights, --no-headlight to disable)\n");
     }
 
+    // One structure and one renderer on the chosen device. On a CUDA device
+    // the kernel picks the structure unless --accel says which.
     BuildOptions build_options = to_build_options(a.accel, a.threads);
+    build_options.device = device;
+    build_options.gpu_kernel = kernel;
     build_options.build_on_device = build_on_device;
-    RenderSummary summary;
+    if (device.is_cuda() && a.accel.accel.empty()) build_options.structure = structure_of(kernel);
+    options.device = device;
+    const std::unique_ptr<Accel> accel = build_accel(geometry, build_options);
+    const AccelStats stats = accel->stats();
     std::string device_build_line;
-    double setup_ms = 0.0;
-    if (device.is_cuda()) {
-#ifdef RAYFORGE_HAS_CUDA
-        // The device renderer builds its own structure (on the device where
-        // the builder has a device version, else on the CPU, then uploaded).
-        Clock::time_point setup_start = Clock::now();
-        cuda::Renderer renderer(scene, geometry, camera, options, kernel, build_options, device.index);
-        const AccelStats stats = renderer.tracer().stats();
+    if (device.is_cuda())
         device_build_line = to_string(device) + " " + stats.name + ": " +
-                            bench::format_device_build(bench::describe_device_build(
-                                renderer.tracer().build_stages(), stats.node_count, stats.sah_cost));
-        setup_ms = ms_since(setup_start) - stats.build_ms;
-        render_and_write(a, renderer, tone, [](cuda::Renderer& r, const auto& after_pass, const auto& progress) {
-            cuda::render_progressive(r, after_pass, progress);
-        });
-        summary = {renderer.passes(), renderer.stats(), to_string(device) + " " + stats.name, stats.build_ms};
-#else
-        (void)kernel;
-        throw Error("--device " + a.device + ": " + kNoCudaBackend);
-#endif
-    } else {
-        std::unique_ptr<Accel> accel = build_accel(geometry, build_options);
-        const AccelStats stats = accel->stats();
-        Clock::time_point setup_start = Clock::now();
-        ProgressiveRenderer renderer(scene, geometry, *accel, camera, options);
-        setup_ms = ms_since(setup_start);
-        render_and_write(a, renderer, tone, [](ProgressiveRenderer& r, const auto& after_pass, const auto& progress) {
-            render_progressive(r, after_pass, progress);
-        });
-        summary = {renderer.passes(), renderer.stats(), stats.name, stats.build_ms};
-    }
+                            bench::format_device_build({accel->build_report(), stats.node_count, stats.sah_cost});
+    const Clock::time_point setup_start = Clock::now();
+    const std::unique_ptr<Renderer> renderer = make_renderer(scene, geometry, *accel, camera, options);
+    const double setup_ms = ms_since(setup_start);
+    render_and_write(a, *renderer, tone);
+    const RenderSummary summary{renderer->passes(), renderer->stats(),
+                                device.is_cuda() ? to_string(device) + " " + stats.name : stats.name, stats.build_ms};
 
     const RenderStats& rs = summary.stats;
     const double render_ms = rs.seconds * 1e3;

@@ -293,8 +293,8 @@ void write_json(const std::string& path, const std::vector<BenchRecord>& records
                                 {"max_rel_t_diff", r.reference->max_rel_t_diff}};
         else
             rec["reference"] = nullptr;
-        if (r.is_gpu() && r.device_build.on_device) {
-            const GpuBuildStages& b = r.device_build;
+        if (r.is_gpu() && r.device_build.report.on_device) {
+            const BuildReport& b = r.device_build.report;
             Json stages = Json::object();
             for (const auto& [name, ms] : b.device_stages) stages[name] = ms;
             rec["device_build"] = {{"device_ms", b.device_ms},     {"stages_ms", stages},

@@ -7,7 +7,6 @@
 #include <ostream>
 
 #include "backend/cpu/parallel.h"
-#include "gpu_bench.h"
 #include "rayforge/core/error.h"
 
 namespace rf::bench {
@@ -59,10 +58,34 @@ struct BuiltPeer {
 
 struct BuiltGpu {
     GpuCandidate candidate;
-    std::unique_ptr<GpuTracer> tracer;
-    std::vector<double> build_runs;  // GpuTracer::stats().build_ms of each build
-    GpuBuildStages median_build;     // the stages of the build with the median build_ms
+    std::unique_ptr<Accel> accel;    // on the CUDA device
+    std::vector<double> build_runs;  // AccelStats::build_ms of each build
+    DeviceBuildSummary median_build; // the stages of the build with the median build_ms
 };
+
+// Per-ray traversal work of an instrumented pass, into `rec`.
+void count_work(const Accel& accel, const RaySet& set, BenchRecord& rec) {
+    TraversalTotals totals;
+    if (accel.count_traversal(set.rays, is_any_hit(set.kind), totals) && totals.rays > 0) {
+        rec.has_counts = true;
+        rec.steps_per_ray = double(totals.steps) / double(totals.rays);
+        rec.prims_per_ray = double(totals.prim_tests) / double(totals.rays);
+        rec.restarts_per_ray = double(totals.restarts) / double(totals.rays);
+    }
+}
+
+// What `accel` answers for every ray of `set`.
+TraceResult answers_of(const Accel& accel, const RaySet& set) {
+    TraceResult out;
+    if (is_any_hit(set.kind)) {
+        out.occluded.assign(set.rays.size(), 0);
+        accel.occluded(set.rays, out.occluded);
+    } else {
+        out.hits.assign(set.rays.size(), Hit{});
+        accel.intersect(set.rays, out.hits);
+    }
+    return out;
+}
 
 // The GPU rows of one ray set: rays resident on the device, the kernel time
 // of one launch per run, hits compared with the CPU reference's.
@@ -71,50 +94,166 @@ void trace_gpu_rows(const RaySet& set, const Accel& reference, const std::string
                     std::vector<BenchRecord>& records) {
     const bool any_hit = is_any_hit(set.kind);
     const size_t n = set.rays.size();
-    TraceResult expected;
-    if (any_hit) {
-        expected.occluded.assign(n, 0);
-        reference.occluded(set.rays, expected.occluded);
-    } else {
-        expected.hits.assign(n, Hit{});
-        reference.intersect(set.rays, expected.hits);
-    }
+    const TraceResult expected = answers_of(reference, set);
     for (BuiltGpu& g : gpus) {
         BenchRecord rec = prototype;
         rec.candidate = g.candidate.build;
-        GpuTracer& tracer = *g.tracer;
-        tracer.upload(set.rays);
-        tracer.trace(any_hit);  // warm-up
-        for (int r = 0; r < config.repetitions; ++r) rec.trace_ms_runs.push_back(tracer.trace(any_hit));
+        TraceResult out;  // what the last timed launch found
+        out.hits.assign(any_hit ? 0 : n, Hit{});
+        out.occluded.assign(any_hit ? n : 0, 0);
+        rec.trace_ms_runs = g.accel->time_traversal(set.rays, any_hit, config.repetitions, out.hits, out.occluded);
         rec.trace_ms = median(rec.trace_ms_runs);
         rec.mrays_per_s = rec.trace_ms > 0.0 ? double(n) / (rec.trace_ms * 1e3) : 0.0;
         rec.build_ms_runs = g.build_runs;
         rec.build_ms = median(g.build_runs);
-        rec.stats = tracer.stats();
+        rec.stats = g.accel->stats();
         rec.layout_ms = rec.stats.layout_ms;
-        rec.device_bytes = tracer.device_bytes();
+        rec.device_bytes = rec.stats.device_bytes;
         rec.device_build = g.median_build;
         ReferenceAgreement agreement;
         agreement.reference = reference_label;
-        TraceResult out;  // what the last timed launch found
+        if (any_hit) agreement_any_hit(out.occluded, expected.occluded, agreement.agreement);
+        else compare_hits(out.hits, expected.hits, agreement.agreement, agreement.max_rel_t_diff);
+        rec.reference = agreement;
+        if (config.count_traversal) count_work(*g.accel, set, rec);
+        records.push_back(std::move(rec));
+    }
+}
+
+// Everything built for one scene: our candidates (the first is the
+// reference), the peer's qualities and the GPU rows' structures.
+struct SceneBuilds {
+    std::vector<BuiltCandidate> candidates;
+    std::vector<BuiltPeer> peers;
+    std::vector<BuiltGpu> gpus;
+};
+
+// Builds ours; the last build of each is traced. Without CPU rows only the
+// first candidate is built, once: the GPU rows' reference.
+std::vector<BuiltCandidate> build_candidates(const SceneGeometry& geometry, const BenchConfig& config,
+                                             const std::function<void(const std::string&)>& say) {
+    std::vector<BuiltCandidate> built;
+    for (const Candidate& candidate : config.candidates) {
+        if (!config.cpu && !built.empty()) break;
+        say("  building " + candidate.label() +
+            (config.cpu ? " x" + std::to_string(config.build_repetitions) : " (CPU reference)"));
+        BuiltCandidate b{candidate, nullptr, {}};
+        const int builds = config.cpu ? config.build_repetitions : 1;
+        for (int r = 0; r < builds; ++r) {
+            b.accel.reset();
+            const auto start = Clock::now();
+            b.accel = build_accel(geometry, candidate.options);
+            b.build_runs.push_back(ms_since(start));
+        }
+        built.push_back(std::move(b));
+    }
+    return built;
+}
+
+std::vector<BuiltPeer> build_peers(const SceneGeometry& geometry, const BenchConfig& config,
+                                   const std::function<void(const std::string&)>& say) {
+    std::vector<BuiltPeer> peers;
+    for (EmbreeQuality quality : config.cpu ? config.embree : std::vector<EmbreeQuality>{}) {
+        say(std::string("  building embree/") + embree_quality_name(quality) + " x" +
+            std::to_string(config.build_repetitions));
+        BuiltPeer p{quality, nullptr, {}};
+        for (int r = 0; r < config.build_repetitions; ++r) {
+            p.peer.reset();
+            p.peer = std::make_unique<EmbreePeer>(geometry, quality, config.threads);
+            p.build_runs.push_back(p.peer->build_ms());
+        }
+        peers.push_back(std::move(p));
+    }
+    return peers;
+}
+
+std::vector<BuiltGpu> build_gpus(const SceneGeometry& geometry, const BenchConfig& config,
+                                 const std::function<void(const std::string&)>& say) {
+    std::vector<BuiltGpu> gpus;
+    const Device device{Device::Kind::Cuda, config.gpu_device};
+    for (const GpuCandidate& candidate : config.gpu) {
+        say("  building " + to_string(device) + " " + candidate.label() + " x" +
+            std::to_string(config.build_repetitions));
+        BuiltGpu g{candidate, nullptr, {}, {}};
+        BuildOptions options = candidate.build.options;
+        options.threads = config.threads;
+        options.device = device;
+        options.gpu_kernel = candidate.kernel;
+        std::vector<std::pair<double, DeviceBuildSummary>> stage_runs;
+        for (int r = 0; r < config.build_repetitions; ++r) {
+            g.accel.reset();  // frees the device memory of the previous build first
+            g.accel = build_accel(geometry, options);
+            const AccelStats stats = g.accel->stats();
+            g.build_runs.push_back(stats.build_ms);
+            stage_runs.emplace_back(stats.build_ms,
+                                    DeviceBuildSummary{g.accel->build_report(), stats.node_count, stats.sah_cost});
+        }
+        if (!stage_runs.empty()) {
+            std::sort(stage_runs.begin(), stage_runs.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+            g.median_build = stage_runs[stage_runs.size() / 2].second;
+        }
+        gpus.push_back(std::move(g));
+    }
+    return gpus;
+}
+
+// The figures of one Embree quality on `set`; its answers go to `out`.
+PeerFigures trace_peer(const BuiltPeer& built, const RaySet& set, int repetitions, TraceResult& out) {
+    const EmbreePeer& peer = *built.peer;
+    const size_t n = set.rays.size();
+    std::vector<double> runs;
+    if (is_any_hit(set.kind)) {
+        out.occluded.assign(n, 0);
+        runs = timed_runs(repetitions, [&] { peer.occluded(set.rays, out.occluded); });
+    } else {
+        out.hits.assign(n, Hit{});
+        runs = timed_runs(repetitions, [&] { peer.intersect(set.rays, out.hits); });
+    }
+    PeerFigures f;
+    f.quality = built.quality;
+    f.trace_ms = median(runs);
+    f.mrays_per_s = f.trace_ms > 0.0 ? double(n) / (f.trace_ms * 1e3) : 0.0;
+    f.build_ms = median(built.build_runs);
+    f.bytes = peer.bytes();
+    return f;
+}
+
+// The CPU rows of one ray set: the peer first (its answers are the
+// reference of the agreement figures), then every candidate.
+void trace_cpu_rows(const RaySet& set, const SceneBuilds& builds, const BenchConfig& config,
+                    const BenchRecord& prototype, std::vector<BenchRecord>& records) {
+    const bool any_hit = is_any_hit(set.kind);
+    const size_t n = set.rays.size();
+    std::vector<TraceResult> peer_results(builds.peers.size());
+    std::vector<PeerFigures> peer_figures;
+    for (size_t p = 0; p < builds.peers.size(); ++p)
+        peer_figures.push_back(trace_peer(builds.peers[p], set, config.repetitions, peer_results[p]));
+    for (const BuiltCandidate& b : builds.candidates) {
+        BenchRecord rec = prototype;
+        rec.candidate = b.candidate;
+        TraceResult out;
         if (any_hit) {
             out.occluded.assign(n, 0);
-            tracer.download_occluded(out.occluded);
-            agreement_any_hit(out.occluded, expected.occluded, agreement.agreement);
+            rec.trace_ms_runs = timed_runs(config.repetitions, [&] { b.accel->occluded(set.rays, out.occluded); });
         } else {
             out.hits.assign(n, Hit{});
-            tracer.download_hits(out.hits);
-            compare_hits(out.hits, expected.hits, agreement.agreement, agreement.max_rel_t_diff);
+            rec.trace_ms_runs = timed_runs(config.repetitions, [&] { b.accel->intersect(set.rays, out.hits); });
         }
-        rec.reference = agreement;
-        if (config.count_traversal) {
-            TraversalTotals totals;
-            tracer.count_traversal(set.rays, any_hit, totals);
-            if (totals.rays > 0) {
-                rec.has_counts = true;
-                rec.steps_per_ray = double(totals.steps) / double(totals.rays);
-                rec.prims_per_ray = double(totals.prim_tests) / double(totals.rays);
-                rec.restarts_per_ray = double(totals.restarts) / double(totals.rays);
+        rec.trace_ms = median(rec.trace_ms_runs);
+        rec.mrays_per_s = rec.trace_ms > 0.0 ? double(n) / (rec.trace_ms * 1e3) : 0.0;
+        rec.build_ms_runs = b.build_runs;
+        rec.build_ms = median(b.build_runs);
+        rec.stats = b.accel->stats();
+        rec.layout_ms = rec.stats.layout_ms;
+        if (config.count_traversal) count_work(*b.accel, set, rec);
+        rec.embree = peer_figures;
+        for (size_t p = 0; p < builds.peers.size(); ++p) {
+            PeerFigures& f = rec.embree[p];
+            if (any_hit) {
+                agreement_any_hit(out.occluded, peer_results[p].occluded, f.agreement);
+                f.max_rel_t_diff = 0.0;
+            } else {
+                compare_hits(out.hits, peer_results[p].hits, f.agreement, f.max_rel_t_diff);
             }
         }
         records.push_back(std::move(rec));
@@ -151,25 +290,98 @@ void compare_hits(const std::vector<Hit>& ours, const std::vector<Hit>& peer, do
     max_rel_t_diff = worst;
 }
 
-std::vector<BenchRecord> run_bench(const BenchConfig& config, std::ostream& log,
-                                   const std::function<void(const std::vector<BenchRecord>&)>& on_scene) {
+namespace {
+
+// Every view and resolution of one scene, every ray set: CPU rows, then GPU rows.
+void trace_scene(const LoadedScene& scene, SceneBuilds& builds, const BenchConfig& config,
+                 const std::function<void(const std::string&)>& say, std::vector<BenchRecord>& records) {
+    const SceneGeometry& geometry = scene.geometry;
+    // The reference for the GPU rows' agreement (and for the secondary ray
+    // sets) is the first candidate: every correct structure finds the same closest hits.
+    const Accel& reference = *builds.candidates.front().accel;
+    const std::string reference_label = builds.candidates.front().candidate.label();
+    const std::string gpu_device = to_string(Device{Device::Kind::Cuda, config.gpu_device});
+    const std::string gpu_name = builds.gpus.empty() ? std::string() : gpu_device_name(config.gpu_device);
+    std::vector<int> views = config.views;
+    if (views.empty())
+        for (int v = 0; v < view_count(scene); ++v) views.push_back(v);
+    for (int view_index : views) {
+        for (const Resolution& res : config.resolutions) {
+            const auto new_record = [&](const RaySet& set, int spp) {
+                BenchRecord rec;
+                rec.scene = scene.spec.name;
+                rec.triangles = geometry.triangles.size();
+                rec.load_ms = scene.load_ms;
+                rec.view = view_index;
+                rec.width = res.width;
+                rec.height = res.height;
+                rec.ray_set = set.kind;
+                rec.rays = set.rays.size();
+                rec.samples_per_pixel = spp;
+                rec.triangle_bytes = geometry.triangles.size() * sizeof(Triangle);
+                return rec;
+            };
+            const auto describe = [&](const RaySet& set, int spp, const std::string& where) {
+                return "  tracing " + std::string(ray_set_name(set.kind)) + " on " + where + ": " +
+                       std::to_string(set.rays.size()) + " rays (" + std::to_string(res.width) + "x" +
+                       std::to_string(res.height) + ", " + std::to_string(spp) + " spp, view " +
+                       std::to_string(view_index) + ")";
+            };
+            ViewSetup view = make_view_setup(scene, view_index, res.width, res.height);
+            std::vector<RaySet> cpu_sets, gpu_sets;
+            if (config.cpu) {
+                view.samples_per_pixel = config.cpu_samples_per_pixel;
+                cpu_sets = make_ray_sets(geometry, reference, view, config.ray_sets);
+            }
+            const bool shared_sets = config.cpu && config.cpu_samples_per_pixel == config.gpu_samples_per_pixel;
+            if (!builds.gpus.empty() && !shared_sets) {
+                view.samples_per_pixel = config.gpu_samples_per_pixel;
+                gpu_sets = make_ray_sets(geometry, reference, view, config.ray_sets);
+            }
+            const std::vector<RaySet>& device_sets = shared_sets ? cpu_sets : gpu_sets;
+            for (size_t k = 0; k < config.ray_sets.size(); ++k) {
+                if (config.cpu) {
+                    say(describe(cpu_sets[k], config.cpu_samples_per_pixel, "cpu"));
+                    trace_cpu_rows(cpu_sets[k], builds, config, new_record(cpu_sets[k], config.cpu_samples_per_pixel),
+                                   records);
+                }
+                if (builds.gpus.empty()) continue;
+                const RaySet& set = device_sets[k];
+                say(describe(set, config.gpu_samples_per_pixel, gpu_device));
+                BenchRecord prototype = new_record(set, config.gpu_samples_per_pixel);
+                prototype.device = gpu_device;
+                prototype.gpu = gpu_name;
+                trace_gpu_rows(set, reference, reference_label, builds.gpus, config, prototype, records);
+            }
+        }
+    }
+}
+
+void check_config(const BenchConfig& config) {
     if (config.repetitions < 1 || config.build_repetitions < 1)
         throw Error("bench: repetitions must be at least 1");
     if (config.candidates.empty()) throw Error("bench: no implemented structure selected");
     if (!config.cpu && config.gpu.empty()) throw Error("bench: neither CPU nor GPU rows selected");
     if (config.cpu_samples_per_pixel < 1 || config.gpu_samples_per_pixel < 1)
         throw Error("bench: samples per pixel must be at least 1");
-    std::string gpu_name;
-    if (!config.gpu.empty()) {
-        require_gpu_device(config.gpu_device);
-        gpu_name = gpu_device_name(config.gpu_device);
-    }
-    const std::string gpu_device = "cuda:" + std::to_string(config.gpu_device);
+    if (!config.gpu.empty()) require_device(Device{Device::Kind::Cuda, config.gpu_device});
+}
+
+}  // namespace
+
+std::string gpu_device_name(int device) {
+    for (const DeviceInfo& info : list_cuda_devices().devices)
+        if (info.index == device) return info.name;
+    return "";
+}
+
+std::vector<BenchRecord> run_bench(const BenchConfig& config, std::ostream& log,
+                                   const std::function<void(const std::vector<BenchRecord>&)>& on_scene) {
+    check_config(config);
     std::vector<BenchRecord> all_records;
-    const auto say = [&](const std::string& line) {
+    const std::function<void(const std::string&)> say = [&](const std::string& line) {
         if (config.progress) log << line << std::endl;
     };
-
     parallel::with_threads(config.threads, [&] {
         for (const std::string& scene_name : config.scenes) {
             LoadedScene scene;
@@ -180,183 +392,12 @@ std::vector<BenchRecord> run_bench(const BenchConfig& config, std::ostream& log,
                 log << "skipped scene " << scene_name << ": " << e.what() << std::endl;
                 continue;
             }
-            const SceneGeometry& geometry = scene.geometry;
-            say(scene.spec.name + ": " + std::to_string(geometry.triangles.size()) + " triangles, loaded in " +
+            say(scene.spec.name + ": " + std::to_string(scene.geometry.triangles.size()) + " triangles, loaded in " +
                 std::to_string(int(scene.load_ms)) + " ms");
-
-            // Builds: ours, then the peer's qualities; the last build of each is traced.
-            std::vector<BuiltCandidate> built;
-            for (const Candidate& candidate : config.candidates) {
-                if (!config.cpu && !built.empty()) break;  // GPU rows only: just the reference
-                say("  building " + candidate.label() + (config.cpu ? " x" + std::to_string(config.build_repetitions)
-                                                                    : " (CPU reference)"));
-                BuiltCandidate b{candidate, nullptr, {}};
-                const int builds = config.cpu ? config.build_repetitions : 1;
-                for (int r = 0; r < builds; ++r) {
-                    b.accel.reset();
-                    const auto start = Clock::now();
-                    b.accel = build_accel(geometry, candidate.options);
-                    b.build_runs.push_back(ms_since(start));
-                }
-                built.push_back(std::move(b));
-            }
-            // The reference for primary hits (and for the GPU rows' agreement)
-            // is the first candidate: every correct structure finds the same closest hits.
-            const Accel& reference = *built.front().accel;
-            const std::string reference_label = built.front().candidate.label();
-            std::vector<BuiltPeer> peers;
-            for (EmbreeQuality quality : config.cpu ? config.embree : std::vector<EmbreeQuality>{}) {
-                say(std::string("  building embree/") + embree_quality_name(quality) + " x" +
-                    std::to_string(config.build_repetitions));
-                BuiltPeer p{quality, nullptr, {}};
-                for (int r = 0; r < config.build_repetitions; ++r) {
-                    p.peer.reset();
-                    p.peer = std::make_unique<EmbreePeer>(geometry, quality, config.threads);
-                    p.build_runs.push_back(p.peer->build_ms());
-                }
-                peers.push_back(std::move(p));
-            }
-            std::vector<BuiltGpu> gpus;
-            for (const GpuCandidate& candidate : config.gpu) {
-                say("  building " + gpu_device + " " + candidate.label() + " x" +
-                    std::to_string(config.build_repetitions));
-                BuiltGpu g{candidate, nullptr, {}, {}};
-                BuildOptions options = candidate.build.options;
-                options.threads = config.threads;
-                std::vector<std::pair<double, GpuBuildStages>> stage_runs;
-                for (int r = 0; r < config.build_repetitions; ++r) {
-                    g.tracer.reset();  // frees the device memory of the previous build first
-                    g.tracer = std::make_unique<GpuTracer>(geometry, candidate.kernel, options, config.gpu_device);
-                    g.build_runs.push_back(g.tracer->stats().build_ms);
-                    stage_runs.emplace_back(g.build_runs.back(), g.tracer->build_stages());
-                }
-                if (!stage_runs.empty()) {
-                    std::sort(stage_runs.begin(), stage_runs.end(),
-                              [](const auto& a, const auto& b) { return a.first < b.first; });
-                    g.median_build = stage_runs[stage_runs.size() / 2].second;
-                }
-                gpus.push_back(std::move(g));
-            }
-
-            std::vector<int> views = config.views;
-            if (views.empty())
-                for (int v = 0; v < view_count(scene); ++v) views.push_back(v);
+            SceneBuilds builds{build_candidates(scene.geometry, config, say), build_peers(scene.geometry, config, say),
+                               build_gpus(scene.geometry, config, say)};
             std::vector<BenchRecord> scene_records;
-            const auto new_record = [&](int view_index, const Resolution& res, RaySetKind kind, size_t n, int spp) {
-                BenchRecord rec;
-                rec.scene = scene.spec.name;
-                rec.triangles = geometry.triangles.size();
-                rec.load_ms = scene.load_ms;
-                rec.view = view_index;
-                rec.width = res.width;
-                rec.height = res.height;
-                rec.ray_set = kind;
-                rec.rays = n;
-                rec.samples_per_pixel = spp;
-                rec.triangle_bytes = geometry.triangles.size() * sizeof(Triangle);
-                return rec;
-            };
-            for (int view_index : views) {
-                for (const Resolution& res : config.resolutions) {
-                    ViewSetup view = make_view_setup(scene, view_index, res.width, res.height);
-                    std::vector<RaySet> cpu_sets, gpu_sets;
-                    if (config.cpu) {
-                        view.samples_per_pixel = config.cpu_samples_per_pixel;
-                        cpu_sets = make_ray_sets(geometry, reference, view, config.ray_sets);
-                    }
-                    const bool shared_sets = config.cpu && config.cpu_samples_per_pixel == config.gpu_samples_per_pixel;
-                    if (!gpus.empty() && !shared_sets) {
-                        view.samples_per_pixel = config.gpu_samples_per_pixel;
-                        gpu_sets = make_ray_sets(geometry, reference, view, config.ray_sets);
-                    }
-                    const std::vector<RaySet>& device_sets = shared_sets ? cpu_sets : gpu_sets;
-                    const auto describe = [&](const RaySet& set, int spp, const std::string& where) {
-                        return "  tracing " + std::string(ray_set_name(set.kind)) + " on " + where + ": " +
-                               std::to_string(set.rays.size()) + " rays (" + std::to_string(res.width) + "x" +
-                               std::to_string(res.height) + ", " + std::to_string(spp) + " spp, view " +
-                               std::to_string(view_index) + ")";
-                    };
-                    for (size_t k = 0; k < config.ray_sets.size(); ++k) {
-                        if (config.cpu) {
-                            const RaySet& set = cpu_sets[k];
-                            const bool any_hit = is_any_hit(set.kind);
-                            const size_t n = set.rays.size();
-                            say(describe(set, config.cpu_samples_per_pixel, "cpu"));
-                            // The peer first: its results are the reference for agreement.
-                            std::vector<TraceResult> peer_results(peers.size());
-                            std::vector<PeerFigures> peer_figures;
-                            for (size_t p = 0; p < peers.size(); ++p) {
-                                TraceResult& out = peer_results[p];
-                                const EmbreePeer& peer = *peers[p].peer;
-                                std::vector<double> runs;
-                                if (any_hit) {
-                                    out.occluded.assign(n, 0);
-                                    runs = timed_runs(config.repetitions, [&] { peer.occluded(set.rays, out.occluded); });
-                                } else {
-                                    out.hits.assign(n, Hit{});
-                                    runs = timed_runs(config.repetitions, [&] { peer.intersect(set.rays, out.hits); });
-                                }
-                                PeerFigures f;
-                                f.quality = peers[p].quality;
-                                f.trace_ms = median(runs);
-                                f.mrays_per_s = f.trace_ms > 0.0 ? double(n) / (f.trace_ms * 1e3) : 0.0;
-                                f.build_ms = median(peers[p].build_runs);
-                                f.bytes = peer.bytes();
-                                peer_figures.push_back(f);
-                            }
-                            for (const BuiltCandidate& b : built) {
-                                BenchRecord rec = new_record(view_index, res, set.kind, n, config.cpu_samples_per_pixel);
-                                rec.candidate = b.candidate;
-                                TraceResult out;
-                                if (any_hit) {
-                                    out.occluded.assign(n, 0);
-                                    rec.trace_ms_runs =
-                                        timed_runs(config.repetitions, [&] { b.accel->occluded(set.rays, out.occluded); });
-                                } else {
-                                    out.hits.assign(n, Hit{});
-                                    rec.trace_ms_runs =
-                                        timed_runs(config.repetitions, [&] { b.accel->intersect(set.rays, out.hits); });
-                                }
-                                rec.trace_ms = median(rec.trace_ms_runs);
-                                rec.mrays_per_s = rec.trace_ms > 0.0 ? double(n) / (rec.trace_ms * 1e3) : 0.0;
-                                rec.build_ms_runs = b.build_runs;
-                                rec.build_ms = median(b.build_runs);
-                                rec.stats = b.accel->stats();
-                                rec.layout_ms = rec.stats.layout_ms;
-                                if (config.count_traversal) {
-                                    TraversalTotals totals;
-                                    if (b.accel->count_traversal(set.rays, any_hit, totals) && totals.rays > 0) {
-                                        rec.has_counts = true;
-                                        rec.steps_per_ray = double(totals.steps) / double(totals.rays);
-                                        rec.prims_per_ray = double(totals.prim_tests) / double(totals.rays);
-                                        rec.restarts_per_ray = double(totals.restarts) / double(totals.rays);
-                                    }
-                                }
-                                rec.embree = peer_figures;
-                                for (size_t p = 0; p < peers.size(); ++p) {
-                                    PeerFigures& f = rec.embree[p];
-                                    if (any_hit) {
-                                        agreement_any_hit(out.occluded, peer_results[p].occluded, f.agreement);
-                                        f.max_rel_t_diff = 0.0;
-                                    } else {
-                                        compare_hits(out.hits, peer_results[p].hits, f.agreement, f.max_rel_t_diff);
-                                    }
-                                }
-                                scene_records.push_back(std::move(rec));
-                            }
-                        }
-                        if (gpus.empty()) continue;
-
-                        const RaySet& set = device_sets[k];
-                        say(describe(set, config.gpu_samples_per_pixel, gpu_device));
-                        BenchRecord prototype =
-                            new_record(view_index, res, set.kind, set.rays.size(), config.gpu_samples_per_pixel);
-                        prototype.device = gpu_device;
-                        prototype.gpu = gpu_name;
-                        trace_gpu_rows(set, reference, reference_label, gpus, config, prototype, scene_records);
-                    }
-                }
-            }
+            trace_scene(scene, builds, config, say, scene_records);
             if (on_scene) on_scene(scene_records);
             all_records.insert(all_records.end(), scene_records.begin(), scene_records.end());
         }

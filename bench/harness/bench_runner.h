@@ -97,11 +97,14 @@ struct BenchRecord {
     double steps_per_ray = 0.0, prims_per_ray = 0.0, restarts_per_ray = 0.0;
     std::vector<PeerFigures> embree;     // CPU rows
     std::optional<ReferenceAgreement> reference;  // GPU rows
-    GpuBuildStages device_build;         // GPU rows: the stages of the median build (on_device: built there)
+    DeviceBuildSummary device_build;     // GPU rows: the stages of the median build (on_device: built there)
     [[nodiscard]] bool is_gpu() const { return device != "cpu"; }
 };
 
 double median(std::vector<double> values);
+
+// The name the driver gives CUDA device `device`, "" when it cannot be used.
+std::string gpu_device_name(int device);
 
 // Hit agreement between two closest-hit result arrays.
 void compare_hits(const std::vector<Hit>& ours, const std::vector<Hit>& peer, double& agreement,

@@ -7,8 +7,7 @@
 
 #include "bench_runner.h"
 #include "backend/cpu/parallel.h"
-#include "gpu_bench.h"
-#include "io/procedural_sky.h"
+#include "rayforge/io/scene_io.h"
 #include "ray_sets.h"
 #include "rayforge/core/error.h"
 
@@ -50,13 +49,11 @@ double replay_batches(const Accel& accel, const std::vector<Ray>& closest, const
     return ms_since(start);
 }
 
-}  // namespace
-
-std::vector<RenderBenchRecord> run_render_bench(const LoadedScene& loaded, const RenderBenchConfig& config,
-                                                std::ostream& progress) {
-    std::vector<RenderBenchRecord> records;
-    Scene scene = loaded.scene;  // lights and sky are added to a copy
-    const ViewSetup view = make_view_setup(loaded, 0, config.width, config.height);
+// The scene as rendered: a light at the view's light position when the
+// spec asks for one and the scene has none, and the procedural sky when
+// there is no environment (config.add_sky).
+Scene lit_scene(const LoadedScene& loaded, const ViewSetup& view, bool add_sky) {
+    Scene scene = loaded.scene;
     if (loaded.spec.has_light && scene.lights.empty()) {
         Light light;
         light.position = view.light;
@@ -65,24 +62,107 @@ std::vector<RenderBenchRecord> run_render_bench(const LoadedScene& loaded, const
         scene.lights.push_back(light);
     }
     const bool has_environment = scene.environment.texture >= 0 || max_component(scene.environment.color) > 0.0f;
-    if (config.add_sky && !has_environment) {
+    if (add_sky && !has_environment) {
         scene.textures.push_back(make_sky_texture());
         scene.environment.texture = int32_t(scene.textures.size() - 1);
         scene.environment.strength = 1.0f;
     }
+    return scene;
+}
 
+RenderBenchRecord new_record(const LoadedScene& loaded, const std::string& integrator, const RenderBenchConfig& config) {
+    RenderBenchRecord rec;
+    rec.scene = loaded.spec.name;
+    rec.integrator = integrator;
+    rec.width = config.width;
+    rec.height = config.height;
+    rec.max_depth = config.max_depth;
+    return rec;
+}
+
+// One device row per GPU candidate: passes timed as the renderer reports them.
+void gpu_rows(const LoadedScene& loaded, const Scene& scene, const ViewSetup& view, const std::string& integrator,
+              const RenderOptions& base, const RenderBenchConfig& config, std::ostream& progress,
+              std::vector<RenderBenchRecord>& records) {
+    const Device device{Device::Kind::Cuda, config.gpu_device};
+    const double pixels = double(config.width) * double(config.height);
+    for (const GpuCandidate& candidate : config.gpu) {
+        progress << "render bench: " << loaded.spec.name << ' ' << integrator << ' ' << config.width << 'x'
+                 << config.height << " depth " << config.max_depth << " on " << to_string(device) << ' '
+                 << candidate.label() << '\n';
+        BuildOptions build = candidate.build.options;
+        build.threads = config.threads;
+        build.device = device;
+        build.gpu_kernel = candidate.kernel;
+        const std::unique_ptr<Accel> accel = build_accel(loaded.geometry, build);
+        RenderOptions options = base;
+        options.device = device;
+        const std::unique_ptr<Renderer> renderer = make_renderer(scene, loaded.geometry, *accel, view.camera, options);
+        renderer->render_pass();  // warm-up
+        std::vector<double> pass_ms;
+        uint64_t rays = 0;
+        for (int r = 0; r < config.repetitions; ++r) {
+            renderer->render_pass();
+            pass_ms.push_back(renderer->last_pass().pass_ms);
+            rays += renderer->last_pass().closest_rays + renderer->last_pass().shadow_rays;
+        }
+        RenderBenchRecord rec = new_record(loaded, integrator, config);
+        rec.accel = accel->stats().name;
+        rec.device = to_string(device);
+        rec.gpu = gpu_device_name(config.gpu_device);
+        rec.pass_ms = median(pass_ms);
+        rec.samples_per_s = pixels / (rec.pass_ms * 1e-3);
+        rec.rays_per_sample = double(rays) / (pixels * double(config.repetitions));
+        rec.rays_per_s = rec.samples_per_s * rec.rays_per_sample;
+        rec.trace_ms = rec.batch_trace_ms = rec.shading_fraction = std::nan("");
+        records.push_back(rec);
+    }
+}
+
+// The CPU row: a recorded warm-up pass whose queries are replayed without shading.
+RenderBenchRecord cpu_row(const LoadedScene& loaded, const Scene& scene, const ViewSetup& view, const Accel& accel,
+                          const std::string& integrator, const RenderOptions& options,
+                          const RenderBenchConfig& config) {
+    const std::unique_ptr<Renderer> renderer = make_renderer(scene, loaded.geometry, accel, view.camera, options);
+    std::vector<TracedRay> rays;
+    renderer->render_pass_recorded(rays);
+    std::vector<double> pass_ms, trace_ms, batch_ms;
+    for (int r = 0; r < config.repetitions; ++r) {
+        renderer->render_pass();
+        pass_ms.push_back(renderer->last_pass().pass_ms);
+    }
+    const RenderStats stats = renderer->stats();
+    for (int r = 0; r < config.repetitions; ++r) trace_ms.push_back(replay_single(accel, rays, config.threads));
+    std::vector<Ray> closest, shadow;
+    for (const TracedRay& t : rays) (t.any_hit ? shadow : closest).push_back(t.ray);
+    for (int r = 0; r < config.repetitions; ++r) batch_ms.push_back(replay_batches(accel, closest, shadow, config.threads));
+    const double pixels = double(config.width) * double(config.height);
+    RenderBenchRecord rec = new_record(loaded, integrator, config);
+    rec.accel = accel.stats().name;
+    rec.threads = config.threads;
+    rec.pass_ms = median(pass_ms);
+    rec.samples_per_s = pixels / (rec.pass_ms * 1e-3);
+    rec.rays_per_sample = double(stats.rays()) / double(stats.samples);
+    rec.rays_per_s = rec.samples_per_s * rec.rays_per_sample;
+    rec.trace_ms = median(trace_ms);
+    rec.batch_trace_ms = median(batch_ms);
+    rec.shading_fraction = 1.0 - rec.trace_ms / rec.pass_ms;
+    return rec;
+}
+
+}  // namespace
+
+std::vector<RenderBenchRecord> run_render_bench(const LoadedScene& loaded, const RenderBenchConfig& config,
+                                                std::ostream& progress) {
+    std::vector<RenderBenchRecord> records;
+    const ViewSetup view = make_view_setup(loaded, 0, config.width, config.height);
+    const Scene scene = lit_scene(loaded, view, config.add_sky);
     std::unique_ptr<Accel> accel;
-    std::string accel_name;
     if (config.cpu) {
         BuildOptions build = config.build;
         build.threads = config.threads;
         accel = build_accel(loaded.geometry, build);
-        accel_name = accel->stats().name;
     }
-    const double pixels = double(config.width) * double(config.height);
-    const std::string gpu_device = "cuda:" + std::to_string(config.gpu_device);
-    const std::string gpu_name = config.gpu.empty() ? std::string() : gpu_device_name(config.gpu_device);
-
     for (const std::string& integrator : config.integrators) {
         RenderOptions options;
         options.width = config.width;
@@ -91,76 +171,11 @@ std::vector<RenderBenchRecord> run_render_bench(const LoadedScene& loaded, const
         options.max_depth = config.max_depth;
         options.threads = config.threads;
         options.spp = 1 << 20;
-        for (const GpuCandidate& candidate : config.gpu) {
-            progress << "render bench: " << loaded.spec.name << ' ' << integrator << ' ' << config.width << 'x'
-                     << config.height << " depth " << config.max_depth << " on " << gpu_device << ' '
-                     << candidate.label() << '\n';
-            BuildOptions build = candidate.build.options;
-            build.threads = config.threads;
-            GpuRenderer renderer(scene, loaded.geometry, view.camera, options, candidate.kernel, build,
-                                 config.gpu_device);
-            renderer.render_pass();  // warm-up
-            std::vector<double> pass_ms;
-            uint64_t rays = 0;
-            for (int r = 0; r < config.repetitions; ++r) {
-                const GpuPass pass = renderer.render_pass();
-                pass_ms.push_back(pass.pass_ms);
-                rays += pass.closest_rays + pass.shadow_rays;
-            }
-            RenderBenchRecord rec;
-            rec.scene = loaded.spec.name;
-            rec.integrator = integrator;
-            rec.accel = renderer.accel_stats().name;
-            rec.device = gpu_device;
-            rec.gpu = gpu_name;
-            rec.width = config.width;
-            rec.height = config.height;
-            rec.max_depth = config.max_depth;
-            rec.pass_ms = median(pass_ms);
-            rec.samples_per_s = pixels / (rec.pass_ms * 1e-3);
-            rec.rays_per_sample = double(rays) / (pixels * double(config.repetitions));
-            rec.rays_per_s = rec.samples_per_s * rec.rays_per_sample;
-            rec.trace_ms = rec.batch_trace_ms = rec.shading_fraction = std::nan("");
-            records.push_back(rec);
-        }
+        gpu_rows(loaded, scene, view, integrator, options, config, progress, records);
         if (!config.cpu) continue;
         progress << "render bench: " << loaded.spec.name << ' ' << integrator << ' ' << config.width << 'x'
                  << config.height << " depth " << config.max_depth << '\n';
-        ProgressiveRenderer renderer(scene, loaded.geometry, *accel, view.camera, options);
-
-        // Warm-up pass, recorded: its queries are replayed below.
-        std::vector<TracedRay> rays;
-        renderer.render_pass_recorded(rays);
-        std::vector<double> pass_ms, trace_ms, batch_ms;
-        for (int r = 0; r < config.repetitions; ++r) {
-            const RenderStats before = renderer.stats();
-            renderer.render_pass();
-            pass_ms.push_back((renderer.stats().seconds - before.seconds) * 1e3);
-        }
-        const RenderStats stats = renderer.stats();
-        for (int r = 0; r < config.repetitions; ++r) trace_ms.push_back(replay_single(*accel, rays, config.threads));
-        {
-            std::vector<Ray> closest, shadow;
-            for (const TracedRay& t : rays) (t.any_hit ? shadow : closest).push_back(t.ray);
-            for (int r = 0; r < config.repetitions; ++r)
-                batch_ms.push_back(replay_batches(*accel, closest, shadow, config.threads));
-        }
-        RenderBenchRecord rec;
-        rec.scene = loaded.spec.name;
-        rec.integrator = integrator;
-        rec.accel = accel_name;
-        rec.width = config.width;
-        rec.height = config.height;
-        rec.max_depth = config.max_depth;
-        rec.threads = config.threads;
-        rec.pass_ms = median(pass_ms);
-        rec.samples_per_s = pixels / (rec.pass_ms * 1e-3);
-        rec.rays_per_sample = double(stats.rays()) / double(stats.samples);
-        rec.rays_per_s = rec.samples_per_s * rec.rays_per_sample;
-        rec.trace_ms = median(trace_ms);
-        rec.batch_trace_ms = median(batch_ms);
-        rec.shading_fraction = 1.0 - rec.trace_ms / rec.pass_ms;
-        records.push_back(rec);
+        records.push_back(cpu_row(loaded, scene, view, *accel, integrator, options, config));
     }
     return records;
 }

@@ -4,9 +4,9 @@
 // (every closest-hit and any-hit query in the order each tile made it) and
 // replayed through the same single-ray calls on the same threads, so the
 // difference between the two times is what shading, sampling, texture
-// filtering and light selection cost. On a CUDA device (rf::cuda::Renderer,
-// a wavefront path tracer) a pass is timed as the device renderer reports it;
-// there is no replay there.
+// filtering and light selection cost. On a CUDA device (rf::make_renderer
+// with a CUDA device: a wavefront path tracer) a pass is timed as the
+// renderer reports it; there is no replay there.
 #pragma once
 
 #include <ostream>
@@ -28,7 +28,7 @@ struct RenderBenchConfig {
     int threads = 0;
     BuildOptions build;                    // the structure traced
     bool add_sky = true;                   // scenes without an environment get the procedural sky
-    bool cpu = true;                       // render on the CPU (ProgressiveRenderer over `build`)
+    bool cpu = true;                       // render on the CPU (over `build`)
     std::vector<GpuCandidate> gpu;         // and on the device, once per kernel and build
     int gpu_device = 0;
 };

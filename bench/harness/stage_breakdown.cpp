@@ -6,11 +6,10 @@
 #include <ostream>
 #include <sstream>
 
-#include "accel/bvh/builders/build_bvh.h"
 #include "accel/bvh/builders/grid_bvh.h"
 #include "accel/bvh/builders/hlbvh2.h"
 #include "backend/cpu/parallel.h"
-#include "gpu_bench.h"
+#include "device_build_report.h"
 
 namespace rf::bench {
 namespace {
@@ -82,11 +81,13 @@ namespace {
 template <class Build>
 StageBreakdown median_device_build(const LoadedScene& scene, const std::string& name, int repetitions, Build&& build) {
     (void)build();
-    std::vector<GpuBuildStages> runs;
+    std::vector<DeviceBuildSummary> runs;
     for (int i = 0; i < std::max(1, repetitions); ++i) runs.push_back(build());
-    std::sort(runs.begin(), runs.end(),
-              [](const GpuBuildStages& a, const GpuBuildStages& b) { return a.device_ms < b.device_ms; });
-    const GpuBuildStages& s = runs[runs.size() / 2];
+    std::sort(runs.begin(), runs.end(), [](const DeviceBuildSummary& a, const DeviceBuildSummary& b) {
+        return a.report.device_ms < b.report.device_ms;
+    });
+    const DeviceBuildSummary& summary = runs[runs.size() / 2];
+    const BuildReport& s = summary.report;
     StageBreakdown row;
     row.scene = scene.spec.name;
     row.triangles = scene.geometry.triangles.size();
@@ -96,13 +97,23 @@ StageBreakdown median_device_build(const LoadedScene& scene, const std::string& 
     std::ostringstream detail;
     detail.setf(std::ios::fixed);
     detail.precision(2);
-    detail << "peak " << double(s.peak_device_bytes) / (1024.0 * 1024.0) << " MiB on the device, " << s.nodes
+    detail << "peak " << double(s.peak_device_bytes) / (1024.0 * 1024.0) << " MiB on the device, " << summary.nodes
            << " nodes";
-    if (std::isfinite(s.sah_cost)) detail << ", SAH " << s.sah_cost;
+    if (std::isfinite(summary.sah_cost)) detail << ", SAH " << summary.sah_cost;
     detail << (s.detail.empty() ? "" : ", ") << s.detail << "; not in total: upload " << s.upload_ms << ", download "
            << s.download_ms << ", host " << s.host_ms << " ms";
     row.detail = detail.str();
     return row;
+}
+
+// An accel built on `device` for `kernel`, summarised by its report.
+DeviceBuildSummary device_accel_build(const SceneGeometry& geometry, BuildOptions options, GpuKernel kernel,
+                                      int device) {
+    options.device = Device{Device::Kind::Cuda, device};
+    options.gpu_kernel = kernel;
+    const std::unique_ptr<Accel> accel = build_accel(geometry, options);
+    const AccelStats stats = accel->stats();
+    return {accel->build_report(), stats.node_count, stats.sah_cost};
 }
 
 }  // namespace
@@ -114,18 +125,28 @@ std::vector<StageBreakdown> measure_device_stage_breakdowns(const LoadedScene& s
                                   Builder::GridBvhSplit}) {
         BuildOptions options;
         options.builder = builder;
-        rows.push_back(median_device_build(scene, to_string(builder) + " (cuda)", repetitions,
-                                           [&] { return gpu_build(triangles, options, device); }));
+        options.device = Device{Device::Kind::Cuda, device};
+        rows.push_back(median_device_build(scene, to_string(builder) + " (cuda)", repetitions, [&] {
+            DeviceBuildSummary summary;
+            const Bvh bvh = build_bvh(triangles, options, &summary.report);
+            summary.nodes = bvh.nodes.size();
+            summary.sah_cost = bvh.nodes.empty() ? 0.0 : bvh.sah_cost();
+            return summary;
+        }));
     }
-    for (const bool proximity : {false, true})
+    for (const bool proximity : {false, true}) {
+        BuildOptions options;
+        options.structure = proximity ? Structure::ProximityGrid : Structure::Grid;
+        const GpuKernel kernel = proximity ? GpuKernel::ProximityGrid : GpuKernel::Grid;
         rows.push_back(median_device_build(scene, proximity ? "grid-prox (cuda)" : "grid (cuda)", repetitions,
-                                           [&] { return gpu_build_grid(triangles, 0, proximity, device); }));
-    // Layout conversions of the default tree, each its own row (issue 7: timed separately).
-    const Bvh bvh = build_bvh(triangles, BuildOptions{});
+                                           [&] { return device_accel_build(scene.geometry, options, kernel, device); }));
+    }
+    // Layout conversions of the default tree (built on the CPU: binned SAH has
+    // no device builder), each its own row, the conversion alone its total.
     for (const GpuKernel kernel : {GpuKernel::AilaLaine, GpuKernel::Cwbvh})
         rows.push_back(median_device_build(scene, to_string(kernel) + " layout (cuda)", repetitions, [&] {
-            GpuBuildStages s = gpu_convert_layout(bvh, triangles, kernel, device);
-            s.device_ms = s.layout_ms;  // the row's total is the conversion
+            DeviceBuildSummary s = device_accel_build(scene.geometry, BuildOptions{}, kernel, device);
+            s.report.device_ms = s.report.layout_ms;
             return s;
         }));
     return rows;

@@ -1,8 +1,12 @@
-// Umbrella header: the public C++ API of rayforge.
+// Umbrella header: the public C++ API of rayforge, everything a program
+// needs to load a scene, build a structure on a device (rf::Device: the CPU
+// or a CUDA device), trace rays, render progressively and write images.
 #pragma once
 
 #include "rayforge/accel/accel.h"
+#include "rayforge/accel/build_report.h"
 #include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/backend/device.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/image_io.h"
 #include "rayforge/io/scene_io.h"
@@ -11,6 +15,7 @@
 #include "rayforge/math/ray.h"
 #include "rayforge/math/vec.h"
 #include "rayforge/render/image.h"
+#include "rayforge/render/integrators.h"
 #include "rayforge/render/render.h"
 #include "rayforge/scene/camera.h"
 #include "rayforge/scene/scene.h"

@@ -11,6 +11,7 @@
 
 #include "accel/accel_factories.h"
 #include "accel/brute_force.h"
+#include "backend/backends.h"
 #include "accel/bvh/builders/build_bvh.h"
 #include "accel/bvh/bvh_accel.h"
 #include "rayforge/core/error.h"
@@ -60,6 +61,10 @@ void validate_build_options(const BuildOptions& options) {
     if (options.threads < 0) {
         throw Error("build options: threads must be >= 0 (0 = all cores), got " + std::to_string(options.threads));
     }
+    if (options.device.is_cuda() && structure_of(options.gpu_kernel) != options.structure) {
+        throw Error("build options: the GPU kernel " + to_string(options.gpu_kernel) + " traverses a " +
+                    to_string(structure_of(options.gpu_kernel)) + ", not a " + to_string(options.structure));
+    }
 }
 
 namespace {
@@ -68,8 +73,7 @@ constexpr size_t kMaxTriangles = 0x7FFFFFFF;
 
 }  // namespace
 
-std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options) {
-    validate_build_options(options);
+std::unique_ptr<Accel> cpu::build_accel(const SceneGeometry& geometry, const BuildOptions& options) {
     // Node indices are 32-bit and a BVH over n triangles may need 2n - 1 nodes.
     if (geometry.triangles.size() > kMaxTriangles) {
         throw Error("build_accel: " + std::to_string(geometry.triangles.size()) +
@@ -78,7 +82,7 @@ std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOpt
     switch (options.structure) {
         case Structure::Bvh: {
             const auto start = std::chrono::steady_clock::now();
-            Bvh bvh = parallel::with_threads(options.threads, [&] { return build_bvh(geometry.triangles, options); });
+            Bvh bvh = parallel::with_threads(options.threads, [&] { return build_bvh_on_cpu(geometry.triangles, options); });
             const double build_ms =
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
             std::string name = "bvh/" + to_string(options.builder) + (options.optimize ? "+opt" : "") + "/" +
@@ -93,6 +97,53 @@ std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOpt
         case Structure::BruteForce: return std::make_unique<BruteForceAccel>(geometry);
     }
     throw Error("build options: unknown structure");
+}
+
+Structure structure_of(GpuKernel kernel) {
+    switch (kernel) {
+        case GpuKernel::KdShortStack:
+        case GpuKernel::KdRestart: return Structure::KdTree;
+        case GpuKernel::Grid: return Structure::Grid;
+        case GpuKernel::ProximityGrid: return Structure::ProximityGrid;
+        case GpuKernel::Bvh2:
+        case GpuKernel::AilaLaine:
+        case GpuKernel::Cwbvh: break;
+    }
+    return Structure::Bvh;
+}
+
+std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options) {
+    validate_build_options(options);
+    return options.device.is_cuda() ? cuda::build_accel(geometry, options) : cpu::build_accel(geometry, options);
+}
+
+Bvh build_bvh(std::span<const Triangle> triangles, const BuildOptions& options, BuildReport* report) {
+    validate_build_options(options);
+    if (options.device.is_cuda()) return cuda::build_bvh(triangles, options, report);
+    if (report) *report = BuildReport{};
+    return parallel::with_threads(options.threads, [&] { return build_bvh_on_cpu(triangles, options); });
+}
+
+std::vector<double> Accel::time_traversal(std::span<const Ray> rays, bool any_hit, int runs, std::span<Hit> hits,
+                                          std::span<uint8_t> occluded) const {
+    const auto trace = [&] {
+        if (any_hit) this->occluded(rays, occluded);
+        else intersect(rays, hits);
+    };
+    trace();  // warm-up
+    std::vector<double> times;
+    for (int r = 0; r < runs; ++r) {
+        const auto start = std::chrono::steady_clock::now();
+        trace();
+        times.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+    }
+    return times;
+}
+
+BuildReport Accel::build_report() const {
+    BuildReport report;
+    report.device = device();
+    return report;
 }
 
 namespace {

@@ -10,10 +10,6 @@
 
 namespace rf {
 
-// Throws rf::Error naming the first option out of its range (build_accel
-// calls it; so does the CUDA backend before building on the CPU).
-void validate_build_options(const BuildOptions& options);
-
 // Uniform grid, plain (3D-DDA) or with proximity clouds (options.structure
 // says which). Defined in accel/grid/grid_accel.cpp.
 std::unique_ptr<Accel> make_grid_accel(const SceneGeometry& geometry, const BuildOptions& options);

@@ -2,23 +2,14 @@
 // reference every other structure is checked against.
 #pragma once
 
-#include "rayforge/accel/accel.h"
+#include "accel/view_accel.h"
 
 namespace rf {
 
-class BruteForceAccel final : public Accel {
+class BruteForceAccel final : public ViewAccel<NoStructure, BruteForceTracer> {
 public:
     // `geometry` must outlive this object.
-    explicit BruteForceAccel(const SceneGeometry& geometry) : geometry_(geometry) {}
-
-    [[nodiscard]] Hit intersect(const Ray& ray) const override;
-    [[nodiscard]] bool occluded(const Ray& ray) const override;
-    using Accel::intersect;
-    using Accel::occluded;
-    [[nodiscard]] AccelStats stats() const override;
-
-private:
-    const SceneGeometry& geometry_;
+    explicit BruteForceAccel(const SceneGeometry& geometry);
 };
 
 }  // namespace rf

@@ -1,9 +1,10 @@
-// Device and GPU-kernel names (rayforge/backend/device.h).
+// Device and GPU-kernel names, and the device queries of rayforge/backend/device.h.
 #include "rayforge/backend/device.h"
 
 #include <cstdlib>
 #include <utility>
 
+#include "backend/backends.h"
 #include "rayforge/core/error.h"
 
 namespace rf {
@@ -58,12 +59,12 @@ std::vector<GpuKernel> all_gpu_kernels() {
     return kernels;
 }
 
-bool cuda_backend_built() {
-#ifdef RAYFORGE_CUDA_BACKEND_BUILT
-    return true;
-#else
-    return false;
-#endif
+bool cuda_backend_built() { return cuda::backend_built(); }
+
+DeviceListing list_cuda_devices() { return cuda::list_devices(); }
+
+void require_device(const Device& device) {
+    if (device.is_cuda()) cuda::require_device(device.index);
 }
 
 }  // namespace rf

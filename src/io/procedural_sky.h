@@ -4,6 +4,7 @@
 // Preetham or Hosek-Wilkie): see procedural_sky.cpp.
 #pragma once
 
+#include "rayforge/io/scene_io.h"
 #include "rayforge/math/vec.h"
 #include "rayforge/scene/texture.h"
 
@@ -24,11 +25,6 @@ Vec3f equirect_direction(float u, float v);
 // centre column) turning towards +x.
 Vec3f sky_sun_direction(float elevation_deg, float azimuth_deg);
 
-// A width x height LinearFloat RGB texture (Repeat in u, ClampToEdge in v),
-// named "builtin:sky": blue-to-white gradient sky, dark ground, bright sun.
-// Throws rf::Error for sizes below 8 x 4 or above 16384 x 8192, an elevation
-// outside [1, 90] degrees or a non-finite azimuth.
-Texture make_sky_texture(int width = 512, int height = 256, float sun_elevation_deg = 35.0f,
-                         float sun_azimuth_deg = 30.0f);
+// make_sky_texture itself is public (rayforge/io/scene_io.h).
 
 }  // namespace rf

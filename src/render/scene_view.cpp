@@ -31,14 +31,27 @@ std::vector<uint8_t> textures_needing_mips(const Scene& scene) {
     return used;
 }
 
+// How far secondary rays start off a surface: large enough to clear float
+// error at the hit point for scenes whose coordinates are about the size of
+// their extent, small against features.
+void set_scene_scale(const SceneGeometry& geometry, SceneView& view) {
+    if (!geometry.bounds.is_empty()) {
+        const float d = length(geometry.bounds.extent());
+        if (std::isfinite(d) && d > 0.0f) view.scene_diagonal = d;
+    }
+    const Vec3f far_corner =
+        geometry.bounds.is_empty() ? Vec3f(0.0f) : max(abs(geometry.bounds.lo), abs(geometry.bounds.hi));
+    view.epsilon = std::fmax(1e-4f * view.scene_diagonal, 1e-5f * max_component(far_corner));
+    if (!(view.epsilon > 0.0f)) view.epsilon = 1e-4f;
+}
+
 }  // namespace
 
-HostSceneView::HostSceneView(const Scene& scene, const SceneGeometry& geometry)
-    : scene_(&scene),
-      geometry_(&geometry),
-      materials_(shading_materials(scene)),
+SceneTables::SceneTables(const Scene& scene, const SceneGeometry& geometry)
+    : materials_(shading_materials(scene)),
       shading_triangles_(build_shading_triangles(scene, geometry)),
-      lights_(scene, geometry, materials_) {
+      lights_(std::make_unique<HostLightSet>(scene, geometry, materials_)),
+      triangle_count_(uint32_t(geometry.triangles.size())) {
     const std::vector<uint8_t> needs_mips = textures_needing_mips(scene);
     mip_chains_.resize(scene.textures.size());
     parallel::for_each_index(0, int(scene.textures.size()), [&](int i) {
@@ -48,32 +61,23 @@ HostSceneView::HostSceneView(const Scene& scene, const SceneGeometry& geometry)
     for (size_t i = 0; i < scene.textures.size(); ++i)
         textures_.push_back(make_mip_view(scene.textures[i], mip_chains_[i].get()));
 
+    SceneView& v = view_;
+    v.shading_triangles = shading_triangles_.data();
+    v.materials = materials_.data();
+    v.material_count = uint32_t(materials_.size());
+    v.textures = textures_.data();
+    v.texture_count = uint32_t(textures_.size());
+    v.lights = lights_->view();
     for (const ShadingMaterial& m : materials_)
-        if (m.alpha_mode != AlphaMode::Opaque) has_transparent_materials_ = true;
-
-    if (!geometry.bounds.is_empty()) {
-        float d = length(geometry.bounds.extent());
-        if (std::isfinite(d) && d > 0.0f) diagonal_ = d;
-    }
-    // Large enough to clear float error at the hit point for scenes whose
-    // coordinates are about the size of their extent, small against features.
-    Vec3f far_corner = geometry.bounds.is_empty() ? Vec3f(0.0f) : max(abs(geometry.bounds.lo), abs(geometry.bounds.hi));
-    ray_epsilon_ = std::fmax(1e-4f * diagonal_, 1e-5f * max_component(far_corner));
-    if (!(ray_epsilon_ > 0.0f)) ray_epsilon_ = 1e-4f;
+        if (m.alpha_mode != AlphaMode::Opaque) v.transparent_materials = true;
+    set_scene_scale(geometry, v);
 }
 
-size_t HostSceneView::mip_bytes() const {
+size_t SceneTables::mip_bytes() const {
     size_t bytes = 0;
     for (const auto& chain : mip_chains_)
         if (chain) bytes += chain->memory_bytes();
     return bytes;
-}
-
-SurfaceHit HostSceneView::emitter_surface(const AreaLightSample& s) const {
-    Ray ray;
-    Hit hit;
-    emitter_ray_hit(s, ray, hit);
-    return surface(ray, hit);
 }
 
 }  // namespace rf

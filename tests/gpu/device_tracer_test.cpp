@@ -1,9 +1,11 @@
 // Every GPU traversal kernel (rf::GpuKernel) against the CPU: same hits
 // (hit or miss, primitive, t within 1e-5 relative) as the brute-force
 // reference for camera rays, diffuse bounce rays and random rays; any-hit
-// queries agree with closest-hit ones; the resident-ray path of the bench
+// queries agree with closest-hit ones; the resident-ray timing of the bench
 // and the instrumented traversal work; error paths give clean rf::Errors.
-// Skips with a message when no CUDA device is present.
+// Everything through the public API: rf::build_accel on a CUDA device.
+// Skips with a message when no CUDA device is present (fails with
+// RAYFORGE_REQUIRE_GPU=1).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -14,7 +16,6 @@
 #include "accel/brute_force.h"
 #include "backend/cuda/self_test.h"
 #include "gpu_test_device.h"
-#include "rayforge/backend/cuda.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
 #include "rayforge/scene/camera.h"
@@ -97,14 +98,15 @@ TEST(GpuDeviceTracer, EveryKernelMatchesBruteForce) {
         for (GpuKernel kernel : all_gpu_kernels()) {
             const std::string what = std::string(name) + " / " + to_string(kernel);
             SCOPED_TRACE(what);
-            cuda::DeviceTracer tracer(g, kernel);
+            const auto tracer = build_accel(g, gpu_test::on_device(kernel));
+            EXPECT_EQ(tracer->device(), parse_device("cuda:0"));
             std::vector<Hit> hits(rays.size());
             std::vector<uint8_t> occluded(rays.size());
-            tracer.intersect(rays, hits);
-            tracer.occluded(rays, occluded);
+            tracer->intersect(rays, hits);
+            tracer->occluded(rays, occluded);
             expect_same_hits(rays, expected, hits, occluded, what);
-            EXPECT_GT(tracer.device_bytes(), 0u);
-            EXPECT_NE(tracer.stats().name.find(to_string(kernel)), std::string::npos);
+            EXPECT_GT(tracer->stats().device_bytes, 0u);
+            EXPECT_NE(tracer->stats().name.find(to_string(kernel)), std::string::npos);
         }
     }
 }
@@ -123,11 +125,11 @@ TEST(GpuDeviceTracer, BuildersAndLeafSizesForTheBvhKernels) {
             BuildOptions build;
             build.builder = builder;
             build.max_leaf_size = 8;
-            cuda::DeviceTracer tracer(g, kernel, build);
+            const auto tracer = build_accel(g, gpu_test::on_device(kernel, build));
             std::vector<Hit> hits(rays.size());
             std::vector<uint8_t> occluded(rays.size());
-            tracer.intersect(rays, hits);
-            tracer.occluded(rays, occluded);
+            tracer->intersect(rays, hits);
+            tracer->occluded(rays, occluded);
             expect_same_hits(rays, expected, hits, occluded, what);
         }
 }
@@ -140,14 +142,13 @@ TEST(GpuDeviceTracer, ResidentRaysAndCountersMatchTheOneShotPath) {
     const std::vector<Ray> rays = test_rays(scene, g, brute, 3);
     for (GpuKernel kernel : all_gpu_kernels()) {
         SCOPED_TRACE(to_string(kernel));
-        cuda::DeviceTracer tracer(g, kernel);
+        const auto tracer = build_accel(g, gpu_test::on_device(kernel));
         std::vector<Hit> once(rays.size()), resident(rays.size());
-        tracer.intersect(rays, once);
-        tracer.upload_rays(rays);
-        const cuda::KernelTiming timing = tracer.trace_uploaded(false);
-        EXPECT_EQ(timing.rays, rays.size());
-        EXPECT_GT(timing.kernel_ms, 0.0);
-        tracer.download_hits(resident);
+        std::vector<uint8_t> no_flags;
+        tracer->intersect(rays, once);
+        const std::vector<double> runs = tracer->time_traversal(rays, false, 2, resident, no_flags);
+        ASSERT_EQ(runs.size(), 2u);
+        EXPECT_GT(runs[0], 0.0);
         // Same t; the primitive may differ only on an exact tie (a shared
         // edge), where speculation or postponement can reorder the tests.
         for (size_t i = 0; i < rays.size(); ++i) {
@@ -155,7 +156,7 @@ TEST(GpuDeviceTracer, ResidentRaysAndCountersMatchTheOneShotPath) {
             ASSERT_EQ(once[i].t, resident[i].t) << i;
         }
         TraversalTotals totals;
-        tracer.count_traversal(rays, false, totals);
+        EXPECT_TRUE(tracer->count_traversal(rays, false, totals));
         EXPECT_EQ(totals.rays, rays.size());
         EXPECT_GT(totals.steps, totals.rays);
         EXPECT_GT(totals.prim_tests, 0u);
@@ -169,9 +170,9 @@ TEST(GpuDeviceTracer, EmptySceneAlwaysMisses) {
     for (Ray& r : rays) r.dir = Vec3f(0.0f, 0.0f, 1.0f);
     for (GpuKernel kernel : all_gpu_kernels()) {
         SCOPED_TRACE(to_string(kernel));
-        cuda::DeviceTracer tracer(g, kernel);
+        const auto tracer = build_accel(g, gpu_test::on_device(kernel));
         std::vector<Hit> hits(rays.size());
-        tracer.intersect(rays, hits);
+        tracer->intersect(rays, hits);
         for (const Hit& h : hits) EXPECT_FALSE(h.found());
     }
 }
@@ -231,7 +232,7 @@ TEST(GpuErrors, UnknownDeviceIsACleanError) {
     RF_REQUIRE_DEVICE();
     const SceneGeometry g = SceneGeometry::build(make_builtin_scene("cornell"));
     try {
-        cuda::DeviceTracer tracer(g, GpuKernel::Cwbvh, {}, 99);
+        (void)build_accel(g, gpu_test::on_device(GpuKernel::Cwbvh, {}, 99));
         FAIL() << "no error";
     } catch (const Error& e) {
         EXPECT_NE(std::string(e.what()).find("cuda:99: no such device"), std::string::npos) << e.what();

@@ -15,7 +15,6 @@
 #include "accel/brute_force.h"
 #include "gpu_test_device.h"
 #include "rayforge/accel/bvh/bvh.h"
-#include "rayforge/backend/cuda.h"
 #include "trace/bvh_traversal.h"
 
 namespace rf::gpu_build_test {

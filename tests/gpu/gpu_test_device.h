@@ -11,14 +11,23 @@
 #include <cstring>
 #include <string>
 
-#include "rayforge/backend/cuda.h"
+#include "rayforge/accel/accel.h"
+#include "rayforge/backend/device.h"
 
 namespace rf::gpu_test {
 
 // Listed once per process: every test asks.
-inline const cuda::DeviceListing& device_listing() {
-    static const cuda::DeviceListing listing = cuda::list_devices();
+inline const DeviceListing& device_listing() {
+    static const DeviceListing listing = list_cuda_devices();
     return listing;
+}
+
+// `options` for `kernel` on cuda:N: the kernel's structure, built there.
+inline BuildOptions on_device(GpuKernel kernel, BuildOptions options = {}, int index = 0) {
+    options.device = Device{Device::Kind::Cuda, index};
+    options.gpu_kernel = kernel;
+    options.structure = structure_of(kernel);
+    return options;
 }
 
 // Set and not "0": a run that must exercise the device.

@@ -18,8 +18,7 @@
 #include "../accel_test_scenes.h"
 #include "accel/bvh/builders/grid_bvh.h"
 #include "gpu_build_checks.h"
-#include "rayforge/backend/cuda.h"
-#include "rayforge/backend/cuda_build.h"
+#include "backend/cuda/device_builders.h"
 
 namespace rf {
 namespace {

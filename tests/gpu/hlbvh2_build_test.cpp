@@ -22,8 +22,7 @@
 #include "accel/bvh/builders/hlbvh2_top_steps.h"
 #include "accel/bvh/builders/morton_tree.h"
 #include "backend/cuda/hlbvh2_build.h"
-#include "rayforge/backend/cuda.h"
-#include "rayforge/backend/cuda_build.h"
+#include "backend/cuda/device_builders.h"
 
 namespace rf {
 namespace {

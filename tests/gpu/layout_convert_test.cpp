@@ -16,8 +16,7 @@
 #include "accel/bvh/layout/cwbvh_layout.h"
 #include "gpu_build_checks.h"
 #include "rayforge/accel/accel.h"
-#include "rayforge/backend/cuda.h"
-#include "rayforge/backend/cuda_build.h"
+#include "backend/cuda/device_builders.h"
 #include "rayforge/core/error.h"
 
 namespace rf {

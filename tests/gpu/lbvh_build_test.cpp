@@ -18,8 +18,7 @@
 #include "accel/bvh/builders/lbvh.h"
 #include "accel/bvh/builders/morton_tree.h"
 #include "backend/cuda/lbvh_build.h"
-#include "rayforge/backend/cuda.h"
-#include "rayforge/backend/cuda_build.h"
+#include "backend/cuda/device_builders.h"
 #include "rayforge/core/error.h"
 
 namespace rf {

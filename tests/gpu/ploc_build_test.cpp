@@ -17,8 +17,7 @@
 #include "accel/bvh/builders/ploc.h"
 #include "accel/bvh/builders/ploc_emit.h"
 #include "backend/cuda/ploc_build.h"
-#include "rayforge/backend/cuda.h"
-#include "rayforge/backend/cuda_build.h"
+#include "backend/cuda/device_builders.h"
 
 namespace rf {
 namespace {

@@ -2,8 +2,9 @@
 // images equal within floating-point tolerance (same per-sample code, same
 // random streams; only FMA contraction differs between the compilers), path
 // traced images with the same mean within noise bounds, ray sorting that
-// changes nothing, a white furnace that renders 1, and AOVs. Skips with a
-// message when no CUDA device is present.
+// changes nothing, a white furnace that renders 1, and AOVs; all through
+// rf::make_renderer with a CUDA device. Skips with a message when no CUDA
+// device is present (fails with RAYFORGE_REQUIRE_GPU=1).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -12,12 +13,20 @@
 
 #include "rayforge/accel/accel.h"
 #include "gpu_test_device.h"
-#include "rayforge/backend/cuda.h"
 #include "rayforge/io/scene_io.h"
+#include "rayforge/core/error.h"
 #include "rayforge/render/render.h"
 
 namespace rf {
 namespace {
+
+// A renderer on cuda:0 over a CWBVH built there; `accel` keeps the structure alive.
+std::unique_ptr<Renderer> device_renderer(const Scene& scene, const SceneGeometry& g, RenderOptions o,
+                                          std::unique_ptr<Accel>& accel) {
+    accel = build_accel(g, gpu_test::on_device(GpuKernel::Cwbvh));
+    o.device = accel->device();
+    return make_renderer(scene, g, *accel, scene.camera_or_default(), o);
+}
 
 struct Rendered {
     Image cpu, gpu;
@@ -28,12 +37,15 @@ Rendered render_both(const std::string& scene_name, const RenderOptions& options
     const Scene scene = make_builtin_scene(scene_name);
     const SceneGeometry g = SceneGeometry::build(scene);
     const auto accel = build_accel(g);
-    ProgressiveRenderer cpu(scene, g, *accel, scene.camera_or_default(), options);
-    render_progressive(cpu);
-    cuda::Renderer gpu(scene, g, scene.camera_or_default(), options, kernel);
-    cuda::render_progressive(gpu);
-    EXPECT_EQ(gpu.passes(), options.spp);
-    return {cpu.image(), gpu.image(), cpu.stats(), gpu.stats()};
+    const auto cpu = make_renderer(scene, g, *accel, scene.camera_or_default(), options);
+    render_progressive(*cpu);
+    const auto device_accel = build_accel(g, gpu_test::on_device(kernel));
+    RenderOptions on_device = options;
+    on_device.device = device_accel->device();
+    const auto gpu = make_renderer(scene, g, *device_accel, scene.camera_or_default(), on_device);
+    render_progressive(*gpu);
+    EXPECT_EQ(gpu->passes(), options.spp);
+    return {cpu->image(), gpu->image(), cpu->stats(), gpu->stats()};
 }
 
 // Share of pixels (all channels) within `tol` of each other, and the largest difference.
@@ -112,12 +124,13 @@ TEST(GpuRenderer, RaySortingChangesNothing) {
     o.height = 48;
     o.spp = 4;
     o.integrator = IntegratorKind::Path;
-    cuda::Renderer plain(scene, g, scene.camera_or_default(), o);
-    cuda::render_progressive(plain);
+    std::unique_ptr<Accel> accel_a, accel_b;
+    const auto plain = device_renderer(scene, g, o, accel_a);
+    render_progressive(*plain);
     o.sort_rays = true;
-    cuda::Renderer sorted(scene, g, scene.camera_or_default(), o);
-    cuda::render_progressive(sorted);
-    const Image a = plain.image(), b = sorted.image();
+    const auto sorted = device_renderer(scene, g, o, accel_b);
+    render_progressive(*sorted);
+    const Image a = plain->image(), b = sorted->image();
     // Sorting only permutes independent paths. A path's hits do not depend on
     // its warp except on an exact tie between two triangles (a shared edge),
     // where CWBVH postponement may pick the other one: allow 0.1 % of pixels.
@@ -125,8 +138,8 @@ TEST(GpuRenderer, RaySortingChangesNothing) {
     for (size_t i = 0; i < a.pixels.size(); ++i)
         differing += a.pixels[i].x != b.pixels[i].x || a.pixels[i].y != b.pixels[i].y || a.pixels[i].z != b.pixels[i].z;
     EXPECT_LE(differing, a.pixels.size() / 1000) << differing << " of " << a.pixels.size() << " pixels differ";
-    EXPECT_FALSE(sorted.last_pass().paths_per_bounce.empty());
-    EXPECT_EQ(sorted.last_pass().paths_per_bounce[0], uint32_t(64 * 48));
+    ASSERT_FALSE(sorted->last_pass().waves.empty());
+    EXPECT_EQ(sorted->last_pass().waves[0].paths, uint64_t(64 * 48));
 }
 
 TEST(GpuRenderer, WhiteFurnaceRendersOne) {
@@ -140,9 +153,10 @@ TEST(GpuRenderer, WhiteFurnaceRendersOne) {
     o.integrator = IntegratorKind::Path;
     o.max_depth = 64;
     o.rr_depth = 64;
-    cuda::Renderer gpu(scene, g, scene.camera_or_default(), o);
-    cuda::render_progressive(gpu);
-    const Image image = gpu.image();
+    std::unique_ptr<Accel> accel;
+    const auto gpu = device_renderer(scene, g, o, accel);
+    render_progressive(*gpu);
+    const Image image = gpu->image();
     double sum = 0.0;
     for (const Vec3f& p : image.pixels) sum += p.x + p.y + p.z;
     EXPECT_NEAR(sum / (3.0 * double(image.pixels.size())), 1.0, 0.01);
@@ -158,13 +172,19 @@ TEST(GpuRenderer, AovsAndCallbacks) {
     o.spp = 10;
     o.integrator = IntegratorKind::Path;
     o.aovs = true;
-    cuda::Renderer gpu(scene, g, scene.camera_or_default(), o);
+    std::unique_ptr<Accel> accel;
+    const auto gpu = device_renderer(scene, g, o, accel);
     int calls = 0;
-    cuda::render_progressive(gpu, [&](const cuda::Renderer& r) { return ++calls < 3 && r.passes() > 0; });
+    render_progressive(*gpu, [&](const Renderer& r) { return ++calls < 3 && r.passes() > 0; });
     EXPECT_EQ(calls, 3);
-    EXPECT_EQ(gpu.passes(), 3);
-    EXPECT_EQ(gpu.albedo().pixels.size(), size_t(32 * 24));
-    EXPECT_GT(gpu.depth().pixels[size_t(12 * 32 + 16)].x, 0.0f);  // the centre sees the box
+    EXPECT_EQ(gpu->passes(), 3);
+    EXPECT_EQ(gpu->albedo().pixels.size(), size_t(32 * 24));
+    EXPECT_GT(gpu->depth().pixels[size_t(12 * 32 + 16)].x, 0.0f);  // the centre sees the box
+    // A camera move restarts; the device cannot record a pass.
+    gpu->set_camera(scene.camera_or_default());
+    EXPECT_EQ(gpu->passes(), 0);
+    std::vector<TracedRay> rays;
+    EXPECT_THROW(gpu->render_pass_recorded(rays), Error);
 }
 
 }  // namespace

@@ -14,7 +14,7 @@
 #include "../accel_test_scenes.h"
 #include "accel/grid/uniform_grid.h"
 #include "gpu_build_checks.h"
-#include "rayforge/backend/cuda_build.h"
+#include "backend/cuda/device_builders.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 

@@ -7,7 +7,11 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
+#include "rayforge/accel/build_report.h"
+#include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/backend/device.h"
 #include "rayforge/math/ray.h"
 #include "rayforge/scene/scene_geometry.h"
 
@@ -45,6 +49,9 @@ struct BuildOptions {
     Structure structure = Structure::Bvh;
     Builder builder = Builder::BinnedSah;
     Layout layout = Layout::Bvh8;  // the fastest traversal measured (docs/benchmarks.md)
+    Device device;                 // where to build and trace: cpu (default), cuda, cuda:N
+    GpuKernel gpu_kernel = kDefaultGpuKernel;  // on a CUDA device: the traversal kernel, which picks the
+                                               // structure (and layout) built; `layout` is for the CPU
     int bin_count = 16;          // SAH bins per axis (binned builders)
     int max_leaf_size = 4;       // leaves never hold more primitives than this
     float traversal_cost = 1.0f; // SAH C_trav
@@ -82,6 +89,7 @@ struct AccelStats {
     size_t node_count = 0;
     size_t leaf_count = 0;
     size_t bytes = 0;            // structure memory, excluding the triangles
+    size_t device_bytes = 0;     // on a CUDA device: the device memory it holds, triangles included
     // Tree quality; NaN where the metric does not apply (e.g. brute force).
     double sah_cost = 0.0;       // C_trav = C_int = 1, normalised by root area
     double quality_cost = 0.0;   // Garanzha's formula 4.2, C(root) with nc = 2 (quality = 1 / C)
@@ -113,14 +121,45 @@ public:
     virtual void intersect(std::span<const Ray> rays, std::span<Hit> hits) const;
     virtual void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const;
     [[nodiscard]] virtual AccelStats stats() const = 0;
+    // Where the structure lives and its queries run: the CPU, or a CUDA device.
+    [[nodiscard]] virtual Device device() const { return {}; }
+    // How it was built (a CPU build reports no stages).
+    [[nodiscard]] virtual BuildReport build_report() const;
     // Instrumented traversal of every ray (closest hit, or any hit), adding
     // its work to `totals`; false when the structure keeps no counters.
     virtual bool count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const;
+    // The traversal alone, timed (the bench): `rays` kept where the structure
+    // lives (device memory for a CUDA accel), one warm-up trace, then `runs`
+    // timed traces; returns each run's milliseconds (CUDA events around the
+    // launch on a device, wall time on the CPU) and leaves the last run's
+    // answers in `hits` (closest hit) or `occluded` (any hit), one per ray.
+    virtual std::vector<double> time_traversal(std::span<const Ray> rays, bool any_hit, int runs,
+                                               std::span<Hit> hits, std::span<uint8_t> occluded) const;
 };
 
 // Builds the structure named in `options` over `geometry`, which must outlive
-// the result. Throws rf::Error for invalid options.
+// the result, on options.device: the CPU, or a CUDA device (where the
+// structure is built on the device when options.build_on_device is set and
+// the builder has a device version, and is traced by options.gpu_kernel;
+// batches of host rays are then copied there and back). Throws rf::Error for
+// invalid options or a device that cannot be used.
 std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options = {});
+
+// The canonical BVH of options.builder over `triangles` (the reinsertion
+// optimizer after it when asked), on options.device: a CUDA device runs the
+// builder's device version (lbvh30, lbvh63, hlbvh2, ploc, gridbvh,
+// gridbvh-split have one; rf::Error for the others) and gives the same BVH.
+// `report`, when given, gets the build's stages.
+Bvh build_bvh(std::span<const Triangle> triangles, const BuildOptions& options, BuildReport* report = nullptr);
+
+// The structure a GPU kernel traverses: bvh (bvh2, aila-laine, cwbvh),
+// kdtree (kd-short-stack, kd-restart), grid, grid-proximity. On a CUDA device
+// BuildOptions::structure must be the one of BuildOptions::gpu_kernel.
+Structure structure_of(GpuKernel kernel);
+
+// Throws rf::Error naming the first option out of its range (build_accel and
+// build_bvh call it).
+void validate_build_options(const BuildOptions& options);
 
 // Names for the CLI, the bench and scene files; parse_* throw rf::Error when unknown.
 //   structures: bvh, grid, grid-proximity, kdtree, brute

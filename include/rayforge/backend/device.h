@@ -3,6 +3,7 @@
 // `--device` the same way whether or not the CUDA backend was built.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -22,15 +23,15 @@ struct Device {
 Device parse_device(const std::string& name);
 std::string to_string(const Device& device);
 
-// The GPU traversal kernels (rf::cuda::DeviceTracer), one per structure the
-// seeds compare:
+// The GPU traversal kernels, one per structure (BuildOptions::gpu_kernel on
+// a CUDA device):
 //   bvh2            the canonical binary BVH, one thread per ray (the CPU's own traversal code)
 //   aila-laine      node pairs with persistent "while-while" threads (Aila and Laine 2009)
 //   cwbvh           the compressed 8-wide BVH (Ylitie, Karras and Laine 2017)
-//   kd-short-stack  kd-tree, short stack with restart fallback (Horn et al. 2007; seed 002)
-//   kd-restart      kd-tree, kd-restart (Foley and Sugerman 2005; seed 002)
-//   grid            uniform grid, 3D-DDA (seeds 001, 002)
-//   grid-proximity  uniform grid with proximity clouds (seed 001)
+//   kd-short-stack  kd-tree, short stack with restart fallback (Horn et al. 2007)
+//   kd-restart      kd-tree, kd-restart (Foley and Sugerman 2005)
+//   grid            uniform grid, 3D-DDA (Amanatides and Woo 1987)
+//   grid-proximity  uniform grid with proximity clouds (Bogolepov et al.)
 enum class GpuKernel : uint8_t { Bvh2, AilaLaine, Cwbvh, KdShortStack, KdRestart, Grid, ProximityGrid };
 
 GpuKernel parse_gpu_kernel(const std::string& name);  // throws rf::Error for an unknown name
@@ -41,5 +42,34 @@ inline constexpr GpuKernel kDefaultGpuKernel = GpuKernel::Cwbvh;
 
 // Whether this build of rayforge contains the CUDA backend (nvcc was found at configure time).
 bool cuda_backend_built();
+
+struct DeviceInfo {
+    int index = 0;             // the N of cuda:N
+    std::string name;
+    size_t total_memory = 0;
+    size_t free_memory = 0;
+    int compute_major = 0, compute_minor = 0;
+    int multiprocessors = 0;
+    int clock_mhz = 0;         // SM clock
+    int memory_bus_bits = 0;
+    size_t l2_bytes = 0;
+    int driver_version = 0;    // e.g. 13000 for CUDA 13.0
+    int runtime_version = 0;
+};
+
+// The CUDA devices this process can use and, when there are none (or one
+// could not be queried), why, in the runtime's own words, e.g.
+// "cudaGetDeviceCount failed: cudaErrorNoDevice: no CUDA-capable device is
+// detected (driver none, runtime 13.0)", or that this build has no CUDA
+// backend. Never throws.
+struct DeviceListing {
+    std::vector<DeviceInfo> devices;
+    std::string error;  // "" when every device was listed
+};
+DeviceListing list_cuda_devices();
+
+// Throws rf::Error saying why `device` cannot be used (a build without the
+// CUDA backend, no driver, no such device); the CPU always can.
+void require_device(const Device& device);
 
 }  // namespace rf

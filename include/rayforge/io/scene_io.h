@@ -31,4 +31,12 @@ Scene load_aff_at_time(const std::string& path, double time, const LoadOptions& 
 std::vector<std::string> builtin_scene_names();
 Scene make_builtin_scene(const std::string& name);  // name without the "builtin:" prefix
 
+// A procedural HDR sky as a width x height equirectangular LinearFloat RGB
+// environment texture ("builtin:sky": blue-to-white gradient, dark ground, a
+// sun at the given elevation and azimuth from -z towards +x, in degrees).
+// Throws rf::Error for sizes below 8 x 4 or above 16384 x 8192, an elevation
+// outside [1, 90] degrees or a non-finite azimuth.
+Texture make_sky_texture(int width = 512, int height = 256, float sun_elevation_deg = 35.0f,
+                         float sun_azimuth_deg = 30.0f);
+
 }  // namespace rf

@@ -1,6 +1,7 @@
-// Rendering a scene through an acceleration structure on the CPU: one-shot
-// (rf::render) or progressive (rf::ProgressiveRenderer, one sample per pixel
-// per pass accumulated into a float film, with a callback after each pass).
+// Rendering a scene through an acceleration structure, on the CPU or a CUDA
+// device: one-shot (rf::render) or progressive (rf::Renderer, one sample per
+// pixel per pass accumulated into float films, with a callback after each
+// pass, and a camera, options or scene that may change between passes).
 #pragma once
 
 #include <cstdint>
@@ -10,23 +11,16 @@
 #include <vector>
 
 #include "rayforge/accel/accel.h"
+#include "rayforge/backend/device.h"
 #include "rayforge/render/image.h"
+#include "rayforge/render/integrators.h"
 #include "rayforge/scene/scene.h"
 #include "rayforge/scene/scene_geometry.h"
 
 namespace rf {
 
-enum class IntegratorKind : uint8_t { Normals, AmbientOcclusion, Whitted, Path };
-
-// How the path tracer estimates direct light: both strategies combined by
-// multiple importance sampling (the default), next-event estimation only, or
-// BSDF sampling only (emitters found by chance). All three converge to the same image.
-enum class LightSampling : uint8_t { Mis, Nee, Bsdf };
-
-// Whitted's local shading: Lambert, or the seeds' Phong / Blinn-Phong highlights.
-enum class WhittedShading : uint8_t { Lambert, Phong, Blinn };
-
 struct RenderOptions {
+    Device device;               // where to render: cpu (default), cuda, cuda:N; the accel must be built there
     int width = 640;
     int height = 480;
     int spp = 1;                 // samples per pixel = progressive passes (1 = pixel centre for whitted/normals)
@@ -41,11 +35,12 @@ struct RenderOptions {
     int rr_depth = 3;            // Russian roulette from this bounce on
     LightSampling light_sampling = LightSampling::Mis;
     float max_sample_value = 0.0f;  // > 0: clamp each sample's radiance to this (biased; removes fireflies)
-    bool wavefront = false;      // run the path tracer stage by stage over queues of paths (same image)
+    bool wavefront = false;      // CPU: run the path tracer stage by stage over queues of paths (same
+                                 // image); a CUDA device always does
     bool sort_rays = false;      // wavefront: sort the active rays by origin/direction key before each extension
 
     // whitted
-    int reflection_depth = 1;    // seed 001's default: one reflection
+    int reflection_depth = 1;    // one reflection (Bogolepov et al.'s default)
     int refraction_depth = 2;    //   and two refractions
     WhittedShading whitted_shading = WhittedShading::Lambert;
 
@@ -73,62 +68,89 @@ struct TracedRay {
     bool any_hit = false;  // occlusion query (shadow ray) rather than closest hit
 };
 
-class ProgressiveRenderer {
-public:
-    // Everything passed must outlive the renderer. Throws rf::Error for invalid options.
-    ProgressiveRenderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
-                        const Camera& camera, const RenderOptions& options);
-    ~ProgressiveRenderer();
-    ProgressiveRenderer(const ProgressiveRenderer&) = delete;
-    ProgressiveRenderer& operator=(const ProgressiveRenderer&) = delete;
+// The queues of one extension round of a wavefront path tracer (a bounce,
+// or a pass through a blended surface).
+struct WavefrontWave {
+    uint64_t paths = 0;        // active paths extended
+    uint64_t shadow_rays = 0;  // shadow connections made by shading them
+};
 
-    // Adds one sample per pixel (sample index = passes()); `progress` sees the
-    // fraction of this pass.
-    void render_pass(const ProgressCallback& progress = {});
-    // render_pass that also returns every query the pass made, tile by tile in
-    // the order each tile made them.
-    void render_pass_recorded(std::vector<TracedRay>& rays);
-    [[nodiscard]] int passes() const;
-    [[nodiscard]] const RenderOptions& options() const;
-    [[nodiscard]] RenderStats stats() const;
+// What the last pass did.
+struct PassStats {
+    double pass_ms = 0.0;               // wall time of the pass, device work included
+    uint64_t closest_rays = 0, shadow_rays = 0;
+    std::vector<WavefrontWave> waves;   // wavefront path tracing: index = extension round, 0 = camera rays
+    double sort_ms = 0.0;               // wavefront ray sorting (sort_rays)
+};
+
+// What changed in the scene a renderer draws (its Scene and SceneGeometry,
+// changed in place by the caller, who also rebuilds or refits the Accel).
+enum class SceneChange : uint8_t {
+    Materials,  // materials, textures, lights or the environment
+    Geometry,   // triangles (and so shading records and emitters); includes Materials
+};
+
+// Progressive rendering on one device: each pass adds one sample per pixel
+// to float films (colour and, with options.aovs, the first-hit albedo,
+// normal and depth); the image is their mean. Made by make_renderer. Both
+// backends run the same per-sample code, so a CPU and a CUDA render of the
+// same options agree (docs/gpu.md says how closely).
+class Renderer {
+public:
+    virtual ~Renderer() = default;
+
+    // Adds one sample per pixel (sample index = passes()); `progress` sees
+    // the fraction of this pass.
+    virtual void render_pass(const ProgressCallback& progress = {}) = 0;
+    // render_pass that also returns every query the pass made (CPU only: a
+    // CUDA renderer throws rf::Error).
+    virtual void render_pass_recorded(std::vector<TracedRay>& rays) = 0;
+    [[nodiscard]] virtual int passes() const = 0;
+    [[nodiscard]] virtual const RenderOptions& options() const = 0;
+    [[nodiscard]] virtual Device device() const = 0;
+    // Summed over the passes since the last restart.
+    [[nodiscard]] virtual RenderStats stats() const = 0;
+    [[nodiscard]] virtual const PassStats& last_pass() const = 0;
 
     // The mean of the passes so far (black before the first).
-    [[nodiscard]] Image image() const;
+    [[nodiscard]] virtual Image image() const = 0;
     // First-hit AOVs (options.aovs): albedo, shading normal (world, components
     // in [-1, 1]), and the distance along the camera ray (0 on a miss, in all
     // three channels). Empty images when AOVs are off.
-    [[nodiscard]] Image albedo() const;
-    [[nodiscard]] Image normal() const;
-    [[nodiscard]] Image depth() const;
+    [[nodiscard]] virtual Image albedo() const = 0;
+    [[nodiscard]] virtual Image normal() const = 0;
+    [[nodiscard]] virtual Image depth() const = 0;
 
-private:
-    struct State;
-    void run_pass(const ProgressCallback& progress, std::vector<std::vector<TracedRay>>* tile_logs);
-    std::unique_ptr<State> state_;
+    // Each of these restarts accumulation (no passes, no stats, black films).
+    // The camera moved:
+    virtual void set_camera(const Camera& camera) = 0;
+    // New options (integrator, depths, resolution, samples, seed, ...); the
+    // device cannot change. Throws rf::Error for invalid options.
+    virtual void set_options(const RenderOptions& options) = 0;
+    // The scene changed in place: shading tables (and their device copies) rebuilt.
+    virtual void scene_changed(SceneChange what) = 0;
 };
 
+// A renderer on options.device for `accel`, which must live on that device
+// (BuildOptions::device). Everything passed must outlive the renderer.
+// Throws rf::Error for invalid options, a device that cannot be used or an
+// accel built for another device.
+std::unique_ptr<Renderer> make_renderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
+                                        const Camera& camera, const RenderOptions& options);
+
 // Called after each pass with the renderer; return false to stop early.
-using PassCallback = std::function<bool(const ProgressiveRenderer& renderer)>;
+using PassCallback = std::function<bool(const Renderer& renderer)>;
 
 // Runs passes until options.spp are done or options.time_budget_s is spent
 // (or `after_pass` returns false); `progress` sees the fraction of the spp.
-// Returns the mean image.
-Image render(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
-             const Camera& camera, const RenderOptions& options,
-             const ProgressCallback& progress = {});
-void render_progressive(ProgressiveRenderer& renderer, const PassCallback& after_pass = {},
+void render_progressive(Renderer& renderer, const PassCallback& after_pass = {},
                         const ProgressCallback& progress = {});
+// make_renderer, render_progressive, and the mean image.
+Image render(const Scene& scene, const SceneGeometry& geometry, const Accel& accel, const Camera& camera,
+             const RenderOptions& options, const ProgressCallback& progress = {});
 
 // Throws rf::Error naming the first option out of its range (sizes, spp,
 // depths, budgets); every renderer, CPU or GPU, checks its options with it.
 void validate_render_options(const RenderOptions& options);
-
-// Names for the CLI and scene files; parse_* throw rf::Error when unknown.
-IntegratorKind parse_integrator(const std::string& name);  // normals | ao | whitted | path
-std::string integrator_name(IntegratorKind kind);
-LightSampling parse_light_sampling(const std::string& name);  // mis | nee | bsdf
-std::string to_string(LightSampling sampling);
-WhittedShading parse_whitted_shading(const std::string& name);  // lambert | phong | blinn
-std::string to_string(WhittedShading shading);
 
 }  // namespace rf

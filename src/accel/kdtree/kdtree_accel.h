@@ -1,46 +1,23 @@
-// rf::Accel over the SAH kd-tree of seed 002 (kdtree_build.h), traced with
-// one of the four traversals of trace/kdtree_traversal.h.
+// rf::Accel over the SAH kd-tree (Wald and Havran 2006; kdtree_build.h),
+// traced with one of the four traversals of trace/kdtree_traversal.h
+// (accel/view_accel.h with KdTracer<traversal>).
 #pragma once
 
-#include <string>
-#include <utility>
+#include <memory>
 
 #include "accel/kdtree/kdtree.h"
-#include "rayforge/accel/accel.h"
-#include "trace/kdtree_traversal.h"
+#include "accel/view_accel.h"
 
 namespace rf {
 
-class KdTreeAccel final : public Accel {
-public:
-    // Traces `tree`, built over `geometry` in `build_ms`, with `traversal`;
-    // `geometry` must outlive this object.
-    KdTreeAccel(const SceneGeometry& geometry, KdTree tree, KdTraversal traversal, int short_stack_size,
-                double build_ms)
-        : geometry_(geometry), tree_(std::move(tree)), traversal_(traversal), short_stack_size_(short_stack_size),
-          build_ms_(build_ms) {}
+void describe_structure(const KdTree& tree, AccelStats& stats);
 
-    [[nodiscard]] Hit intersect(const Ray& ray) const override;
-    [[nodiscard]] bool occluded(const Ray& ray) const override;
-    // Batches call the traversal directly (no virtual call per ray).
-    void intersect(std::span<const Ray> rays, std::span<Hit> hits) const override;
-    void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const override;
-    [[nodiscard]] AccelStats stats() const override;
-    bool count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const override;
+template <KdTraversal kMode>
+using KdTreeAccel = ViewAccel<KdTree, KdTracer<kMode>>;
 
-    [[nodiscard]] const KdTree& tree() const { return tree_; }
-    [[nodiscard]] KdTraversal traversal() const { return traversal_; }
-    [[nodiscard]] KdTreeView view() const {
-        return {tree_.nodes.data(), tree_.prim_indices.data(), geometry_.triangles.data(),
-                static_cast<uint32_t>(tree_.nodes.size()), tree_.bounds, short_stack_size_};
-    }
-
-private:
-    const SceneGeometry& geometry_;
-    KdTree tree_;
-    KdTraversal traversal_;
-    int short_stack_size_;
-    double build_ms_ = 0.0;
-};
+// Traces `tree`, built over `geometry` in `build_ms`, with `traversal`;
+// `geometry` must outlive the result.
+std::unique_ptr<Accel> make_kdtree_accel(const SceneGeometry& geometry, KdTree tree, KdTraversal traversal,
+                                         int short_stack_size, double build_ms);
 
 }  // namespace rf

@@ -6,6 +6,7 @@
 #include <cstddef>
 #include <span>
 #include <string>
+#include <string_view>
 
 #include "backend/cpu/parallel.h"
 #include "rayforge/accel/accel.h"
@@ -16,7 +17,7 @@ namespace rf {
 
 inline constexpr size_t kRayGrainSize = 256;  // rays per parallel task
 
-inline void check_batch_sizes(const char* what, size_t rays, size_t results) {
+inline void check_batch_sizes(std::string_view what, size_t rays, size_t results) {
     if (rays != results) {
         throw Error(std::string(what) + ": " + std::to_string(rays) + " rays but " + std::to_string(results) +
                     " result slots");

@@ -5,8 +5,8 @@
 #pragma once
 
 #include "backend/cuda/device_buffer.h"
+#include "backend/cuda/device_builders.h"
 #include "backend/cuda/event_timer.h"
-#include "rayforge/backend/cuda_build.h"
 
 namespace rf::cuda {
 

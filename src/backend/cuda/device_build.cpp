@@ -1,10 +1,12 @@
-// rf::cuda::build_bvh_on_device: the device counterpart of rf::build_bvh,
-// dispatching options.builder to its device builder (issue 7) and running
-// the host's reinsertion optimizer afterwards when asked, as build_bvh does.
+// The device builders' dispatch: build_bvh_on_device, the device
+// counterpart of the CPU's build_bvh_on_cpu (every builder with a device
+// version, then the host's reinsertion optimizer when asked), the seam's
+// cuda::build_bvh, and a device build's stages as the public BuildReport.
 #include <chrono>
 
 #include "accel/bvh/optimize/reinsertion.h"
-#include "rayforge/backend/cuda_build.h"
+#include "backend/backends.h"
+#include "backend/cuda/device_builders.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {
@@ -43,6 +45,45 @@ Bvh build_bvh_on_device(std::span<const Triangle> triangles, const BuildOptions&
         s.optimize_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     }
     return bvh;
+}
+
+Bvh build_bvh(std::span<const Triangle> triangles, const BuildOptions& options, BuildReport* report) {
+    DeviceBuildStages stages;
+    Bvh bvh = build_bvh_on_device(triangles, options, &stages, options.device.index);
+    if (report) *report = describe_device_build(stages, options.device);
+    return bvh;
+}
+
+// A stage that did not run is 0 ms (CUDA events never time a launch at
+// exactly 0), so the listed stages are the ones that ran.
+BuildReport describe_device_build(const DeviceBuildStages& s, const Device& device) {
+    BuildReport out;
+    out.on_device = s.on_device;
+    out.device = device;
+    const std::pair<const char*, double> stages[] = {
+        {"partial tris", s.partial_triangles_ms}, {"bounds", s.bounds_ms},   {"morton", s.morton_ms},
+        {"cell pairs", s.cell_pairs_ms},          {"sort", s.sort_ms},       {"clusters", s.clusters_ms},
+        {"grid0", s.grid0_ms},                    {"coarse levels", s.coarse_levels_ms},
+        {"inner nodes", s.inner_nodes_ms},        {"bottom", s.bottom_ms},   {"top", s.top_ms},
+        {"ploc", s.ploc_ms},                      {"hierarchy", s.hierarchy_ms},
+        {"leaves", s.leaf_finish_ms},             {"cell ranges", s.cell_ranges_ms},
+        {"proximity", s.proximity_ms},            {"boxes", s.boxes_ms},     {"emission", s.device_emit_ms}};
+    for (const auto& [name, ms] : stages)
+        if (ms > 0.0) out.device_stages.emplace_back(name, ms);
+    out.device_ms = s.device_total_ms();
+    out.layout_ms = s.layout_ms;
+    out.upload_ms = s.upload_ms;
+    out.download_ms = s.download_ms;
+    out.host_ms = s.emit_ms + s.optimize_ms;
+    out.peak_device_bytes = s.peak_device_bytes;
+    const auto add = [&](const std::string& text) { out.detail += (out.detail.empty() ? "" : ", ") + text; };
+    if (s.cluster_count) add(std::to_string(s.cluster_count) + " clusters");
+    if (s.bottom_levels) add(std::to_string(s.bottom_levels) + " bottom levels");
+    if (s.top_levels) add(std::to_string(s.top_levels) + " top levels");
+    if (s.ploc_iterations) add(std::to_string(s.ploc_iterations) + " iterations");
+    if (s.references) add(std::to_string(s.references) + " references");
+    if (s.occupied_top_cells) add(std::to_string(s.occupied_top_cells) + " top cells");
+    return out;
 }
 
 }  // namespace rf::cuda

@@ -4,8 +4,8 @@
 // "a driver the runtime cannot use" or "a sandbox refusing the device".
 #include <cuda_runtime.h>
 
+#include "backend/backends.h"
 #include "backend/cuda/cuda_check.h"
-#include "rayforge/backend/cuda.h"
 
 namespace rf::cuda {
 namespace {
@@ -52,6 +52,8 @@ DeviceInfo describe(int index, const cudaDeviceProp& prop) {
 }
 
 }  // namespace
+
+bool backend_built() { return true; }
 
 DeviceListing list_devices() {
     DeviceListing listing;

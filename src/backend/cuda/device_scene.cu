@@ -1,4 +1,4 @@
-// DeviceScene (device_scene.h): a deep copy of a HostSceneView's tables.
+// DeviceScene (device_scene.h): a deep copy of a SceneTables' tables.
 #include "backend/cuda/device_scene.h"
 
 namespace rf::cuda {
@@ -33,8 +33,9 @@ TextureView DeviceScene::copy_texture(const TextureView& host, const std::string
     return view;
 }
 
-DeviceScene::DeviceScene(const HostSceneView& host) {
-    DeviceSceneView& v = view_;
+DeviceScene::DeviceScene(const SceneTables& host) {
+    SceneView& v = view_;
+    v = host.view();  // the scalars; every pointer is replaced below
     const std::span<const ShadingTriangle> shading = host.shading_triangles();
     v.shading_triangles = copy(shading.data(), shading.size(), "shading records");
     // At least one material, as on the host (material() falls back to 0).
@@ -52,9 +53,8 @@ DeviceScene::DeviceScene(const HostSceneView& host) {
     v.textures = copy(device_textures.data(), device_textures.size(), "texture views");
     v.texture_count = uint32_t(device_textures.size());
 
-    const LightSet& lights = host.light_set();
+    const LightSet& lights = host.view().light_set();
     LightSet& d = v.lights;
-    d = lights;
     d.lights = copy(lights.lights, lights.light_count, "lights");
     d.emitters.triangles = copy(lights.emitters.triangles, lights.emitters.count, "emitter indices");
     d.emitters.cdf = copy(lights.emitters.cdf, lights.emitters.count, "emitter cdf");
@@ -67,10 +67,6 @@ DeviceScene::DeviceScene(const HostSceneView& host) {
         env.marginal_cdf = copy(lights.environment.marginal_cdf, h + 1, "environment marginal cdf");
         env.conditional_cdf = copy(lights.environment.conditional_cdf, h * (w + 1), "environment conditional cdf");
     }
-
-    v.epsilon = host.ray_epsilon();
-    v.scene_diagonal = host.diagonal();
-    v.transparent_materials = host.has_transparent_materials();
 }
 
 size_t DeviceScene::device_bytes() const {

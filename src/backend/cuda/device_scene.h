@@ -1,8 +1,8 @@
-// A scene's shading data on the device: every table a HostSceneView points
-// at (materials, shading records, texture mip levels and their decode
-// tables, light lists, emitter and environment sampling tables) copied once,
-// and a DeviceSceneView whose pointers are the copies. The integrators read
-// the device view exactly as they read the host one.
+// A scene's shading data on the device: every table of a SceneTables
+// (materials, shading records, texture mip levels and their decode tables,
+// light lists, emitter and environment sampling tables) copied once, and a
+// SceneView whose pointers are the copies: the integrators read it exactly
+// as they read the host's.
 #pragma once
 
 #include <cstdint>
@@ -11,17 +11,16 @@
 #include <vector>
 
 #include "backend/cuda/device_buffer.h"
-#include "backend/cuda/device_scene_view.h"
 #include "render/scene_view.h"
 
 namespace rf::cuda {
 
 class DeviceScene {
 public:
-    // Uploads to the current device. `host` must be complete (it is not kept).
-    explicit DeviceScene(const HostSceneView& host);
+    // Uploads to the current device; `host` is not kept.
+    explicit DeviceScene(const SceneTables& host);
 
-    [[nodiscard]] const DeviceSceneView& view() const { return view_; }
+    [[nodiscard]] const SceneView& view() const { return view_; }
     [[nodiscard]] size_t device_bytes() const;
 
 private:
@@ -33,7 +32,7 @@ private:
 
     std::vector<DeviceBuffer<unsigned char>> buffers_;
     std::vector<std::pair<const float*, const float*>> decode_tables_;  // host table -> device copy
-    DeviceSceneView view_;
+    SceneView view_;
 };
 
 }  // namespace rf::cuda

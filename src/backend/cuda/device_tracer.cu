@@ -1,4 +1,4 @@
-// rf::cuda::DeviceTracer: builds the structure a GPU kernel reads (on the
+// DeviceTracer (device_tracer.h): builds the structure a GPU kernel reads (on the
 // device where a device builder exists and BuildOptions::build_on_device is
 // set, else on the CPU), converts it to that kernel's layout, uploads it,
 // and traces batches of rays in device memory. Per-ray traversal is the
@@ -18,13 +18,13 @@
 #include <cstdio>
 #include <limits>
 
-#include "accel/accel_factories.h"
 #include "accel/bvh/builders/build_bvh.h"
 #include "accel/grid/uniform_grid.h"
 #include "accel/kdtree/kdtree_build.h"
+#include "backend/backends.h"
+#include "backend/cuda/device_builders.h"
 #include "backend/cuda/device_tracer_impl.h"
 #include "backend/cuda/event_timer.h"
-#include "rayforge/backend/cuda_build.h"
 
 namespace rf::cuda {
 
@@ -164,9 +164,10 @@ uint32_t checked_ray_count(size_t count) {
 
 }  // namespace
 
-DeviceTracer::DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, const BuildOptions& build, int device)
-    : impl_(new Impl) {
+DeviceTracer::DeviceTracer(const SceneGeometry& geometry, const BuildOptions& build) : impl_(new Impl) {
     validate_build_options(build);
+    const GpuKernel kernel = build.gpu_kernel;
+    const int device = build.device.index;
     require_device(device);
     Impl& impl = *impl_;
     impl.kernel = kernel;
@@ -194,7 +195,7 @@ DeviceTracer::DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, cons
         case GpuKernel::Cwbvh: {
             const bool device_build = build.build_on_device && has_device_builder(build.builder);
             const Bvh bvh = device_build ? build_bvh_on_device(triangles, build, &impl.build_stages, device)
-                                         : build_bvh(triangles, build);
+                                         : build_bvh_on_cpu(triangles, build);
             stats.name += "/" + to_string(build.builder);
             stats.sah_cost = bvh.sah_cost(1.0f, 1.0f);
             stats.quality_cost = bvh.quality_cost(2.0);
@@ -280,9 +281,16 @@ DeviceTracer::DeviceTracer(const SceneGeometry& geometry, GpuKernel kernel, cons
     stats.build_ms = ms_since(start);
     stats.layout_ms = layout_ms;
     stats.bytes = structure_bytes;
+    stats.device_bytes = impl.structure_bytes();
 }
 
 DeviceTracer::~DeviceTracer() = default;
+
+size_t DeviceTracer::Impl::structure_bytes() const {
+    return triangles.bytes() + bvh_nodes.bytes() + prim_indices.bytes() + aila_laine_nodes.bytes() +
+           aila_laine_triangles.bytes() + cwbvh_nodes.bytes() + cwbvh_triangles.bytes() + kd_nodes.bytes() +
+           cell_start.bytes() + cell_prims.bytes() + proximity.bytes();
+}
 
 void DeviceTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
     if (rays.size() != hits.size()) throw Error("cuda::DeviceTracer::intersect: rays and hits differ in size");
@@ -360,11 +368,5 @@ int DeviceTracer::device() const { return impl_->device; }
 AccelStats DeviceTracer::stats() const { return impl_->stats; }
 const DeviceBuildStages& DeviceTracer::build_stages() const { return impl_->build_stages; }
 
-size_t DeviceTracer::device_bytes() const {
-    const Impl& i = *impl_;
-    return i.triangles.bytes() + i.bvh_nodes.bytes() + i.prim_indices.bytes() + i.aila_laine_nodes.bytes() +
-           i.aila_laine_triangles.bytes() + i.cwbvh_nodes.bytes() + i.cwbvh_triangles.bytes() + i.kd_nodes.bytes() +
-           i.cell_start.bytes() + i.cell_prims.bytes() + i.proximity.bytes();
-}
 
 }  // namespace rf::cuda

@@ -1,14 +1,15 @@
-// rf::cuda::DeviceTracer's state, shared by the trace kernels
+// DeviceTracer's state (device_tracer.h), shared by the trace kernels
 // (device_tracer.cu) and the renderer (renderer.cu): the structure's arrays
-// in device memory and, per GPU kernel, the tracer struct over them.
+// in device memory and, per GPU kernel, the tracer struct over them
+// (trace/tracers.h, the CPU's own).
 #pragma once
 
 #include <cstdint>
 
 #include "backend/cuda/device_buffer.h"
-#include "backend/cuda/device_tracers.h"
-#include "rayforge/backend/cuda.h"
-#include "rayforge/backend/cuda_build.h"
+#include "trace/tracers.h"
+#include "backend/cuda/device_builders.h"
+#include "backend/cuda/device_tracer.h"
 
 namespace rf::cuda {
 
@@ -46,6 +47,9 @@ struct DeviceTracer::Impl {
     DeviceBuffer<uint8_t> flags{"occlusion flags"};
     DeviceBuffer<uint32_t> work_counter{"persistent-thread ray counter"};
     DeviceBuffer<unsigned long long> totals{"traversal totals"};
+
+    // Device memory of the structure and its triangles (not the ray buffers).
+    [[nodiscard]] size_t structure_bytes() const;
 
     // Calls f with the tracer struct of this kernel.
     template <class F>

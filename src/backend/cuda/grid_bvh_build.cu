@@ -67,12 +67,12 @@
 #include "accel/bvh/builders/grid_bvh_emit.h"
 #include "accel/bvh/builders/grid_bvh_finish_steps.h"
 #include "accel/bvh/builders/grid_bvh_steps.h"
+#include "backend/backends.h"
 #include "backend/cuda/build_context.h"
 #include "backend/cuda/cub_run.h"
 #include "backend/cuda/device_buffer.h"
+#include "backend/cuda/device_builders.h"
 #include "backend/cuda/launch.h"
-#include "rayforge/backend/cuda.h"
-#include "rayforge/backend/cuda_build.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {

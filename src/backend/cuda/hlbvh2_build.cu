@@ -42,6 +42,7 @@
 
 #include "accel/bvh/builders/hlbvh2_bottom_steps.h"
 #include "accel/bvh/builders/hlbvh2_emit.h"
+#include "backend/backends.h"
 #include "backend/cuda/build_context.h"
 #include "backend/cuda/cub_run.h"
 #include "backend/cuda/device_buffer.h"
@@ -50,7 +51,6 @@
 #include "backend/cuda/launch.h"
 #include "backend/cuda/morton_sort.h"
 #include "backend/cuda/raw_tree_emit.h"
-#include "rayforge/backend/cuda.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "accel/bvh/builders/hlbvh2_emit.h"
-#include "rayforge/backend/cuda_build.h"
+#include "backend/cuda/device_builders.h"
 #include "rayforge/math/box.h"
 #include "rayforge/scene/scene_geometry.h"
 

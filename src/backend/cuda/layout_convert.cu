@@ -48,12 +48,12 @@
 #include "accel/bvh/layout/cwbvh_emit_steps.h"
 #include "accel/bvh/layout/cwbvh_layout.h"
 #include "accel/bvh/layout/cwbvh_refine_steps.h"
+#include "backend/backends.h"
 #include "backend/cuda/cub_run.h"
 #include "backend/cuda/device_buffer.h"
+#include "backend/cuda/device_builders.h"
 #include "backend/cuda/event_timer.h"
 #include "backend/cuda/launch.h"
-#include "rayforge/backend/cuda.h"
-#include "rayforge/backend/cuda_build.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {

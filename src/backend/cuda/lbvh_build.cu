@@ -31,13 +31,13 @@
 
 #include "accel/bvh/builders/karras_tree_steps.h"
 #include "accel/bvh/builders/lbvh_emit.h"
+#include "backend/backends.h"
 #include "backend/cuda/build_context.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/launch.h"
 #include "backend/cuda/lbvh_build.h"
 #include "backend/cuda/morton_sort.h"
 #include "backend/cuda/raw_tree_emit.h"
-#include "rayforge/backend/cuda.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {

@@ -5,7 +5,7 @@
 
 namespace rf::cuda {
 
-void launch_pixel_kernel(const DeviceTracer::Impl& impl, const PixelKernelParams& p, int blocks, int block_size) {
+void launch_pixel_kernel(const DeviceTracer::Impl& impl, const PixelPass& p, int blocks, int block_size) {
     switch (impl.kernel) {
         case GpuKernel::Bvh2:
         case GpuKernel::AilaLaine:
@@ -18,7 +18,7 @@ void launch_pixel_kernel(const DeviceTracer::Impl& impl, const PixelKernelParams
     RF_CUDA_CHECK(cudaGetLastError());
 }
 
-void launch_pixel_kernel_bvh(const DeviceTracer::Impl& impl, const PixelKernelParams& p, int blocks, int block_size) {
+void launch_pixel_kernel_bvh(const DeviceTracer::Impl& impl, const PixelPass& p, int blocks, int block_size) {
     switch (impl.kernel) {
         case GpuKernel::Bvh2: pixel_kernel<<<blocks, block_size>>>(impl.bvh2, p); break;
         case GpuKernel::AilaLaine: pixel_kernel<<<blocks, block_size>>>(impl.aila_laine, p); break;

@@ -4,7 +4,7 @@
 
 namespace rf::cuda {
 
-void launch_pixel_kernel_cells(const DeviceTracer::Impl& impl, const PixelKernelParams& p, int blocks,
+void launch_pixel_kernel_cells(const DeviceTracer::Impl& impl, const PixelPass& p, int blocks,
                                int block_size) {
     switch (impl.kernel) {
         case GpuKernel::KdShortStack: pixel_kernel<<<blocks, block_size>>>(impl.kd_short_stack, p); break;

@@ -40,6 +40,7 @@
 
 #include "accel/bvh/builders/ploc_emit.h"
 #include "accel/bvh/builders/ploc_steps.h"
+#include "backend/backends.h"
 #include "backend/cuda/build_context.h"
 #include "backend/cuda/cub_run.h"
 #include "backend/cuda/device_buffer.h"
@@ -47,7 +48,6 @@
 #include "backend/cuda/morton_sort.h"
 #include "backend/cuda/ploc_build.h"
 #include "backend/cuda/raw_tree_emit.h"
-#include "rayforge/backend/cuda.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {

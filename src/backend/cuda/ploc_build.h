@@ -7,7 +7,7 @@
 #include <span>
 #include <vector>
 
-#include "rayforge/backend/cuda_build.h"
+#include "backend/cuda/device_builders.h"
 #include "rayforge/math/box.h"
 #include "rayforge/scene/scene_geometry.h"
 

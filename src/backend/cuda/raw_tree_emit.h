@@ -9,9 +9,9 @@
 #include <string>
 
 #include "backend/cuda/build_context.h"
+#include "backend/cuda/device_builders.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/accel/bvh/bvh.h"
-#include "rayforge/backend/cuda_build.h"
 #include "rayforge/math/box.h"
 
 namespace rf::cuda {

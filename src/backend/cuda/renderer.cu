@@ -1,43 +1,39 @@
-// rf::cuda::Renderer: progressive rendering on one device.
+// The CUDA backend's rf::Renderer: progressive rendering on one device, the
+// films accumulated in device memory.
 //
-// The path tracer is a wavefront (Laine, Karras and Aila 2013, "Megakernels
-// Considered Harmful"): per pass, a generation kernel starts one path per
-// pixel, then while paths are active an extension kernel traces the active
-// rays, a shading kernel runs path_stages.h's shade_path on each hit (emission,
-// one light sample, the BSDF sample and Russian roulette), a compaction kernel
-// gathers the surviving paths and the shadow connections into queues, and a
-// connection kernel tests the shadow rays; a final kernel adds each path's
-// radiance to the film. Only the extension and connection kernels trace, so
-// only they depend on the GPU kernel (tracer) chosen. Queues are appended to
-// with one atomic per warp (ballot and popc), as the dissertation's work
-// queues do. With sort_rays the active queue is sorted by the ray key of
-// Garanzha and Loop 2010 (render/ray_sort_key.h) with CUB's radix sort
-// before each extension, so neighbouring threads trace similar rays.
+// The path tracer is the wavefront of render/wavefront.h (Laine, Karras and
+// Aila 2013), the loop the CPU runs too; here each stage is one kernel
+// launch with one thread per item over the shared per-item steps, all
+// pixels' paths in one chunk. Only the extension and connection kernels
+// trace, so only they depend on the GPU kernel (tracer) chosen. Queues are
+// appended to with one atomic per warp (ballot and popc), as the
+// dissertation's work queues do. With sort_rays the active queue is sorted
+// by the ray key of Garanzha and Loop 2010 (render/ray_sort_key.h) with
+// CUB's radix sort before each extension, so neighbouring threads trace
+// similar rays.
 //
-// Whitted, AO and normals run one thread per pixel (pixel_kernels.h).
+// Whitted, AO and normals run one thread per pixel (pixel_kernels.h) over
+// render/pixel_sample.h, the CPU's per-pixel function.
 #include <cuda_runtime.h>
 
 #include <cub/device/device_radix_sort.cuh>
 
 #include <algorithm>
-#include <chrono>
-#include <cmath>
 
+#include "backend/backends.h"
+#include "backend/cuda/cuda_accel.h"
 #include "backend/cuda/device_scene.h"
 #include "backend/cuda/device_tracer_impl.h"
 #include "backend/cuda/pixel_kernels.h"
 #include "rayforge/core/error.h"
-#include "render/integrators/path.h"
-#include "render/integrators/path_stages.h"
-#include "render/ray_sort_key.h"
-#include "render/texture_lod.h"
+#include "render/renderer_base.h"
+#include "render/wavefront.h"
 
 namespace rf::cuda {
 
 namespace {
 
 constexpr int kBlock = 128;
-using Clock = std::chrono::steady_clock;
 
 int blocks_for(uint32_t count) { return int(std::max<uint32_t>(1, (count + kBlock - 1) / kBlock)); }
 
@@ -54,331 +50,239 @@ __device__ __forceinline__ uint32_t warp_append(uint32_t* counter, bool keep) {
     return base + uint32_t(__popc(votes & ((1u << lane) - 1u)));
 }
 
-struct WavefrontBuffers {
-    PathState* paths = nullptr;        // one per pixel, indexed by pixel
-    FirstHitAovs* aovs = nullptr;      // one per pixel, or null
-    uint32_t* active = nullptr;        // queue of path indices
-    uint32_t* next_active = nullptr;
-    PathHit* hits = nullptr;           // per active slot
-    uint8_t* alive = nullptr;          // per active slot: the path goes on
-    ShadowConnection* shadows = nullptr;  // per active slot
-    uint8_t* has_shadow = nullptr;     // per active slot
-    uint32_t* shadow_queue = nullptr;  // active slots with a shadow connection
-    uint32_t* counters = nullptr;      // [0] next active count, [1] shadow count
-};
-
-__global__ void generate_kernel(CameraFrame camera, int width, int height, uint32_t sample, uint32_t seed,
-                                PathSettings settings, WavefrontBuffers q) {
-    const uint32_t pixel = blockIdx.x * blockDim.x + threadIdx.x;
-    const uint32_t count = uint32_t(width) * uint32_t(height);
-    if (pixel >= count) return;
-    const int x = int(pixel % uint32_t(width)), y = int(pixel / uint32_t(width));
-    q.paths[pixel] = generate_camera_path(camera, x, y, width, height, sample, seed, settings);
-    if (q.aovs) q.aovs[pixel] = FirstHitAovs{};
-    q.active[pixel] = pixel;
+__global__ void generate_kernel(IntegratorSettings s, uint32_t sample, WavefrontQueues q, uint32_t count) {
+    const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i < count) wavefront_generate(s, sample, 0, q, i);
 }
 
-__global__ void sort_keys_kernel(const PathState* paths, const uint32_t* active, uint32_t count, Box3f bounds,
-                                 uint32_t* keys) {
+__global__ void sort_keys_kernel(IntegratorSettings s, WavefrontQueues q, uint32_t count) {
     const uint32_t k = blockIdx.x * blockDim.x + threadIdx.x;
-    if (k < count) keys[k] = ray_sort_key(paths[active[k]].ray, bounds);
+    if (k < count) wavefront_sort_key(s, q, k);
 }
 
 template <class Tracer>
-__global__ void extend_kernel(Tracer tracer, DeviceSceneView view, WavefrontBuffers q, uint32_t count) {
+__global__ void extend_kernel(Tracer tracer, SceneView view, WavefrontQueues q, uint32_t count) {
     const uint32_t k = blockIdx.x * blockDim.x + threadIdx.x;
-    if (k < count) q.hits[k] = extend_path(tracer, view, q.paths[q.active[k]]);
+    if (k < count) wavefront_extend(tracer, view, q, k);
 }
 
-__global__ void shade_kernel(DeviceSceneView view, PathSettings settings, WavefrontBuffers q, uint32_t count) {
+__global__ void shade_kernel(SceneView view, PathSettings settings, WavefrontQueues q, uint32_t count) {
     const uint32_t k = blockIdx.x * blockDim.x + threadIdx.x;
-    if (k >= count) return;
-    const uint32_t i = q.active[k];
-    ShadowConnection shadow;
-    bool has_shadow = false;
-    q.alive[k] = shade_path(view, settings, q.paths[i], q.hits[k], q.aovs ? &q.aovs[i] : nullptr, shadow, has_shadow)
-                     ? 1
-                     : 0;
-    q.has_shadow[k] = has_shadow ? 1 : 0;
-    if (has_shadow) {
-        shadow.path = i;
-        q.shadows[k] = shadow;
-    }
+    if (k < count) wavefront_shade(view, settings, q, k);
 }
 
-// Compaction: surviving paths into next_active, shadow connections into shadow_queue.
-__global__ void compact_kernel(WavefrontBuffers q, uint32_t count) {
+// Compaction: surviving paths into next_active, shadow connections into
+// shadow_slots; counters = [next active count, shadow count].
+__global__ void compact_kernel(WavefrontQueues q, uint32_t count, uint32_t* counters) {
     const uint32_t k = blockIdx.x * blockDim.x + threadIdx.x;
     const bool in_range = k < count;
-    const bool alive = in_range && q.alive[k];
-    const uint32_t slot = warp_append(&q.counters[0], alive);
+    const bool alive = in_range && q.goes_on[k];
+    const uint32_t slot = warp_append(&counters[0], alive);
     if (alive) q.next_active[slot] = q.active[k];
     const bool shadow = in_range && q.has_shadow[k];
-    const uint32_t shadow_slot = warp_append(&q.counters[1], shadow);
-    if (shadow) q.shadow_queue[shadow_slot] = k;
+    const uint32_t shadow_slot = warp_append(&counters[1], shadow);
+    if (shadow) q.shadow_slots[shadow_slot] = k;
 }
 
 template <class Tracer>
-__global__ void connect_kernel(Tracer tracer, DeviceSceneView view, WavefrontBuffers q, uint32_t count) {
+__global__ void connect_kernel(Tracer tracer, SceneView view, WavefrontQueues q, uint32_t count) {
     const uint32_t j = blockIdx.x * blockDim.x + threadIdx.x;
-    if (j >= count) return;
-    const ShadowConnection& shadow = q.shadows[q.shadow_queue[j]];
-    // One connection per path per round: no other thread writes this path now.
-    if (connect_shadow(tracer, view, shadow)) q.paths[shadow.path].radiance += shadow.contribution;
+    if (j < count) wavefront_connect(tracer, view, q, j);
 }
 
-__global__ void accumulate_paths_kernel(WavefrontBuffers q, uint32_t count, float clamp, Films films) {
-    const uint32_t pixel = blockIdx.x * blockDim.x + threadIdx.x;
-    if (pixel >= count) return;
-    films.color[pixel] += film_sample(q.paths[pixel].radiance, clamp);
-    if (q.aovs) {
-        const FirstHitAovs& a = q.aovs[pixel];
-        films.albedo[pixel] += a.albedo;
-        films.normal[pixel] += a.normal;
-        films.depth[pixel] += Vec3f(a.depth);
-    }
+__global__ void accumulate_kernel(WavefrontQueues q, uint32_t count, float clamp, Films films) {
+    const uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i < count) wavefront_accumulate(q, i, clamp, films);
 }
 
-Image mean_image(const DeviceBuffer<Vec3f>& sums, int width, int height, int passes) {
-    if (sums.size() == 0) return {};
-    Image image(width, height);
-    sums.download(image.pixels);
-    const float scale = passes > 0 ? 1.0f / float(passes) : 0.0f;
-    for (Vec3f& p : image.pixels) p = p * scale;
-    return image;
-}
-
-}  // namespace
-
-struct Renderer::State {
-    RenderOptions options;
-    CameraFrame frame;
-    std::unique_ptr<DeviceTracer> tracer;
-    std::unique_ptr<DeviceScene> scene;
-    PathSettings path;
-    WhittedSettings whitted;
-    AoSettings ao;
-    Box3f sort_bounds;
-    int passes = 0;
-    RenderStats stats;
-    PassStats last;
-
-    DeviceBuffer<Vec3f> color{"film"}, albedo{"albedo film"}, normal{"normal film"}, depth{"depth film"};
-    // Wavefront queues (path integrator only).
+// The wavefront's device buffers, one slot per pixel.
+struct WavefrontBuffers {
     DeviceBuffer<PathState> paths{"path states"};
     DeviceBuffer<FirstHitAovs> aovs{"first-hit AOVs"};
     DeviceBuffer<uint32_t> active{"active path queue"}, next_active{"next active path queue"};
-    DeviceBuffer<PathHit> hits{"extension hits"};
-    DeviceBuffer<uint8_t> alive{"path survival flags"}, has_shadow{"shadow flags"};
+    DeviceBuffer<uint32_t> keys{"ray sort keys"}, sorted_keys{"sorted ray keys"};
+    DeviceBuffer<PathHit> found{"extension hits"};
     DeviceBuffer<ShadowConnection> shadows{"shadow connections"};
-    DeviceBuffer<uint32_t> shadow_queue{"shadow queue"};
+    DeviceBuffer<uint8_t> has_shadow{"shadow flags"}, goes_on{"path survival flags"};
+    DeviceBuffer<uint32_t> shadow_slots{"shadow queue"};
     DeviceBuffer<uint32_t> counters{"queue counters"};
-    DeviceBuffer<unsigned long long> ray_counts{"ray counters"};
-    DeviceBuffer<uint32_t> sort_keys{"ray sort keys"}, sorted_keys{"sorted ray keys"};
     DeviceBuffer<unsigned char> sort_scratch{"radix sort scratch"};
 
-    [[nodiscard]] uint32_t pixels() const { return uint32_t(options.width) * uint32_t(options.height); }
-
-    Films films() const {
-        return {color.data(), albedo.size() ? albedo.data() : nullptr, normal.size() ? normal.data() : nullptr,
-                depth.size() ? depth.data() : nullptr};
+    void allocate(uint32_t n, bool with_aovs, bool sorting) {
+        paths.allocate(n);
+        aovs.allocate(with_aovs ? n : 0);
+        active.allocate(n);
+        next_active.allocate(n);
+        keys.allocate(sorting ? n : 0);
+        sorted_keys.allocate(sorting ? n : 0);
+        found.allocate(n);
+        shadows.allocate(n);
+        has_shadow.allocate(n);
+        goes_on.allocate(n);
+        shadow_slots.allocate(n);
+        counters.allocate(2);
     }
-
-    WavefrontBuffers queues() const {
-        WavefrontBuffers q;
-        q.paths = paths.data();
-        q.aovs = aovs.size() ? aovs.data() : nullptr;
-        q.active = active.data();
-        q.next_active = next_active.data();
-        q.hits = hits.data();
-        q.alive = alive.data();
-        q.shadows = shadows.data();
-        q.has_shadow = has_shadow.data();
-        q.shadow_queue = shadow_queue.data();
-        q.counters = counters.data();
-        return q;
-    }
-
-    void sort_active(uint32_t count) {
-        sort_keys_kernel<<<blocks_for(count), kBlock>>>(paths.data(), active.data(), count, sort_bounds,
-                                                        sort_keys.data());
-        RF_CUDA_CHECK(cudaGetLastError());
-        size_t scratch = 0;
-        RF_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, scratch, sort_keys.data(), sorted_keys.data(),
-                                                      active.data(), next_active.data(), int(count)));
-        sort_scratch.reserve(scratch);
-        RF_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(sort_scratch.data(), scratch, sort_keys.data(),
-                                                      sorted_keys.data(), active.data(), next_active.data(),
-                                                      int(count)));
-        std::swap(active, next_active);
-    }
-
-    void path_pass() {
-        const uint32_t n = pixels();
-        generate_kernel<<<blocks_for(n), kBlock>>>(frame, options.width, options.height, uint32_t(passes),
-                                                   options.seed, path, queues());
-        RF_CUDA_CHECK(cudaGetLastError());
-        uint32_t count = n;
-        last.paths_per_bounce.clear();
-        while (count > 0) {
-            last.paths_per_bounce.push_back(count);
-            last.closest_rays += count;
-            if (options.sort_rays) sort_active(count);
-            const WavefrontBuffers q = queues();
-            tracer->impl().with_tracer([&](const auto& t) {
-                extend_kernel<<<blocks_for(count), kBlock>>>(t, scene->view(), q, count);
-            });
-            RF_CUDA_CHECK(cudaGetLastError());
-            shade_kernel<<<blocks_for(count), kBlock>>>(scene->view(), path, q, count);
-            RF_CUDA_CHECK(cudaGetLastError());
-            RF_CUDA_CHECK(cudaMemset(counters.data(), 0, 2 * sizeof(uint32_t)));
-            compact_kernel<<<blocks_for(count), kBlock>>>(q, count);
-            RF_CUDA_CHECK(cudaGetLastError());
-            uint32_t sizes[2] = {0, 0};
-            RF_CUDA_CHECK(cudaMemcpy(sizes, counters.data(), sizeof sizes, cudaMemcpyDeviceToHost));
-            if (sizes[1] > 0) {
-                tracer->impl().with_tracer([&](const auto& t) {
-                    connect_kernel<<<blocks_for(sizes[1]), kBlock>>>(t, scene->view(), q, sizes[1]);
-                });
-                RF_CUDA_CHECK(cudaGetLastError());
-                last.shadow_rays += sizes[1];
-            }
-            std::swap(active, next_active);
-            count = sizes[0];
-        }
-        accumulate_paths_kernel<<<blocks_for(n), kBlock>>>(queues(), n, options.max_sample_value, films());
-        RF_CUDA_CHECK(cudaGetLastError());
-    }
-
-    void pixel_pass() {
-        PixelKernelParams p;
-        p.view = scene->view();
-        p.camera = frame;
-        p.width = options.width;
-        p.height = options.height;
-        p.sample = uint32_t(passes);
-        p.seed = options.seed;
-        p.centre = options.spp == 1;
-        p.integrator = int(options.integrator);
-        p.whitted = whitted;
-        p.ao = ao;
-        p.clamp = options.max_sample_value;
-        p.films = films();
-        ray_counts.reserve(2);
-        RF_CUDA_CHECK(cudaMemset(ray_counts.data(), 0, 2 * sizeof(unsigned long long)));
-        p.ray_counts = ray_counts.data();
-        launch_pixel_kernel(tracer->impl(), p, blocks_for(pixels()), kBlock);
-        unsigned long long counted[2] = {0, 0};
-        RF_CUDA_CHECK(cudaMemcpy(counted, ray_counts.data(), sizeof(counted), cudaMemcpyDeviceToHost));
-        last.closest_rays += counted[0];
-        last.shadow_rays += counted[1];
+    [[nodiscard]] WavefrontQueues queues() const {
+        return {paths.data(),   aovs.size() ? aovs.data() : nullptr,
+                active.data(),  next_active.data(),
+                keys.data(),    found.data(),
+                shadows.data(), has_shadow.data(),
+                goes_on.data(), shadow_slots.data()};
     }
 };
 
-Renderer::Renderer(const Scene& scene, const SceneGeometry& geometry, const Camera& camera,
-                   const RenderOptions& options, GpuKernel kernel, const BuildOptions& build, int device)
-    : state_(new State) {
-    validate_render_options(options);
-    State& st = *state_;
-    st.options = options;
-    st.frame = CameraFrame::make(camera, options.width, options.height);
-    st.tracer = std::make_unique<DeviceTracer>(geometry, kernel, build, device);
-    {
-        const HostSceneView host(scene, geometry);  // mip chains and light tables, built on the CPU
-        st.scene = std::make_unique<DeviceScene>(host);
-        st.ao = {.samples = options.ao_samples,
-                 .radius = options.ao_radius > 0.0f ? options.ao_radius : 0.1f * host.diagonal()};
-    }
-    st.whitted.reflection_depth = options.reflection_depth;
-    st.whitted.refraction_depth = options.refraction_depth;
-    st.whitted.shading = int(options.whitted_shading);
-    st.path.max_depth = options.max_depth;
-    st.path.rr_depth = options.rr_depth;
-    st.path.strategy = int(options.light_sampling);
-    st.path.pixel_spread = pixel_spread_angle(camera.vfov_degrees * (kPi / 180.0f), options.height);
-    st.sort_bounds = geometry.bounds;
-    st.sort_bounds.extend(st.frame.eye);
+// The device side of run_wavefront: each stage one launch over its items.
+class DeviceWavefront {
+public:
+    DeviceWavefront(const DeviceTracer::Impl& tracer, const SceneView& view, const IntegratorSettings& settings,
+                    uint32_t sample, const Films& films, WavefrontBuffers& buffers)
+        : tracer_(tracer), view_(view), settings_(settings), sample_(sample), films_(films), b_(buffers) {}
 
-    const uint32_t n = st.pixels();
-    auto zeroed = [](DeviceBuffer<Vec3f>& film, uint32_t count) {
-        film.allocate(count);
-        RF_CUDA_CHECK(cudaMemset(film.data(), 0, film.bytes()));
-    };
-    zeroed(st.color, n);
-    if (options.aovs) {
-        zeroed(st.albedo, n);
-        zeroed(st.normal, n);
-        zeroed(st.depth, n);
+    void generate(uint32_t count) {
+        generate_kernel<<<blocks_for(count), kBlock>>>(settings_, sample_, b_.queues(), count);
+        RF_CUDA_CHECK(cudaGetLastError());
     }
-    if (options.integrator == IntegratorKind::Path) {
-        st.paths.allocate(n);
-        if (options.aovs) st.aovs.allocate(n);
-        st.active.allocate(n);
-        st.next_active.allocate(n);
-        st.hits.allocate(n);
-        st.alive.allocate(n);
-        st.has_shadow.allocate(n);
-        st.shadows.allocate(n);
-        st.shadow_queue.allocate(n);
-        st.counters.allocate(2);
-        if (options.sort_rays) {
-            st.sort_keys.allocate(n);
-            st.sorted_keys.allocate(n);
+    void sort(uint32_t active) {
+        sort_keys_kernel<<<blocks_for(active), kBlock>>>(settings_, b_.queues(), active);
+        RF_CUDA_CHECK(cudaGetLastError());
+        size_t scratch = 0;
+        RF_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, scratch, b_.keys.data(), b_.sorted_keys.data(),
+                                                      b_.active.data(), b_.next_active.data(), int(active)));
+        b_.sort_scratch.reserve(scratch);
+        RF_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(b_.sort_scratch.data(), scratch, b_.keys.data(),
+                                                      b_.sorted_keys.data(), b_.active.data(),
+                                                      b_.next_active.data(), int(active)));
+        std::swap(b_.active, b_.next_active);
+    }
+    void extend(uint32_t active) {
+        tracer_.with_tracer([&](const auto& t) {
+            extend_kernel<<<blocks_for(active), kBlock>>>(t, view_, b_.queues(), active);
+        });
+        RF_CUDA_CHECK(cudaGetLastError());
+        closest_rays += active;
+    }
+    void shade(uint32_t active) {
+        shade_kernel<<<blocks_for(active), kBlock>>>(view_, settings_.path, b_.queues(), active);
+        RF_CUDA_CHECK(cudaGetLastError());
+    }
+    WaveSizes compact(uint32_t active) {
+        RF_CUDA_CHECK(cudaMemset(b_.counters.data(), 0, 2 * sizeof(uint32_t)));
+        compact_kernel<<<blocks_for(active), kBlock>>>(b_.queues(), active, b_.counters.data());
+        RF_CUDA_CHECK(cudaGetLastError());
+        uint32_t sizes[2] = {0, 0};
+        RF_CUDA_CHECK(cudaMemcpy(sizes, b_.counters.data(), sizeof sizes, cudaMemcpyDeviceToHost));
+        return {sizes[0], sizes[1]};
+    }
+    void connect(uint32_t shadows) {
+        tracer_.with_tracer([&](const auto& t) {
+            connect_kernel<<<blocks_for(shadows), kBlock>>>(t, view_, b_.queues(), shadows);
+        });
+        RF_CUDA_CHECK(cudaGetLastError());
+        shadow_rays += shadows;
+    }
+    void swap_queues() { std::swap(b_.active, b_.next_active); }
+    void accumulate(uint32_t count) {
+        accumulate_kernel<<<blocks_for(count), kBlock>>>(b_.queues(), count, settings_.clamp, films_);
+        RF_CUDA_CHECK(cudaGetLastError());
+    }
+
+    uint64_t closest_rays = 0, shadow_rays = 0;
+
+private:
+    const DeviceTracer::Impl& tracer_;
+    const SceneView& view_;
+    const IntegratorSettings& settings_;
+    uint32_t sample_;
+    Films films_;
+    WavefrontBuffers& b_;
+};
+
+const DeviceTracer& device_tracer_of(const Accel& accel) {
+    const auto* cuda_accel = dynamic_cast<const CudaAccel*>(&accel);
+    if (!cuda_accel) throw Error("render on a CUDA device: the acceleration structure is not a CUDA one");
+    return cuda_accel->tracer();
+}
+
+class CudaRenderer final : public RendererBase {
+public:
+    CudaRenderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel, const Camera& camera,
+                 const RenderOptions& options)
+        : RendererBase(scene, geometry, accel, camera, options), tracer_(device_tracer_of(accel)) {
+        RF_CUDA_CHECK(cudaSetDevice(tracer_.device()));
+        reset();
+    }
+
+private:
+    void run_pass(const ProgressCallback&, std::vector<TracedRay>*, PassStats& stats) override {
+        RF_CUDA_CHECK(cudaSetDevice(tracer_.device()));
+        if (options().integrator == IntegratorKind::Path) path_pass(stats);
+        else pixel_pass(stats);
+        RF_CUDA_CHECK(cudaDeviceSynchronize());
+    }
+
+    void path_pass(PassStats& stats) {
+        const uint32_t pixels = uint32_t(options().width) * uint32_t(options().height);
+        DeviceWavefront wavefront(tracer_.impl(), scene_->view(), settings(), uint32_t(passes()), films(),
+                                  wavefront_);
+        run_wavefront(wavefront, settings(), pixels, stats.waves);
+        stats.closest_rays = wavefront.closest_rays;
+        stats.shadow_rays = wavefront.shadow_rays;
+    }
+
+    void pixel_pass(PassStats& stats) {
+        ray_counts_.reserve(2);
+        RF_CUDA_CHECK(cudaMemset(ray_counts_.data(), 0, 2 * sizeof(unsigned long long)));
+        const PixelPass p{scene_->view(), settings(), uint32_t(passes()), films(), ray_counts_.data()};
+        launch_pixel_kernel(tracer_.impl(), p, blocks_for(uint32_t(options().width) * uint32_t(options().height)),
+                            kBlock);
+        unsigned long long counted[2] = {0, 0};
+        RF_CUDA_CHECK(cudaMemcpy(counted, ray_counts_.data(), sizeof(counted), cudaMemcpyDeviceToHost));
+        stats.closest_rays = counted[0];
+        stats.shadow_rays = counted[1];
+    }
+
+    [[nodiscard]] Films films() const {
+        if (albedo_.size() == 0) return {color_.data(), nullptr, nullptr, nullptr};
+        return {color_.data(), albedo_.data(), normal_.data(), depth_.data()};
+    }
+
+    [[nodiscard]] Image film_sums(Film film) const override {
+        const DeviceBuffer<Vec3f>& sums = film == Film::Color    ? color_
+                                          : film == Film::Albedo ? albedo_
+                                          : film == Film::Normal ? normal_
+                                                                 : depth_;
+        if (sums.size() == 0) return {};
+        Image image(options().width, options().height);
+        sums.download(image.pixels);
+        return image;
+    }
+
+    void reset_films() override {
+        const RenderOptions& o = options();
+        const uint32_t n = uint32_t(o.width) * uint32_t(o.height);
+        for (DeviceBuffer<Vec3f>* film : {&color_, &albedo_, &normal_, &depth_}) {
+            film->allocate((film == &color_ || o.aovs) ? n : 0);
+            if (film->size()) RF_CUDA_CHECK(cudaMemset(film->data(), 0, film->bytes()));
         }
+        if (o.integrator == IntegratorKind::Path) wavefront_.allocate(n, o.aovs, o.sort_rays);
+        else wavefront_ = WavefrontBuffers{};
     }
-}
 
-Renderer::~Renderer() = default;
+    void tables_changed() override { scene_ = std::make_unique<DeviceScene>(tables()); }
 
-void Renderer::render_pass() {
-    State& st = *state_;
-    RF_CUDA_CHECK(cudaSetDevice(st.tracer->device()));
-    const Clock::time_point start = Clock::now();
-    st.last = PassStats{};
-    if (st.options.integrator == IntegratorKind::Path) st.path_pass();
-    else st.pixel_pass();
-    RF_CUDA_CHECK(cudaDeviceSynchronize());
-    ++st.passes;
-    st.last.pass_ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-    st.stats.samples += st.pixels();
-    st.stats.closest_rays += st.last.closest_rays;
-    st.stats.shadow_rays += st.last.shadow_rays;
-    st.stats.seconds += st.last.pass_ms * 1e-3;
-}
+    const DeviceTracer& tracer_;
+    std::unique_ptr<DeviceScene> scene_;
+    DeviceBuffer<Vec3f> color_{"film"}, albedo_{"albedo film"}, normal_{"normal film"}, depth_{"depth film"};
+    WavefrontBuffers wavefront_;
+    DeviceBuffer<unsigned long long> ray_counts_{"ray counters"};
+};
 
-int Renderer::passes() const { return state_->passes; }
-const RenderOptions& Renderer::options() const { return state_->options; }
-RenderStats Renderer::stats() const { return state_->stats; }
-const PassStats& Renderer::last_pass() const { return state_->last; }
-const DeviceTracer& Renderer::tracer() const { return *state_->tracer; }
+}  // namespace
 
-Image Renderer::image() const {
-    return mean_image(state_->color, state_->options.width, state_->options.height, state_->passes);
-}
-Image Renderer::albedo() const {
-    return mean_image(state_->albedo, state_->options.width, state_->options.height, state_->passes);
-}
-Image Renderer::normal() const {
-    return mean_image(state_->normal, state_->options.width, state_->options.height, state_->passes);
-}
-Image Renderer::depth() const {
-    return mean_image(state_->depth, state_->options.width, state_->options.height, state_->passes);
-}
-
-void render_progressive(Renderer& renderer, const DevicePassCallback& after_pass, const ProgressCallback& progress) {
-    const RenderOptions& o = renderer.options();
-    const Clock::time_point start = Clock::now();
-    while (renderer.passes() < o.spp) {
-        renderer.render_pass();
-        const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
-        if (progress) {
-            double done = double(renderer.passes()) / double(o.spp);
-            if (o.time_budget_s > 0.0) done = std::max(done, std::min(1.0, elapsed / o.time_budget_s));
-            progress(std::min(done, 1.0));
-        }
-        if (after_pass && !after_pass(renderer)) break;
-        if (o.time_budget_s > 0.0 && elapsed >= o.time_budget_s) break;
-    }
+std::unique_ptr<Renderer> make_renderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
+                                        const Camera& camera, const RenderOptions& options) {
+    require_device(options.device.index);
+    return std::make_unique<CudaRenderer>(scene, geometry, accel, camera, options);
 }
 
 }  // namespace rf::cuda

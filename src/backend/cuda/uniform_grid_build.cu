@@ -36,12 +36,12 @@
 
 #include "accel/grid/uniform_grid.h"
 #include "accel/grid/uniform_grid_steps.h"
+#include "backend/backends.h"
 #include "backend/cuda/build_context.h"
 #include "backend/cuda/cub_run.h"
 #include "backend/cuda/device_buffer.h"
+#include "backend/cuda/device_builders.h"
 #include "backend/cuda/launch.h"
-#include "rayforge/backend/cuda.h"
-#include "rayforge/backend/cuda_build.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 

@@ -21,6 +21,7 @@
 #include <cstdint>
 
 #include "rayforge/core/host_device.h"
+#include "rayforge/render/integrators.h"
 #include "rayforge/math/ray.h"
 #include "rayforge/scene/camera.h"
 #include "render/bsdf.h"
@@ -31,16 +32,10 @@
 
 namespace rf {
 
-// rf::LightSampling (rayforge/render/render.h) as integers, so that device
-// code needs no public header.
-inline constexpr int kLightSamplingMis = 0;
-inline constexpr int kLightSamplingNee = 1;
-inline constexpr int kLightSamplingBsdf = 2;
-
 struct PathSettings {
     int max_depth = 8;          // bounces after the camera ray
     int rr_depth = 3;           // Russian roulette from this bounce on
-    int strategy = kLightSamplingMis;
+    LightSampling strategy = LightSampling::Mis;
     float pixel_spread = 0.0f;  // ray-cone spread angle of a camera ray (texture LOD); 0 = finest level
 };
 
@@ -150,9 +145,9 @@ RF_HD bool shade_path(const View& view, const PathSettings& settings, PathState&
     has_shadow = false;
     const LightSet& lights = view.light_set();
     const float epsilon = view.ray_epsilon();
-    const bool use_nee = settings.strategy != kLightSamplingBsdf;
-    const bool use_bsdf_hits = settings.strategy != kLightSamplingNee;
-    const bool mis = settings.strategy == kLightSamplingMis;
+    const bool use_nee = settings.strategy != LightSampling::Bsdf;
+    const bool use_bsdf_hits = settings.strategy != LightSampling::Nee;
+    const bool mis = settings.strategy == LightSampling::Mis;
     const Vec3f dir = normalize(path.ray.dir);
 
     if (!found.hit.found()) {

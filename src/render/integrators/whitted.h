@@ -10,7 +10,7 @@
 //   mirror lobe        M = metallic * (1 - roughness): perfect reflection tinted by base_color;
 //   diffuse lobe       D = 1 - T - M: Lambert with base_color (rough metal falls
 //                      here too, a crude stand-in for a glossy lobe).
-// Local shading of the diffuse lobe: Lambert, or (for the seeds' look) Lambert
+// Local shading of the diffuse lobe: Lambert, or (for the look of the GPU ray tracers it reproduces) Lambert
 // plus a Phong or Blinn-Phong highlight per light with specular colour F0 =
 // mix(0.04, base_color, metallic) and exponent 2 / alpha^2 - 2 (alpha =
 // roughness^2; Walter et al. 2007's Beckmann-Phong correspondence, halved for
@@ -26,6 +26,7 @@
 
 #include <cmath>
 
+#include "rayforge/render/integrators.h"
 #include "rayforge/scene/light.h"
 #include "render/area_lights.h"
 #include "render/integrators/surface_trace.h"
@@ -35,15 +36,10 @@
 
 namespace rf {
 
-// Values of WhittedSettings::shading (rf::WhittedShading as integers).
-inline constexpr int kWhittedLambert = 0;
-inline constexpr int kWhittedPhong = 1;
-inline constexpr int kWhittedBlinn = 2;
-
 struct WhittedSettings {
     int reflection_depth = 1;       // mirror and Fresnel reflections along one path
     int refraction_depth = 2;       // refractions (and blended pass-throughs) along one path
-    int shading = kWhittedLambert;
+    WhittedShading shading = WhittedShading::Lambert;
     int area_light_samples = 4;     // shadow rays towards area lights per shading point
     float min_weight = 1e-3f;       // branches contributing less than this are not traced
 };
@@ -78,13 +74,13 @@ RF_HDI bool refract(Vec3f d, Vec3f n, float eta, Vec3f& out) {
 
 // Highlight of one light for the Phong / Blinn-Phong options: the lobe value
 // times cos(theta_i), relative to the light's incident radiance or irradiance.
-RF_HDI float whitted_highlight(int shading, Vec3f n, Vec3f wo, Vec3f wi, float roughness) {
-    if (shading == kWhittedLambert) return 0.0f;
+RF_HDI float whitted_highlight(WhittedShading shading, Vec3f n, Vec3f wo, Vec3f wi, float roughness) {
+    if (shading == WhittedShading::Lambert) return 0.0f;
     float alpha = fmaxf(roughness * roughness, 1e-3f);
     float exponent = fminf(2.0f / (alpha * alpha) - 2.0f, 1e4f);
     if (!(exponent > 0.0f)) return 0.0f;
     float cos_lobe;
-    if (shading == kWhittedPhong) {
+    if (shading == WhittedShading::Phong) {
         exponent *= 0.25f;
         cos_lobe = dot(reflect(-wo, n), wi);
     } else {
@@ -232,7 +228,7 @@ RF_HD Vec3f whitted_radiance(const Tracer& tracer, const View& view, const Ray& 
             Vec3f highlight;
             Vec3f lighting = direct_lighting(tracer, view, si, -d, rng, settings, highlight);
             radiance += weight * m.base_color * (diffuse * kInvPi) * lighting;
-            if (settings.shading != kWhittedLambert) {
+            if (settings.shading != WhittedShading::Lambert) {
                 Vec3f specular_color = lerp(Vec3f(0.04f), m.base_color, m.metallic);
                 radiance += weight * specular_color * diffuse * highlight;
             }

@@ -12,7 +12,7 @@
 
 namespace rf {
 
-Bvh build_bvh(std::span<const Triangle> triangles, const BuildOptions& options) {
+Bvh build_bvh_on_cpu(std::span<const Triangle> triangles, const BuildOptions& options) {
     Bvh bvh;
     switch (options.builder) {
         case Builder::BinnedSah: bvh = build_binned_sah(triangles, options); break;

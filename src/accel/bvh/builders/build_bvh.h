@@ -1,5 +1,6 @@
-// One entry point for every BVH builder: runs the builder named in
-// options.builder, then the optimizer when options.optimize is set.
+// The CPU's one entry point for every BVH builder: runs the builder named in
+// options.builder, then the optimizer when options.optimize is set. The
+// public rf::build_bvh (rayforge/accel/accel.h) calls it for the CPU.
 #pragma once
 
 #include <span>
@@ -14,6 +15,6 @@ namespace rf {
 // siblings adjacent, depth <= kBvhMaxDepth, leaves of at most max_leaf_size
 // references. Builders with spatial splits (SBVH, GridBvhSplit) may reference
 // a triangle from several leaves; all others reference each exactly once.
-Bvh build_bvh(std::span<const Triangle> triangles, const BuildOptions& options);
+Bvh build_bvh_on_cpu(std::span<const Triangle> triangles, const BuildOptions& options);
 
 }  // namespace rf

@@ -1,7 +1,11 @@
-// The tracers the device integrators and trace kernels call: one small
-// struct per GPU kernel (rf::GpuKernel) with the member functions the
-// integrators of src/render expect (intersect, occluded), each forwarding to
-// the shared host/device traversal of src/trace. Views hold device pointers.
+// The tracers: one small struct per traversal over a plain view of a
+// structure, with what the integrators and the batch loops call
+// (intersect, occluded, and counted for the instrumented pass), each
+// forwarding to the shared host/device traversal code of src/trace. The
+// same structs serve both backends: on the CPU an rf::Accel wraps one
+// (accel/view_accel.h) over host arrays; on the GPU the trace and render
+// kernels take one by value over device arrays. The CPU-only SIMD layouts
+// add theirs in backend/cpu/wide_bvh_tracer.h.
 #pragma once
 
 #include "accel/bvh/layout/aila_laine_layout.h"
@@ -12,8 +16,9 @@
 #include "trace/cwbvh_traversal.h"
 #include "trace/grid_traversal.h"
 #include "trace/kdtree_traversal.h"
+#include "trace/triangle_intersect.h"
 
-namespace rf::cuda {
+namespace rf {
 
 // Traversal statistics gathered per ray by the counting variants.
 struct RayCounters {
@@ -84,6 +89,34 @@ struct KdTracer {
     }
 };
 
+// Every triangle for every ray: the reference every other tracer is checked
+// against (no counted traversal: its work is the triangle count).
+struct BruteForceTracer {
+    const Triangle* triangles = nullptr;
+    uint32_t count = 0;
+    RF_HDI Hit intersect(const Ray& ray) const {
+        const WatertightRay tri_ray = WatertightRay::make(ray);
+        Hit hit;
+        float tmax = ray.tmax;
+        for (uint32_t i = 0; i < count; ++i) {
+            TriangleHit candidate;
+            if (intersect_triangle(tri_ray, triangles[i], ray.tmin, tmax, candidate)) {
+                hit = Hit{candidate.t, candidate.u, candidate.v, i};
+                tmax = candidate.t;
+            }
+        }
+        return hit;
+    }
+    RF_HDI bool occluded(const Ray& ray) const {
+        const WatertightRay tri_ray = WatertightRay::make(ray);
+        for (uint32_t i = 0; i < count; ++i) {
+            TriangleHit candidate;
+            if (intersect_triangle(tri_ray, triangles[i], ray.tmin, ray.tmax, candidate)) return true;
+        }
+        return false;
+    }
+};
+
 struct GridTracer {
     GridView grid;  // proximity != nullptr: proximity clouds
     RF_HDI Hit intersect(const Ray& ray) const { return grid_intersect(grid, ray); }
@@ -99,4 +132,4 @@ struct GridTracer {
     }
 };
 
-}  // namespace rf::cuda
+}  // namespace rf

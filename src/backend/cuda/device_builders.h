@@ -1,12 +1,14 @@
-// Acceleration-structure builders on the CUDA device (issue 7), with the
-// per-stage timing and peak device memory of each build. Available with
-// rayforge::rayforge_cuda; no CUDA header is needed to use it.
+// Acceleration-structure builders on a CUDA device, with the per-stage
+// timing and peak device memory of each build (the public face is
+// rf::build_bvh and rf::build_accel with a CUDA BuildOptions::device). No
+// CUDA header is needed to include this.
 #pragma once
 
 #include <cstddef>
 #include <span>
 
 #include "rayforge/accel/accel.h"
+#include "rayforge/accel/build_report.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/scene/scene_geometry.h"
 
@@ -64,6 +66,9 @@ struct DeviceBuildStages {
                cell_ranges_ms + proximity_ms;
     }
 };
+
+// The stages that ran, as the public report.
+BuildReport describe_device_build(const DeviceBuildStages& stages, const Device& device);
 
 // Whether options.builder has a device version: lbvh30, lbvh63, hlbvh2,
 // ploc, gridbvh, gridbvh-split.

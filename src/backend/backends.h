@@ -1,0 +1,48 @@
+// The device seam: what each backend gives the engine. The public entry
+// points (rf::build_accel, rf::build_bvh, rf::make_renderer,
+// rf::list_cuda_devices, rf::require_device) pick the backend from an
+// rf::Device and call these; nothing else in the library, the bench or the
+// apps names a backend. The CUDA functions are defined by src/backend/cuda,
+// or, in a build without it, by backend/cuda_unavailable.cpp, where each
+// answers with the one "built without the CUDA backend" error.
+#pragma once
+
+#include <memory>
+#include <span>
+
+#include "rayforge/accel/accel.h"
+#include "rayforge/accel/build_report.h"
+#include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/backend/device.h"
+#include "rayforge/render/render.h"
+
+namespace rf {
+
+// The reason every CUDA request fails in a build without the backend.
+inline constexpr const char* kCudaNotBuilt =
+    "this rayforge was built without the CUDA backend (nvcc was not found at configure time)";
+
+namespace cpu {
+
+std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options);
+std::unique_ptr<Renderer> make_renderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
+                                        const Camera& camera, const RenderOptions& options);
+
+}  // namespace cpu
+
+namespace cuda {
+
+bool backend_built();
+DeviceListing list_devices();
+// Throws rf::Error when device `index` cannot be used.
+void require_device(int index);
+// The structure options.gpu_kernel traverses, on device options.device.index.
+std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options);
+// options.builder run by its device builder (rf::Error for a builder without one).
+Bvh build_bvh(std::span<const Triangle> triangles, const BuildOptions& options, BuildReport* report);
+// A renderer for an accel from cuda::build_accel.
+std::unique_ptr<Renderer> make_renderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
+                                        const Camera& camera, const RenderOptions& options);
+
+}  // namespace cuda
+}  // namespace rf

@@ -1,0 +1,44 @@
+// The CUDA backend's rf::Accel: a DeviceTracer (a structure and its
+// traversal kernel on one device) behind the interface every structure
+// answers through. Batches of host rays are copied to the device and the
+// answers back; a single ray is a batch of one (correct, but a GPU is for
+// batches). The CUDA renderer takes its structure from here.
+#pragma once
+
+#include <vector>
+
+#include "backend/cuda/device_tracer.h"
+#include "rayforge/accel/accel.h"
+
+namespace rf::cuda {
+
+class CudaAccel final : public Accel {
+public:
+    CudaAccel(const SceneGeometry& geometry, const BuildOptions& options) : tracer_(geometry, options) {}
+
+    [[nodiscard]] Hit intersect(const Ray& ray) const override;
+    [[nodiscard]] bool occluded(const Ray& ray) const override;
+    void intersect(std::span<const Ray> rays, std::span<Hit> hits) const override { tracer_.intersect(rays, hits); }
+    void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const override {
+        tracer_.occluded(rays, occluded);
+    }
+    bool count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const override {
+        tracer_.count_traversal(rays, any_hit, totals);
+        return true;
+    }
+    std::vector<double> time_traversal(std::span<const Ray> rays, bool any_hit, int runs, std::span<Hit> hits,
+                                       std::span<uint8_t> occluded) const override;
+    [[nodiscard]] AccelStats stats() const override { return tracer_.stats(); }
+    [[nodiscard]] Device device() const override { return {Device::Kind::Cuda, tracer_.device()}; }
+    [[nodiscard]] BuildReport build_report() const override {
+        return describe_device_build(tracer_.build_stages(), device());
+    }
+
+    [[nodiscard]] const DeviceTracer& tracer() const { return tracer_; }
+
+private:
+    // The resident-ray buffers are scratch space: a const query may reuse them.
+    mutable DeviceTracer tracer_;
+};
+
+}  // namespace rf::cuda

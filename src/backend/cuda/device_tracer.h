@@ -1,0 +1,63 @@
+// A structure on one CUDA device with the traversal kernel that reads it
+// (BuildOptions::gpu_kernel): built on the device when
+// BuildOptions::build_on_device is set and the builder has a device version
+// (device_builders.h; the layout conversion then runs there too), else on
+// the CPU; then converted to the kernel's layout (node pairs, CWBVH, kd
+// nodes, grid cells) and uploaded with the triangles. The CUDA backend's
+// rf::Accel (cuda_accel.cpp) and renderer (renderer.cu) are built on it.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+
+#include "backend/cuda/device_builders.h"
+#include "rayforge/accel/accel.h"
+#include "rayforge/math/ray.h"
+#include "rayforge/scene/scene_geometry.h"
+
+namespace rf::cuda {
+
+// Kernel time of one launch, from CUDA events around the launch alone.
+struct KernelTiming {
+    double kernel_ms = 0.0;
+    uint64_t rays = 0;
+};
+
+class DeviceTracer {
+public:
+    // options.gpu_kernel over `geometry` on device options.device.index.
+    DeviceTracer(const SceneGeometry& geometry, const BuildOptions& options);
+    ~DeviceTracer();
+    DeviceTracer(const DeviceTracer&) = delete;
+    DeviceTracer& operator=(const DeviceTracer&) = delete;
+
+    // Host rays in, host answers out (uploads, one launch, downloads).
+    void intersect(std::span<const Ray> rays, std::span<Hit> hits) const;
+    void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const;
+
+    // Rays resident on the device, so that a launch measures traversal alone.
+    void upload_rays(std::span<const Ray> rays);
+    KernelTiming trace_uploaded(bool any_hit);
+    void download_hits(std::span<Hit> hits) const;           // after trace_uploaded(false)
+    void download_occluded(std::span<uint8_t> flags) const;  // after trace_uploaded(true)
+
+    // Instrumented traversal (node or cell visits, triangle tests, restarts), like Accel::count_traversal.
+    void count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const;
+
+    [[nodiscard]] GpuKernel kernel() const;
+    [[nodiscard]] int device() const;
+    // name "cuda/<kernel>/<builder>", build_ms (build + layout + upload, wall time), layout_ms, nodes,
+    // bytes and device_bytes.
+    [[nodiscard]] AccelStats stats() const;
+    // The build's stages (on_device false: built on the host, no stages).
+    [[nodiscard]] const DeviceBuildStages& build_stages() const;
+
+    struct Impl;
+    [[nodiscard]] const Impl& impl() const { return *impl_; }
+
+private:
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace rf::cuda

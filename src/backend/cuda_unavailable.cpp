@@ -1,0 +1,22 @@
+// The CUDA half of the device seam (backend/backends.h) in a build without
+// the CUDA backend: no devices, and one error for every request.
+#include "backend/backends.h"
+#include "rayforge/core/error.h"
+
+namespace rf::cuda {
+
+bool backend_built() { return false; }
+DeviceListing list_devices() { return {{}, kCudaNotBuilt}; }
+void require_device(int) { throw Error(kCudaNotBuilt); }
+std::unique_ptr<Accel> build_accel(const SceneGeometry&, const BuildOptions& options) {
+    throw Error(to_string(options.device) + ": " + kCudaNotBuilt);
+}
+Bvh build_bvh(std::span<const Triangle>, const BuildOptions& options, BuildReport*) {
+    throw Error(to_string(options.device) + ": " + kCudaNotBuilt);
+}
+std::unique_ptr<Renderer> make_renderer(const Scene&, const SceneGeometry&, const Accel&, const Camera&,
+                                        const RenderOptions& options) {
+    throw Error(to_string(options.device) + ": " + kCudaNotBuilt);
+}
+
+}  // namespace rf::cuda

@@ -1,0 +1,94 @@
+#include "render/renderer_base.h"
+
+#include <chrono>
+
+#include "rayforge/core/error.h"
+
+namespace rf {
+
+using Clock = std::chrono::steady_clock;
+
+RendererBase::RendererBase(const Scene& scene, const SceneGeometry& geometry, const Accel& accel, const Camera& camera,
+                           const RenderOptions& options)
+    : scene_(scene), geometry_(geometry), accel_(accel), camera_(camera), options_(options) {
+    validate_render_options(options);
+    if (!(accel.device() == options.device))
+        throw Error("render on " + to_string(options.device) + ": the acceleration structure was built for " +
+                    to_string(accel.device()) + " (BuildOptions::device)");
+}
+
+void RendererBase::reset() {
+    tables_ = std::make_unique<SceneTables>(scene_, geometry_);
+    tables_changed();
+    settings_ = make_integrator_settings(options_, camera_, tables_->view(), geometry_.bounds);
+    reset_films();
+    restart();
+}
+
+void RendererBase::restart() {
+    passes_ = 0;
+    stats_ = {};
+    last_ = {};
+}
+
+void RendererBase::render_pass(const ProgressCallback& progress) {
+    const Clock::time_point start = Clock::now();
+    PassStats pass;
+    run_pass(progress, nullptr, pass);
+    pass.pass_ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+    finish_pass(pass);
+}
+
+void RendererBase::run_recorded_pass(std::vector<TracedRay>& log) {
+    const Clock::time_point start = Clock::now();
+    PassStats pass;
+    run_pass({}, &log, pass);
+    pass.pass_ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+    finish_pass(pass);
+}
+
+void RendererBase::render_pass_recorded(std::vector<TracedRay>&) {
+    throw Error("render_pass_recorded: the renderer on " + to_string(options_.device) + " does not record its rays");
+}
+
+void RendererBase::finish_pass(PassStats& pass) {
+    ++passes_;
+    stats_.samples += uint64_t(options_.width) * uint64_t(options_.height);
+    stats_.closest_rays += pass.closest_rays;
+    stats_.shadow_rays += pass.shadow_rays;
+    stats_.seconds += pass.pass_ms * 1e-3;
+    last_ = std::move(pass);
+}
+
+Image RendererBase::film_mean(Film film) const {
+    Image image = film_sums(film);
+    const float scale = passes_ > 0 ? 1.0f / float(passes_) : 0.0f;
+    for (Vec3f& p : image.pixels) p = p * scale;
+    return image;
+}
+
+void RendererBase::set_camera(const Camera& camera) {
+    camera_ = camera;
+    settings_ = make_integrator_settings(options_, camera_, tables_->view(), geometry_.bounds);
+    reset_films();
+    restart();
+}
+
+void RendererBase::set_options(const RenderOptions& options) {
+    validate_render_options(options);
+    if (!(options.device == options_.device))
+        throw Error("set_options: a renderer on " + to_string(options_.device) + " cannot move to " +
+                    to_string(options.device) + "; make a new one");
+    options_ = options;
+    settings_ = make_integrator_settings(options_, camera_, tables_->view(), geometry_.bounds);
+    reset_films();
+    restart();
+}
+
+void RendererBase::scene_changed(SceneChange) {
+    // Materials and geometry both feed the shading records, the emitter
+    // tables and the scene's scale: every table is rebuilt either way.
+    reset();
+}
+
+}  // namespace rf
