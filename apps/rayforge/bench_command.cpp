@@ -230,22 +230,11 @@ CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
     return cmd;
 }
 
-int run_bench(const BenchArgs& a, const std::string& command_line) {
-    bench::BenchConfig config;
-    config.scenes_dir = bench::find_scenes_dir(a.scenes_dir);
-    if (a.list) {
-        print_list(config.scenes_dir);
-        return 0;
-    }
-    bench::RunInfo info;
-    info.command = command_line;
-    const DeviceSelection devices = parse_devices(a.devices.empty() ? std::vector<std::string>{"cpu"}
-                                                                    : split_list(a.devices));
-    if (devices.gpu) require_usable(Device{Device::Kind::Cuda, devices.gpu_index}, "--device " + devices.gpu_text);
-    if (!devices.gpu && !a.gpu_kernels.empty()) throw Error("--gpu-kernel: needs --device cuda");
-    const bool build_on_device = parse_build_on(a.build_on, devices.gpu);
-    std::vector<bench::Candidate> unimplemented;
+namespace {
 
+// The candidates (a preset's, or --structure/--builder/--layout) and the scenes to run.
+const bench::Preset* choose_work(const BenchArgs& a, bench::BenchConfig& config, bench::RunInfo& info) {
+    std::vector<bench::Candidate> unimplemented;
     std::vector<std::string> scenes = split_list(a.scenes);
     const bench::Preset* preset = nullptr;
     if (!a.preset.empty()) {
@@ -273,6 +262,11 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
     }
     config.scenes = scenes;
     for (const bench::Candidate& c : unimplemented) info.unimplemented.push_back(c.label());
+    return preset;
+}
+
+// --res, --rays and --view.
+void choose_views(const BenchArgs& a, bench::BenchConfig& config) {
     if (!a.resolutions.empty()) {
         config.resolutions.clear();
         for (const std::string& r : split_list(a.resolutions)) config.resolutions.push_back(parse_resolution_or_throw(r));
@@ -292,6 +286,12 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
             throw Error("--view: expected view indices or all, got '" + v + "'");
         }
     }
+}
+
+// The rows: CPU with the Embree peer, and the GPU kernels on one device.
+void choose_devices(const BenchArgs& a, const DeviceSelection& devices, const bench::Preset* preset,
+                    bench::BenchConfig& config, bench::RunInfo& info) {
+    const bool build_on_device = parse_build_on(a.build_on, devices.gpu);
     const std::vector<std::string> embree_names = a.embree.empty() ? std::vector<std::string>{"all"} : split_list(a.embree);
     config.embree = parse_embree(embree_names);
     if (!devices.cpu) config.embree.clear();  // the peer is a CPU column
@@ -315,16 +315,11 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
     info.devices.clear();
     if (devices.cpu) info.devices.push_back("cpu");
     if (devices.gpu) info.devices.push_back("cuda:" + std::to_string(devices.gpu_index));
-    config.threads = a.threads;
-    config.repetitions = a.repetitions;
-    config.build_repetitions = a.build_repetitions;
-    config.count_traversal = !a.no_counts;
-    config.progress = !a.quiet;
-    info.threads = a.threads;
-    info.repetitions = a.repetitions;
-    info.build_repetitions = a.build_repetitions;
+}
 
-    // Notes go to stdout (and the JSON): stderr carries progress and at most one error line.
+// Notes go to stdout (and the JSON): stderr carries progress and at most one error line.
+void print_notes(const BenchArgs& a, const DeviceSelection& devices, const bench::Preset* preset,
+                 bench::RunInfo& info) {
     if (a.repetitions < 5)
         info.notes.push_back("--reps " + std::to_string(a.repetitions) + " is below the protocol's 5 timed runs");
     if (devices.gpu && a.spp > 0 && a.spp < 4)
@@ -339,6 +334,57 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
         for (const std::string& label : info.unimplemented) std::cout << ' ' << label;
         std::cout << '\n';
     }
+}
+
+// Every builder stage by stage on each scene, after the tables.
+void run_stage_breakdowns(const BenchArgs& a, const DeviceSelection& devices, const bench::BenchConfig& config) {
+    std::vector<bench::StageBreakdown> stages;
+    for (const std::string& name : config.scenes) {
+        bench::LoadedScene scene;
+        try {
+            scene = bench::load_bench_scene(bench::resolve_scene(name, config.scenes_dir));
+        } catch (const Error&) {
+            continue;  // unloadable scenes were reported by the main run
+        }
+        if (!a.quiet) std::cerr << "stage breakdown: " << scene.spec.name << '\n';
+        if (devices.cpu)
+            for (bench::StageBreakdown& row : bench::measure_stage_breakdowns(scene, a.threads, a.build_repetitions))
+                stages.push_back(std::move(row));
+        if (devices.gpu)  // device failures are errors: the device was asked for
+            for (bench::StageBreakdown& row :
+                 bench::measure_device_stage_breakdowns(scene, devices.gpu_index, a.build_repetitions))
+                stages.push_back(std::move(row));
+    }
+    bench::print_stage_breakdowns(std::cout, stages, a.threads, a.build_repetitions);
+}
+
+}  // namespace
+
+int run_bench(const BenchArgs& a, const std::string& command_line) {
+    bench::BenchConfig config;
+    config.scenes_dir = bench::find_scenes_dir(a.scenes_dir);
+    if (a.list) {
+        print_list(config.scenes_dir);
+        return 0;
+    }
+    bench::RunInfo info;
+    info.command = command_line;
+    const DeviceSelection devices = parse_devices(a.devices.empty() ? std::vector<std::string>{"cpu"}
+                                                                    : split_list(a.devices));
+    if (devices.gpu) require_usable(Device{Device::Kind::Cuda, devices.gpu_index}, "--device " + devices.gpu_text);
+    if (!devices.gpu && !a.gpu_kernels.empty()) throw Error("--gpu-kernel: needs --device cuda");
+    const bench::Preset* preset = choose_work(a, config, info);
+    choose_views(a, config);
+    choose_devices(a, devices, preset, config, info);
+    config.threads = a.threads;
+    config.repetitions = a.repetitions;
+    config.build_repetitions = a.build_repetitions;
+    config.count_traversal = !a.no_counts;
+    config.progress = !a.quiet;
+    info.threads = a.threads;
+    info.repetitions = a.repetitions;
+    info.build_repetitions = a.build_repetitions;
+    print_notes(a, devices, preset, info);
     if (config.candidates.empty())
         throw Error("nothing to run: no implemented combination matches --structure, --builder and --layout "
                     "(see --list)");
@@ -350,27 +396,7 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
                                       a.repetitions, a.build_repetitions);
         });
     if (preset && preset->configuration_table) bench::print_configuration_table(std::cout, records);
-    if ((preset && preset->stage_breakdown) || a.build_stages) {
-        std::vector<bench::StageBreakdown> stages;
-        for (const std::string& name : scenes) {
-            bench::LoadedScene scene;
-            try {
-                scene = bench::load_bench_scene(bench::resolve_scene(name, config.scenes_dir));
-            } catch (const Error&) {
-                continue;  // unloadable scenes were reported by the main run
-            }
-            if (!a.quiet) std::cerr << "stage breakdown: " << scene.spec.name << '\n';
-            if (devices.cpu)
-                for (bench::StageBreakdown& row :
-                     bench::measure_stage_breakdowns(scene, a.threads, a.build_repetitions))
-                    stages.push_back(std::move(row));
-            if (devices.gpu)  // device failures are errors: the device was asked for
-                for (bench::StageBreakdown& row :
-                     bench::measure_device_stage_breakdowns(scene, devices.gpu_index, a.build_repetitions))
-                    stages.push_back(std::move(row));
-        }
-        bench::print_stage_breakdowns(std::cout, stages, a.threads, a.build_repetitions);
-    }
+    if ((preset && preset->stage_breakdown) || a.build_stages) run_stage_breakdowns(a, devices, config);
     if (!a.json.empty()) {
         bench::write_json(a.json, records, info);
         std::cout << "\nwrote " << records.size() << " records to " << a.json << '\n';

@@ -143,14 +143,6 @@ void write_outputs(const RenderArgs& a, const Renderer& renderer, const ToneMapp
     }
 }
 
-// What a render reports in its summary line.
-struct RenderSummary {
-    int passes = 0;
-    RenderStats stats;
-    std::string accel;  // the structure's name
-    double build_ms = 0.0;
-};
-
 // The progressive loop: progress bar, --save-every previews, the final outputs.
 void render_and_write(const RenderArgs& a, Renderer& renderer, const ToneMapping& tone) {
     {
@@ -170,8 +162,10 @@ void render_and_write(const RenderArgs& a, Renderer& renderer, const ToneMapping
 
 }  // namespace
 
-CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
-    CLI::App* cmd = app.add_subcommand("render", "Render a scene to an image (.png, .exr or .pfm)");
+namespace {
+
+// The scene, the outputs, the image and the progressive loop.
+void add_image_options(CLI::App* cmd, RenderArgs& a) {
     cmd->add_option("scene", a.scene, "Scene file (.obj, .gltf, .glb, .ply, .aff, .json) or builtin:NAME")->required();
     cmd->add_option("-o,--output", a.outputs,
                     "Output image; the format follows the extension: .png (tone-mapped 8-bit sRGB), .exr or "
@@ -202,6 +196,10 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
         ->check(CLI::NonNegativeNumber);
     cmd->add_option("--save-every", a.save_every, "Also write the outputs every N passes (progressive preview)")
         ->check(CLI::NonNegativeNumber);
+}
+
+// Each integrator's parameters.
+void add_integrator_options(CLI::App* cmd, RenderArgs& a) {
     a.max_depth_opt = cmd->add_option("--max-depth", a.max_depth, "path: bounces after the camera ray (default 8)")
                           ->check(CLI::Range(0, 1024));
     a.rr_depth_opt =
@@ -224,6 +222,10 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
     a.ao_radius_opt = cmd->add_option("--ao-radius", a.ao_radius, "ao: ray length (0 = 10% of the scene diagonal)")
                           ->check(CLI::NonNegativeNumber);
     cmd->add_option("--ao-samples", a.ao_samples, "ao: rays per sample (default 16)")->check(CLI::Range(1, 65536));
+}
+
+// How the outputs are written, and the random seed.
+void add_output_options(CLI::App* cmd, RenderArgs& a) {
     cmd->add_option("--exposure", a.exposure, "Linear scale applied before writing (default 1)")
         ->check(CLI::NonNegativeNumber);
     cmd->add_option("--tonemap", a.tonemap, "PNG tone curve: clamp (default) | reinhard | aces; EXR/PFM stay linear")
@@ -234,7 +236,10 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
         ->delimiter(',')
         ->check(CLI::IsMember({"albedo", "normal", "depth"}));
     cmd->add_option("--seed", a.seed, "Random seed (default 0)");
-    add_accel_options(cmd, a.accel);
+}
+
+// Lights and environment added to (or replacing) the scene's.
+void add_light_options(CLI::App* cmd, RenderArgs& a) {
     cmd->add_option("--light", a.lights,
                      "Add a point light at x,y,z with optional intensity (W/sr; default: the squared scene "
                      "diagonal / 4); repeatable");
@@ -246,6 +251,10 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
             ->check(CLI::NonNegativeNumber);
     cmd->add_flag("--no-headlight", a.no_headlight,
                   "Do not add a light at the camera when a whitted or path render would have no light at all");
+}
+
+// Where it renders, and how the path tracer is scheduled.
+void add_device_options(CLI::App* cmd, RenderArgs& a) {
     cmd->add_option("--device", a.device, "Where to render: cpu (default), cuda (= cuda:0) or cuda:N")
         ->check(device_validator());
     cmd->add_option("--gpu-kernel", a.gpu_kernel,
@@ -261,27 +270,33 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
                   "path on the CPU with --wavefront: sort the active rays by an origin/direction key before each "
                   "extension");
     cmd->add_flag("-q,--quiet", a.quiet, "No progress bar");
+}
+
+}  // namespace
+
+CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
+    CLI::App* cmd = app.add_subcommand("render", "Render a scene to an image (.png, .exr or .pfm)");
+    add_image_options(cmd, a);
+    add_integrator_options(cmd, a);
+    add_output_options(cmd, a);
+    add_accel_options(cmd, a.accel);
+    add_light_options(cmd, a);
+    add_device_options(cmd, a);
     return cmd;
 }
 
-int run_render(const RenderArgs& a) {
-    const Device device = parse_device(a.device);
-    const GpuKernel kernel = a.gpu_kernel.empty() ? kDefaultGpuKernel : parse_gpu_kernel(a.gpu_kernel);
-    require_usable(device, "--device " + a.device);  // before the scene loads: fail fast
-    const bool build_on_device = parse_build_on(a.build_on, device.is_cuda());
-    Clock::time_point start = Clock::now();
-    Scene scene = load_scene(a.scene);
-    SceneGeometry geometry = SceneGeometry::build(scene);
-    double load_ms = ms_since(start);
+namespace {
 
-    // A command-line option when given, else the scene file's setting, else the default.
-    auto pick = [](const CLI::Option* option, const auto& cli, const auto& file, const auto& fallback) {
+// The render options: a command-line option when given, else the scene
+// file's setting, else the default.
+RenderOptions render_options(const RenderArgs& a, const RenderSettings& file, const Device& device) {
+    auto pick = [](const CLI::Option* option, const auto& cli, const auto& from_file, const auto& fallback) {
         using T = std::decay_t<decltype(fallback)>;
-        return option->count() > 0 ? T(cli) : T(file.value_or(fallback));
+        return option->count() > 0 ? T(cli) : T(from_file.value_or(fallback));
     };
-    const RenderSettings& file = scene.render_settings;
     const RenderOptions defaults;
     RenderOptions options;
+    options.device = device;
     options.width = file.width.value_or(defaults.width);
     options.height = file.height.value_or(defaults.height);
     if (a.resolution_opt->count() > 0) parse_resolution(a.resolution, options.width, options.height);
@@ -307,53 +322,73 @@ int run_render(const RenderArgs& a) {
     options.seed = a.seed;
     options.wavefront = a.wavefront;
     options.sort_rays = a.sort_rays;
-    const ToneMapping tone{.exposure = a.exposure, .curve = parse_tone_curve(a.tonemap)};
-    Camera camera = a.camera.empty() ? scene.camera_or_default() : parse_camera(a.camera);
-    apply_light_options(a, scene, geometry);
-    const bool lit_integrator = options.integrator == IntegratorKind::Whitted || options.integrator == IntegratorKind::Path;
-    if (lit_integrator && !a.no_headlight && has_no_light(scene, geometry)) {
-        // Many OBJ/PLY files carry no light; a black image helps nobody. A
-        // headlight lights a surface at the target distance with irradiance pi,
-        // so a white diffuse surface there renders at about 1.
-        Light headlight;
-        headlight.position = camera.eye;
-        const float distance = length(camera.target - camera.eye);
-        headlight.intensity = 3.14159265f * distance * distance;
-        scene.lights.push_back(headlight);
-        std::fprintf(stderr, "rayforge: note: the scene has no light; adding a headlight at the camera "
-                             "(--light to place lights, --no-headlight to disable)\n");
-    }
+    return options;
+}
 
-    // One structure and one renderer on the chosen device. On a CUDA device
-    // the kernel picks the structure unless --accel says which.
-    BuildOptions build_options = to_build_options(a.accel, a.threads);
-    build_options.device = device;
-    build_options.gpu_kernel = kernel;
-    build_options.build_on_device = build_on_device;
-    if (device.is_cuda() && a.accel.accel.empty()) build_options.structure = structure_of(kernel);
-    options.device = device;
-    const std::unique_ptr<Accel> accel = build_accel(geometry, build_options);
+// Many OBJ/PLY files carry no light; a black image helps nobody. A
+// headlight lights a surface at the target distance with irradiance pi, so
+// a white diffuse surface there renders at about 1.
+void add_headlight_if_unlit(const RenderArgs& a, const RenderOptions& options, const Camera& camera, Scene& scene,
+                            const SceneGeometry& geometry) {
+    const bool lit_integrator = options.integrator == IntegratorKind::Whitted || options.integrator == IntegratorKind::Path;
+    if (!lit_integrator || a.no_headlight || !has_no_light(scene, geometry)) return;
+    Light headlight;
+    headlight.position = camera.eye;
+    const float distance = length(camera.target - camera.eye);
+    headlight.intensity = 3.14159265f * distance * distance;
+    scene.lights.push_back(headlight);
+    std::fprintf(stderr, "rayforge: note: the scene has no light; adding a headlight at the camera "
+                         "(--light to place lights, --no-headlight to disable)\n");
+}
+
+// The structure's options on the chosen device. On a CUDA device the kernel
+// picks the structure unless --accel says which.
+BuildOptions structure_options(const RenderArgs& a, const Device& device) {
+    const GpuKernel kernel = a.gpu_kernel.empty() ? kDefaultGpuKernel : parse_gpu_kernel(a.gpu_kernel);
+    BuildOptions build = to_build_options(a.accel, a.threads);
+    build.device = device;
+    build.gpu_kernel = kernel;
+    build.build_on_device = parse_build_on(a.build_on, device.is_cuda());
+    if (device.is_cuda() && a.accel.accel.empty()) build.structure = structure_of(kernel);
+    return build;
+}
+
+}  // namespace
+
+int run_render(const RenderArgs& a) {
+    const Device device = parse_device(a.device);
+    require_usable(device, "--device " + a.device);  // before the scene loads: fail fast
+    const BuildOptions build = structure_options(a, device);
+    Clock::time_point start = Clock::now();
+    Scene scene = load_scene(a.scene);
+    SceneGeometry geometry = SceneGeometry::build(scene);
+    const double load_ms = ms_since(start);
+
+    const RenderOptions options = render_options(a, scene.render_settings, device);
+    const ToneMapping tone{.exposure = a.exposure, .curve = parse_tone_curve(a.tonemap)};
+    const Camera camera = a.camera.empty() ? scene.camera_or_default() : parse_camera(a.camera);
+    apply_light_options(a, scene, geometry);
+    add_headlight_if_unlit(a, options, camera, scene, geometry);
+
+    const std::unique_ptr<Accel> accel = build_accel(geometry, build);
     const AccelStats stats = accel->stats();
-    std::string device_build_line;
-    if (device.is_cuda())
-        device_build_line = to_string(device) + " " + stats.name + ": " +
-                            bench::format_device_build({accel->build_report(), stats.node_count, stats.sah_cost});
     const Clock::time_point setup_start = Clock::now();
     const std::unique_ptr<Renderer> renderer = make_renderer(scene, geometry, *accel, camera, options);
     const double setup_ms = ms_since(setup_start);
     render_and_write(a, *renderer, tone);
-    const RenderSummary summary{renderer->passes(), renderer->stats(),
-                                device.is_cuda() ? to_string(device) + " " + stats.name : stats.name, stats.build_ms};
 
-    const RenderStats& rs = summary.stats;
+    const RenderStats rs = renderer->stats();
     const double render_ms = rs.seconds * 1e3;
+    const std::string accel_name = device.is_cuda() ? to_string(device) + " " + stats.name : stats.name;
     std::printf("%s: %dx%d %s %d spp, %zu triangles | load %.1f ms | build %.1f ms (%s) | setup %.1f ms | render %.1f ms "
                 "(%.2f Msamples/s, %.2f Mrays/s)\n",
                 a.outputs.front().c_str(), options.width, options.height, integrator_name(options.integrator).c_str(),
-                summary.passes, geometry.size(), load_ms, summary.build_ms, summary.accel.c_str(), setup_ms, render_ms,
+                renderer->passes(), geometry.size(), load_ms, stats.build_ms, accel_name.c_str(), setup_ms, render_ms,
                 render_ms > 0.0 ? double(rs.samples) / (render_ms * 1e3) : 0.0,
                 render_ms > 0.0 ? double(rs.rays()) / (render_ms * 1e3) : 0.0);
-    if (!device_build_line.empty()) std::printf("%s\n", device_build_line.c_str());
+    if (device.is_cuda())
+        std::printf("%s: %s\n", accel_name.c_str(),
+                    bench::format_device_build({accel->build_report(), stats.node_count, stats.sah_cost}).c_str());
     return 0;
 }
 

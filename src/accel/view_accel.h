@@ -15,6 +15,7 @@
 #include <utility>
 
 #include "backend/cpu/ray_batches.h"
+#include "core/assert.h"
 #include "rayforge/accel/accel.h"
 #include "trace/tracers.h"
 
@@ -32,7 +33,9 @@ public:
     // build and layout times; the rest is filled from the structure on request.
     template <class MakeTracer>
     ViewAccel(Structure structure, MakeTracer&& make_tracer, AccelStats stats)
-        : structure_(std::move(structure)), tracer_(make_tracer(structure_)), stats_(std::move(stats)) {}
+        : structure_(std::move(structure)), tracer_(make_tracer(structure_)), stats_(std::move(stats)) {
+        RF_ASSERT(!stats_.name.empty(), "an accel without a name for its stats and errors");
+    }
 
     [[nodiscard]] Hit intersect(const Ray& ray) const override { return tracer_.intersect(ray); }
     [[nodiscard]] bool occluded(const Ray& ray) const override { return tracer_.occluded(ray); }

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "rayforge/core/host_device.h"
+#include "core/assert.h"
 #include "rayforge/math/vec.h"
 #include "rayforge/scene/light.h"
 #include "rayforge/scene/scene.h"
@@ -49,6 +50,7 @@ struct LightSet {
     // u rescaled to [0, 1) within that interval (to be reused downstream).
     // Requires selection_count > 0.
     RF_HDI uint32_t select(float u, float& probability, float& u_remapped) const {
+        RF_ASSERT(selection_count > 0, "a light selected from an empty light set");
         uint32_t lo = 0, hi = selection_count - 1;
         while (lo < hi) {  // first i with cdf[i] > u (skips zero-probability entries)
             uint32_t mid = (lo + hi) / 2;

@@ -9,6 +9,7 @@
 #include <cstdint>
 
 #include "rayforge/core/host_device.h"
+#include "core/assert.h"
 #include "render/integrator_settings.h"
 #include "render/integrators/ao.h"
 #include "render/integrators/normals.h"
@@ -32,6 +33,7 @@ struct Films {
 template <bool kWithPath, class Tracer, class View>
 RF_HD void add_pixel_sample(const Tracer& tracer, const View& view, const IntegratorSettings& s, uint32_t sample,
                             uint32_t pixel, const Films& films) {
+    RF_ASSERT(pixel < uint32_t(s.width) * uint32_t(s.height), "a pixel outside the image");
     const int x = int(pixel % uint32_t(s.width)), y = int(pixel / uint32_t(s.width));
     RandomStream rng(pixel, sample, s.seed);
     const Vec2f jitter = s.centre ? Vec2f{0.5f, 0.5f} : rng.next2();

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "rayforge/core/host_device.h"
+#include "core/assert.h"
 #include "rayforge/scene/scene.h"
 #include "rayforge/scene/scene_geometry.h"
 #include "render/area_lights.h"
@@ -41,6 +42,7 @@ struct SceneView {
     // The material of triangle `prim`, without interpolating anything.
     [[nodiscard]] RF_HDI uint32_t material_id(uint32_t prim) const { return shading_triangles[prim].material; }
     [[nodiscard]] RF_HDI const ShadingMaterial& material(uint32_t id) const {
+        RF_ASSERT(material_count > 0, "a scene view without its fallback material");
         return materials[id < material_count ? id : 0];
     }
     // nullptr for kNoTexture or an index out of range.

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "rayforge/core/host_device.h"
+#include "core/assert.h"
 #include "rayforge/render/render.h"
 #include "render/integrator_settings.h"
 #include "render/integrators/path_stages.h"
@@ -139,6 +140,7 @@ void run_wavefront(Backend& backend, const IntegratorSettings& settings, uint32_
         backend.extend(active);
         backend.shade(active);
         const WaveSizes next = backend.compact(active);
+        RF_ASSERT(next.active <= active && next.shadows <= active, "compaction made a queue longer");
         if (waves.size() <= round) waves.resize(round + 1);
         waves[round].paths += active;
         waves[round].shadow_rays += next.shadows;

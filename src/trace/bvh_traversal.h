@@ -18,6 +18,7 @@
 
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/core/host_device.h"
+#include "core/assert.h"
 #include "rayforge/math/ray.h"
 #include "rayforge/scene/scene_geometry.h"
 #include "trace/triangle_intersect.h"
@@ -105,6 +106,7 @@ RF_HDI Hit traverse(const BvhView& bvh, const Ray& ray, TraversalCounters* count
         const BvhNode& node = bvh.nodes[current];
         if (!node.is_leaf()) {
             const uint32_t left = node.first;
+            RF_ASSERT(left + 1 < bvh.node_count, "an inner node's children lie beyond the node array");
             float entry_left, entry_right;
             const bool hit_left = slab_test(slab, bvh.nodes[left].bounds, tmin, tmax, entry_left);
             const bool hit_right = slab_test(slab, bvh.nodes[left + 1].bounds, tmin, tmax, entry_right);
@@ -113,6 +115,7 @@ RF_HDI Hit traverse(const BvhView& bvh, const Ray& ray, TraversalCounters* count
                 // Visit the nearer child first; the other waits on the stack.
                 const bool left_first = entry_left <= entry_right;
                 current = left_first ? left : left + 1;
+                RF_ASSERT(stack_size < kBvhMaxDepth, "a BVH deeper than kBvhMaxDepth");
                 stack[stack_size++] = left_first ? StackEntry{left + 1, entry_right} : StackEntry{left, entry_left};
                 continue;
             }

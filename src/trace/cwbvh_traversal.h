@@ -59,6 +59,7 @@
 #include "accel/bvh/layout/cwbvh_layout.h"
 #include "rayforge/core/float_bits.h"
 #include "rayforge/core/host_device.h"
+#include "core/assert.h"
 #include "rayforge/math/ray.h"
 #include "rayforge/scene/scene_geometry.h"
 #include "trace/bvh_traversal.h"
@@ -218,6 +219,7 @@ RF_HDI Hit cwbvh_traverse(const CwbvhView& bvh, const Ray& ray, Counters* counte
             const uint32_t below = (group.hits & 0xFFu) & ((1u << slot) - 1u);
             const uint32_t index = group.base + cwbvh_popc(below);
             if (group.hits & kCwbvhNodeBits) {
+                RF_ASSERT(stack_size < kCwbvhTraversalStackSize, "CWBVH traversal stack overflow");
                 stack[stack_size++] = group;
                 postpone->pushed(stack_size);
             }
@@ -240,6 +242,7 @@ RF_HDI Hit cwbvh_traverse(const CwbvhView& bvh, const Ray& ray, Counters* counte
         // The hit leaves' triangles, one by one.
         while (triangles.hits != 0) {
             if (may_postpone && postpone->postpone()) {
+                RF_ASSERT(stack_size < kCwbvhTraversalStackSize, "CWBVH traversal stack overflow");
                 stack[stack_size++] = triangles;
                 postpone->pushed(stack_size);
                 break;

@@ -27,18 +27,42 @@ struct RayCounters {
     uint32_t restarts = 0;    // kd-tree restarts
 };
 
+// Each traversal's own counters, added to a RayCounters.
+RF_HDI void add_counts(const TraversalCounters& t, RayCounters& c) {
+    c.steps += t.nodes_visited;
+    c.prim_tests += t.prims_tested;
+}
+RF_HDI void add_counts(const KdTraversalCounters& t, RayCounters& c) {
+    c.steps += t.nodes_visited;
+    c.prim_tests += t.prims_tested;
+    c.restarts += t.restarts;
+}
+RF_HDI void add_counts(const GridTraversalCounters& t, RayCounters& c) {
+    c.steps += t.cells_visited;
+    c.prim_tests += t.prims_tested;
+}
+
+// What every tracer's counted() does: the closest-hit or any-hit traversal
+// with counters (an any-hit answer is a Hit whose prim says found or not),
+// the counters added to `c`.
+template <class Counters, class Closest, class AnyHit>
+RF_HDI Hit counted_query(bool any_hit, RayCounters& c, Closest&& closest, AnyHit&& occluded) {
+    Counters t;
+    Hit h;
+    if (any_hit) h.prim = occluded(t) ? 0u : kInvalidId;
+    else h = closest(t);
+    add_counts(t, c);
+    return h;
+}
+
 struct Bvh2Tracer {
     BvhView bvh;
     RF_HDI Hit intersect(const Ray& ray) const { return bvh_intersect(bvh, ray); }
     RF_HDI bool occluded(const Ray& ray) const { return bvh_occluded(bvh, ray); }
     RF_HDI Hit counted(const Ray& ray, bool any_hit, RayCounters& c) const {
-        TraversalCounters t;
-        Hit h;
-        if (any_hit) h.prim = bvh_occluded_counted(bvh, ray, t) ? 0u : kInvalidId;
-        else h = bvh_intersect_counted(bvh, ray, t);
-        c.steps += t.nodes_visited;
-        c.prim_tests += t.prims_tested;
-        return h;
+        return counted_query<TraversalCounters>(
+            any_hit, c, [&](TraversalCounters& t) { return bvh_intersect_counted(bvh, ray, t); },
+            [&](TraversalCounters& t) { return bvh_occluded_counted(bvh, ray, t); });
     }
 };
 
@@ -47,13 +71,9 @@ struct AilaLaineTracer {
     RF_HDI Hit intersect(const Ray& ray) const { return aila_laine_intersect(bvh, ray); }
     RF_HDI bool occluded(const Ray& ray) const { return aila_laine_occluded(bvh, ray); }
     RF_HDI Hit counted(const Ray& ray, bool any_hit, RayCounters& c) const {
-        TraversalCounters t;
-        Hit h;
-        if (any_hit) h.prim = aila_laine_occluded_counted(bvh, ray, t) ? 0u : kInvalidId;
-        else h = aila_laine_intersect_counted(bvh, ray, t);
-        c.steps += t.nodes_visited;
-        c.prim_tests += t.prims_tested;
-        return h;
+        return counted_query<TraversalCounters>(
+            any_hit, c, [&](TraversalCounters& t) { return aila_laine_intersect_counted(bvh, ray, t); },
+            [&](TraversalCounters& t) { return aila_laine_occluded_counted(bvh, ray, t); });
     }
 };
 
@@ -62,13 +82,9 @@ struct CwbvhTracer {
     RF_HDI Hit intersect(const Ray& ray) const { return cwbvh_intersect(bvh, ray); }
     RF_HDI bool occluded(const Ray& ray) const { return cwbvh_occluded(bvh, ray); }
     RF_HDI Hit counted(const Ray& ray, bool any_hit, RayCounters& c) const {
-        TraversalCounters t;
-        Hit h;
-        if (any_hit) h.prim = cwbvh_occluded_counted(bvh, ray, t) ? 0u : kInvalidId;
-        else h = cwbvh_intersect_counted(bvh, ray, t);
-        c.steps += t.nodes_visited;
-        c.prim_tests += t.prims_tested;
-        return h;
+        return counted_query<TraversalCounters>(
+            any_hit, c, [&](TraversalCounters& t) { return cwbvh_intersect_counted(bvh, ray, t); },
+            [&](TraversalCounters& t) { return cwbvh_occluded_counted(bvh, ray, t); });
     }
 };
 
@@ -78,14 +94,9 @@ struct KdTracer {
     RF_HDI Hit intersect(const Ray& ray) const { return kdtree_intersect<kMode>(tree, ray); }
     RF_HDI bool occluded(const Ray& ray) const { return kdtree_occluded<kMode>(tree, ray); }
     RF_HDI Hit counted(const Ray& ray, bool any_hit, RayCounters& c) const {
-        KdTraversalCounters t;
-        Hit h;
-        if (any_hit) h.prim = kdtree_occluded_counted<kMode>(tree, ray, t) ? 0u : kInvalidId;
-        else h = kdtree_intersect_counted<kMode>(tree, ray, t);
-        c.steps += t.nodes_visited;
-        c.prim_tests += t.prims_tested;
-        c.restarts += t.restarts;
-        return h;
+        return counted_query<KdTraversalCounters>(
+            any_hit, c, [&](KdTraversalCounters& t) { return kdtree_intersect_counted<kMode>(tree, ray, t); },
+            [&](KdTraversalCounters& t) { return kdtree_occluded_counted<kMode>(tree, ray, t); });
     }
 };
 
@@ -122,13 +133,9 @@ struct GridTracer {
     RF_HDI Hit intersect(const Ray& ray) const { return grid_intersect(grid, ray); }
     RF_HDI bool occluded(const Ray& ray) const { return grid_occluded(grid, ray); }
     RF_HDI Hit counted(const Ray& ray, bool any_hit, RayCounters& c) const {
-        GridTraversalCounters t;
-        Hit h;
-        if (any_hit) h.prim = grid_occluded_counted(grid, ray, t) ? 0u : kInvalidId;
-        else h = grid_intersect_counted(grid, ray, t);
-        c.steps += t.cells_visited;
-        c.prim_tests += t.prims_tested;
-        return h;
+        return counted_query<GridTraversalCounters>(
+            any_hit, c, [&](GridTraversalCounters& t) { return grid_intersect_counted(grid, ray, t); },
+            [&](GridTraversalCounters& t) { return grid_occluded_counted(grid, ray, t); });
     }
 };
 

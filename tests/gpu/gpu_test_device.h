@@ -38,7 +38,7 @@ inline bool gpu_required() {
 
 // "" when device 0 is there, else why not.
 inline std::string missing_device() {
-    const cuda::DeviceListing& listing = device_listing();
+    const DeviceListing& listing = device_listing();
     if (!listing.devices.empty()) return "";
     return listing.error.empty() ? std::string("the runtime lists no device") : listing.error;
 }

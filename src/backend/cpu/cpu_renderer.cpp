@@ -16,6 +16,7 @@
 #include "backend/cpu/accel_tracer.h"
 #include "backend/cpu/cpu_wavefront.h"
 #include "backend/cpu/parallel.h"
+#include "core/assert.h"
 #include "render/counting_tracer.h"
 #include "render/pixel_sample.h"
 #include "render/renderer_base.h"
@@ -24,6 +25,7 @@
 namespace rf {
 
 void sort_queue_by_key(std::span<uint32_t> queue, std::span<uint32_t> keys) {
+    RF_ASSERT(queue.size() == keys.size(), "a queue sorted by keys of another length");
     const size_t n = std::min(queue.size(), keys.size());
     if (n < 2) return;
     std::vector<uint32_t> other_queue(n), other_keys(n);

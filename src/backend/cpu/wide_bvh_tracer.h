@@ -22,13 +22,9 @@ struct WideBvhTracer {
     [[nodiscard]] Hit intersect(const Ray& ray) const { return wide_bvh_intersect(bvh, ray); }
     [[nodiscard]] bool occluded(const Ray& ray) const { return wide_bvh_occluded(bvh, ray); }
     Hit counted(const Ray& ray, bool any_hit, RayCounters& c) const {
-        TraversalCounters t;
-        Hit h;
-        if (any_hit) h.prim = wide_bvh_occluded_counted(bvh, ray, t) ? 0u : kInvalidId;
-        else h = wide_bvh_intersect_counted(bvh, ray, t);
-        c.steps += t.nodes_visited;
-        c.prim_tests += t.prims_tested;
-        return h;
+        return counted_query<TraversalCounters>(
+            any_hit, c, [&](TraversalCounters& t) { return wide_bvh_intersect_counted(bvh, ray, t); },
+            [&](TraversalCounters& t) { return wide_bvh_occluded_counted(bvh, ray, t); });
     }
 
     // hits[lo, hi) of rays[lo, hi): packets where eight rays share an octant.

@@ -162,126 +162,144 @@ uint32_t checked_ray_count(size_t count) {
     return uint32_t(count);
 }
 
+// What placing a structure on the device gives back: its host-side size and
+// the wall time of its layout conversion.
+struct Placed {
+    size_t structure_bytes = 0;
+    double layout_ms = 0.0;
+};
+
+// The tracer's triangles go up after the build: a device builder holds its
+// own copy while it runs and frees it before returning, so the two copies
+// never coexist.
+const Triangle* upload_triangles(DeviceTracer::Impl& impl, std::span<const Triangle> triangles) {
+    impl.triangles.upload(triangles);
+    return impl.triangles.data();
+}
+
+Placed place_bvh2(DeviceTracer::Impl& impl, const Bvh& bvh, const Triangle* device_triangles) {
+    impl.bvh_nodes.upload(bvh.nodes);
+    impl.prim_indices.upload(bvh.prim_indices);
+    impl.bvh2.bvh = {impl.bvh_nodes.data(), impl.prim_indices.data(), device_triangles, uint32_t(bvh.nodes.size())};
+    impl.stats.node_count = bvh.nodes.size();
+    return {bvh.memory_bytes(), 0.0};
+}
+
+// Node pairs (Aila and Laine 2009), converted on the device when asked.
+Placed place_aila_laine(DeviceTracer::Impl& impl, const Bvh& bvh, std::span<const Triangle> triangles,
+                        bool on_device) {
+    const auto start = std::chrono::steady_clock::now();
+    const AilaLaineBvh al = on_device ? convert_to_aila_laine_on_device(bvh, triangles, &impl.build_stages.layout_ms,
+                                                                        impl.device)
+                                      : convert_to_aila_laine(bvh, triangles);
+    const double layout_ms = ms_since(start);
+    impl.aila_laine_nodes.upload(al.nodes);
+    impl.aila_laine_triangles.upload(al.triangles);
+    impl.aila_laine.bvh = {impl.aila_laine_nodes.data(), impl.aila_laine_triangles.data(), al.root,
+                           uint32_t(al.nodes.size())};
+    impl.stats.node_count = al.nodes.size();
+    return {al.memory_bytes(), layout_ms};
+}
+
+// The compressed 8-wide BVH (Ylitie et al. 2017), built on the device when asked.
+Placed place_cwbvh(DeviceTracer::Impl& impl, const Bvh& bvh, std::span<const Triangle> triangles, bool on_device) {
+    const auto start = std::chrono::steady_clock::now();
+    const CwbvhBvh cw = on_device ? build_cwbvh_on_device(bvh, triangles, &impl.build_stages.layout_ms, impl.device)
+                                  : build_cwbvh(bvh, triangles);
+    const double layout_ms = ms_since(start);
+    impl.cwbvh_nodes.upload(cw.nodes);
+    impl.cwbvh_triangles.upload(cw.triangles);
+    CwbvhView view = cw.view();
+    view.nodes = impl.cwbvh_nodes.data();
+    view.triangles = impl.cwbvh_triangles.data();
+    impl.cwbvh.bvh = view;
+    impl.stats.node_count = cw.nodes.size();
+    return {cw.memory_bytes(), layout_ms};
+}
+
+// A BVH from build.builder (on the device where it has a device builder), in the kernel's layout.
+Placed place_bvh(DeviceTracer::Impl& impl, std::span<const Triangle> triangles, const BuildOptions& build) {
+    const bool device_build = build.build_on_device && has_device_builder(build.builder);
+    const Bvh bvh = device_build ? build_bvh_on_device(triangles, build, &impl.build_stages, impl.device)
+                                 : build_bvh_on_cpu(triangles, build);
+    AccelStats& stats = impl.stats;
+    stats.name += "/" + to_string(build.builder);
+    stats.sah_cost = bvh.sah_cost(1.0f, 1.0f);
+    stats.quality_cost = bvh.quality_cost(2.0);
+    stats.leaf_count = bvh.leaf_count();
+    const Triangle* device_triangles = upload_triangles(impl, triangles);
+    switch (impl.kernel) {
+        case GpuKernel::AilaLaine: return place_aila_laine(impl, bvh, triangles, build.build_on_device);
+        case GpuKernel::Cwbvh: return place_cwbvh(impl, bvh, triangles, build.build_on_device);
+        default: return place_bvh2(impl, bvh, device_triangles);
+    }
+}
+
+// The SAH kd-tree, built on the CPU (it has no device builder).
+Placed place_kdtree(DeviceTracer::Impl& impl, std::span<const Triangle> triangles, const BuildOptions& build) {
+    const KdTree tree = build_kdtree(triangles, build);
+    const Triangle* device_triangles = upload_triangles(impl, triangles);
+    impl.kd_nodes.upload(tree.nodes);
+    impl.prim_indices.upload(tree.prim_indices);
+    const KdTreeView kd{impl.kd_nodes.data(), impl.prim_indices.data(), device_triangles, uint32_t(tree.nodes.size()),
+                        tree.bounds, build.kd_short_stack_size};
+    impl.kd_short_stack.tree = kd;
+    impl.kd_restart.tree = kd;
+    impl.stats.node_count = tree.nodes.size();
+    impl.stats.leaf_count = tree.leaf_count();
+    impl.stats.sah_cost = tree.sah_cost(build.traversal_cost, build.intersection_cost);
+    return {tree.memory_bytes(), 0.0};
+}
+
+// A uniform grid (with proximity clouds for that kernel), built on the device when asked.
+Placed place_grid(DeviceTracer::Impl& impl, std::span<const Triangle> triangles, const BuildOptions& build) {
+    const bool proximity = impl.kernel == GpuKernel::ProximityGrid;
+    const UniformGrid grid =
+        build.build_on_device
+            ? build_uniform_grid_on_device(triangles, build.grid_resolution, proximity, &impl.build_stages, impl.device)
+            : build_uniform_grid(triangles, build.grid_resolution, proximity);
+    impl.build_stages.on_device = build.build_on_device;
+    const Triangle* device_triangles = upload_triangles(impl, triangles);
+    impl.cell_start.upload(grid.cell_start);
+    impl.cell_prims.upload(grid.cell_prims);
+    impl.proximity.upload(grid.proximity);
+    GridView view = grid.view(device_triangles);
+    view.cell_start = impl.cell_start.data();
+    view.cell_prims = impl.cell_prims.data();
+    view.proximity = grid.proximity.empty() ? nullptr : impl.proximity.data();
+    impl.grid.grid = view;
+    impl.stats.node_count = grid.cell_count();
+    impl.stats.leaf_count = grid.non_empty_cells();
+    impl.stats.sah_cost = impl.stats.quality_cost = std::numeric_limits<double>::quiet_NaN();
+    return {grid.memory_bytes(), 0.0};
+}
+
 }  // namespace
 
 DeviceTracer::DeviceTracer(const SceneGeometry& geometry, const BuildOptions& build) : impl_(new Impl) {
     validate_build_options(build);
-    const GpuKernel kernel = build.gpu_kernel;
-    const int device = build.device.index;
-    require_device(device);
     Impl& impl = *impl_;
-    impl.kernel = kernel;
-    impl.device = device;
-    RF_CUDA_CHECK(cudaSetDevice(device));
-    RF_CUDA_CHECK(cudaDeviceGetAttribute(&impl.multiprocessors, cudaDevAttrMultiProcessorCount, device));
+    impl.kernel = build.gpu_kernel;
+    impl.device = build.device.index;
+    require_device(impl.device);
+    RF_CUDA_CHECK(cudaSetDevice(impl.device));
+    RF_CUDA_CHECK(cudaDeviceGetAttribute(&impl.multiprocessors, cudaDevAttrMultiProcessorCount, impl.device));
 
     const auto start = std::chrono::steady_clock::now();
     const std::span<const Triangle> triangles(geometry.triangles);
-    AccelStats& stats = impl.stats;
-    stats.name = "cuda/" + to_string(kernel);
-    double layout_ms = 0.0;
-    size_t structure_bytes = 0;
-    // The tracer's triangles go up after the build: a device builder holds
-    // its own copy while it runs and frees it before returning, so the two
-    // copies never coexist.
-    const auto upload_triangles = [&] {
-        impl.triangles.upload(triangles);
-        return static_cast<const Triangle*>(impl.triangles.data());
-    };
-
-    switch (kernel) {
-        case GpuKernel::Bvh2:
-        case GpuKernel::AilaLaine:
-        case GpuKernel::Cwbvh: {
-            const bool device_build = build.build_on_device && has_device_builder(build.builder);
-            const Bvh bvh = device_build ? build_bvh_on_device(triangles, build, &impl.build_stages, device)
-                                         : build_bvh_on_cpu(triangles, build);
-            stats.name += "/" + to_string(build.builder);
-            stats.sah_cost = bvh.sah_cost(1.0f, 1.0f);
-            stats.quality_cost = bvh.quality_cost(2.0);
-            stats.leaf_count = bvh.leaf_count();
-            const Triangle* device_triangles = upload_triangles();
-            const auto layout_start = std::chrono::steady_clock::now();
-            if (kernel == GpuKernel::Bvh2) {
-                impl.bvh_nodes.upload(bvh.nodes);
-                impl.prim_indices.upload(bvh.prim_indices);
-                impl.bvh2.bvh = {impl.bvh_nodes.data(), impl.prim_indices.data(), device_triangles,
-                                 uint32_t(bvh.nodes.size())};
-                stats.node_count = bvh.nodes.size();
-                structure_bytes = bvh.memory_bytes();
-            } else if (kernel == GpuKernel::AilaLaine) {
-                const AilaLaineBvh al = build.build_on_device
-                                            ? convert_to_aila_laine_on_device(bvh, triangles,
-                                                                              &impl.build_stages.layout_ms, device)
-                                            : convert_to_aila_laine(bvh, triangles);
-                layout_ms = ms_since(layout_start);
-                impl.aila_laine_nodes.upload(al.nodes);
-                impl.aila_laine_triangles.upload(al.triangles);
-                impl.aila_laine.bvh = {impl.aila_laine_nodes.data(), impl.aila_laine_triangles.data(), al.root,
-                                       uint32_t(al.nodes.size())};
-                stats.node_count = al.nodes.size();
-                structure_bytes = al.memory_bytes();
-            } else {
-                const CwbvhBvh cw = build.build_on_device
-                                        ? build_cwbvh_on_device(bvh, triangles, &impl.build_stages.layout_ms, device)
-                                        : build_cwbvh(bvh, geometry.triangles);
-                layout_ms = ms_since(layout_start);
-                impl.cwbvh_nodes.upload(cw.nodes);
-                impl.cwbvh_triangles.upload(cw.triangles);
-                CwbvhView view = cw.view();
-                view.nodes = impl.cwbvh_nodes.data();
-                view.triangles = impl.cwbvh_triangles.data();
-                impl.cwbvh.bvh = view;
-                stats.node_count = cw.nodes.size();
-                structure_bytes = cw.memory_bytes();
-            }
-            break;
-        }
-        case GpuKernel::KdShortStack:
-        case GpuKernel::KdRestart: {
-            const KdTree tree = build_kdtree(triangles, build);
-            const Triangle* device_triangles = upload_triangles();
-            impl.kd_nodes.upload(tree.nodes);
-            impl.prim_indices.upload(tree.prim_indices);
-            const KdTreeView kd{impl.kd_nodes.data(), impl.prim_indices.data(), device_triangles,
-                                uint32_t(tree.nodes.size()), tree.bounds, build.kd_short_stack_size};
-            impl.kd_short_stack.tree = kd;
-            impl.kd_restart.tree = kd;
-            stats.node_count = tree.nodes.size();
-            stats.leaf_count = tree.leaf_count();
-            stats.sah_cost = tree.sah_cost(build.traversal_cost, build.intersection_cost);
-            structure_bytes = tree.memory_bytes();
-            break;
-        }
-        case GpuKernel::Grid:
-        case GpuKernel::ProximityGrid: {
-            const bool proximity = kernel == GpuKernel::ProximityGrid;
-            const UniformGrid grid =
-                build.build_on_device
-                    ? build_uniform_grid_on_device(triangles, build.grid_resolution, proximity, &impl.build_stages,
-                                                   device)
-                    : build_uniform_grid(triangles, build.grid_resolution, proximity);
-            impl.build_stages.on_device = build.build_on_device;
-            const Triangle* device_triangles = upload_triangles();
-            impl.cell_start.upload(grid.cell_start);
-            impl.cell_prims.upload(grid.cell_prims);
-            impl.proximity.upload(grid.proximity);
-            GridView view = grid.view(device_triangles);
-            view.cell_start = impl.cell_start.data();
-            view.cell_prims = impl.cell_prims.data();
-            view.proximity = grid.proximity.empty() ? nullptr : impl.proximity.data();
-            impl.grid.grid = view;
-            stats.node_count = grid.cell_count();
-            structure_bytes = grid.memory_bytes();
-            stats.sah_cost = stats.quality_cost = std::numeric_limits<double>::quiet_NaN();
-            break;
-        }
+    impl.stats.name = "cuda/" + to_string(impl.kernel);
+    Placed placed;
+    switch (structure_of(impl.kernel)) {
+        case Structure::KdTree: placed = place_kdtree(impl, triangles, build); break;
+        case Structure::Grid:
+        case Structure::ProximityGrid: placed = place_grid(impl, triangles, build); break;
+        default: placed = place_bvh(impl, triangles, build); break;
     }
     RF_CUDA_CHECK(cudaDeviceSynchronize());
-    stats.build_ms = ms_since(start);
-    stats.layout_ms = layout_ms;
-    stats.bytes = structure_bytes;
-    stats.device_bytes = impl.structure_bytes();
+    impl.stats.build_ms = ms_since(start);
+    impl.stats.layout_ms = placed.layout_ms;
+    impl.stats.bytes = placed.structure_bytes;
+    impl.stats.device_bytes = impl.structure_bytes();
 }
 
 DeviceTracer::~DeviceTracer() = default;

@@ -172,7 +172,7 @@ void cwbvh_assign_slots_greedy(const double (&cost)[kCwbvhWidth][kCwbvhWidth], i
     }
 }
 
-CwbvhBvh build_cwbvh(const Bvh& bvh, const std::vector<Triangle>& triangles) {
+CwbvhBvh build_cwbvh(const Bvh& bvh, std::span<const Triangle> triangles) {
     CwbvhBvh out;
     if (bvh.nodes.empty()) return out;
     if (bvh.prim_indices.size() >= std::numeric_limits<uint32_t>::max())

@@ -67,6 +67,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <span>
 #include <vector>
 
 #include "rayforge/accel/bvh/bvh.h"
@@ -194,7 +195,7 @@ void cwbvh_assign_slots_greedy(const double (&cost)[kCwbvhWidth][kCwbvhWidth], i
 // allowed). Throws rf::Error when the BVH is malformed (links or primitive
 // indices out of range), the wide tree is deeper than kCwbvhMaxDepth, or a
 // box cannot be quantised.
-CwbvhBvh build_cwbvh(const Bvh& bvh, const std::vector<Triangle>& triangles);
+CwbvhBvh build_cwbvh(const Bvh& bvh, std::span<const Triangle> triangles);
 
 }  // namespace rf
 
