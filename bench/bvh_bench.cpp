@@ -6,7 +6,6 @@
 #include <random>
 #include <vector>
 
-#include "accel/bvh/builders/binned_sah.h"
 #include "accel/bvh/builders/build_bvh.h"
 #include "accel/bvh/bvh_accel.h"
 #include "rayforge/accel/accel.h"
@@ -70,7 +69,7 @@ void report_build(benchmark::State& state, const rf::SceneGeometry& g) {
     const rf::BuildOptions options{.threads = static_cast<int>(state.range(0))};
     double sah = 0.0;
     for (auto _ : state) {
-        const rf::Bvh bvh = rf::build_binned_sah(g.triangles, options);
+        const rf::Bvh bvh = rf::build_bvh(g.triangles, options);  // binned SAH, the default
         benchmark::DoNotOptimize(bvh.nodes.data());
         state.PauseTiming();
         sah = bvh.sah_cost();

@@ -340,7 +340,7 @@ TEST(BenchCandidates, SelectionNamesWhatIsMissing) {
     // +opt variants come only when their builder is named.
     const auto optimised = bench::select_candidates({"bvh"}, {"binned+opt"}, {"bvh2"}, nullptr);
     ASSERT_EQ(optimised.size(), 1u);
-    EXPECT_TRUE(optimised.front().options.optimize);
+    EXPECT_TRUE(optimised.front().options.reinsertion.enabled);
     // `all` leaves brute force out; naming it brings it in.
     for (const auto& c : bench::select_candidates({"all"}, {"all"}, {"all"}, nullptr))
         EXPECT_NE(c.structure, "brute");
@@ -446,7 +446,7 @@ TEST(BenchGpuCandidates, PresetStructuresMapToTheirKernels) {
                                         "grid-proximity/uniform-128/grid-proximity", "bvh/binned/aila-laine",
                                         "bvh/binned/cwbvh"}));
     // The grids keep the preset's resolutions and structures.
-    EXPECT_EQ(rows001[1].build.options.grid_resolution, 64);
+    EXPECT_EQ(rows001[1].build.options.grid.resolution, 64);
     EXPECT_EQ(rows001[1].kernel, GpuKernel::Grid);
     EXPECT_EQ(rows001[4].build.options.structure, Structure::ProximityGrid);
     EXPECT_EQ(rows001[4].kernel, GpuKernel::ProximityGrid);

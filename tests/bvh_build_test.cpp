@@ -2,6 +2,7 @@
 // several scenes, thread counts, leaf sizes and bin counts; determinism; the
 // SAH metric; empty, single and degenerate inputs.
 #include "accel/bvh/builders/binned_sah.h"
+#include "accel/bvh/builders/build_bvh.h"
 
 #include <gtest/gtest.h>
 
@@ -122,8 +123,9 @@ TEST(BvhBuild, InvariantsHoldForScenesLeafSizesBinsAndThreads) {
                 for (int threads : {1, 2}) {
                     SCOPED_TRACE(scene.name + " leaf " + std::to_string(leaf_size) + " bins " +
                                  std::to_string(bins) + " threads " + std::to_string(threads));
-                    const BuildOptions options{.bin_count = bins, .max_leaf_size = leaf_size, .threads = threads};
-                    const Bvh bvh = build_binned_sah(scene.geometry.triangles, options);
+                    const BuildOptions options{
+                        .threads = threads, .max_leaf_size = leaf_size, .binned = {.bin_count = bins}};
+                    const Bvh bvh = build_bvh(scene.geometry.triangles, options);
                     check_bvh(bvh, scene.geometry.triangles, leaf_size);
                 }
             }
@@ -134,7 +136,8 @@ TEST(BvhBuild, InvariantsHoldForScenesLeafSizesBinsAndThreads) {
 TEST(BvhBuild, DepthStaysWithinLimitOnPathologicalInput) {
     const SceneGeometry row = make_geometric_row(900);
     for (int leaf_size : {1, 4}) {
-        const Bvh bvh = build_binned_sah(row.triangles, BuildOptions{.bin_count = 2, .max_leaf_size = leaf_size});
+        const Bvh bvh = build_binned_sah(row.triangles, BvhBuildConfig{.max_leaf_size = leaf_size},
+                                         BinnedSahOptions{.bin_count = 2});
         const TreeShape shape = check_bvh(bvh, row.triangles, leaf_size);
         EXPECT_LE(shape.max_depth, kBvhMaxDepth);
         EXPECT_GT(shape.max_depth, 50);  // the input really is lopsided
@@ -144,9 +147,9 @@ TEST(BvhBuild, DepthStaysWithinLimitOnPathologicalInput) {
 TEST(BvhBuild, SameTreeForEveryThreadCount) {
     // Large enough for parallel binning (> 64K primitives per node) and subtree tasks.
     const SceneGeometry soup = test::make_triangle_soup(150000, 5, {Vec3f(-100.0f), Vec3f(100.0f)}, 1.0f);
-    const Bvh one = build_binned_sah(soup.triangles, BuildOptions{.threads = 1});
-    const Bvh two = build_binned_sah(soup.triangles, BuildOptions{.threads = 2});
-    const Bvh all = build_binned_sah(soup.triangles, BuildOptions{.threads = 0});
+    const Bvh one = build_bvh(soup.triangles, BuildOptions{.builder = Builder::BinnedSah, .threads = 1});
+    const Bvh two = build_bvh(soup.triangles, BuildOptions{.builder = Builder::BinnedSah, .threads = 2});
+    const Bvh all = build_bvh(soup.triangles, BuildOptions{.builder = Builder::BinnedSah, .threads = 0});
     EXPECT_TRUE(identical(one, two));
     EXPECT_TRUE(identical(one, all));
     check_bvh(one, soup.triangles, 4);
@@ -154,7 +157,7 @@ TEST(BvhBuild, SameTreeForEveryThreadCount) {
 
 TEST(BvhBuild, LeafSizeOneGivesOneTrianglePerLeaf) {
     const SceneGeometry sphere = test::to_geometry(test::make_icosphere(2));
-    const Bvh bvh = build_binned_sah(sphere.triangles, BuildOptions{.max_leaf_size = 1});
+    const Bvh bvh = build_binned_sah(sphere.triangles, BvhBuildConfig{.max_leaf_size = 1}, BinnedSahOptions{});
     EXPECT_EQ(bvh.leaf_count(), sphere.triangles.size());
     EXPECT_EQ(bvh.nodes.size(), 2 * sphere.triangles.size() - 1);
 }
@@ -185,7 +188,7 @@ TEST(BvhBuild, SahPrefersSplittingSeparatedClusters) {
         test::append(g, {Vec3f(d, 0, 0), Vec3f(d + 0.1f, 0, 0), Vec3f(d, 0.1f, 0)});
         test::append(g, {Vec3f(100 + d, 0, 0), Vec3f(100 + d + 0.1f, 0, 0), Vec3f(100 + d, 0.1f, 0)});
     }
-    const Bvh bvh = build_binned_sah(g.triangles, BuildOptions{.max_leaf_size = 8});
+    const Bvh bvh = build_binned_sah(g.triangles, BvhBuildConfig{.max_leaf_size = 8}, BinnedSahOptions{});
     check_bvh(bvh, g.triangles, 8);
     ASSERT_GT(bvh.nodes.size(), 1u);
     EXPECT_LT(bvh.nodes[1].bounds.hi.x, 1.0f);
@@ -194,14 +197,14 @@ TEST(BvhBuild, SahPrefersSplittingSeparatedClusters) {
 }
 
 TEST(BvhBuild, EmptyAndSingleTriangle) {
-    const Bvh empty = build_binned_sah({}, BuildOptions{});
+    const Bvh empty = build_binned_sah({}, BvhBuildConfig{}, BinnedSahOptions{});
     EXPECT_TRUE(empty.nodes.empty());
     EXPECT_TRUE(empty.prim_indices.empty());
     EXPECT_EQ(empty.leaf_count(), 0u);
     EXPECT_EQ(empty.sah_cost(), 0.0);
 
     const Triangle tri{Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)};
-    const Bvh one = build_binned_sah(std::span<const Triangle>(&tri, 1), BuildOptions{});
+    const Bvh one = build_binned_sah(std::span<const Triangle>(&tri, 1), BvhBuildConfig{}, BinnedSahOptions{});
     ASSERT_EQ(one.nodes.size(), 1u);
     EXPECT_EQ(one.nodes[0].count, 1u);
     EXPECT_TRUE(same_box(one.nodes[0].bounds, tri.bounds()));
@@ -211,7 +214,7 @@ TEST(BvhBuild, EmptyAndSingleTriangle) {
 TEST(BvhBuild, AllPointTrianglesAtOnePlace) {
     SceneGeometry g;
     for (int i = 0; i < 50; ++i) test::append(g, {Vec3f(3.0f), Vec3f(3.0f), Vec3f(3.0f)});
-    const Bvh bvh = build_binned_sah(g.triangles, BuildOptions{.max_leaf_size = 4});
+    const Bvh bvh = build_binned_sah(g.triangles, BvhBuildConfig{.max_leaf_size = 4}, BinnedSahOptions{});
     check_bvh(bvh, g.triangles, 4);
     EXPECT_TRUE(std::isfinite(bvh.sah_cost()));
 }
@@ -233,15 +236,15 @@ TEST(BvhBuild, AccelStatsDescribeTheTree) {
 
 TEST(BvhBuild, InvalidOptionsAndNamesThrow) {
     const SceneGeometry g = test::to_geometry(test::make_icosphere(0));
-    EXPECT_THROW((void)build_accel(g, BuildOptions{.bin_count = 1}), Error);
-    EXPECT_THROW((void)build_accel(g, BuildOptions{.bin_count = 257}), Error);
+    EXPECT_THROW((void)build_accel(g, BuildOptions{.binned = {.bin_count = 1}}), Error);
+    EXPECT_THROW((void)build_accel(g, BuildOptions{.binned = {.bin_count = 257}}), Error);
     EXPECT_THROW((void)build_accel(g, BuildOptions{.max_leaf_size = 0}), Error);
     EXPECT_THROW((void)build_accel(g, BuildOptions{.max_leaf_size = 65}), Error);
-    EXPECT_THROW((void)build_accel(g, BuildOptions{.traversal_cost = 0.0f}), Error);
-    EXPECT_THROW((void)build_accel(g, BuildOptions{.intersection_cost = -1.0f}), Error);
-    EXPECT_THROW((void)build_accel(g, BuildOptions{.intersection_cost = NAN}), Error);
+    EXPECT_THROW((void)build_accel(g, BuildOptions{.sah = {.traversal = 0.0f}}), Error);
+    EXPECT_THROW((void)build_accel(g, BuildOptions{.sah = {.intersection = -1.0f}}), Error);
+    EXPECT_THROW((void)build_accel(g, BuildOptions{.sah = {.intersection = NAN}}), Error);
     EXPECT_THROW((void)build_accel(g, BuildOptions{.threads = -1}), Error);
-    EXPECT_NO_THROW((void)build_accel(g, BuildOptions{.bin_count = 2, .max_leaf_size = 64}));
+    EXPECT_NO_THROW((void)build_accel(g, BuildOptions{.max_leaf_size = 64, .binned = {.bin_count = 2}}));
     EXPECT_EQ(parse_structure("bvh"), Structure::Bvh);
     EXPECT_EQ(parse_structure("brute"), Structure::BruteForce);
     EXPECT_EQ(parse_builder("binned"), Builder::BinnedSah);

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "accel/brute_force.h"
+#include "accel/bvh/builders/build_bvh.h"
 #include "accel/bvh/builders/hlbvh2.h"
 #include "accel/bvh/builders/lbvh.h"
 #include "accel/bvh/builders/morton_code.h"
@@ -22,6 +23,7 @@
 #include "accel/bvh/builders/ploc.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
 
@@ -99,12 +101,13 @@ bool identical(const Bvh& a, const Bvh& b) {
            std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(BvhNode)) == 0;
 }
 
-Bvh build_with(Builder builder, std::span<const Triangle> triangles, const BuildOptions& options) {
+// Through the dispatch, which runs the builder on options.threads threads.
+Bvh build_with(Builder builder, std::span<const Triangle> triangles, BuildOptions options) {
     switch (builder) {
-        case Builder::Lbvh30: return build_lbvh(triangles, options, 30);
-        case Builder::Lbvh63: return build_lbvh(triangles, options, 63);
-        case Builder::Hlbvh2: return build_hlbvh2(triangles, options);
-        case Builder::Ploc: return build_ploc(triangles, options);
+        case Builder::Lbvh30:
+        case Builder::Lbvh63:
+        case Builder::Hlbvh2:
+        case Builder::Ploc: options.builder = builder; return build_bvh(triangles, options);
         default: ADD_FAILURE() << "not a Morton builder"; return {};
     }
 }
@@ -149,7 +152,7 @@ void check_invariants(Builder builder) {
         for (int leaf_size : {1, 4, 16}) {
             for (int threads : {1, 2}) {
                 SCOPED_TRACE(scene.name + " leaf " + std::to_string(leaf_size) + " threads " + std::to_string(threads));
-                const BuildOptions options{.max_leaf_size = leaf_size, .threads = threads};
+                const BuildOptions options{.threads = threads, .max_leaf_size = leaf_size};
                 check_bvh(build_with(builder, scene.geometry.triangles, options), scene.geometry.triangles, leaf_size);
             }
         }
@@ -346,12 +349,12 @@ TEST(MortonCode, FusedSortMatchesCodesSortAndGather) {
     const SceneGeometry sphere = test::to_geometry(test::make_icosphere(5));
     const SceneGeometry same = make_identical(100);  // every code equal: order kept
     for (const SceneGeometry* g : {&sphere, &same}) {
-        const BuildOptions options;
+        const BvhBuildConfig config;
         {
             std::vector<uint32_t> keys, order;
             morton::compute_morton_codes(g->triangles, keys, order);
             radix_sort_pairs(keys, order, 30);
-            morton::RawTree reference(g->triangles, options), fused(g->triangles, options);
+            morton::RawTree reference(g->triangles, config), fused(g->triangles, config);
             reference.set_order(std::vector<uint32_t>(order));
             morton::Buffer<uint32_t> fused_keys;
             fused.sort_by_morton_codes(fused_keys);
@@ -368,7 +371,7 @@ TEST(MortonCode, FusedSortMatchesCodesSortAndGather) {
             std::vector<uint32_t> order;
             morton::compute_morton_codes(g->triangles, keys, order);
             radix_sort_pairs(keys, order, 63);
-            morton::RawTree fused(g->triangles, options);
+            morton::RawTree fused(g->triangles, config);
             morton::Buffer<uint64_t> fused_keys;
             fused.sort_by_morton_codes(fused_keys);
             ASSERT_EQ(fused_keys.size(), keys.size());
@@ -379,7 +382,7 @@ TEST(MortonCode, FusedSortMatchesCodesSortAndGather) {
             }
         }
     }
-    morton::RawTree empty(std::span<const Triangle>{}, BuildOptions{});
+    morton::RawTree empty(std::span<const Triangle>{}, BvhBuildConfig{});
     morton::Buffer<uint32_t> keys;
     empty.sort_by_morton_codes(keys);
     EXPECT_EQ(empty.size(), 0u);
@@ -390,8 +393,8 @@ TEST(Lbvh, InOrderEmissionMatchesGeneralEmission) {
     // emit_in_order (the primitive order moved in) writes the same BVH as emit.
     const SceneGeometry sphere = test::to_geometry(test::make_icosphere(4));
     for (int leaf_size : {1, 4}) {
-        const BuildOptions options{.max_leaf_size = leaf_size, .threads = 1};
-        const Bvh lbvh = build_lbvh(sphere.triangles, options, 30);
+        const BvhBuildConfig config{.max_leaf_size = leaf_size};
+        const Bvh lbvh = parallel::with_threads(1, [&] { return build_lbvh(sphere.triangles, config, 30); });
         // A chain over sorted positions: a tree whose leaves are in order.
         auto chain = [&](morton::RawTree& tree) {
             std::vector<uint32_t> order(sphere.triangles.size());
@@ -402,7 +405,7 @@ TEST(Lbvh, InOrderEmissionMatchesGeneralEmission) {
             tree.finalize(n - 2, morton::kLeafRef | (n - 2), morton::kLeafRef | (n - 1));
             for (uint32_t k = n - 2; k-- > 0;) tree.finalize(k, morton::kLeafRef | k, k + 1);
         };
-        morton::RawTree a(sphere.triangles, options), b(sphere.triangles, options);
+        morton::RawTree a(sphere.triangles, config), b(sphere.triangles, config);
         chain(a);
         chain(b);
         const Bvh general = a.emit(0), in_order = b.emit_in_order(0);
@@ -433,7 +436,7 @@ TEST(Lbvh, DepthStaysWithinLimitOnPathologicalInput) {
 TEST(Lbvh, DeepMortonChainIsCutAtTheDepthLimit) {
     const SceneGeometry chain = make_morton_chain(2000);
     for (int leaf_size : {1, 4}) {
-        const TreeShape shape = check_bvh(build_lbvh(chain.triangles, BuildOptions{.max_leaf_size = leaf_size}, 63),
+        const TreeShape shape = check_bvh(build_lbvh(chain.triangles, BvhBuildConfig{.max_leaf_size = leaf_size}, 63),
                                           chain.triangles, leaf_size);
         EXPECT_LE(shape.max_depth, kBvhMaxDepth);
         EXPECT_GE(shape.max_depth, 60);  // the 63-level chain is really there
@@ -461,8 +464,8 @@ TEST(Lbvh, SahLeafCollapseNeverCostsMore) {
     // measures, over trees that include the uncollapsed one.
     const SceneGeometry soup = test::make_triangle_soup(20000, 8, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.3f);
     for (int bits : {30, 63}) {
-        const Bvh single = build_lbvh(soup.triangles, BuildOptions{.max_leaf_size = 1}, bits);
-        const Bvh collapsed = build_lbvh(soup.triangles, BuildOptions{.max_leaf_size = 8}, bits);
+        const Bvh single = build_lbvh(soup.triangles, BvhBuildConfig{.max_leaf_size = 1}, bits);
+        const Bvh collapsed = build_lbvh(soup.triangles, BvhBuildConfig{.max_leaf_size = 8}, bits);
         const TreeShape shape = check_bvh(collapsed, soup.triangles, 8);
         EXPECT_GT(shape.multi_prim_leaves, 0u);
         EXPECT_LT(collapsed.nodes.size(), single.nodes.size());
@@ -480,8 +483,8 @@ TEST(Lbvh, Finer63BitCodesSeparateClosePrimitives) {
         const float x = 500.0f + 0.01f * static_cast<float>(i);
         test::append(g, {Vec3f(x, 0, 0), Vec3f(x, 1e-3f, 0), Vec3f(x, 0, 1e-3f)});
     }
-    const Bvh b63 = build_lbvh(g.triangles, BuildOptions{.max_leaf_size = 1}, 63);
-    const Bvh b30 = build_lbvh(g.triangles, BuildOptions{.max_leaf_size = 1}, 30);
+    const Bvh b63 = build_lbvh(g.triangles, BvhBuildConfig{.max_leaf_size = 1}, 63);
+    const Bvh b30 = build_lbvh(g.triangles, BvhBuildConfig{.max_leaf_size = 1}, 30);
     check_bvh(b63, g.triangles, 1);
     check_bvh(b30, g.triangles, 1);
     EXPECT_LT(b63.sah_cost(), b30.sah_cost());
@@ -489,7 +492,7 @@ TEST(Lbvh, Finer63BitCodesSeparateClosePrimitives) {
 
 TEST(Lbvh, RejectsOtherCodeLengths) {
     const SceneGeometry g = make_identical(3);
-    EXPECT_THROW((void)build_lbvh(g.triangles, BuildOptions{}, 32), Error);
+    EXPECT_THROW((void)build_lbvh(g.triangles, BvhBuildConfig{}, 32), Error);
 }
 
 TEST(Lbvh, DepthLimitRebuildsOnlyDeepSubtrees) {
@@ -497,7 +500,7 @@ TEST(Lbvh, DepthLimitRebuildsOnlyDeepSubtrees) {
     // the emitter must rebuild its deep part balanced and keep the top.
     const SceneGeometry row = make_geometric_row(1000, 1.01f);
     for (int leaf_size : {1, 4}) {
-        morton::RawTree tree(row.triangles, BuildOptions{.max_leaf_size = leaf_size});
+        morton::RawTree tree(row.triangles, BvhBuildConfig{.max_leaf_size = leaf_size});
         std::vector<uint32_t> order(row.triangles.size());
         for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
         tree.set_order(std::move(order));
@@ -532,7 +535,7 @@ TEST(Hlbvh2, ClustersAreTheDistinct15BitPrefixesAndStagesAreTimed) {
     std::set<uint32_t> prefixes;
     for (uint32_t k : keys) prefixes.insert(k >> 15);
     Hlbvh2Stages stages;
-    const Bvh bvh = build_hlbvh2(sphere.triangles, BuildOptions{}, &stages);
+    const Bvh bvh = build_hlbvh2(sphere.triangles, BvhBuildConfig{}, &stages);
     check_bvh(bvh, sphere.triangles, 4);
     EXPECT_EQ(stages.cluster_count, prefixes.size());
     EXPECT_GT(stages.cluster_count, 100u);
@@ -543,13 +546,13 @@ TEST(Hlbvh2, ClustersAreTheDistinct15BitPrefixesAndStagesAreTimed) {
     }
     EXPECT_GT(stages.total_ms(), 0.0);
     // The overload without stages builds the same tree.
-    EXPECT_TRUE(identical(bvh, build_hlbvh2(sphere.triangles, BuildOptions{})));
+    EXPECT_TRUE(identical(bvh, build_hlbvh2(sphere.triangles, BvhBuildConfig{})));
 }
 
 TEST(Hlbvh2, LeavesHoldAtMostNumLeafTri) {
     const SceneGeometry soup = test::make_triangle_soup(20000, 11, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.3f);
     for (int leaf : {1, 2, 7, 64}) {
-        const TreeShape shape = check_bvh(build_hlbvh2(soup.triangles, BuildOptions{.max_leaf_size = leaf}),
+        const TreeShape shape = check_bvh(build_hlbvh2(soup.triangles, BvhBuildConfig{.max_leaf_size = leaf}),
                                           soup.triangles, leaf);
         if (leaf > 1) {
             EXPECT_GT(shape.multi_prim_leaves, 0u);
@@ -589,17 +592,17 @@ SceneGeometry make_clustered_soup(int count, uint32_t seed) {
 
 TEST(Ploc, BetterSahThanLbvh) {
     const SceneGeometry soup = make_clustered_soup(30000, 12);
-    const double ploc = build_ploc(soup.triangles, BuildOptions{}).sah_cost();
-    const double lbvh = build_lbvh(soup.triangles, BuildOptions{}, 30).sah_cost();
+    const double ploc = build_ploc(soup.triangles, BvhBuildConfig{}, PlocOptions{}).sah_cost();
+    const double lbvh = build_lbvh(soup.triangles, BvhBuildConfig{}, 30).sah_cost();
     EXPECT_LT(ploc, lbvh);
 }
 
 TEST(Ploc, RadiusOptionIsRespected) {
     const SceneGeometry soup = make_clustered_soup(30000, 13);
-    const Bvh r1 = build_ploc(soup.triangles, BuildOptions{.ploc_radius = 1});
-    const Bvh r16 = build_ploc(soup.triangles, BuildOptions{.ploc_radius = 16});
-    const Bvh r16_again = build_ploc(soup.triangles, BuildOptions{.ploc_radius = 16});
-    const Bvh r64 = build_ploc(soup.triangles, BuildOptions{.ploc_radius = 64});
+    const Bvh r1 = build_ploc(soup.triangles, BvhBuildConfig{}, PlocOptions{.radius = 1});
+    const Bvh r16 = build_ploc(soup.triangles, BvhBuildConfig{}, PlocOptions{.radius = 16});
+    const Bvh r16_again = build_ploc(soup.triangles, BvhBuildConfig{}, PlocOptions{.radius = 16});
+    const Bvh r64 = build_ploc(soup.triangles, BvhBuildConfig{}, PlocOptions{.radius = 64});
     check_bvh(r1, soup.triangles, 4);
     check_bvh(r64, soup.triangles, 4);
     EXPECT_TRUE(identical(r16, r16_again));
@@ -608,9 +611,9 @@ TEST(Ploc, RadiusOptionIsRespected) {
     // A wider search finds closer neighbours: a better tree than radius 1.
     EXPECT_LT(r16.sah_cost(), r1.sah_cost());
     // Radius through build_accel (validated there).
-    const auto accel = build_accel(soup, BuildOptions{.builder = Builder::Ploc, .ploc_radius = 1});
+    const auto accel = build_accel(soup, BuildOptions{.builder = Builder::Ploc, .ploc = {.radius = 1}});
     EXPECT_NEAR(accel->stats().sah_cost, r1.sah_cost(), 1e-9 * r1.sah_cost());
-    EXPECT_THROW((void)build_accel(soup, BuildOptions{.builder = Builder::Ploc, .ploc_radius = 0}), Error);
+    EXPECT_THROW((void)build_accel(soup, BuildOptions{.builder = Builder::Ploc, .ploc = {.radius = 0}}), Error);
 }
 
 }  // namespace

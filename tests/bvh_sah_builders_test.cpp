@@ -1,11 +1,14 @@
 // Full-sweep SAH builder, SBVH builder and the reinsertion optimizer:
 // structural invariants of the canonical BVH (relaxed for SBVH, whose leaves
 // reference clipped triangle pieces), the depth limit, determinism across
-// thread counts, traversal against brute force, and SAH quality relations.
+// thread counts, traversal against brute force, and SAH quality relations;
+// the pinned output of the three top-down SAH builders (binned included).
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <random>
 #include <string>
@@ -19,6 +22,8 @@
 #include "accel/bvh/optimize/reinsertion.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
+#include "bvh_hash.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/accel/accel.h"
 
 namespace rf {
@@ -238,8 +243,9 @@ TEST(SweepSah, InvariantsHoldForScenesLeafSizesAndThreads) {
         for (int leaf_size : {1, 4, 16}) {
             for (int threads : {1, 2}) {
                 SCOPED_TRACE(scene.name + " leaf " + std::to_string(leaf_size) + " threads " + std::to_string(threads));
-                const Bvh bvh = build_sweep_sah(scene.geometry.triangles,
-                                                BuildOptions{.max_leaf_size = leaf_size, .threads = threads});
+                const Bvh bvh = build_bvh(scene.geometry.triangles, BuildOptions{.builder = Builder::SweepSah,
+                                                                                  .threads = threads,
+                                                                                  .max_leaf_size = leaf_size});
                 check_bvh(bvh, scene.geometry.triangles, leaf_size);
                 EXPECT_TRUE(std::isfinite(bvh.sah_cost()));
             }
@@ -258,9 +264,9 @@ TEST(SweepSah, DepthStaysWithinLimitOnPathologicalInput) {
     const SceneGeometry row = make_geometric_row(900);
     const SceneGeometry overflow = make_overflowing_soup();
     for (int leaf_size : {1, 4}) {
-        const BuildOptions options{.max_leaf_size = leaf_size};
-        check_bvh(build_sweep_sah(row.triangles, options), row.triangles, leaf_size);
-        const TreeShape shape = check_bvh(build_sweep_sah(overflow.triangles, options), overflow.triangles, leaf_size);
+        const BvhBuildConfig config{.max_leaf_size = leaf_size};
+        check_bvh(build_sweep_sah(row.triangles, config), row.triangles, leaf_size);
+        const TreeShape shape = check_bvh(build_sweep_sah(overflow.triangles, config), overflow.triangles, leaf_size);
         EXPECT_LE(shape.max_depth, kBvhMaxDepth);
         EXPECT_GT(shape.max_depth, 50);  // the input really is lopsided
     }
@@ -269,9 +275,9 @@ TEST(SweepSah, DepthStaysWithinLimitOnPathologicalInput) {
 TEST(SweepSah, SameTreeForEveryThreadCount) {
     // Large enough for parallel sorts, axis tasks and subtree tasks.
     const SceneGeometry soup = test::make_triangle_soup(80000, 5, {Vec3f(-100.0f), Vec3f(100.0f)}, 1.0f);
-    const Bvh one = build_sweep_sah(soup.triangles, BuildOptions{.threads = 1});
-    const Bvh two = build_sweep_sah(soup.triangles, BuildOptions{.threads = 2});
-    const Bvh all = build_sweep_sah(soup.triangles, BuildOptions{.threads = 0});
+    const Bvh one = build_bvh(soup.triangles, BuildOptions{.builder = Builder::SweepSah, .threads = 1});
+    const Bvh two = build_bvh(soup.triangles, BuildOptions{.builder = Builder::SweepSah, .threads = 2});
+    const Bvh all = build_bvh(soup.triangles, BuildOptions{.builder = Builder::SweepSah, .threads = 0});
     EXPECT_TRUE(identical(one, two));
     EXPECT_TRUE(identical(one, all));
     check_bvh(one, soup.triangles, 4);
@@ -281,8 +287,9 @@ TEST(SweepSah, SahNoWorseThanBinned) {
     for (const NamedScene& scene : test_scenes()) {
         if (scene.name == "identical" || scene.name == "points" || scene.name == "geometric") continue;
         SCOPED_TRACE(scene.name);
-        const double binned = build_binned_sah(scene.geometry.triangles, BuildOptions{}).sah_cost();
-        const double sweep = build_sweep_sah(scene.geometry.triangles, BuildOptions{}).sah_cost();
+        const double binned =
+            build_binned_sah(scene.geometry.triangles, BvhBuildConfig{}, BinnedSahOptions{}).sah_cost();
+        const double sweep = build_sweep_sah(scene.geometry.triangles, BvhBuildConfig{}).sah_cost();
         EXPECT_LE(sweep, binned * 1.02);
     }
 }
@@ -295,9 +302,9 @@ TEST(SweepSah, MatchesBruteForce) {
 }
 
 TEST(SweepSah, EmptyAndSingleTriangle) {
-    EXPECT_TRUE(build_sweep_sah({}, BuildOptions{}).nodes.empty());
+    EXPECT_TRUE(build_sweep_sah({}, BvhBuildConfig{}).nodes.empty());
     const Triangle tri{Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)};
-    const Bvh one = build_sweep_sah(std::span<const Triangle>(&tri, 1), BuildOptions{});
+    const Bvh one = build_sweep_sah(std::span<const Triangle>(&tri, 1), BvhBuildConfig{});
     ASSERT_EQ(one.nodes.size(), 1u);
     EXPECT_EQ(one.nodes[0].count, 1u);
     EXPECT_TRUE(same_box(one.nodes[0].bounds, tri.bounds()));
@@ -310,8 +317,9 @@ TEST(Sbvh, InvariantsHoldForScenesLeafSizesAndThreads) {
         for (int leaf_size : {1, 4, 16}) {
             for (int threads : {1, 2}) {
                 SCOPED_TRACE(scene.name + " leaf " + std::to_string(leaf_size) + " threads " + std::to_string(threads));
-                const Bvh bvh =
-                    build_sbvh(scene.geometry.triangles, BuildOptions{.max_leaf_size = leaf_size, .threads = threads});
+                const Bvh bvh = build_bvh(scene.geometry.triangles, BuildOptions{.builder = Builder::Sbvh,
+                                                                                  .threads = threads,
+                                                                                  .max_leaf_size = leaf_size});
                 check_bvh(bvh, scene.geometry.triangles, leaf_size, true);
                 check_coverage(bvh, scene.geometry.triangles, 7);
                 EXPECT_LE(bvh.prim_indices.size(), 2 * scene.geometry.triangles.size());  // the reference budget
@@ -325,9 +333,10 @@ TEST(Sbvh, DepthStaysWithinLimitOnPathologicalInput) {
     const SceneGeometry row = make_geometric_row(900);
     const SceneGeometry overflow = make_overflowing_soup();
     for (int leaf_size : {1, 4}) {
-        const BuildOptions options{.max_leaf_size = leaf_size};
-        check_bvh(build_sbvh(row.triangles, options), row.triangles, leaf_size, true);
-        const TreeShape shape = check_bvh(build_sbvh(overflow.triangles, options), overflow.triangles, leaf_size, true);
+        const BvhBuildConfig config{.max_leaf_size = leaf_size};
+        check_bvh(build_sbvh(row.triangles, config, SbvhOptions{}), row.triangles, leaf_size, true);
+        const TreeShape shape =
+            check_bvh(build_sbvh(overflow.triangles, config, SbvhOptions{}), overflow.triangles, leaf_size, true);
         EXPECT_LE(shape.max_depth, kBvhMaxDepth);
         EXPECT_GT(shape.max_depth, 50);
     }
@@ -335,9 +344,9 @@ TEST(Sbvh, DepthStaysWithinLimitOnPathologicalInput) {
 
 TEST(Sbvh, SameTreeForEveryThreadCount) {
     const SceneGeometry soup = test::make_triangle_soup(12000, 6, {Vec3f(-40.0f), Vec3f(40.0f)}, 3.0f);
-    const Bvh one = build_sbvh(soup.triangles, BuildOptions{.threads = 1});
-    const Bvh two = build_sbvh(soup.triangles, BuildOptions{.threads = 2});
-    const Bvh all = build_sbvh(soup.triangles, BuildOptions{.threads = 0});
+    const Bvh one = build_bvh(soup.triangles, BuildOptions{.builder = Builder::Sbvh, .threads = 1});
+    const Bvh two = build_bvh(soup.triangles, BuildOptions{.builder = Builder::Sbvh, .threads = 2});
+    const Bvh all = build_bvh(soup.triangles, BuildOptions{.builder = Builder::Sbvh, .threads = 0});
     EXPECT_GT(one.prim_indices.size(), soup.triangles.size());  // spatial splits happened
     EXPECT_TRUE(identical(one, two));
     EXPECT_TRUE(identical(one, all));
@@ -351,38 +360,38 @@ TEST(Sbvh, BudgetSharingIsDeterministicAndBounded) {
     SceneGeometry mixed = test::make_triangle_soup(8000, 11, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f);
     const SceneGeometry diagonals = make_thin_diagonals(600, 12);
     mixed.triangles.insert(mixed.triangles.end(), diagonals.triangles.begin(), diagonals.triangles.end());
-    const Bvh one = build_sbvh(mixed.triangles, BuildOptions{.threads = 1});
-    const Bvh two = build_sbvh(mixed.triangles, BuildOptions{.threads = 2});
-    const Bvh all = build_sbvh(mixed.triangles, BuildOptions{.threads = 0});
+    const Bvh one = build_bvh(mixed.triangles, BuildOptions{.builder = Builder::Sbvh, .threads = 1});
+    const Bvh two = build_bvh(mixed.triangles, BuildOptions{.builder = Builder::Sbvh, .threads = 2});
+    const Bvh all = build_bvh(mixed.triangles, BuildOptions{.builder = Builder::Sbvh, .threads = 0});
     EXPECT_TRUE(identical(one, two));
     EXPECT_TRUE(identical(one, all));
     check_bvh(one, mixed.triangles, 4, true);
     EXPECT_GT(one.prim_indices.size(), mixed.triangles.size());
     EXPECT_LE(one.prim_indices.size(), 2 * mixed.triangles.size());
-    EXPECT_LT(one.sah_cost(), build_sweep_sah(mixed.triangles, BuildOptions{}).sah_cost());
+    EXPECT_LT(one.sah_cost(), build_sweep_sah(mixed.triangles, BvhBuildConfig{}).sah_cost());
 }
 
 TEST(Sbvh, LowestSahWhereSpatialSplitsMatter) {
     const SceneGeometry diagonals = make_thin_diagonals(3000, 8);
-    const double binned = build_binned_sah(diagonals.triangles, BuildOptions{}).sah_cost();
-    const double sweep = build_sweep_sah(diagonals.triangles, BuildOptions{}).sah_cost();
-    const double sbvh = build_sbvh(diagonals.triangles, BuildOptions{}).sah_cost();
+    const double binned = build_binned_sah(diagonals.triangles, BvhBuildConfig{}, BinnedSahOptions{}).sah_cost();
+    const double sweep = build_sweep_sah(diagonals.triangles, BvhBuildConfig{}).sah_cost();
+    const double sbvh = build_sbvh(diagonals.triangles, BvhBuildConfig{}, SbvhOptions{}).sah_cost();
     EXPECT_LT(sbvh, sweep * 0.9);
     EXPECT_LT(sbvh, binned * 0.9);
     // Elsewhere it is still no worse than the sweep (its object splits are the same sweep).
     for (const NamedScene& scene : test_scenes()) {
         if (scene.name == "identical" || scene.name == "points") continue;
         SCOPED_TRACE(scene.name);
-        const double s = build_sweep_sah(scene.geometry.triangles, BuildOptions{}).sah_cost();
-        EXPECT_LE(build_sbvh(scene.geometry.triangles, BuildOptions{}).sah_cost(), s * 1.001);
+        const double s = build_sweep_sah(scene.geometry.triangles, BvhBuildConfig{}).sah_cost();
+        EXPECT_LE(build_sbvh(scene.geometry.triangles, BvhBuildConfig{}, SbvhOptions{}).sah_cost(), s * 1.001);
     }
 }
 
 TEST(Sbvh, AlphaOneDisablesSpatialSplits) {
     const SceneGeometry diagonals = make_thin_diagonals(1000, 9);
-    const Bvh sbvh = build_sbvh(diagonals.triangles, BuildOptions{.sbvh_alpha = 1.0f});
+    const Bvh sbvh = build_sbvh(diagonals.triangles, BvhBuildConfig{}, SbvhOptions{.alpha = 1.0f});
     EXPECT_EQ(sbvh.prim_indices.size(), diagonals.triangles.size());
-    EXPECT_TRUE(identical(sbvh, build_sweep_sah(diagonals.triangles, BuildOptions{})));
+    EXPECT_TRUE(identical(sbvh, build_sweep_sah(diagonals.triangles, BvhBuildConfig{})));
 }
 
 TEST(Sbvh, MatchesBruteForce) {
@@ -393,9 +402,9 @@ TEST(Sbvh, MatchesBruteForce) {
 }
 
 TEST(Sbvh, EmptyAndSingleTriangle) {
-    EXPECT_TRUE(build_sbvh({}, BuildOptions{}).nodes.empty());
+    EXPECT_TRUE(build_sbvh({}, BvhBuildConfig{}, SbvhOptions{}).nodes.empty());
     const Triangle tri{Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)};
-    const Bvh one = build_sbvh(std::span<const Triangle>(&tri, 1), BuildOptions{});
+    const Bvh one = build_sbvh(std::span<const Triangle>(&tri, 1), BvhBuildConfig{}, SbvhOptions{});
     ASSERT_EQ(one.nodes.size(), 1u);
     EXPECT_EQ(one.prim_indices, std::vector<uint32_t>{0});
     EXPECT_TRUE(same_box(one.nodes[0].bounds, tri.bounds()));
@@ -474,7 +483,8 @@ TEST(BinnedSah, RootSplitMatchesPlainBinning) {
                              std::to_string(seed));
                 const SceneGeometry soup =
                     test::make_triangle_soup(count, 100 + seed, {Vec3f(-10.0f), Vec3f(10.0f)}, 2.0f);
-                const Bvh bvh = build_binned_sah(soup.triangles, BuildOptions{.bin_count = bins, .max_leaf_size = 1});
+                const Bvh bvh = build_binned_sah(soup.triangles, BvhBuildConfig{.max_leaf_size = 1},
+                                                 BinnedSahOptions{.bin_count = bins});
                 const std::vector<uint32_t> expected = reference_left_of_root(soup.triangles, bins);
                 ASSERT_FALSE(expected.empty());
                 ASSERT_FALSE(bvh.nodes[0].is_leaf());
@@ -488,20 +498,172 @@ TEST(BinnedSah, RootSplitMatchesPlainBinning) {
     }
 }
 
+// --- Pinned output of the top-down SAH builders ----------------------------
+
+// The binned, full-sweep and SBVH builders' trees over scenes that reach
+// every path of the shared top-down skeleton (SAH leaves, median and depth
+// fallbacks, parallel binning and subtree tasks, spatial splits and the
+// reference budget), for leaf sizes, bin counts and SAH costs, on 1 and 2
+// threads. The hashes were taken before the builders shared the skeleton
+// (top_down_sah.h); RF_PRINT_SAH_BVH_HASHES prints them for re-pinning
+// after an intended change of a builder.
+TEST(SahBuilders, OutputIsPinned) {
+    const bool print = std::getenv("RF_PRINT_SAH_BVH_HASHES") != nullptr;
+    const std::vector<uint64_t> expected = {
+0xfbb5fe70abfd9bc7ull,  // soup binned leaf 4 bins 16 costs 1/1
+        0x194d987dc24cc82bull,  // soup binned leaf 1 bins 16 costs 1/1
+        0x4d56f96cef87094dull,  // soup binned leaf 8 bins 4 costs 1.3/0.7
+        0xc4a1ed52f607a823ull,  // soup sweep leaf 4 bins 16 costs 1/1
+        0xa5852eb19ddf19f5ull,  // soup sweep leaf 1 bins 16 costs 1/1
+        0x65c84f1cfb309165ull,  // soup sweep leaf 8 bins 4 costs 1.3/0.7
+        0x9b768d4468270335ull,  // soup sbvh leaf 4 bins 16 costs 1/1
+        0xa6f7930f15b68474ull,  // soup sbvh leaf 1 bins 16 costs 1/1
+        0x4e2e286ef631e4afull,  // soup sbvh leaf 8 bins 4 costs 1.3/0.7
+        0xd5e1afb33d6d1dedull,  // sphere binned leaf 4 bins 16 costs 1/1
+        0x6cdc8a372e1c0801ull,  // sphere binned leaf 1 bins 16 costs 1/1
+        0xbb01bcdd9768b227ull,  // sphere binned leaf 8 bins 4 costs 1.3/0.7
+        0xf0a0b8560b7e1ec3ull,  // sphere sweep leaf 4 bins 16 costs 1/1
+        0xe93c0b56d928741dull,  // sphere sweep leaf 1 bins 16 costs 1/1
+        0x3c70897e2809b981ull,  // sphere sweep leaf 8 bins 4 costs 1.3/0.7
+        0x075553c7490c812bull,  // sphere sbvh leaf 4 bins 16 costs 1/1
+        0x55a92d35f75f4313ull,  // sphere sbvh leaf 1 bins 16 costs 1/1
+        0xfe495c459fee2598ull,  // sphere sbvh leaf 8 bins 4 costs 1.3/0.7
+        0x6cae68ed1e28abc2ull,  // nasty binned leaf 4 bins 16 costs 1/1
+        0x6519523cc08cfa12ull,  // nasty binned leaf 1 bins 16 costs 1/1
+        0xb771d5e8551fdd57ull,  // nasty binned leaf 8 bins 4 costs 1.3/0.7
+        0x1ee0b0139e6df163ull,  // nasty sweep leaf 4 bins 16 costs 1/1
+        0x991fd4b1460ac342ull,  // nasty sweep leaf 1 bins 16 costs 1/1
+        0xa6afc7db69ac5706ull,  // nasty sweep leaf 8 bins 4 costs 1.3/0.7
+        0xd88d91d49282203cull,  // nasty sbvh leaf 4 bins 16 costs 1/1
+        0x7b53c326b31b141aull,  // nasty sbvh leaf 1 bins 16 costs 1/1
+        0xf2171d86192cb20full,  // nasty sbvh leaf 8 bins 4 costs 1.3/0.7
+        0x5be63097a26a9de4ull,  // far binned leaf 4 bins 16 costs 1/1
+        0xb1b256c941d9cdeaull,  // far binned leaf 1 bins 16 costs 1/1
+        0xe1722cdb969a5a6cull,  // far binned leaf 8 bins 4 costs 1.3/0.7
+        0x25c8f46bdf9f28bcull,  // far sweep leaf 4 bins 16 costs 1/1
+        0xeb94f61066b0007aull,  // far sweep leaf 1 bins 16 costs 1/1
+        0x95dc48178c38d6b4ull,  // far sweep leaf 8 bins 4 costs 1.3/0.7
+        0x25c8f46bdf9f28bcull,  // far sbvh leaf 4 bins 16 costs 1/1
+        0xeb94f61066b0007aull,  // far sbvh leaf 1 bins 16 costs 1/1
+        0x95dc48178c38d6b4ull,  // far sbvh leaf 8 bins 4 costs 1.3/0.7
+        0xb2c5a7b1787557bfull,  // huge binned leaf 4 bins 16 costs 1/1
+        0xaa5dc1987c15966bull,  // huge binned leaf 1 bins 16 costs 1/1
+        0xb4b08ed75256d658ull,  // huge binned leaf 8 bins 4 costs 1.3/0.7
+        0x1ee82fc37e03e7f3ull,  // huge sweep leaf 4 bins 16 costs 1/1
+        0x4ed65c076f8e1258ull,  // huge sweep leaf 1 bins 16 costs 1/1
+        0xac49dbafc7adfd33ull,  // huge sweep leaf 8 bins 4 costs 1.3/0.7
+        0x1ee82fc37e03e7f3ull,  // huge sbvh leaf 4 bins 16 costs 1/1
+        0x4ed65c076f8e1258ull,  // huge sbvh leaf 1 bins 16 costs 1/1
+        0xac49dbafc7adfd33ull,  // huge sbvh leaf 8 bins 4 costs 1.3/0.7
+        0x197ae41fb7531fe6ull,  // diagonals binned leaf 4 bins 16 costs 1/1
+        0xf9f060e7e677b21bull,  // diagonals binned leaf 1 bins 16 costs 1/1
+        0x3041390ebd3890daull,  // diagonals binned leaf 8 bins 4 costs 1.3/0.7
+        0x6cad6a67ff73012cull,  // diagonals sweep leaf 4 bins 16 costs 1/1
+        0x640d72e38b1fdbbdull,  // diagonals sweep leaf 1 bins 16 costs 1/1
+        0x65cdeb9106952860ull,  // diagonals sweep leaf 8 bins 4 costs 1.3/0.7
+        0xf2361db736ae35fbull,  // diagonals sbvh leaf 4 bins 16 costs 1/1
+        0x84beb144407532c6ull,  // diagonals sbvh leaf 1 bins 16 costs 1/1
+        0x87d9b288da55a0e0ull,  // diagonals sbvh leaf 8 bins 4 costs 1.3/0.7
+        0xbc8981ecf353ba1eull,  // geometric binned leaf 4 bins 16 costs 1/1
+        0xe78705975b7e98abull,  // geometric binned leaf 1 bins 16 costs 1/1
+        0x69b4067616c1280full,  // geometric binned leaf 8 bins 4 costs 1.3/0.7
+        0x34987ff88e2d2eb3ull,  // geometric sweep leaf 4 bins 16 costs 1/1
+        0xb776666297c136a1ull,  // geometric sweep leaf 1 bins 16 costs 1/1
+        0x83c9d51edda37234ull,  // geometric sweep leaf 8 bins 4 costs 1.3/0.7
+        0x34987ff88e2d2eb3ull,  // geometric sbvh leaf 4 bins 16 costs 1/1
+        0xb776666297c136a1ull,  // geometric sbvh leaf 1 bins 16 costs 1/1
+        0x83c9d51edda37234ull,  // geometric sbvh leaf 8 bins 4 costs 1.3/0.7
+        0x665011ee0826191cull,  // identical binned leaf 4 bins 16 costs 1/1
+        0xdb76a114c507f2b4ull,  // identical binned leaf 1 bins 16 costs 1/1
+        0xdf34ade75dec735cull,  // identical binned leaf 8 bins 4 costs 1.3/0.7
+        0xe3c5e8f342ddf45cull,  // identical sweep leaf 4 bins 16 costs 1/1
+        0xcef37c991b004b54ull,  // identical sweep leaf 1 bins 16 costs 1/1
+        0x4c1ea50edc064169ull,  // identical sweep leaf 8 bins 4 costs 1.3/0.7
+        0x47f67ed16c8c4019ull,  // identical sbvh leaf 4 bins 16 costs 1/1
+        0x45ca52920a6ca63aull,  // identical sbvh leaf 1 bins 16 costs 1/1
+        0xbefda87a60121da8ull,  // identical sbvh leaf 8 bins 4 costs 1.3/0.7
+        0xc9d8c4347ce484f5ull,  // points binned leaf 4 bins 16 costs 1/1
+        0x19e0d3ce1fcb5f72ull,  // points binned leaf 1 bins 16 costs 1/1
+        0xba8827cfa8a4940dull,  // points binned leaf 8 bins 4 costs 1.3/0.7
+        0x1ab5da3ac835aafbull,  // points sweep leaf 4 bins 16 costs 1/1
+        0x9e80e3819e9ebd12ull,  // points sweep leaf 1 bins 16 costs 1/1
+        0x2673102cd6b44fb3ull,  // points sweep leaf 8 bins 4 costs 1.3/0.7
+        0x1ab5da3ac835aafbull,  // points sbvh leaf 4 bins 16 costs 1/1
+        0x9e80e3819e9ebd12ull,  // points sbvh leaf 1 bins 16 costs 1/1
+        0x2673102cd6b44fb3ull,  // points sbvh leaf 8 bins 4 costs 1.3/0.7
+        0x3a0afa778e5e717full,  // overflow binned leaf 4 bins 16 costs 1/1
+        0x0c445380f0a2f5beull,  // overflow binned leaf 1 bins 16 costs 1/1
+        0xad5d918134cfceb8ull,  // overflow binned leaf 8 bins 4 costs 1.3/0.7
+        0x769a71db2f483803ull,  // overflow sweep leaf 4 bins 16 costs 1/1
+        0xb1685075fa6fcb24ull,  // overflow sweep leaf 1 bins 16 costs 1/1
+        0xefd1813e5bfb58ecull,  // overflow sweep leaf 8 bins 4 costs 1.3/0.7
+        0x769a71db2f483803ull,  // overflow sbvh leaf 4 bins 16 costs 1/1
+        0xb1685075fa6fcb24ull,  // overflow sbvh leaf 1 bins 16 costs 1/1
+        0xefd1813e5bfb58ecull,  // overflow sbvh leaf 8 bins 4 costs 1.3/0.7
+        0x303675285c3d9c44ull,  // spatial soup binned leaf 4 bins 16 costs 1/1
+        0x51bf6c33f9f5823aull,  // spatial soup binned leaf 1 bins 16 costs 1/1
+        0xee4ae0a634214c23ull,  // spatial soup binned leaf 8 bins 4 costs 1.3/0.7
+        0x75a77c115073a749ull,  // spatial soup sweep leaf 4 bins 16 costs 1/1
+        0x55f92bd6e1b0fb95ull,  // spatial soup sweep leaf 1 bins 16 costs 1/1
+        0x89e93830b2c26e2eull,  // spatial soup sweep leaf 8 bins 4 costs 1.3/0.7
+        0x03e5121a39f3a354ull,  // spatial soup sbvh leaf 4 bins 16 costs 1/1
+        0x597ab53ccceae22cull,  // spatial soup sbvh leaf 1 bins 16 costs 1/1
+        0x6ff93ed282b8a4d4ull,  // spatial soup sbvh leaf 8 bins 4 costs 1.3/0.7
+        0xe08f234c14fc5822ull,  // large soup binned leaf 4 bins 16 costs 1/1
+        0x3236185675c63245ull,  // large soup binned leaf 1 bins 16 costs 1/1
+        0x174c78f608672c10ull,  // large soup binned leaf 8 bins 4 costs 1.3/0.7
+        0x4507bfc3f23c498dull,  // large soup sweep leaf 4 bins 16 costs 1/1
+        0xf88cac0eccc014abull,  // large soup sweep leaf 1 bins 16 costs 1/1
+        0xcbd4df3faf87c71full,  // large soup sweep leaf 8 bins 4 costs 1.3/0.7
+    };
+    std::vector<NamedScene> scenes = test_scenes();
+    scenes.push_back({"overflow", make_overflowing_soup()});
+    scenes.push_back({"spatial soup", test::make_triangle_soup(12000, 6, {Vec3f(-40.0f), Vec3f(40.0f)}, 3.0f)});
+    scenes.push_back({"large soup", test::make_triangle_soup(80000, 5, {Vec3f(-100.0f), Vec3f(100.0f)}, 1.0f)});
+    struct Variant {
+        int leaf, bins;
+        SahCosts sah;
+    };
+    const Variant variants[] = {{4, 16, {1.0f, 1.0f}}, {1, 16, {1.0f, 1.0f}}, {8, 4, {1.3f, 0.7f}}};
+    size_t k = 0;
+    for (const NamedScene& scene : scenes) {
+        for (const Builder builder : {Builder::BinnedSah, Builder::SweepSah, Builder::Sbvh}) {
+            if (builder == Builder::Sbvh && scene.name == "large soup") continue;  // slow, and like "spatial soup"
+            for (const Variant& v : variants) {
+                const std::string what = scene.name + " " + to_string(builder) + " leaf " + std::to_string(v.leaf) +
+                                         " bins " + std::to_string(v.bins);
+                for (const int threads : {1, 2}) {
+                    const BuildOptions options{.builder = builder, .threads = threads, .max_leaf_size = v.leaf,
+                                               .sah = v.sah, .binned = {.bin_count = v.bins}};
+                    const uint64_t h = test::bvh_hash(build_bvh(scene.geometry.triangles, options));
+                    if (print && threads == 1) {
+                        std::printf("        0x%016llxull,  // %s %s leaf %d bins %d costs %g/%g\n",
+                                    static_cast<unsigned long long>(h), scene.name.c_str(),
+                                    to_string(builder).c_str(), v.leaf, v.bins, v.sah.traversal, v.sah.intersection);
+                    }
+                    if (k < expected.size()) EXPECT_EQ(expected[k], h) << what << " threads " << threads;
+                }
+                ++k;
+            }
+        }
+    }
+    EXPECT_EQ(k, expected.size());
+}
+
 // --- Reinsertion ----------------------------------------------------------
 
 TEST(Reinsertion, NeverIncreasesSahAndKeepsInvariants) {
     for (const NamedScene& scene : test_scenes()) {
         for (const Builder builder : {Builder::BinnedSah, Builder::SweepSah, Builder::Sbvh}) {
             SCOPED_TRACE(scene.name + " " + to_string(builder));
-            const BuildOptions options{.builder = builder, .max_leaf_size = 2};
+            const BvhBuildConfig config{.max_leaf_size = 2};
             const std::span<const Triangle> tris = scene.geometry.triangles;
-            Bvh bvh = builder == Builder::BinnedSah  ? build_binned_sah(tris, options)
-                      : builder == Builder::SweepSah ? build_sweep_sah(tris, options)
-                                                     : build_sbvh(tris, options);
+            Bvh bvh = builder == Builder::BinnedSah  ? build_binned_sah(tris, config, BinnedSahOptions{})
+                      : builder == Builder::SweepSah ? build_sweep_sah(tris, config)
+                                                     : build_sbvh(tris, config, SbvhOptions{});
             const double before = bvh.sah_cost();
             const size_t leaves = bvh.leaf_count();
-            optimize_reinsertion(bvh, tris, options);
+            optimize_reinsertion(bvh, tris, config.sah, ReinsertionOptions{});
             EXPECT_LE(bvh.sah_cost(), before);
             EXPECT_EQ(bvh.leaf_count(), leaves);
             check_bvh(bvh, tris, 2, builder == Builder::Sbvh);
@@ -515,21 +677,20 @@ TEST(Reinsertion, LowersSahOfPoorTree) {
     const BuildOptions lbvh{.builder = Builder::Lbvh30};
     Bvh bvh = build_bvh(sphere.triangles, lbvh);
     const double before = bvh.sah_cost();
-    optimize_reinsertion(bvh, sphere.triangles, lbvh);
+    optimize_reinsertion(bvh, sphere.triangles, SahCosts{}, ReinsertionOptions{});
     const double after = bvh.sah_cost();
     EXPECT_LT(after, before * 0.97) << before << " -> " << after;
     check_bvh(bvh, sphere.triangles, 4);
 
     // Two bins per axis: spatial-median splits, a poor tree too.
-    const BuildOptions two_bins{.bin_count = 2};
-    Bvh binned = build_binned_sah(sphere.triangles, two_bins);
+    Bvh binned = build_binned_sah(sphere.triangles, BvhBuildConfig{}, BinnedSahOptions{.bin_count = 2});
     const double binned_before = binned.sah_cost();
-    optimize_reinsertion(binned, sphere.triangles, two_bins);
+    optimize_reinsertion(binned, sphere.triangles, SahCosts{}, ReinsertionOptions{});
     EXPECT_LT(binned.sah_cost(), binned_before);
 
     // More batches never do worse than one.
     Bvh once = build_bvh(sphere.triangles, lbvh);
-    optimize_reinsertion(once, sphere.triangles, BuildOptions{.builder = Builder::Lbvh30, .optimize_iterations = 1});
+    optimize_reinsertion(once, sphere.triangles, SahCosts{}, ReinsertionOptions{.iterations = 1});
     EXPECT_LT(once.sah_cost(), before);
     EXPECT_LE(after, once.sah_cost());
 }
@@ -537,26 +698,29 @@ TEST(Reinsertion, LowersSahOfPoorTree) {
 TEST(Reinsertion, DepthStaysWithinLimit) {
     // A tree already close to the depth limit: reinsertion must not push it over.
     const SceneGeometry row = make_geometric_row(900);
-    const BuildOptions options{.bin_count = 2, .max_leaf_size = 1};
-    Bvh bvh = build_binned_sah(row.triangles, options);
+    Bvh bvh = build_binned_sah(row.triangles, BvhBuildConfig{.max_leaf_size = 1}, BinnedSahOptions{.bin_count = 2});
     const double before = bvh.sah_cost();
-    optimize_reinsertion(bvh, row.triangles, BuildOptions{.bin_count = 2, .max_leaf_size = 1, .optimize_iterations = 20});
+    optimize_reinsertion(bvh, row.triangles, SahCosts{}, ReinsertionOptions{.iterations = 20});
     EXPECT_LE(bvh.sah_cost(), before);
     check_bvh(bvh, row.triangles, 1);
     // A tree at the depth limit whose costs are all infinite stays valid.
     const SceneGeometry overflow = make_overflowing_soup();
-    Bvh deep = build_sweep_sah(overflow.triangles, BuildOptions{.max_leaf_size = 1});
-    optimize_reinsertion(deep, overflow.triangles, BuildOptions{.max_leaf_size = 1});
+    Bvh deep = build_sweep_sah(overflow.triangles, BvhBuildConfig{.max_leaf_size = 1});
+    optimize_reinsertion(deep, overflow.triangles, SahCosts{}, ReinsertionOptions{});
     EXPECT_LE(check_bvh(deep, overflow.triangles, 1).max_depth, kBvhMaxDepth);
 }
 
 TEST(Reinsertion, SameTreeForEveryThreadCount) {
     const SceneGeometry soup = test::make_triangle_soup(30000, 11, {Vec3f(-50.0f), Vec3f(50.0f)}, 1.0f);
-    const Bvh base = build_binned_sah(soup.triangles, BuildOptions{.bin_count = 4});
+    const Bvh base = build_binned_sah(soup.triangles, BvhBuildConfig{}, BinnedSahOptions{.bin_count = 4});
     Bvh one = base, two = base, all = base;
-    optimize_reinsertion(one, soup.triangles, BuildOptions{.threads = 1});
-    optimize_reinsertion(two, soup.triangles, BuildOptions{.threads = 2});
-    optimize_reinsertion(all, soup.triangles, BuildOptions{.threads = 0});
+    auto optimize_on = [&](int threads, Bvh& bvh) {
+        parallel::with_threads(threads,
+                               [&] { optimize_reinsertion(bvh, soup.triangles, SahCosts{}, ReinsertionOptions{}); });
+    };
+    optimize_on(1, one);
+    optimize_on(2, two);
+    optimize_on(0, all);
     EXPECT_TRUE(identical(one, two));
     EXPECT_TRUE(identical(one, all));
 }
@@ -564,18 +728,19 @@ TEST(Reinsertion, SameTreeForEveryThreadCount) {
 TEST(Reinsertion, MatchesBruteForce) {
     for (const NamedScene& scene : traversal_scenes()) {
         SCOPED_TRACE(scene.name);
-        compare_with_brute_force(scene.geometry, BuildOptions{.bin_count = 4, .optimize = true}, 1500, 13);
+        compare_with_brute_force(scene.geometry,
+                                 BuildOptions{.binned = {.bin_count = 4}, .reinsertion = {.enabled = true}}, 1500, 13);
     }
 }
 
 TEST(Reinsertion, TinyTreesAreLeftAlone) {
     Bvh empty;
-    optimize_reinsertion(empty, {}, BuildOptions{});
+    optimize_reinsertion(empty, {}, SahCosts{}, ReinsertionOptions{});
     EXPECT_TRUE(empty.nodes.empty());
     const SceneGeometry three = test::make_triangle_soup(3, 12, {Vec3f(-1.0f), Vec3f(1.0f)}, 0.2f);
-    Bvh bvh = build_binned_sah(three.triangles, BuildOptions{.max_leaf_size = 1});
+    Bvh bvh = build_binned_sah(three.triangles, BvhBuildConfig{.max_leaf_size = 1}, BinnedSahOptions{});
     const Bvh before = bvh;
-    optimize_reinsertion(bvh, three.triangles, BuildOptions{.max_leaf_size = 1});
+    optimize_reinsertion(bvh, three.triangles, SahCosts{}, ReinsertionOptions{});
     EXPECT_TRUE(identical(bvh, before));
 }
 

@@ -388,7 +388,7 @@ TEST(Cwbvh, MatchesBruteForceOnTriangleSoup) {
 TEST(Cwbvh, LargeCanonicalLeavesAreSplitIntoLeavesOfAtMostThree) {
     const SceneGeometry soup = test::make_triangle_soup(2000, 31, {Vec3f(-5.0f), Vec3f(5.0f)}, 0.5f);
     // Leaves of up to 64 references, built with a high traversal cost so that they fill up.
-    const BuildOptions options{.max_leaf_size = 64, .traversal_cost = 50.0f};
+    const BuildOptions options{.max_leaf_size = 64, .sah = {.traversal = 50.0f}};
     const Bvh bvh = build_bvh(soup.triangles, options);
     size_t largest = 0;
     for (const BvhNode& n : bvh.nodes) largest = std::max<size_t>(largest, n.count);

@@ -47,6 +47,12 @@ using gridbvh::TaskOutcome;
 
 using test::bvh_hash;
 
+// rf::build_grid_bvh with the groups of `options`.
+Bvh cpu_build(std::span<const Triangle> tris, const BuildOptions& options, bool split,
+              GridBvhStages* stages = nullptr) {
+    return build_grid_bvh(tris, bvh_build_config(options), options.grid_bvh, split, stages);
+}
+
 SceneGeometry make_diagonal_slivers(int count, uint32_t seed) {
     std::mt19937 rng(seed);
     std::uniform_real_distribution<float> u(-10.0f, 10.0f);
@@ -107,8 +113,8 @@ TEST(GridBvhDeviceLogic, CpuBuilderOutputIsPinned) {
         for (int split = 0; split < 2; ++split) {
             for (const float budget : {0.3f, 2.0f}) {
                 if (!split && budget != 0.3f) continue;
-                const BuildOptions options{.split_budget = budget};
-                const uint64_t h = bvh_hash(build_grid_bvh(scene.geometry.triangles, options, split != 0));
+                const BuildOptions options{.grid_bvh = {.split_budget = budget}};
+                const uint64_t h = bvh_hash(cpu_build(scene.geometry.triangles, options, split != 0));
                 if (print) std::printf("        0x%016llxull,  // %s split %d budget %g\n", (unsigned long long)h,
                                        scene.name.c_str(), split, budget);
                 if (k < expected.size()) {
@@ -462,11 +468,11 @@ TEST(GridBvhDeviceLogic, SortedKeysAndSparseGridEqualCpu) {
 // The whole device schedule, then the host half, gives build_grid_bvh's BVH.
 Bvh device_build(std::span<const Triangle> tris, const BuildOptions& options, bool split, std::mt19937& rng,
                  GridBvhStages* stages = nullptr, int slices = 8) {
-    DeviceRefs dev = device_references(tris, split, options.split_budget, rng);
+    DeviceRefs dev = device_references(tris, split, options.grid_bvh.split_budget, rng);
     const DeviceGrid g = device_grid(dev, rng);
     GridHierarchy h = device_hierarchy(std::move(dev), g, uint32_t(std::max(1, options.max_leaf_size)), rng, slices);
     group_by_leaf(h, rng);
-    return emit_grid_bvh_hierarchy(tris, options, split, std::move(h), stages);
+    return emit_grid_bvh_hierarchy(tris, bvh_build_config(options), split, std::move(h), stages);
 }
 
 TEST(GridBvhDeviceLogic, TaskQueueHierarchyGivesTheCpuBvh) {
@@ -475,9 +481,9 @@ TEST(GridBvhDeviceLogic, TaskQueueHierarchyGivesTheCpuBvh) {
         for (const GoldenScene& scene : golden_scenes()) {
             for (const bool split : {false, true}) {
                 for (const int leaf : {1, 4}) {
-                    const BuildOptions options{.max_leaf_size = leaf, .split_budget = 2.0f};
+                    const BuildOptions options{.max_leaf_size = leaf, .grid_bvh = {.split_budget = 2.0f}};
                     GridBvhStages cpu_stages, dev_stages;
-                    const Bvh cpu = build_grid_bvh(scene.geometry.triangles, options, split, &cpu_stages);
+                    const Bvh cpu = cpu_build(scene.geometry.triangles, options, split, &cpu_stages);
                     const Bvh dev = device_build(scene.geometry.triangles, options, split, rng, &dev_stages);
                     EXPECT_TRUE(same_bvh(cpu, dev)) << scene.name << (split ? " split" : "") << " leaf " << leaf;
                     EXPECT_EQ(cpu_stages.references, dev_stages.references) << scene.name;
@@ -493,7 +499,7 @@ TEST(GridBvhDeviceLogic, OneThreadOrEightPerTaskAgree) {
     std::mt19937 rng(6);
     const SceneGeometry soup = test::make_triangle_soup(2000, 9, Box3f{Vec3f(-1.0f), Vec3f(1.0f)}, 0.05f);
     const BuildOptions options{};
-    const Bvh cpu = build_grid_bvh(soup.triangles, options, false);
+    const Bvh cpu = cpu_build(soup.triangles, options, false);
     for (const int slices : {1, 3, 8, 32}) {
         EXPECT_TRUE(same_bvh(cpu, device_build(soup.triangles, options, false, rng, nullptr, slices))) << slices;
     }
@@ -502,13 +508,13 @@ TEST(GridBvhDeviceLogic, OneThreadOrEightPerTaskAgree) {
 TEST(GridBvhDeviceLogic, DegenerateInputs) {
     std::mt19937 rng(7);
     GridHierarchy empty;
-    EXPECT_TRUE(emit_grid_bvh_hierarchy({}, BuildOptions{}, false, std::move(empty)).nodes.empty());
+    EXPECT_TRUE(emit_grid_bvh_hierarchy({}, BvhBuildConfig{}, false, std::move(empty)).nodes.empty());
     SceneGeometry one, point;
     test::append(one, {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)});
     for (int i = 0; i < 1000; ++i) test::append(point, {Vec3f(3.0f), Vec3f(3.0f), Vec3f(3.0f)});
     for (const SceneGeometry* g : {&one, &point}) {
         for (const bool split : {false, true}) {
-            const Bvh cpu = build_grid_bvh(g->triangles, BuildOptions{}, split);
+            const Bvh cpu = cpu_build(g->triangles, BuildOptions{}, split);
             EXPECT_TRUE(same_bvh(cpu, device_build(g->triangles, BuildOptions{}, split, rng)));
         }
     }
@@ -523,20 +529,20 @@ TEST(GridBvhDeviceLogic, MalformedHierarchyIsRejected) {
     ASSERT_GT(h.level_offset.size(), 2u);
     GridHierarchy bad_link = h;
     bad_link.hnodes[0] = uint32_t(bad_link.hnodes.size());  // the root's children past the end
-    EXPECT_THROW(emit_grid_bvh_hierarchy(soup.triangles, BuildOptions{}, false, std::move(bad_link)), Error);
+    EXPECT_THROW(emit_grid_bvh_hierarchy(soup.triangles, BvhBuildConfig{}, false, std::move(bad_link)), Error);
     GridHierarchy bad_leaf = h;
     bad_leaf.hnodes.back() = gridbvh::kLeafBit | uint32_t(bad_leaf.leaves.size());
-    EXPECT_THROW(emit_grid_bvh_hierarchy(soup.triangles, BuildOptions{}, false, std::move(bad_leaf)), Error);
+    EXPECT_THROW(emit_grid_bvh_hierarchy(soup.triangles, BvhBuildConfig{}, false, std::move(bad_leaf)), Error);
     GridHierarchy bad_groups = h;
     group_by_leaf(bad_groups, rng);
     bad_groups.leaf_begin.back() -= 1;  // a reference left out
-    EXPECT_THROW(emit_grid_bvh_hierarchy(soup.triangles, BuildOptions{}, false, std::move(bad_groups)), Error);
+    EXPECT_THROW(emit_grid_bvh_hierarchy(soup.triangles, BvhBuildConfig{}, false, std::move(bad_groups)), Error);
     // Grouped by the host or as the device does: the same BVH.
     GridHierarchy grouped = h;
     group_by_leaf(grouped, rng);
-    const uint64_t expected = bvh_hash(build_grid_bvh(soup.triangles, BuildOptions{}, false));
-    EXPECT_EQ(expected, bvh_hash(emit_grid_bvh_hierarchy(soup.triangles, BuildOptions{}, false, std::move(h))));
-    EXPECT_EQ(expected, bvh_hash(emit_grid_bvh_hierarchy(soup.triangles, BuildOptions{}, false, std::move(grouped))));
+    const uint64_t expected = bvh_hash(cpu_build(soup.triangles, BuildOptions{}, false));
+    EXPECT_EQ(expected, bvh_hash(emit_grid_bvh_hierarchy(soup.triangles, BvhBuildConfig{}, false, std::move(h))));
+    EXPECT_EQ(expected, bvh_hash(emit_grid_bvh_hierarchy(soup.triangles, BvhBuildConfig{}, false, std::move(grouped))));
 }
 
 // ---- leaf finishing and emission on the device (grid_bvh_finish_steps.h) ----
@@ -806,8 +812,8 @@ EmulatedEmission device_emission(const GridHierarchy& h, const BuildOptions& opt
     bool oversized = false;
     for (uint32_t l : shuffled(leaf_count, rng)) oversized |= h.leaf_begin[l + 1] - h.leaf_begin[l] > kDeviceFinishRefs;
     if (oversized && !large_leaves_too) return result;
-    const FinishOptions finish{uint32_t(std::max(1, options.max_leaf_size)), options.traversal_cost,
-                               options.intersection_cost};
+    const FinishOptions finish{uint32_t(std::max(1, options.max_leaf_size)), options.sah.traversal,
+                               options.sah.intersection};
     std::vector<LeafSummary> summaries(leaf_count);
     std::vector<BvhNode> leaf_nodes(2 * size_t{n}, BvhNode{Box3f{}, 0xdeadbeefu, 0xdeadbeefu});
     std::vector<uint32_t> leaf_prims(n, 0xdeadbeefu);
@@ -871,7 +877,7 @@ EmulatedEmission device_emission(const GridHierarchy& h, const BuildOptions& opt
 
 // The device schedule up to the leaf groups (steps 1-6).
 GridHierarchy device_groups(std::span<const Triangle> tris, const BuildOptions& options, bool split, std::mt19937& rng) {
-    DeviceRefs dev = device_references(tris, split, options.split_budget, rng);
+    DeviceRefs dev = device_references(tris, split, options.grid_bvh.split_budget, rng);
     const DeviceGrid g = device_grid(dev, rng);
     GridHierarchy h = device_hierarchy(std::move(dev), g, uint32_t(std::max(1, options.max_leaf_size)), rng);
     group_by_leaf(h, rng);
@@ -904,10 +910,11 @@ TEST(GridBvhDeviceLogic, DeviceEmissionGivesTheCpuBvh) {
     for (const GoldenScene& scene : scenes) {
         for (const bool split : {false, true}) {
             for (const int leaf : {1, 4, 8}) {
-                const BuildOptions options{.max_leaf_size = leaf, .traversal_cost = leaf == 8 ? 2.0f : 1.0f,
-                                           .split_budget = 0.5f};
+                const BuildOptions options{.max_leaf_size = leaf,
+                                           .sah = {.traversal = leaf == 8 ? 2.0f : 1.0f},
+                                           .grid_bvh = {.split_budget = 0.5f}};
                 const std::string what = scene.name + (split ? " split" : "") + " leaf " + std::to_string(leaf);
-                const Bvh cpu = build_grid_bvh(scene.geometry.triangles, options, split);
+                const Bvh cpu = cpu_build(scene.geometry.triangles, options, split);
                 const GridHierarchy h = device_groups(scene.geometry.triangles, options, split, rng);
                 const EmulatedEmission dev = device_emission(h, options, rng);
                 if (!dev.emitted) {
@@ -933,15 +940,15 @@ TEST(GridBvhDeviceLogic, CrowdedCellFallsBackAndTheSharedBuildStillEqualsCpu) {
     const BuildOptions options{};
     GridHierarchy h = device_groups(same.triangles, options, false, rng);
     EXPECT_FALSE(device_emission(h, options, rng).emitted);
-    EXPECT_TRUE(same_bvh(build_grid_bvh(same.triangles, options, false), device_emission(h, options, rng, true).bvh));
+    EXPECT_TRUE(same_bvh(cpu_build(same.triangles, options, false), device_emission(h, options, rng, true).bvh));
     // The host fallback (what the device build then runs) gives the CPU's BVH.
-    EXPECT_TRUE(same_bvh(build_grid_bvh(same.triangles, options, false),
-                         emit_grid_bvh_hierarchy(same.triangles, options, false, std::move(h))));
+    EXPECT_TRUE(same_bvh(cpu_build(same.triangles, options, false),
+                         emit_grid_bvh_hierarchy(same.triangles, bvh_build_config(options), false, std::move(h))));
     // A leaf of 6,000 distinct references: built by the CPU in parallel halves.
     const SceneGeometry crowded = make_crowded_cell(6000, 25);
     for (const bool split : {false, true}) {
         GridBvhStages stages;
-        const Bvh cpu = build_grid_bvh(crowded.triangles, options, split, &stages);
+        const Bvh cpu = cpu_build(crowded.triangles, options, split, &stages);
         EXPECT_GT(stages.large_leaves, 0u);
         const GridHierarchy hc = device_groups(crowded.triangles, options, split, rng);
         uint32_t largest = 0;
@@ -955,9 +962,9 @@ TEST(GridBvhDeviceLogic, CrowdedCellFallsBackAndTheSharedBuildStillEqualsCpu) {
 TEST(GridBvhDeviceLogic, BrokenEmissionStepsAreCaught) {
     std::mt19937 rng(26);
     const SceneGeometry soup = test::make_triangle_soup(3000, 27, Box3f{Vec3f(-5.0f), Vec3f(5.0f)}, 0.3f);
-    const BuildOptions options{.max_leaf_size = 8, .split_budget = 0.5f};
+    const BuildOptions options{.max_leaf_size = 8, .grid_bvh = {.split_budget = 0.5f}};
     for (const bool split : {false, true}) {
-        const Bvh cpu = build_grid_bvh(soup.triangles, options, split);
+        const Bvh cpu = cpu_build(soup.triangles, options, split);
         const GridHierarchy h = device_groups(soup.triangles, options, split, rng);
         EXPECT_TRUE(same_bvh(cpu, device_emission(h, options, rng).bvh));
         for (const int bug : {1, 2, 3}) {

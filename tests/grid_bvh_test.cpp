@@ -20,10 +20,12 @@
 
 #include "accel/brute_force.h"
 #include "accel/bvh/builders/binned_sah.h"
+#include "accel/bvh/builders/build_bvh.h"
 #include "accel/bvh/builders/grid_bvh_partial_triangles.h"
 #include "accel/bvh/builders/grid_bvh_sparse_grid.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
@@ -374,9 +376,8 @@ TEST(GridBvh, InvariantsHoldForScenesLeafSizesAndThreads) {
             for (int threads : {1, 2}) {
                 SCOPED_TRACE(scene.name + " leaf " + std::to_string(leaf_size) + " threads " +
                              std::to_string(threads));
-                const BuildOptions options{.max_leaf_size = leaf_size, .threads = threads};
-                check_bvh(build_grid_bvh(scene.geometry.triangles, options, false), scene.geometry.triangles,
-                          leaf_size);
+                const BuildOptions options{.builder = Builder::GridBvh, .threads = threads, .max_leaf_size = leaf_size};
+                check_bvh(build_bvh(scene.geometry.triangles, options), scene.geometry.triangles, leaf_size);
             }
         }
     }
@@ -387,8 +388,8 @@ TEST(GridBvhSplit, InvariantsHoldForScenesLeafSizesAndBudgets) {
         for (int leaf_size : {1, 4, 16}) {
             for (float budget : {0.3f, 2.0f}) {
                 SCOPED_TRACE(scene.name + " leaf " + std::to_string(leaf_size) + " budget " + std::to_string(budget));
-                const BuildOptions options{.max_leaf_size = leaf_size, .split_budget = budget};
-                const Bvh bvh = build_grid_bvh(scene.geometry.triangles, options, true);
+                const Bvh bvh = build_grid_bvh(scene.geometry.triangles, BvhBuildConfig{.max_leaf_size = leaf_size},
+                                               GridBvhOptions{.split_budget = budget}, true);
                 check_bvh(bvh, scene.geometry.triangles, leaf_size, true);
                 EXPECT_LE(bvh.prim_indices.size(),
                           size_t(std::floor(double(budget) * double(scene.geometry.size()))) + scene.geometry.size());
@@ -399,11 +400,11 @@ TEST(GridBvhSplit, InvariantsHoldForScenesLeafSizesAndBudgets) {
 
 TEST(GridBvh, EmptyAndSingleTriangle) {
     for (bool split : {false, true}) {
-        const Bvh empty = build_grid_bvh({}, BuildOptions{}, split);
+        const Bvh empty = build_grid_bvh({}, BvhBuildConfig{}, GridBvhOptions{}, split);
         EXPECT_TRUE(empty.nodes.empty());
         EXPECT_TRUE(empty.prim_indices.empty());
         const Triangle tri{Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)};
-        const Bvh one = build_grid_bvh(std::span<const Triangle>(&tri, 1), BuildOptions{}, split);
+        const Bvh one = build_grid_bvh(std::span<const Triangle>(&tri, 1), BvhBuildConfig{}, GridBvhOptions{}, split);
         ASSERT_EQ(one.nodes.size(), 1u);
         EXPECT_EQ(one.nodes[0].count, 1u);
         EXPECT_TRUE(same_box(one.nodes[0].bounds, tri.bounds()));
@@ -416,10 +417,10 @@ TEST(GridBvh, DepthStaysWithinLimitOnPathologicalInput) {
     for (bool split : {false, true}) {
         for (int leaf_size : {1, 4}) {
             SCOPED_TRACE(std::string(split ? "split" : "plain") + " leaf " + std::to_string(leaf_size));
-            const BuildOptions options{.max_leaf_size = leaf_size};
-            check_bvh(build_grid_bvh(row.triangles, options, split), row.triangles, leaf_size, split);
-            const TreeShape shape =
-                check_bvh(build_grid_bvh(same.triangles, options, split), same.triangles, leaf_size, split);
+            const BvhBuildConfig config{.max_leaf_size = leaf_size};
+            check_bvh(build_grid_bvh(row.triangles, config, GridBvhOptions{}, split), row.triangles, leaf_size, split);
+            const TreeShape shape = check_bvh(build_grid_bvh(same.triangles, config, GridBvhOptions{}, split),
+                                              same.triangles, leaf_size, split);
             EXPECT_LE(shape.max_depth, kBvhMaxDepth);
         }
     }
@@ -431,9 +432,10 @@ TEST(GridBvh, SameTreeForEveryThreadCount) {
     for (const Triangle& t : slivers.triangles) test::append(soup, {t.v0 * 10.0f, t.v1 * 10.0f, t.v2 * 10.0f});
     for (bool split : {false, true}) {
         SCOPED_TRACE(split ? "split" : "plain");
-        const Bvh one = build_grid_bvh(soup.triangles, BuildOptions{.threads = 1}, split);
-        const Bvh two = build_grid_bvh(soup.triangles, BuildOptions{.threads = 2}, split);
-        const Bvh all = build_grid_bvh(soup.triangles, BuildOptions{.threads = 0}, split);
+        const Builder builder = split ? Builder::GridBvhSplit : Builder::GridBvh;
+        const Bvh one = build_bvh(soup.triangles, BuildOptions{.builder = builder, .threads = 1});
+        const Bvh two = build_bvh(soup.triangles, BuildOptions{.builder = builder, .threads = 2});
+        const Bvh all = build_bvh(soup.triangles, BuildOptions{.builder = builder, .threads = 0});
         EXPECT_TRUE(identical(one, two));
         EXPECT_TRUE(identical(one, all));
         check_bvh(one, soup.triangles, 4, split);
@@ -449,8 +451,10 @@ TEST(GridBvh, SameTreeForEveryThreadCountWithCrowdedCells) {
     for (bool split : {false, true}) {
         SCOPED_TRACE(split ? "split" : "plain");
         GridBvhStages stages;
-        const Bvh one = build_grid_bvh(g.triangles, BuildOptions{.threads = 1}, split, &stages);
-        const Bvh two = build_grid_bvh(g.triangles, BuildOptions{.threads = 2}, split);
+        const Bvh one = parallel::with_threads(
+            1, [&] { return build_grid_bvh(g.triangles, BvhBuildConfig{}, GridBvhOptions{}, split, &stages); });
+        const Builder builder = split ? Builder::GridBvhSplit : Builder::GridBvh;
+        const Bvh two = build_bvh(g.triangles, BuildOptions{.builder = builder, .threads = 2});
         EXPECT_GT(stages.large_leaves, 0u);
         EXPECT_TRUE(identical(one, two));
         check_bvh(one, g.triangles, 4, split);
@@ -460,16 +464,16 @@ TEST(GridBvh, SameTreeForEveryThreadCountWithCrowdedCells) {
 TEST(GridBvh, MemoryBudgetFailureThrowsError) {
     const SceneGeometry soup = test::make_triangle_soup(5000, 16, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f);
     const size_t previous = set_memory_budget(1 << 20);  // TopGrid0 alone needs 8 MB
-    EXPECT_THROW((void)build_grid_bvh(soup.triangles, BuildOptions{}, false), Error);
-    EXPECT_THROW((void)build_grid_bvh(soup.triangles, BuildOptions{}, true), Error);
+    EXPECT_THROW((void)build_grid_bvh(soup.triangles, BvhBuildConfig{}, GridBvhOptions{}, false), Error);
+    EXPECT_THROW((void)build_grid_bvh(soup.triangles, BvhBuildConfig{}, GridBvhOptions{}, true), Error);
     set_memory_budget(previous);
-    EXPECT_NO_THROW((void)build_grid_bvh(soup.triangles, BuildOptions{}, true));
+    EXPECT_NO_THROW((void)build_grid_bvh(soup.triangles, BvhBuildConfig{}, GridBvhOptions{}, true));
 }
 
 TEST(GridBvh, StagesAreReported) {
     const SceneGeometry g = make_diagonal_slivers(2000, 12);
     GridBvhStages stages;
-    const Bvh bvh = build_grid_bvh(g.triangles, BuildOptions{.split_budget = 2.0f}, true, &stages);
+    const Bvh bvh = build_grid_bvh(g.triangles, BvhBuildConfig{}, GridBvhOptions{.split_budget = 2.0f}, true, &stages);
     EXPECT_EQ(stages.triangles, g.size());
     EXPECT_GT(stages.references, g.size());
     EXPECT_GT(stages.occupied_top_cells, 0u);
@@ -487,17 +491,18 @@ TEST(GridBvhSplit, PartialTrianglesLowerSahOnLongThinTriangles) {
     // to the long ones.
     SceneGeometry mixed = test::make_triangle_soup(4000, 14, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.2f);
     for (const Triangle& t : make_diagonal_slivers(300, 13).triangles) test::append(mixed, t);
-    const double mixed_plain = build_grid_bvh(mixed.triangles, BuildOptions{}, false).sah_cost();
-    const double mixed_split = build_grid_bvh(mixed.triangles, BuildOptions{}, true).sah_cost();
+    const double mixed_plain = build_grid_bvh(mixed.triangles, BvhBuildConfig{}, GridBvhOptions{}, false).sah_cost();
+    const double mixed_split = build_grid_bvh(mixed.triangles, BvhBuildConfig{}, GridBvhOptions{}, true).sah_cost();
     EXPECT_LT(mixed_split, 0.9 * mixed_plain);
     // Only long thin triangles: a larger budget is needed (a few halved
     // triangles among many long ones do not lower the SAH, with any builder).
     const SceneGeometry slivers = make_diagonal_slivers(4000, 13);
-    const double plain = build_grid_bvh(slivers.triangles, BuildOptions{}, false).sah_cost();
-    const double split = build_grid_bvh(slivers.triangles, BuildOptions{.split_budget = 2.0f}, true).sah_cost();
+    const double plain = build_grid_bvh(slivers.triangles, BvhBuildConfig{}, GridBvhOptions{}, false).sah_cost();
+    const double split =
+        build_grid_bvh(slivers.triangles, BvhBuildConfig{}, GridBvhOptions{.split_budget = 2.0f}, true).sah_cost();
     EXPECT_LT(split, 0.8 * plain);
     // The grid's approximate SAH stays near the binned builder's quality.
-    const double binned = build_binned_sah(slivers.triangles, BuildOptions{}).sah_cost();
+    const double binned = build_binned_sah(slivers.triangles, BvhBuildConfig{}, BinnedSahOptions{}).sah_cost();
     EXPECT_LT(plain, 1.25 * binned);
     std::printf("SAH mixed: gridbvh %.1f split %.1f; slivers: binned %.1f gridbvh %.1f split(2.0) %.1f\n", mixed_plain,
                 mixed_split, binned, plain, split);
@@ -542,7 +547,7 @@ TEST(GridBvh, TraversalMatchesBruteForce) {
     for (Builder builder : {Builder::GridBvh, Builder::GridBvhSplit}) {
         for (int leaf : {1, 4}) {
             SCOPED_TRACE(to_string(builder) + " leaf " + std::to_string(leaf));
-            const BuildOptions options{.builder = builder, .max_leaf_size = leaf, .split_budget = 1.0f};
+            const BuildOptions options{.builder = builder, .max_leaf_size = leaf, .grid_bvh = {.split_budget = 1.0f}};
             compare_with_brute_force(soup, options, 1000, 1);
             compare_with_brute_force(sphere, options, 1000, 2);
             compare_with_brute_force(nasty, options, 1500, 3);

@@ -55,7 +55,7 @@ struct SortedClusters {
 };
 
 SortedClusters sort_and_cluster(std::span<const Triangle> triangles) {
-    morton::RawTree tree(triangles, BuildOptions{});
+    morton::RawTree tree(triangles, BvhBuildConfig{});
     morton::Buffer<uint32_t> keys;
     tree.sort_by_morton_codes(keys);
     SortedClusters s;
@@ -307,12 +307,12 @@ TEST(Hlbvh2DeviceLogic, HostEmissionIsBuildHlbvh2) {
     for (const NamedScene& scene : scenes()) {
         for (int leaf_size : {1, 4, 8}) {
             SCOPED_TRACE(scene.name + ", leaves of " + std::to_string(leaf_size));
-            const BuildOptions options{.max_leaf_size = leaf_size};
+            const BvhBuildConfig config{.max_leaf_size = leaf_size};
             const SortedClusters s = sort_and_cluster(scene.geometry.triangles);
             const QueueForest f = run_work_queues(s, static_cast<uint32_t>(leaf_size), 11);
             Hlbvh2Stages stages;
-            const Bvh got = emit_hlbvh2_forest(scene.geometry.triangles, options, to_forest(s, f), &stages);
-            EXPECT_TRUE(same_bvh(build_hlbvh2(scene.geometry.triangles, options), got));
+            const Bvh got = emit_hlbvh2_forest(scene.geometry.triangles, config, to_forest(s, f), &stages);
+            EXPECT_TRUE(same_bvh(build_hlbvh2(scene.geometry.triangles, config), got));
         }
     }
     EXPECT_TRUE(emit_hlbvh2_forest({}, {}, Hlbvh2Forest{}).nodes.empty());
@@ -337,7 +337,7 @@ TEST(Hlbvh2DeviceLogic, EnqueueOffsetsArePrefixSums) {
 
 TEST(Hlbvh2DeviceLogic, WrongSplitIsCaught) {
     const SceneGeometry g = test::make_triangle_soup(3000, 9, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f);
-    const BuildOptions options{.max_leaf_size = 1};
+    const BvhBuildConfig config{.max_leaf_size = 1};
     const SortedClusters s = sort_and_cluster(g.triangles);
     const QueueForest f = run_work_queues(s, 1, 3, process_task_wrong_split);
     const uint32_t n = static_cast<uint32_t>(s.keys.size());
@@ -350,8 +350,8 @@ TEST(Hlbvh2DeviceLogic, WrongSplitIsCaught) {
         walk(f.refs, f.leaf_runs, expected, f.refs[2 * (n - 1) + c], seen, differ);
     }
     EXPECT_GT(differ, 0u);
-    EXPECT_FALSE(same_bvh(build_hlbvh2(g.triangles, options),
-                          emit_hlbvh2_forest(g.triangles, options, to_forest(s, f))));
+    EXPECT_FALSE(same_bvh(build_hlbvh2(g.triangles, config),
+                          emit_hlbvh2_forest(g.triangles, config, to_forest(s, f))));
 }
 
 TEST(Hlbvh2DeviceLogic, MalformedForestThrows) {
@@ -362,7 +362,7 @@ TEST(Hlbvh2DeviceLogic, MalformedForestThrows) {
     Hlbvh2Forest bad = to_forest(s, f);
     // A cluster root pointing at a leaf that is not its range's start.
     bad.refs[2 * (n - 1)] = kLeafRef | 1u;
-    EXPECT_THROW((void)emit_hlbvh2_forest(g.triangles, BuildOptions{.max_leaf_size = 1}, std::move(bad)), Error);
+    EXPECT_THROW((void)emit_hlbvh2_forest(g.triangles, BvhBuildConfig{.max_leaf_size = 1}, std::move(bad)), Error);
 }
 
 // ---- The top level ----
@@ -775,9 +775,9 @@ TEST(Hlbvh2DeviceLogic, TopLevelTaskQueuesBuildTheCpuTopLevel) {
                 for (const auto& level : top.level_nodes) nodes += level.size();
                 EXPECT_EQ(nodes, clusters.size() > 1 ? clusters.size() - 1 : 0u) << "every task is one top node";
             }
-            const BuildOptions options{.max_leaf_size = static_cast<int>(leaf_size)};
-            EXPECT_TRUE(same_bvh(build_hlbvh2(scene.geometry.triangles, options),
-                                 emit_hlbvh2_forest(scene.geometry.triangles, options, to_forest(s, f, top.refs))));
+            const BvhBuildConfig config{.max_leaf_size = static_cast<int>(leaf_size)};
+            EXPECT_TRUE(same_bvh(build_hlbvh2(scene.geometry.triangles, config),
+                                 emit_hlbvh2_forest(scene.geometry.triangles, config, to_forest(s, f, top.refs))));
         }
     }
 }
@@ -864,9 +864,9 @@ TEST(Hlbvh2DeviceLogic, TopLevelBlockPathOnASpreadSoup) {
         EXPECT_GE(top.block.tasks, soup.clusters.size() / (2 * hlbvh2::kTopBlockTaskMin)) << "the block path ran";
         EXPECT_EQ(top.level_nodes[0].size(), 1u);
     }
-    const BuildOptions options{.max_leaf_size = 4};
-    EXPECT_TRUE(same_bvh(build_hlbvh2(soup.geometry.triangles, options),
-                         emit_hlbvh2_forest(soup.geometry.triangles, options, to_forest(soup.sorted, soup.forest, top.refs))));
+    const BvhBuildConfig config{.max_leaf_size = 4};
+    EXPECT_TRUE(same_bvh(build_hlbvh2(soup.geometry.triangles, config),
+                         emit_hlbvh2_forest(soup.geometry.triangles, config, to_forest(soup.sorted, soup.forest, top.refs))));
 }
 
 TEST(Hlbvh2DeviceLogic, WrongBlockStrideIsCaught) {
@@ -923,9 +923,9 @@ TEST(Hlbvh2DeviceLogic, WrongTopTieRuleIsCaught) {
     std::vector<TopCluster> cpu = clusters;
     const QueueTop wrong = run_top_task_queues(clusters, n - 1, 1, consider_last_of_equals);
     EXPECT_NE(wrong.refs, build_hlbvh2_top_level(cpu, n - 1));
-    const BuildOptions options{.max_leaf_size = 1};
-    EXPECT_FALSE(same_bvh(build_hlbvh2(g.triangles, options),
-                          emit_hlbvh2_forest(g.triangles, options, to_forest(s, f, wrong.refs))));
+    const BvhBuildConfig config{.max_leaf_size = 1};
+    EXPECT_FALSE(same_bvh(build_hlbvh2(g.triangles, config),
+                          emit_hlbvh2_forest(g.triangles, config, to_forest(s, f, wrong.refs))));
 }
 
 TEST(Hlbvh2DeviceLogic, MalformedTopLevelThrows) {
@@ -936,17 +936,17 @@ TEST(Hlbvh2DeviceLogic, MalformedTopLevelThrows) {
     std::vector<Box3f> inner_boxes;
     const std::vector<uint32_t> good = run_top_task_queues(top_clusters(s, f, inner_boxes), n - 1, 1).refs;
     ASSERT_GT(good.size(), 4u);
-    const BuildOptions options{.max_leaf_size = 1};
-    EXPECT_NO_THROW((void)emit_hlbvh2_forest(g.triangles, options, to_forest(s, f, good)));
+    const BvhBuildConfig config{.max_leaf_size = 1};
+    EXPECT_NO_THROW((void)emit_hlbvh2_forest(g.triangles, config, to_forest(s, f, good)));
     std::vector<uint32_t> bad = good;
     bad[2] = n - 1;  // a child replaced by the root: a cycle
-    EXPECT_THROW((void)emit_hlbvh2_forest(g.triangles, options, to_forest(s, f, bad)), Error);
+    EXPECT_THROW((void)emit_hlbvh2_forest(g.triangles, config, to_forest(s, f, bad)), Error);
     bad = good;
     bad.back() = bad.front();  // a reference used twice
-    EXPECT_THROW((void)emit_hlbvh2_forest(g.triangles, options, to_forest(s, f, bad)), Error);
+    EXPECT_THROW((void)emit_hlbvh2_forest(g.triangles, config, to_forest(s, f, bad)), Error);
     bad = good;
     bad.pop_back();
-    EXPECT_THROW((void)emit_hlbvh2_forest(g.triangles, options, to_forest(s, f, bad)), Error);
+    EXPECT_THROW((void)emit_hlbvh2_forest(g.triangles, config, to_forest(s, f, bad)), Error);
 }
 
 }  // namespace

@@ -37,6 +37,11 @@ constexpr KdTraversal kTraversals[] = {KdTraversal::Stack, KdTraversal::ShortSta
 // (zero components), and [tmin, tmax] limits.
 using test::make_rays;
 
+// build_kdtree with the default SAH costs and bins.
+KdTree build_kdtree_with(std::span<const Triangle> triangles, bool perfect_splits) {
+    return build_kdtree(triangles, SahCosts{}, BinnedSahOptions{}, KdTreeOptions{.perfect_splits = perfect_splits});
+}
+
 // Axis-parallel rays from outside through an axis-aligned lattice, with
 // origins exactly on the lattice planes (rays lying in split planes).
 std::vector<Ray> make_lattice_rays(const Box3f& box, int steps) {
@@ -100,7 +105,7 @@ void compare_with_brute_force(const SceneGeometry& g, const std::vector<Ray>& ra
     if (expect_some_misses) EXPECT_LT(hits, rays.size()) << scene;
 
     for (bool perfect : {true, false}) {
-        const KdTree tree = build_kdtree(g.triangles, BuildOptions{.kd_perfect_splits = perfect});
+        const KdTree tree = build_kdtree_with(g.triangles, perfect);
         std::vector<Hit> reference;
         for (KdTraversal traversal : kTraversals) {
             const std::string what = scene + " " + to_string(traversal) + (perfect ? " perfect" : " bounds");
@@ -161,7 +166,7 @@ TEST(KdTreeTraversal, MatchesBruteForceFarFromTheOrigin) {
 
 TEST(KdTreeTraversal, ShortStackOfEverySizeMatchesStack) {
     const SceneGeometry sphere = test::to_geometry(test::make_icosphere(3), 2.0f);
-    const KdTree tree = build_kdtree(sphere.triangles, BuildOptions{});
+    const KdTree tree = build_kdtree_with(sphere.triangles, true);  // perfect splits: the default
     const auto stack = make_accel(sphere, tree, KdTraversal::Stack);
     const std::vector<Ray> rays = make_rays(sphere, 500, 7);
     for (int size : {1, 3, 4, 16, 64}) {
@@ -202,7 +207,7 @@ TEST(KdTreeTraversal, RestartTerminatesOnFlatCells) {
     const std::vector<Ray> mixed = make_rays(g, 1000, 8);
     rays.insert(rays.end(), mixed.begin(), mixed.end());
     for (bool perfect : {true, false}) {
-        const KdTree tree = build_kdtree(g.triangles, BuildOptions{.kd_perfect_splits = perfect});
+        const KdTree tree = build_kdtree_with(g.triangles, perfect);
         // The scene must really produce zero-thickness leaves.
         size_t flat = 0;
         for (const KdLeafInfo& leaf : tree.leaves()) {
@@ -280,7 +285,7 @@ bool is_degenerate(const Triangle& t) {
 }
 
 void check_structure(const SceneGeometry& g, bool perfect, const std::string& scene) {
-    const KdTree tree = build_kdtree(g.triangles, BuildOptions{.kd_perfect_splits = perfect});
+    const KdTree tree = build_kdtree_with(g.triangles, perfect);
     const std::string what = scene + (perfect ? " perfect" : " bounds");
     size_t usable = 0;
     for (const Triangle& t : g.triangles) usable += !is_degenerate(t);
@@ -364,10 +369,10 @@ TEST(KdTreeBuild, DeterministicAcrossThreadCounts) {
     // Big enough for binned levels and subtrees built as parallel tasks.
     const SceneGeometry soup = test::make_triangle_soup(12000, 35, {Vec3f(-20.0f), Vec3f(20.0f)}, 0.6f);
     for (bool perfect : {true, false}) {
-        const BuildOptions options{.kd_perfect_splits = perfect};
-        const KdTree one = parallel::with_threads(1, [&] { return build_kdtree(soup.triangles, options); });
+        const KdTree one = parallel::with_threads(1, [&] { return build_kdtree_with(soup.triangles, perfect); });
         for (int threads : {2, 3}) {
-            const KdTree many = parallel::with_threads(threads, [&] { return build_kdtree(soup.triangles, options); });
+            const KdTree many =
+                parallel::with_threads(threads, [&] { return build_kdtree_with(soup.triangles, perfect); });
             ASSERT_EQ(one.nodes.size(), many.nodes.size()) << threads;
             for (size_t i = 0; i < one.nodes.size(); ++i) {
                 ASSERT_EQ(one.nodes[i].word0, many.nodes[i].word0) << i;
@@ -434,7 +439,7 @@ TEST(KdTreeBuild, SahNotWorseThanMedianSplit) {
     for (const auto& [name, g] : scenes) {
         const double median = median_split_sah(g);
         for (bool perfect : {true, false}) {
-            const KdTree tree = build_kdtree(g.triangles, BuildOptions{.kd_perfect_splits = perfect});
+            const KdTree tree = build_kdtree_with(g.triangles, perfect);
             const double sah = tree.sah_cost(1.0f, 1.0f);
             EXPECT_LE(sah, median) << name << (perfect ? " perfect" : " bounds");
             EXPECT_GT(sah, 0.0) << name;
@@ -457,8 +462,8 @@ TEST(KdTreeBuild, PerfectSplitsDoNotHurtSah) {
         test::append(g, {a, a + d, a + d + test::random_direction(rng) * 0.05f});
     }
     g.normal_matrices.push_back(Affine3f::identity());
-    const double with = build_kdtree(g.triangles, BuildOptions{.kd_perfect_splits = true}).sah_cost();
-    const double without = build_kdtree(g.triangles, BuildOptions{.kd_perfect_splits = false}).sah_cost();
+    const double with = build_kdtree_with(g.triangles, true).sah_cost();
+    const double without = build_kdtree_with(g.triangles, false).sah_cost();
     EXPECT_LT(with, without);
 }
 
@@ -469,7 +474,8 @@ TEST(KdTreeAccel, BuildAccelStatsAndCounts) {
     const std::vector<Ray> rays = make_rays(sphere, 1000, 9);
     TraversalTotals stack_totals;
     for (KdTraversal traversal : kTraversals) {
-        const auto accel = build_accel(sphere, BuildOptions{.structure = Structure::KdTree, .kd_traversal = traversal});
+        const auto accel =
+            build_accel(sphere, BuildOptions{.structure = Structure::KdTree, .kdtree = {.traversal = traversal}});
         const AccelStats s = accel->stats();
         EXPECT_EQ(s.name, "kdtree/sah/" + to_string(traversal));
         EXPECT_GT(s.node_count, 1u);
@@ -503,7 +509,8 @@ TEST(KdTreeAccel, BatchesEqualSingleRays) {
     const SceneGeometry soup = test::make_triangle_soup(3000, 38, {Vec3f(-5.0f), Vec3f(5.0f)}, 0.5f);
     const std::vector<Ray> rays = make_rays(soup, 2000, 10);
     for (KdTraversal traversal : kTraversals) {
-        const auto accel = build_accel(soup, BuildOptions{.structure = Structure::KdTree, .kd_traversal = traversal});
+        const auto accel =
+            build_accel(soup, BuildOptions{.structure = Structure::KdTree, .kdtree = {.traversal = traversal}});
         std::vector<Hit> hits(rays.size());
         std::vector<uint8_t> occluded(rays.size(), 7);
         accel->intersect(rays, hits);
@@ -529,7 +536,8 @@ TEST(KdTreeAccel, EmptyAndDegenerateScenesAlwaysMiss) {
     const SceneGeometry* scenes[] = {&empty, &points};
     for (const SceneGeometry* g : scenes) {
         for (KdTraversal traversal : kTraversals) {
-            const auto accel = build_accel(*g, BuildOptions{.structure = Structure::KdTree, .kd_traversal = traversal});
+            const auto accel =
+                build_accel(*g, BuildOptions{.structure = Structure::KdTree, .kdtree = {.traversal = traversal}});
             const Ray ray{Vec3f(1.0f, 1.0f, -5.0f), 0.0f, Vec3f(0, 0, 1)};
             EXPECT_FALSE(accel->intersect(ray).found());
             EXPECT_FALSE(accel->occluded(ray));

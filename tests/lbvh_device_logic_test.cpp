@@ -47,7 +47,7 @@ struct SortedInput {
 
 template <class Key>
 SortedInput<Key> sort_input(std::span<const Triangle> triangles) {
-    morton::RawTree tree(triangles, BuildOptions{});
+    morton::RawTree tree(triangles, BvhBuildConfig{});
     morton::Buffer<Key> keys;
     tree.sort_by_morton_codes(keys);
     SortedInput<Key> in;
@@ -231,10 +231,10 @@ void check_pipeline(const SceneGeometry& g, const std::string& what) {
     }
     // The device build's host half gives build_lbvh's BVH.
     for (int leaf_size : {1, 4}) {
-        const BuildOptions options{.builder = bits == 30 ? Builder::Lbvh30 : Builder::Lbvh63, .max_leaf_size = leaf_size};
+        const BvhBuildConfig config{.max_leaf_size = leaf_size};
         std::vector<uint32_t> order = in.order;
-        expect_same_bvh(build_lbvh(g.triangles, options, bits),
-                        emit_karras_tree(g.triangles, options, std::move(order), children),
+        expect_same_bvh(build_lbvh(g.triangles, config, bits),
+                        emit_karras_tree(g.triangles, config, std::move(order), children),
                         "leaf size " + std::to_string(leaf_size));
     }
 }

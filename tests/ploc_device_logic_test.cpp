@@ -79,7 +79,7 @@ Clustering emulate_device(std::span<const Triangle> triangles, int radius_option
     if (n == 0) return out;
     radix_sort_pairs(codes, out.order, 63);
     if (n == 1) return out;
-    morton::RawTree tree(triangles, BuildOptions{});
+    morton::RawTree tree(triangles, BvhBuildConfig{});
     tree.set_order(std::vector<uint32_t>(out.order));
 
     const uint32_t radius = ploc::clamp_radius(radius_option);
@@ -130,8 +130,8 @@ bool same_bvh(const Bvh& a, const Bvh& b) {
             std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(a.nodes[0])) == 0);
 }
 
-Bvh emit(std::span<const Triangle> triangles, const BuildOptions& options, Clustering&& c) {
-    return emit_ploc_tree(triangles, options, std::move(c.order), c.children, c.iteration_nodes);
+Bvh emit(std::span<const Triangle> triangles, const BvhBuildConfig& config, Clustering&& c) {
+    return emit_ploc_tree(triangles, config, std::move(c.order), c.children, c.iteration_nodes);
 }
 
 struct NamedScene {
@@ -247,11 +247,11 @@ void check_emulation(int radius, std::initializer_list<uint32_t> block_sizes, si
         for (uint32_t block_size : block_sizes) {
             const Clustering c = emulate_device(scene.geometry.triangles, radius, block_size, 7 + block_size);
             for (int leaf_size : {1, 4}) {
-                const BuildOptions options{.max_leaf_size = leaf_size, .ploc_radius = radius};
+                const BvhBuildConfig config{.max_leaf_size = leaf_size};
                 const std::string what = scene.name + ", radius " + std::to_string(radius) + ", leaves of " +
                                          std::to_string(leaf_size) + ", blocks of " + std::to_string(block_size);
-                EXPECT_TRUE(same_bvh(build_ploc(scene.geometry.triangles, options),
-                                     emit(scene.geometry.triangles, options, Clustering(c))))
+                EXPECT_TRUE(same_bvh(build_ploc(scene.geometry.triangles, config, PlocOptions{.radius = radius}),
+                                     emit(scene.geometry.triangles, config, Clustering(c))))
                     << what;
             }
         }
@@ -266,7 +266,7 @@ TEST(PlocDeviceLogic, EmulatedDeviceBuildEqualsCpuPlocLargeRadius) { check_emula
 TEST(PlocDeviceLogic, NodeBoxesAreTheUnionsOfTheirChildren) {
     const SceneGeometry soup = test::make_triangle_soup(3000, 5, {Vec3f(-5.0f), Vec3f(5.0f)}, 0.4f);
     const Clustering c = emulate_device(soup.triangles, 16, kDeviceBlock, 1);
-    morton::RawTree tree(soup.triangles, BuildOptions{});
+    morton::RawTree tree(soup.triangles, BvhBuildConfig{});
     tree.set_order(std::vector<uint32_t>(c.order));
     const uint32_t n = tree.size();
     ASSERT_EQ(c.node_boxes.size(), n - 1);
@@ -289,8 +289,8 @@ TEST(PlocDeviceLogic, NodeBoxesAreTheUnionsOfTheirChildren) {
 TEST(PlocDeviceLogic, MalformedClusteringsAreRefused) {
     const SceneGeometry soup = test::make_triangle_soup(100, 2, {Vec3f(-5.0f), Vec3f(5.0f)}, 0.4f);
     const Clustering good = emulate_device(soup.triangles, 16, kDeviceBlock, 1);
-    auto emit_copy = [&](Clustering c) { return emit(soup.triangles, BuildOptions{}, std::move(c)); };
-    EXPECT_TRUE(same_bvh(build_ploc(soup.triangles, {}), emit_copy(good)));
+    auto emit_copy = [&](Clustering c) { return emit(soup.triangles, BvhBuildConfig{}, std::move(c)); };
+    EXPECT_TRUE(same_bvh(build_ploc(soup.triangles, {}, {}), emit_copy(good)));
     Clustering twice = good;
     twice.children[1] = twice.children[0];
     EXPECT_THROW((void)emit_copy(twice), Error);
@@ -309,9 +309,10 @@ TEST(PlocDeviceLogic, MalformedClusteringsAreRefused) {
 // the previous block misses some left neighbours and builds another tree.
 TEST(PlocDeviceLogic, DeliberateBugIsCaught) {
     const SceneGeometry soup = test::make_triangle_soup(3000, 9, {Vec3f(-5.0f), Vec3f(5.0f)}, 0.4f);
-    const BuildOptions options{};
+    const BvhBuildConfig config{};
     Clustering c = emulate_device(soup.triangles, 16, kDeviceBlock, 2, Bug::SkipLeftHalo);
-    EXPECT_FALSE(same_bvh(build_ploc(soup.triangles, options), emit(soup.triangles, options, std::move(c))));
+    EXPECT_FALSE(
+        same_bvh(build_ploc(soup.triangles, config, PlocOptions{}), emit(soup.triangles, config, std::move(c))));
 }
 
 }  // namespace

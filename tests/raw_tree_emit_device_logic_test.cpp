@@ -73,7 +73,7 @@ struct Emulated {
 // `sparse`: node values stored for the used slots only, through the prefix
 // sum of used_slot() (as the device does for HLBVH2).
 template <class Arrival = SequentialArrival>
-Emulated emulate(std::span<const Triangle> triangles, const BuildOptions& options, const RawInput& in,
+Emulated emulate(std::span<const Triangle> triangles, const BvhBuildConfig& config, const RawInput& in,
                  uint32_t seed, bool sparse = false) {
     const uint32_t n = static_cast<uint32_t>(in.order.size());
     const uint32_t slots = static_cast<uint32_t>(in.children.size() / 2);
@@ -100,8 +100,8 @@ Emulated emulate(std::span<const Triangle> triangles, const BuildOptions& option
     view.leaf_parent = leaf_parent.data();
     view.info = info.data();
     view.arrivals = arrivals.data();
-    view.costs = {options.traversal_cost, options.intersection_cost,
-                  static_cast<uint32_t>(std::clamp(options.max_leaf_size, 1, 255))};
+    view.costs = {config.sah.traversal, config.sah.intersection,
+                  static_cast<uint32_t>(std::clamp(config.max_leaf_size, 1, 255))};
 
     std::mt19937 rng(seed);
     auto shuffled = [&](uint32_t count) {
@@ -173,8 +173,8 @@ struct HostEmission {
     std::vector<uint32_t> used_slots;
 };
 
-HostEmission host_emit(std::span<const Triangle> triangles, const BuildOptions& options, const RawInput& in) {
-    morton::RawTree tree(triangles, options);
+HostEmission host_emit(std::span<const Triangle> triangles, const BvhBuildConfig& config, const RawInput& in) {
+    morton::RawTree tree(triangles, config);
     tree.set_order(std::vector<uint32_t>(in.order));
     if (!in.runs.empty()) {
         tree.enable_leaf_runs();
@@ -301,12 +301,12 @@ void expect_same_values(const Emulated& device, const HostEmission& host, const 
     }
 }
 
-void check_against_host(const SceneGeometry& g, const BuildOptions& options, const RawInput& in, uint32_t seed,
+void check_against_host(const SceneGeometry& g, const BvhBuildConfig& config, const RawInput& in, uint32_t seed,
                         const std::string& what) {
-    const HostEmission host = host_emit(g.triangles, options, in);
+    const HostEmission host = host_emit(g.triangles, config, in);
     for (bool sparse : {false, true}) {
         const std::string case_name = what + (sparse ? ", values by used slot" : "");
-        const Emulated device = emulate(g.triangles, options, in, seed, sparse);
+        const Emulated device = emulate(g.triangles, config, in, seed, sparse);
         expect_same_values(device, host, case_name);
         ASSERT_EQ(device.fits, !host.needs_rebuild) << case_name;
         if (device.fits) {
@@ -322,13 +322,13 @@ TEST(RawTreeEmitDeviceLogic, RandomTreesEqualTheHostEmitter) {
         for (bool shuffle_leaves : {false, true}) {
             for (Shape shape : {Shape::kRandom, Shape::kBalanced}) {
                 for (int leaf_size : {1, 4, 8}) {
-                    BuildOptions options;
-                    options.max_leaf_size = std::max<int>(leaf_size, static_cast<int>(max_run));
+                    BvhBuildConfig config;
+                    config.max_leaf_size = std::max<int>(leaf_size, static_cast<int>(max_run));
                     for (uint32_t n : {2u, 3u, 17u, 3000u}) {
                         const RawInput in = random_tree(n, max_run, shuffle_leaves, shape, ++seed);
-                        check_against_host(g, options, in, seed,
+                        check_against_host(g, config, in, seed,
                                            "n " + std::to_string(n) + " run " + std::to_string(max_run) +
-                                               " leaf " + std::to_string(options.max_leaf_size) + " seed " +
+                                               " leaf " + std::to_string(config.max_leaf_size) + " seed " +
                                                std::to_string(seed));
                     }
                 }
@@ -339,26 +339,26 @@ TEST(RawTreeEmitDeviceLogic, RandomTreesEqualTheHostEmitter) {
 
 TEST(RawTreeEmitDeviceLogic, CostsOtherThanOneAreRoundedLikeTheHost) {
     const SceneGeometry g = mixed_triangles(2000, 9);
-    BuildOptions options;
-    options.max_leaf_size = 6;
-    options.traversal_cost = 1.3f;
-    options.intersection_cost = 0.7f;
+    BvhBuildConfig config;
+    config.max_leaf_size = 6;
+    config.sah.traversal = 1.3f;
+    config.sah.intersection = 0.7f;
     for (uint32_t seed = 1; seed <= 4; ++seed) {
-        check_against_host(g, options, random_tree(2000, 3, seed % 2 == 0, Shape::kRandom, seed), seed, "costs");
+        check_against_host(g, config, random_tree(2000, 3, seed % 2 == 0, Shape::kRandom, seed), seed, "costs");
     }
 }
 
 TEST(RawTreeEmitDeviceLogic, DeepTreesAreLeftToTheHost) {
     const SceneGeometry g = mixed_triangles(400, 3);
-    BuildOptions options;
-    options.max_leaf_size = 2;
+    BvhBuildConfig config;
+    config.max_leaf_size = 2;
     // A chain of 400 single-primitive leaves: emitted height far above 64.
     const RawInput deep = random_tree(400, 1, true, Shape::kChain, 7);
-    EXPECT_FALSE(emulate(g.triangles, options, deep, 1).fits);
-    EXPECT_TRUE(host_emit(g.triangles, options, deep).needs_rebuild);
+    EXPECT_FALSE(emulate(g.triangles, config, deep, 1).fits);
+    EXPECT_TRUE(host_emit(g.triangles, config, deep).needs_rebuild);
     // A chain of 60 fits, and is emitted as the host does.
-    check_against_host(g, options, random_tree(60, 1, true, Shape::kChain, 8), 2, "chain of 60");
-    check_against_host(g, options, random_tree(70, 1, false, Shape::kChain, 9), 3, "chain of 70");
+    check_against_host(g, config, random_tree(60, 1, true, Shape::kChain, 8), 2, "chain of 60");
+    check_against_host(g, config, random_tree(70, 1, false, Shape::kChain, 9), 3, "chain of 70");
 }
 
 TEST(RawTreeEmitDeviceLogic, KarrasTreesEqualTheLbvhEmission) {
@@ -367,7 +367,7 @@ TEST(RawTreeEmitDeviceLogic, KarrasTreesEqualTheLbvhEmission) {
     for (const SceneGeometry* g : {&sphere, &soup}) {
         const std::span<const Triangle> tris = g->triangles;
         const uint32_t n = static_cast<uint32_t>(tris.size());
-        morton::RawTree sorter(tris, BuildOptions{});
+        morton::RawTree sorter(tris, BvhBuildConfig{});
         morton::Buffer<uint64_t> keys;
         sorter.sort_by_morton_codes(keys);
         RawInput in;
@@ -379,11 +379,11 @@ TEST(RawTreeEmitDeviceLogic, KarrasTreesEqualTheLbvhEmission) {
         in.high_base = n - 1;
         in.root = 0;
         for (int leaf_size : {1, 4}) {
-            BuildOptions options;
-            options.max_leaf_size = leaf_size;
-            const Emulated device = emulate(tris, options, in, 77);
+            BvhBuildConfig config;
+            config.max_leaf_size = leaf_size;
+            const Emulated device = emulate(tris, config, in, 77);
             ASSERT_TRUE(device.fits);
-            const Bvh expected = emit_karras_tree(tris, options, std::vector<uint32_t>(in.order), in.children);
+            const Bvh expected = emit_karras_tree(tris, config, std::vector<uint32_t>(in.order), in.children);
             EXPECT_TRUE(same_bvh(device.bvh, expected)) << "n " << n << " leaf " << leaf_size;
         }
     }
@@ -391,12 +391,12 @@ TEST(RawTreeEmitDeviceLogic, KarrasTreesEqualTheLbvhEmission) {
 
 TEST(RawTreeEmitDeviceLogic, DeliberateBugIsCaught) {
     const SceneGeometry g = mixed_triangles(1000, 4);
-    BuildOptions options;
-    options.max_leaf_size = 4;
+    BvhBuildConfig config;
+    config.max_leaf_size = 4;
     const RawInput in = random_tree(1000, 1, true, Shape::kRandom, 11);
-    const HostEmission host = host_emit(g.triangles, options, in);
+    const HostEmission host = host_emit(g.triangles, config, in);
     ASSERT_FALSE(host.needs_rebuild);
-    const Emulated buggy = emulate<FirstArrivalContinues>(g.triangles, options, in, 5);
+    const Emulated buggy = emulate<FirstArrivalContinues>(g.triangles, config, in, 5);
     EXPECT_FALSE(buggy.fits && same_bvh(buggy.bvh, host.bvh));
 }
 
@@ -440,14 +440,14 @@ TEST(RawTreeEmitDeviceLogic, CpuMortonBuildersOutputIsPinned) {
     size_t k = 0;
     for (const SceneGeometry* g : {&sphere, &soup, &nasty}) {
         for (int variant = 0; variant < 2; ++variant) {
-            BuildOptions options;
-            options.max_leaf_size = variant == 0 ? 4 : 7;
-            options.traversal_cost = variant == 0 ? 1.0f : 1.3f;
-            options.intersection_cost = variant == 0 ? 1.0f : 0.7f;
-            const uint64_t hashes[] = {bvh_hash(build_lbvh(g->triangles, options, 30)),
-                                       bvh_hash(build_lbvh(g->triangles, options, 63)),
-                                       bvh_hash(build_hlbvh2(g->triangles, options)),
-                                       bvh_hash(build_ploc(g->triangles, options))};
+            BvhBuildConfig config;
+            config.max_leaf_size = variant == 0 ? 4 : 7;
+            config.sah.traversal = variant == 0 ? 1.0f : 1.3f;
+            config.sah.intersection = variant == 0 ? 1.0f : 0.7f;
+            const uint64_t hashes[] = {bvh_hash(build_lbvh(g->triangles, config, 30)),
+                                       bvh_hash(build_lbvh(g->triangles, config, 63)),
+                                       bvh_hash(build_hlbvh2(g->triangles, config)),
+                                       bvh_hash(build_ploc(g->triangles, config, PlocOptions{}))};
             for (uint64_t h : hashes) {
                 if (print) std::printf("        0x%016llxull,\n", static_cast<unsigned long long>(h));
                 if (k < expected.size()) EXPECT_EQ(expected[k], h) << "hash " << k;

@@ -246,17 +246,19 @@ TEST(UniformGrid, ResolutionRules) {
 
 TEST(UniformGrid, InvalidOptionsAndAbsurdSizesThrow) {
     const SceneGeometry cube = test::to_geometry(test::make_tessellated_cube(4));
-    EXPECT_THROW(build_accel(cube, BuildOptions{.structure = Structure::Grid, .grid_resolution = -1}), Error);
-    EXPECT_THROW(build_accel(cube, BuildOptions{.structure = Structure::Grid, .grid_resolution = 4096}), Error);
+    EXPECT_THROW(build_accel(cube, BuildOptions{.structure = Structure::Grid, .grid = {.resolution = -1}}), Error);
+    EXPECT_THROW(build_accel(cube, BuildOptions{.structure = Structure::Grid, .grid = {.resolution = 4096}}), Error);
     EXPECT_THROW(make_grid_accel(cube, BuildOptions{.structure = Structure::Bvh}), Error);
-    EXPECT_THROW(make_grid_accel(cube, BuildOptions{.structure = Structure::ProximityGrid, .grid_resolution = 9999}),
-                 Error);
+    EXPECT_THROW(
+        make_grid_accel(cube, BuildOptions{.structure = Structure::ProximityGrid, .grid = {.resolution = 9999}}),
+        Error);
     EXPECT_THROW(make_grid_accel(cube, BuildOptions{.structure = Structure::Grid, .threads = -2}), Error);
     // 2048^3 cells do not fit 32-bit cell indices.
-    EXPECT_THROW(build_accel(cube, BuildOptions{.structure = Structure::Grid, .grid_resolution = 2048}), Error);
+    EXPECT_THROW(build_accel(cube, BuildOptions{.structure = Structure::Grid, .grid = {.resolution = 2048}}), Error);
     // Over the memory budget: a one-line rf::Error, not bad_alloc.
     const size_t previous = set_memory_budget(size_t(1) << 20);
-    EXPECT_THROW(build_accel(cube, BuildOptions{.structure = Structure::ProximityGrid, .grid_resolution = 256}), Error);
+    EXPECT_THROW(build_accel(cube, BuildOptions{.structure = Structure::ProximityGrid, .grid = {.resolution = 256}}),
+                 Error);
     set_memory_budget(previous);
 }
 
@@ -307,7 +309,7 @@ void compare_with_brute_force(const SceneGeometry& g, std::initializer_list<int>
     for (int resolution : resolutions) {
       for (Structure structure : {Structure::Grid, Structure::ProximityGrid}) {
         SCOPED_TRACE(to_string(structure) + " resolution " + std::to_string(resolution));
-        const auto grid = build_accel(g, BuildOptions{.structure = structure, .grid_resolution = resolution});
+        const auto grid = build_accel(g, BuildOptions{.structure = structure, .grid = {.resolution = resolution}});
         for (size_t i = 0; i < rays.size(); ++i) {
             SCOPED_TRACE("ray " + std::to_string(i));
             expect_same_closest(grid->intersect(rays[i]), expected[i], rays[i]);
@@ -376,7 +378,8 @@ TEST(UniformGrid, RaysFromFarAwayAimedAtTheSurface) {
     brute.intersect(rays, expected);
     for (Structure structure : {Structure::Grid, Structure::ProximityGrid}) {
         for (int resolution : {0, 120}) {
-            const auto grid = build_accel(cube, BuildOptions{.structure = structure, .grid_resolution = resolution});
+            const auto grid =
+                build_accel(cube, BuildOptions{.structure = structure, .grid = {.resolution = resolution}});
             for (size_t i = 0; i < rays.size(); ++i) {
                 expect_same_closest(grid->intersect(rays[i]), expected[i], rays[i]);
                 EXPECT_EQ(grid->occluded(rays[i]), expected[i].found());
@@ -392,7 +395,8 @@ TEST(UniformGrid, AxisAlignedRaysAlongCellBoundaries) {
     const BruteForceAccel brute(cube);
     for (Structure structure : {Structure::Grid, Structure::ProximityGrid}) {
         for (int resolution : {6, 12, 0}) {
-            const auto grid = build_accel(cube, BuildOptions{.structure = structure, .grid_resolution = resolution});
+            const auto grid =
+                build_accel(cube, BuildOptions{.structure = structure, .grid = {.resolution = resolution}});
             int hits = 0;
             for (int i = -6; i <= 6; ++i) {
                 for (int j = -6; j <= 6; ++j) {
@@ -434,7 +438,7 @@ TEST(UniformGrid, BatchesStatsAndCountsAgreeWithSingleRays) {
     const SceneGeometry soup = test::make_triangle_soup(2000, 24, {Vec3f(-5.0f), Vec3f(5.0f)}, 0.5f);
     const std::vector<Ray> rays = make_rays(soup, 1500, 9);
     for (Structure structure : {Structure::Grid, Structure::ProximityGrid}) {
-        const auto accel = build_accel(soup, BuildOptions{.structure = structure, .grid_resolution = 32});
+        const auto accel = build_accel(soup, BuildOptions{.structure = structure, .grid = {.resolution = 32}});
         std::vector<Hit> hits(rays.size());
         std::vector<uint8_t> occluded(rays.size(), 7);
         accel->intersect(rays, hits);
@@ -473,8 +477,9 @@ TEST(UniformGrid, BatchesStatsAndCountsAgreeWithSingleRays) {
 TEST(ProximityGrid, JumpsVisitFewerCellsWithTheSameHits) {
     // A sparse scene at a high resolution: most cells are far from geometry.
     const SceneGeometry sparse = test::make_triangle_soup(40, 36, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.8f);
-    const auto plain = make_grid_accel(sparse, BuildOptions{.structure = Structure::Grid, .grid_resolution = 96});
-    const auto cloud = make_grid_accel(sparse, BuildOptions{.structure = Structure::ProximityGrid, .grid_resolution = 96});
+    const auto plain = make_grid_accel(sparse, BuildOptions{.structure = Structure::Grid, .grid = {.resolution = 96}});
+    const auto cloud =
+        make_grid_accel(sparse, BuildOptions{.structure = Structure::ProximityGrid, .grid = {.resolution = 96}});
     const std::vector<Ray> rays = make_rays(sparse, 2000, 10);
     const GridView plain_view = dynamic_cast<const GridAccel&>(*plain).tracer().grid;
     const GridView cloud_view = dynamic_cast<const GridAccel&>(*cloud).tracer().grid;

@@ -16,29 +16,30 @@ void add_accel_options(CLI::App* cmd, AccelArgs& a) {
     cmd->add_option("--layout", a.layout,
                     "BVH layout traced: bvh2 | bvh4 | bvh8 (default " + to_string(defaults.layout) + ")")
         ->group(group);
-    cmd->add_flag("--optimize", a.options.optimize, "Optimise the BVH by reinsertion after building")->group(group);
-    cmd->add_option("--optimize-iterations", a.options.optimize_iterations,
+    cmd->add_flag("--optimize", a.options.reinsertion.enabled, "Optimise the BVH by reinsertion after building")
+        ->group(group);
+    cmd->add_option("--optimize-iterations", a.options.reinsertion.iterations,
                     "Reinsertion rounds (default 0 = until it stops improving)")
         ->check(CLI::Range(0, 1000))
         ->group(group);
-    cmd->add_option("--bins", a.options.bin_count, "SAH bins per axis of binned builders (default 16)")
+    cmd->add_option("--bins", a.options.binned.bin_count, "SAH bins per axis of binned builders (default 16)")
         ->check(CLI::Range(2, 256))
         ->group(group);
     cmd->add_option("--leaf-size", a.options.max_leaf_size, "Most triangles per BVH leaf (default 4)")
         ->check(CLI::Range(1, 64))
         ->group(group);
-    cmd->add_option("--sbvh-alpha", a.options.sbvh_alpha,
+    cmd->add_option("--sbvh-alpha", a.options.sbvh.alpha,
                     "SBVH: try spatial splits above this overlap / root area (default 1e-5)")
         ->check(CLI::Range(0.0f, 1.0f))
         ->group(group);
-    cmd->add_option("--ploc-radius", a.options.ploc_radius, "PLOC nearest-neighbour search radius (default 16)")
+    cmd->add_option("--ploc-radius", a.options.ploc.radius, "PLOC nearest-neighbour search radius (default 16)")
         ->check(CLI::Range(1, 256))
         ->group(group);
-    cmd->add_option("--split-budget", a.options.split_budget,
+    cmd->add_option("--split-budget", a.options.grid_bvh.split_budget,
                     "GridBvhSplit: partial triangles as a fraction of the triangle count (default 0.3)")
         ->check(CLI::Range(0.0f, 4.0f))
         ->group(group);
-    cmd->add_option("--grid-res", a.options.grid_resolution,
+    cmd->add_option("--grid-res", a.options.grid.resolution,
                     "Grids: cells on the longest axis (default 0 = 4 n^(1/4) on the shortest axis, cubic cells)")
         ->check(CLI::Range(0, 2048))
         ->group(group);
@@ -52,7 +53,7 @@ BuildOptions to_build_options(const AccelArgs& a, int threads) {
     if (!a.accel.empty()) options.structure = parse_structure(a.accel);
     if (!a.builder.empty()) options.builder = parse_builder(a.builder);
     if (!a.layout.empty()) options.layout = parse_layout(a.layout);
-    if (!a.kd_traversal.empty()) options.kd_traversal = parse_kd_traversal(a.kd_traversal);
+    if (!a.kd_traversal.empty()) options.kdtree.traversal = parse_kd_traversal(a.kd_traversal);
     options.threads = threads;
     return options;
 }

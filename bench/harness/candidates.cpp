@@ -64,7 +64,7 @@ std::vector<Candidate> make_catalogue() {
                 options.structure = Structure::Bvh;
                 options.builder = info.builder;
                 options.layout = layout;
-                options.optimize = optimize;
+                options.reinsertion.enabled = optimize;
                 Candidate c = make("bvh", std::string(info.name) + (optimize ? "+opt" : ""), layout_name,
                                    std::string(info.source) + (optimize ? ", then reinsertion" : ""), options);
                 c.implemented = builder_implemented(info.name) && layout_implemented(layout_name) &&
@@ -90,7 +90,7 @@ std::vector<Candidate> make_catalogue() {
               {"grid-proximity", Structure::ProximityGrid, "seed 001, proximity clouds"}}) {
             BuildOptions options;
             options.structure = structure;
-            options.grid_resolution = res;
+            options.grid.resolution = res;
             Candidate c = make(structure_name, std::string("uniform-") + res_name, "grid", source, options);
             c.implemented = structure_implemented(structure_name);
             all.push_back(c);
@@ -101,7 +101,7 @@ std::vector<Candidate> make_catalogue() {
           {"restart", KdTraversal::Restart}, {"pushdown", KdTraversal::Pushdown}}) {
         BuildOptions options;
         options.structure = Structure::KdTree;
-        options.kd_traversal = traversal;
+        options.kdtree.traversal = traversal;
         Candidate c = make("kdtree", "sah", traversal_name, "seed 002, Wald and Havran 2006", options);
         c.implemented = structure_implemented("kdtree");
         all.push_back(c);

@@ -34,13 +34,14 @@ double hlbvh2_total(const Hlbvh2Stages& s) { return s.total_ms(); }
 std::vector<StageBreakdown> measure_stage_breakdowns(const LoadedScene& scene, int threads, int repetitions) {
     std::vector<StageBreakdown> rows;
     const std::span<const Triangle> triangles = scene.geometry.triangles;
-    BuildOptions options;
-    options.threads = threads;
+    const BuildOptions options;  // the defaults
+    const BvhBuildConfig config = bvh_build_config(options);
     for (const bool split : {false, true}) {
         const GridBvhStages s = median_build<GridBvhStages>(
             repetitions,
             [&](GridBvhStages& stages) {
-                return parallel::with_threads(threads, [&] { return build_grid_bvh(triangles, options, split, &stages); });
+                return parallel::with_threads(
+                    threads, [&] { return build_grid_bvh(triangles, config, options.grid_bvh, split, &stages); });
             },
             grid_total);
         StageBreakdown row;
@@ -59,7 +60,7 @@ std::vector<StageBreakdown> measure_stage_breakdowns(const LoadedScene& scene, i
     const Hlbvh2Stages h = median_build<Hlbvh2Stages>(
         repetitions,
         [&](Hlbvh2Stages& stages) {
-            return parallel::with_threads(threads, [&] { return build_hlbvh2(triangles, options, &stages); });
+            return parallel::with_threads(threads, [&] { return build_hlbvh2(triangles, config, &stages); });
         },
         hlbvh2_total);
     StageBreakdown row;

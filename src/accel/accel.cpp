@@ -19,44 +19,47 @@
 namespace rf {
 
 void validate_build_options(const BuildOptions& options) {
-    if (options.bin_count < 2 || options.bin_count > 256) {
-        throw Error("build options: bin_count must be in [2, 256], got " + std::to_string(options.bin_count));
+    if (options.binned.bin_count < 2 || options.binned.bin_count > 256) {
+        throw Error("build options: binned.bin_count must be in [2, 256], got " +
+                    std::to_string(options.binned.bin_count));
     }
     if (options.max_leaf_size < 1 || options.max_leaf_size > 64) {
         throw Error("build options: max_leaf_size must be in [1, 64], got " +
                     std::to_string(options.max_leaf_size));
     }
-    if (!(options.traversal_cost > 0.0f) || !std::isfinite(options.traversal_cost)) {
-        throw Error("build options: traversal_cost must be a positive number, got " +
-                    std::to_string(options.traversal_cost));
+    if (!(options.sah.traversal > 0.0f) || !std::isfinite(options.sah.traversal)) {
+        throw Error("build options: sah.traversal must be a positive number, got " +
+                    std::to_string(options.sah.traversal));
     }
-    if (!(options.intersection_cost > 0.0f) || !std::isfinite(options.intersection_cost)) {
-        throw Error("build options: intersection_cost must be a positive number, got " +
-                    std::to_string(options.intersection_cost));
+    if (!(options.sah.intersection > 0.0f) || !std::isfinite(options.sah.intersection)) {
+        throw Error("build options: sah.intersection must be a positive number, got " +
+                    std::to_string(options.sah.intersection));
     }
-    if (options.optimize_iterations < 0 || options.optimize_iterations > 1000) {
-        throw Error("build options: optimize_iterations must be in [0, 1000], got " +
-                    std::to_string(options.optimize_iterations));
+    if (options.reinsertion.iterations < 0 || options.reinsertion.iterations > 1000) {
+        throw Error("build options: reinsertion.iterations must be in [0, 1000], got " +
+                    std::to_string(options.reinsertion.iterations));
     }
-    if (!(options.sbvh_alpha >= 0.0f && options.sbvh_alpha <= 1.0f)) {
-        throw Error("build options: sbvh_alpha must be in [0, 1], got " + std::to_string(options.sbvh_alpha));
+    if (!(options.sbvh.alpha >= 0.0f && options.sbvh.alpha <= 1.0f)) {
+        throw Error("build options: sbvh.alpha must be in [0, 1], got " + std::to_string(options.sbvh.alpha));
     }
-    if (options.ploc_radius < 1 || options.ploc_radius > 256) {
-        throw Error("build options: ploc_radius must be in [1, 256], got " + std::to_string(options.ploc_radius));
+    if (options.ploc.radius < 1 || options.ploc.radius > 256) {
+        throw Error("build options: ploc.radius must be in [1, 256], got " + std::to_string(options.ploc.radius));
     }
-    if (!(options.split_budget >= 0.0f && options.split_budget <= 4.0f)) {
-        throw Error("build options: split_budget must be in [0, 4], got " + std::to_string(options.split_budget));
+    if (!(options.grid_bvh.split_budget >= 0.0f && options.grid_bvh.split_budget <= 4.0f)) {
+        throw Error("build options: grid_bvh.split_budget must be in [0, 4], got " +
+                    std::to_string(options.grid_bvh.split_budget));
     }
-    if (options.grid_resolution < 0 || options.grid_resolution > 2048) {
-        throw Error("build options: grid_resolution must be in [0, 2048] (0 = automatic), got " +
-                    std::to_string(options.grid_resolution));
+    if (options.grid.resolution < 0 || options.grid.resolution > 2048) {
+        throw Error("build options: grid.resolution must be in [0, 2048] (0 = automatic), got " +
+                    std::to_string(options.grid.resolution));
     }
-    if (!(options.kd_empty_bonus >= 0.0f && options.kd_empty_bonus < 1.0f)) {
-        throw Error("build options: kd_empty_bonus must be in [0, 1), got " + std::to_string(options.kd_empty_bonus));
+    if (!(options.kdtree.empty_bonus >= 0.0f && options.kdtree.empty_bonus < 1.0f)) {
+        throw Error("build options: kdtree.empty_bonus must be in [0, 1), got " +
+                    std::to_string(options.kdtree.empty_bonus));
     }
-    if (options.kd_short_stack_size < 1 || options.kd_short_stack_size > 64) {
-        throw Error("build options: kd_short_stack_size must be in [1, 64], got " +
-                    std::to_string(options.kd_short_stack_size));
+    if (options.kdtree.short_stack_size < 1 || options.kdtree.short_stack_size > 64) {
+        throw Error("build options: kdtree.short_stack_size must be in [1, 64], got " +
+                    std::to_string(options.kdtree.short_stack_size));
     }
     if (options.threads < 0) {
         throw Error("build options: threads must be >= 0 (0 = all cores), got " + std::to_string(options.threads));
@@ -82,11 +85,11 @@ std::unique_ptr<Accel> cpu::build_accel(const SceneGeometry& geometry, const Bui
     switch (options.structure) {
         case Structure::Bvh: {
             const auto start = std::chrono::steady_clock::now();
-            Bvh bvh = parallel::with_threads(options.threads, [&] { return build_bvh_on_cpu(geometry.triangles, options); });
+            Bvh bvh = build_bvh_on_cpu(geometry.triangles, options);  // on options.threads threads
             const double build_ms =
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-            std::string name = "bvh/" + to_string(options.builder) + (options.optimize ? "+opt" : "") + "/" +
-                               to_string(options.layout);
+            std::string name = "bvh/" + to_string(options.builder) + (options.reinsertion.enabled ? "+opt" : "") +
+                               "/" + to_string(options.layout);
             if (options.layout == Layout::Bvh2)
                 return std::make_unique<BvhAccel>(geometry, std::move(bvh), std::move(name), build_ms);
             return make_wide_bvh_accel(geometry, std::move(bvh), options, build_ms, std::move(name));

@@ -14,7 +14,7 @@ namespace rf {
 // says which). Defined in accel/grid/grid_accel.cpp.
 std::unique_ptr<Accel> make_grid_accel(const SceneGeometry& geometry, const BuildOptions& options);
 
-// SAH kd-tree with the traversal named in options.kd_traversal. Defined in
+// SAH kd-tree with the traversal named in options.kdtree.traversal. Defined in
 // accel/kdtree/kdtree_accel.cpp.
 std::unique_ptr<Accel> make_kdtree_accel(const SceneGeometry& geometry, const BuildOptions& options);
 

@@ -44,7 +44,7 @@ TEST(GpuBvhTracer, ClosestAndAnyHitMatchCpu) {
     RF_REQUIRE_DEVICE();
     Scene scene = make_builtin_scene("spheres");
     SceneGeometry geometry = SceneGeometry::build(scene);
-    Bvh bvh = build_binned_sah(geometry.triangles, BuildOptions{});
+    Bvh bvh = build_binned_sah(geometry.triangles, BvhBuildConfig{}, BinnedSahOptions{});
     BvhView cpu_view{bvh.nodes.data(), bvh.prim_indices.data(), geometry.triangles.data(), uint32_t(bvh.nodes.size())};
 
     std::vector<Ray> rays = random_rays(geometry.bounds, 200000, 7);

@@ -34,7 +34,7 @@ TEST(GpuDeviceBuild, EveryDeviceBuilderEqualsItsCpuBuilder) {
         for (const bool optimize : {false, true}) {
             BuildOptions options;
             options.builder = builder;
-            options.optimize = optimize;
+            options.reinsertion.enabled = optimize;
             cuda::DeviceBuildStages stages;
             const Bvh device = cuda::build_bvh_on_device(scene.triangles, options, &stages);
             const std::string what = to_string(builder) + (optimize ? "+opt" : "");

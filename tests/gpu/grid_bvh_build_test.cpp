@@ -17,6 +17,7 @@
 
 #include "../accel_test_scenes.h"
 #include "accel/bvh/builders/grid_bvh.h"
+#include "backend/cuda/device_bvh_builders.h"
 #include "gpu_build_checks.h"
 #include "backend/cuda/device_builders.h"
 
@@ -54,11 +55,13 @@ TEST(GpuGridBvhBuild, SameBvhAsCpuForBothVariants) {
     for (const NamedScene& scene : test_scenes()) {
         for (const bool split : {false, true}) {
             for (const int leaf_size : {1, 4}) {
-                const BuildOptions options{.max_leaf_size = leaf_size, .split_budget = 0.5f};
+                const BvhBuildConfig config{.max_leaf_size = leaf_size};
+                const GridBvhOptions grid_bvh{.split_budget = 0.5f};
                 const std::string what = scene.name + (split ? ", split" : "") + ", leaves of " + std::to_string(leaf_size);
                 cuda::DeviceBuildStages stages;
-                expect_same_bvh(build_grid_bvh(scene.geometry.triangles, options, split),
-                                cuda::build_grid_bvh_on_device(scene.geometry.triangles, options, split, &stages), what);
+                expect_same_bvh(
+                    build_grid_bvh(scene.geometry.triangles, config, grid_bvh, split),
+                    cuda::build_grid_bvh_on_device(scene.geometry.triangles, config, grid_bvh, split, &stages), what);
                 // Only "one point" (1000 references in one Grid0 cell) has a leaf over the device's cap.
                 EXPECT_EQ(stages.emitted_on_device, scene.name != "one point") << what;
             }
@@ -71,11 +74,11 @@ TEST(GpuGridBvhBuild, SplitReferencesAreTheCpusWithinTheBudget) {
     const SceneGeometry slivers = make_slivers(20000, 4);
     const size_t n = slivers.triangles.size();
     for (const float budget : {0.05f, 0.3f, 2.0f, 10.0f}) {
-        const BuildOptions options{.split_budget = budget};
+        const GridBvhOptions grid_bvh{.split_budget = budget};
         GridBvhStages cpu;
-        const Bvh expected = build_grid_bvh(slivers.triangles, options, true, &cpu);
+        const Bvh expected = build_grid_bvh(slivers.triangles, BvhBuildConfig{}, grid_bvh, true, &cpu);
         cuda::DeviceBuildStages dev;
-        const Bvh got = cuda::build_grid_bvh_on_device(slivers.triangles, options, true, &dev);
+        const Bvh got = cuda::build_grid_bvh_on_device(slivers.triangles, BvhBuildConfig{}, grid_bvh, true, &dev);
         EXPECT_EQ(cpu.references, dev.references) << budget;
         EXPECT_LE(dev.references - n, size_t(std::floor(double(budget) * double(n)))) << budget;
         expect_same_bvh(expected, got, "slivers, budget " + std::to_string(budget));
@@ -84,12 +87,12 @@ TEST(GpuGridBvhBuild, SplitReferencesAreTheCpusWithinTheBudget) {
 
 TEST(GpuGridBvhBuild, EmptySingleAndOnePoint) {
     RF_REQUIRE_DEVICE();
-    EXPECT_TRUE(cuda::build_grid_bvh_on_device({}, {}, false).nodes.empty());
-    EXPECT_TRUE(cuda::build_grid_bvh_on_device({}, {}, true).nodes.empty());
+    EXPECT_TRUE(cuda::build_grid_bvh_on_device({}, {}, {}, false).nodes.empty());
+    EXPECT_TRUE(cuda::build_grid_bvh_on_device({}, {}, {}, true).nodes.empty());
     SceneGeometry one;
     test::append(one, {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)});
     for (const bool split : {false, true}) {
-        const Bvh bvh = cuda::build_grid_bvh_on_device(one.triangles, {}, split);
+        const Bvh bvh = cuda::build_grid_bvh_on_device(one.triangles, {}, {}, split);
         ASSERT_EQ(bvh.nodes.size(), 1u);
         EXPECT_EQ(bvh.prim_indices, std::vector<uint32_t>{0});
     }
@@ -99,9 +102,9 @@ TEST(GpuGridBvhBuild, StagesAreReported) {
     RF_REQUIRE_DEVICE();
     const SceneGeometry soup = make_slivers(50000, 5);
     GridBvhStages cpu;
-    build_grid_bvh(soup.triangles, BuildOptions{}, true, &cpu);
+    build_grid_bvh(soup.triangles, BvhBuildConfig{}, GridBvhOptions{}, true, &cpu);
     cuda::DeviceBuildStages s;
-    cuda::build_grid_bvh_on_device(soup.triangles, BuildOptions{}, true, &s);
+    cuda::build_grid_bvh_on_device(soup.triangles, BvhBuildConfig{}, GridBvhOptions{}, true, &s);
     EXPECT_GT(s.partial_triangles_ms, 0.0);
     EXPECT_GT(s.sort_ms, 0.0);
     EXPECT_GT(s.grid0_ms, 0.0);
@@ -125,8 +128,8 @@ TEST(GpuGridBvhBuild, CrowdedCellFallsBackToTheHostEmission) {
     for (int i = 0; i < 200; ++i) test::append(same, {Vec3f(1, 0, 0), Vec3f(0, 1, 0), Vec3f(0, 0, 1)});
     for (const bool split : {false, true}) {
         cuda::DeviceBuildStages s;
-        const Bvh got = cuda::build_grid_bvh_on_device(same.triangles, BuildOptions{}, split, &s);
-        expect_same_bvh(build_grid_bvh(same.triangles, BuildOptions{}, split), got,
+        const Bvh got = cuda::build_grid_bvh_on_device(same.triangles, BvhBuildConfig{}, GridBvhOptions{}, split, &s);
+        expect_same_bvh(build_grid_bvh(same.triangles, BvhBuildConfig{}, GridBvhOptions{}, split), got,
                         std::string("200 identical triangles") + (split ? ", split" : ""));
         EXPECT_FALSE(s.emitted_on_device);
         EXPECT_EQ(s.device_emit_ms, 0.0);

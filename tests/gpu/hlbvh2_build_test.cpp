@@ -21,6 +21,7 @@
 #include "accel/bvh/builders/hlbvh2_bottom_steps.h"
 #include "accel/bvh/builders/hlbvh2_top_steps.h"
 #include "accel/bvh/builders/morton_tree.h"
+#include "backend/cuda/device_bvh_builders.h"
 #include "backend/cuda/hlbvh2_build.h"
 #include "backend/cuda/device_builders.h"
 
@@ -43,9 +44,9 @@ TEST(GpuHlbvh2Build, SameBvhAsCpuHlbvh2) {
     RF_REQUIRE_DEVICE();
     for (const NamedScene& scene : test_scenes()) {
         for (int leaf_size : {1, 4, 8}) {
-            const BuildOptions options{.max_leaf_size = leaf_size};
-            expect_same_bvh(build_hlbvh2(scene.geometry.triangles, options),
-                            cuda::build_hlbvh2_on_device(scene.geometry.triangles, options),
+            const BvhBuildConfig config{.max_leaf_size = leaf_size};
+            expect_same_bvh(build_hlbvh2(scene.geometry.triangles, config),
+                            cuda::build_hlbvh2_on_device(scene.geometry.triangles, config),
                             scene.name + ", leaves of " + std::to_string(leaf_size));
         }
     }
@@ -65,7 +66,7 @@ TEST(GpuHlbvh2Build, DeviceForestAndClusterBoxes) {
     RF_REQUIRE_DEVICE();
     for (const NamedScene& scene : test_scenes()) {
         SCOPED_TRACE(scene.name);
-        morton::RawTree cpu(scene.geometry.triangles, BuildOptions{});
+        morton::RawTree cpu(scene.geometry.triangles, BvhBuildConfig{});
         morton::Buffer<uint32_t> keys;
         cpu.sort_by_morton_codes(keys);
         const uint32_t n = cpu.size();

@@ -17,6 +17,7 @@
 #include "accel/bvh/builders/karras_tree_steps.h"
 #include "accel/bvh/builders/lbvh.h"
 #include "accel/bvh/builders/morton_tree.h"
+#include "backend/cuda/device_bvh_builders.h"
 #include "backend/cuda/lbvh_build.h"
 #include "backend/cuda/device_builders.h"
 #include "rayforge/core/error.h"
@@ -41,11 +42,11 @@ TEST(GpuLbvhBuild, SameBvhAsCpuLbvh) {
     for (const NamedScene& scene : test_scenes()) {
         for (int bits : {30, 63}) {
             for (int leaf_size : {1, 4}) {
-                const BuildOptions options{.max_leaf_size = leaf_size};
+                const BvhBuildConfig config{.max_leaf_size = leaf_size};
                 const std::string what = scene.name + ", " + std::to_string(bits) + " bits, leaves of " +
                                          std::to_string(leaf_size);
-                expect_same_bvh(build_lbvh(scene.geometry.triangles, options, bits),
-                                cuda::build_lbvh_on_device(scene.geometry.triangles, options, bits), what);
+                expect_same_bvh(build_lbvh(scene.geometry.triangles, config, bits),
+                                cuda::build_lbvh_on_device(scene.geometry.triangles, config, bits), what);
             }
         }
     }
@@ -73,7 +74,7 @@ template <class Key>
 void check_raw_tree(const SceneGeometry& g, const std::string& what) {
     const int bits = sizeof(Key) == 4 ? 30 : 63;
     SCOPED_TRACE(what + ", " + std::to_string(bits) + " bits");
-    morton::RawTree cpu(g.triangles, BuildOptions{});
+    morton::RawTree cpu(g.triangles, BvhBuildConfig{});
     morton::Buffer<Key> keys;
     cpu.sort_by_morton_codes(keys);
     const uint32_t n = cpu.size();
@@ -141,10 +142,10 @@ TEST(GpuLbvhBuild, TreesDeeperThanTheLimitAreEmittedByTheHost) {
     RF_REQUIRE_DEVICE();
     const SceneGeometry chain = test::make_morton_chain(2000);
     for (int leaf_size : {1, 4}) {
-        const BuildOptions options{.max_leaf_size = leaf_size};
+        const BvhBuildConfig config{.max_leaf_size = leaf_size};
         cuda::DeviceBuildStages stages;
-        expect_same_bvh(build_lbvh(chain.triangles, options, 63),
-                        cuda::build_lbvh_on_device(chain.triangles, options, 63, &stages),
+        expect_same_bvh(build_lbvh(chain.triangles, config, 63),
+                        cuda::build_lbvh_on_device(chain.triangles, config, 63, &stages),
                         "Morton chain, leaves of " + std::to_string(leaf_size));
         EXPECT_FALSE(stages.emitted_on_device);
         EXPECT_GT(stages.emit_ms, 0.0);

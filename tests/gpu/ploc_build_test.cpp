@@ -16,6 +16,7 @@
 #include "accel/bvh/builders/morton_tree.h"
 #include "accel/bvh/builders/ploc.h"
 #include "accel/bvh/builders/ploc_emit.h"
+#include "backend/cuda/device_bvh_builders.h"
 #include "backend/cuda/ploc_build.h"
 #include "backend/cuda/device_builders.h"
 
@@ -47,11 +48,12 @@ TEST(GpuPlocBuild, SameBvhAsCpuPloc) {
             // The plain search of radius 300 is slow on the CPU side: smaller scenes only.
             if (radius == 300 && scene.geometry.triangles.size() > 5000) continue;
             for (int leaf_size : {1, 4}) {
-                const BuildOptions options{.max_leaf_size = leaf_size, .ploc_radius = radius};
+                const BvhBuildConfig config{.max_leaf_size = leaf_size};
+                const PlocOptions ploc{.radius = radius};
                 const std::string what = scene.name + ", radius " + std::to_string(radius) + ", leaves of " +
                                          std::to_string(leaf_size);
-                expect_same_bvh(build_ploc(scene.geometry.triangles, options),
-                                cuda::build_ploc_on_device(scene.geometry.triangles, options), what);
+                expect_same_bvh(build_ploc(scene.geometry.triangles, config, ploc),
+                                cuda::build_ploc_on_device(scene.geometry.triangles, config, ploc), what);
             }
         }
     }
@@ -59,21 +61,21 @@ TEST(GpuPlocBuild, SameBvhAsCpuPloc) {
 
 TEST(GpuPlocBuild, EmptyAndSingleTriangle) {
     RF_REQUIRE_DEVICE();
-    EXPECT_TRUE(cuda::build_ploc_on_device({}, {}).nodes.empty());
+    EXPECT_TRUE(cuda::build_ploc_on_device({}, {}, {}).nodes.empty());
     SceneGeometry one;
     test::append(one, {Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0)});
-    const Bvh bvh = cuda::build_ploc_on_device(one.triangles, {});
+    const Bvh bvh = cuda::build_ploc_on_device(one.triangles, {}, {});
     ASSERT_EQ(bvh.nodes.size(), 1u);
     EXPECT_EQ(bvh.nodes[0].count, 1u);
     EXPECT_EQ(bvh.prim_indices, std::vector<uint32_t>{0});
-    EXPECT_TRUE(same_box(bvh.nodes[0].bounds, build_ploc(one.triangles, {}).nodes[0].bounds));
+    EXPECT_TRUE(same_box(bvh.nodes[0].bounds, build_ploc(one.triangles, {}, {}).nodes[0].bounds));
 }
 
 // The device's own clustering: the CPU's Morton order, every node's box the
 // union of its children's, and the CPU's BVH from it.
 void check_clustering(const SceneGeometry& g, int radius, const std::string& what) {
     SCOPED_TRACE(what + ", radius " + std::to_string(radius));
-    morton::RawTree cpu(g.triangles, BuildOptions{});
+    morton::RawTree cpu(g.triangles, BvhBuildConfig{});
     morton::Buffer<uint64_t> keys;
     cpu.sort_by_morton_codes(keys);
     const uint32_t n = cpu.size();
@@ -93,9 +95,9 @@ void check_clustering(const SceneGeometry& g, int radius, const std::string& wha
         wrong_boxes += !same_box(dev.node_boxes[k], morton::box_union(box[0], box[1]));
     }
     EXPECT_EQ(wrong_boxes, 0u);
-    const BuildOptions options{.ploc_radius = radius};
-    expect_same_bvh(build_ploc(g.triangles, options),
-                    emit_ploc_tree(g.triangles, options, std::move(dev.order), dev.children, dev.iteration_nodes),
+    expect_same_bvh(build_ploc(g.triangles, BvhBuildConfig{}, PlocOptions{.radius = radius}),
+                    emit_ploc_tree(g.triangles, BvhBuildConfig{}, std::move(dev.order), dev.children,
+                                   dev.iteration_nodes),
                     what);
 }
 
@@ -115,7 +117,7 @@ TEST(GpuPlocBuild, StagesAndPeakMemoryAreReported) {
     RF_REQUIRE_DEVICE();
     const SceneGeometry soup = test::make_triangle_soup(200000, 4, {Vec3f(-50.0f), Vec3f(50.0f)}, 0.5f);
     cuda::DeviceBuildStages stages;
-    const Bvh bvh = cuda::build_ploc_on_device(soup.triangles, {}, &stages);
+    const Bvh bvh = cuda::build_ploc_on_device(soup.triangles, {}, {}, &stages);
     EXPECT_FALSE(bvh.nodes.empty());
     for (double ms : {stages.upload_ms, stages.bounds_ms, stages.morton_ms, stages.sort_ms, stages.ploc_ms,
                       stages.device_emit_ms, stages.download_ms}) {
@@ -132,7 +134,7 @@ TEST(GpuPlocBuild, StagesAndPeakMemoryAreReported) {
 TEST(GpuPlocBuild, HitsEqualBruteForce) {
     RF_REQUIRE_DEVICE();
     const SceneGeometry soup = gpu_build_test::hit_test_soup();
-    gpu_build_test::expect_hits_equal_brute_force(soup, cuda::build_ploc_on_device(soup.triangles, {}), "ploc");
+    gpu_build_test::expect_hits_equal_brute_force(soup, cuda::build_ploc_on_device(soup.triangles, {}, {}), "ploc");
 }
 
 }  // namespace

@@ -19,9 +19,9 @@ namespace rf {
 
 enum class Structure : uint8_t {
     Bvh,            // binary BVH from one of the builders below, traced in one of the layouts
-    Grid,           // uniform grid, 3D-DDA (seeds 001, 002)
-    ProximityGrid,  // uniform grid with proximity clouds (seed 001)
-    KdTree,         // SAH kd-tree (seed 002; Wald and Havran 2006)
+    Grid,           // uniform grid, 3D-DDA (Amanatides and Woo 1987)
+    ProximityGrid,  // uniform grid with proximity clouds (after Karlsson and Ljungstedt 2004)
+    KdTree,         // SAH kd-tree (Wald and Havran 2006)
     BruteForce,     // every triangle for every ray: the reference
 };
 
@@ -32,9 +32,9 @@ enum class Builder : uint8_t {
     Sbvh,          // Stich et al. 2009, spatial splits
     Lbvh30,        // Karras 2012, 30-bit Morton codes
     Lbvh63,        // Karras 2012, 63-bit Morton codes
-    Hlbvh2,        // seed 000 ch. 5
-    GridBvh,       // seed 000 ch. 4
-    GridBvhSplit,  // seed 000 ch. 4, with partial triangles
+    Hlbvh2,        // Garanzha 2014, ch. 5
+    GridBvh,       // Garanzha 2014, ch. 4
+    GridBvhSplit,  // Garanzha 2014, ch. 4, with partial triangles
     Ploc,          // Meister and Bittner 2018
 };
 
@@ -42,8 +42,50 @@ enum class Builder : uint8_t {
 // nodes collapsed from it by SAH and traced with SIMD box tests.
 enum class Layout : uint8_t { Bvh2, Bvh4, Bvh8 };
 
-// kd-tree traversal algorithms (seed 002).
+// kd-tree traversal algorithms: a full stack; a short stack (Horn et al.
+// 2007); kd-restart (Foley and Sugerman 2005); kd-restart with push-down
+// (Horn et al. 2007).
 enum class KdTraversal : uint8_t { Stack, ShortStack, Restart, Pushdown };
+
+// The SAH's costs: every SAH decision (BVH builders, leaf collapse, kd-tree, optimizer).
+struct SahCosts {
+    float traversal = 1.0f;     // C_trav
+    float intersection = 1.0f;  // C_int
+};
+// Binned builders (binned SAH; the kd-tree's binned upper levels).
+struct BinnedSahOptions {
+    int bin_count = 16;  // SAH bins per axis
+};
+// SBVH: spatial splits are tried where the overlap of the best object split
+// exceeds alpha times the root's area (Stich et al. 2009).
+struct SbvhOptions {
+    float alpha = 1e-5f;
+};
+// PLOC: nearest-neighbour search radius along the Morton curve.
+struct PlocOptions {
+    int radius = 16;
+};
+// GridBvhSplit's partial triangles.
+struct GridBvhOptions {
+    float split_budget = 0.3f;  // partial-triangle budget as a fraction of the triangle count
+};
+// Post-build optimizer for any BVH builder (reinsertion, Meister and Bittner 2018).
+struct ReinsertionOptions {
+    bool enabled = false;
+    int iterations = 0;  // 0 = the optimizer's default
+};
+// Uniform grids.
+struct UniformGridOptions {
+    // Cells on the longest axis; 0 = automatic: 4 * n^(1/4) cells on the
+    // shortest axis (after Purcell), cubic cells.
+    int resolution = 0;
+};
+struct KdTreeOptions {
+    KdTraversal traversal = KdTraversal::Stack;
+    bool perfect_splits = true;   // clip triangles to the cell when evaluating splits
+    float empty_bonus = 0.2f;     // SAH discount for cutting off empty space
+    int short_stack_size = 4;     // entries of the short-stack traversal
+};
 
 struct BuildOptions {
     Structure structure = Structure::Bvh;
@@ -52,29 +94,16 @@ struct BuildOptions {
     Device device;                 // where to build and trace: cpu (default), cuda, cuda:N
     GpuKernel gpu_kernel = kDefaultGpuKernel;  // on a CUDA device: the traversal kernel, which picks the
                                                // structure (and layout) built; `layout` is for the CPU
-    int bin_count = 16;          // SAH bins per axis (binned builders)
-    int max_leaf_size = 4;       // leaves never hold more primitives than this
-    float traversal_cost = 1.0f; // SAH C_trav
-    float intersection_cost = 1.0f;  // SAH C_int
-    int threads = 0;             // 0 = all cores
-    // Post-build optimizer for any BVH builder (reinsertion, Meister and Bittner 2018).
-    bool optimize = false;
-    int optimize_iterations = 0;  // 0 = the optimizer's default
-    // SBVH: spatial splits are tried where the overlap of the best object split
-    // exceeds alpha times the root's area (Stich et al. 2009).
-    float sbvh_alpha = 1e-5f;
-    // PLOC: nearest-neighbour search radius along the Morton curve.
-    int ploc_radius = 16;
-    // GridBvhSplit: partial-triangle budget as a fraction of the triangle count.
-    float split_budget = 0.3f;
-    // Uniform grids: cells on the longest axis; 0 = seed 002's rule
-    // (4 * n^(1/4) cells on the shortest axis, cubic cells).
-    int grid_resolution = 0;
-    // kd-tree.
-    KdTraversal kd_traversal = KdTraversal::Stack;
-    bool kd_perfect_splits = true;   // clip triangles to the cell when evaluating splits
-    float kd_empty_bonus = 0.2f;     // SAH discount for cutting off empty space
-    int kd_short_stack_size = 4;     // entries of the short-stack traversal
+    int threads = 0;               // 0 = all cores
+    int max_leaf_size = 4;         // every BVH builder: leaves never hold more primitives than this
+    SahCosts sah;
+    BinnedSahOptions binned;
+    SbvhOptions sbvh;
+    PlocOptions ploc;
+    GridBvhOptions grid_bvh;
+    ReinsertionOptions reinsertion;
+    UniformGridOptions grid;
+    KdTreeOptions kdtree;
     // CUDA backend only: build on the device where a device builder exists
     // (lbvh30, lbvh63, hlbvh2, ploc, gridbvh, gridbvh-split, uniform grids)
     // and convert to the GPU layouts there; false builds on the CPU. Every

@@ -15,9 +15,9 @@ std::unique_ptr<Accel> make_grid_accel(const SceneGeometry& geometry, const Buil
     if (options.structure != Structure::Grid && options.structure != Structure::ProximityGrid) {
         throw Error("make_grid_accel: structure must be grid or grid-proximity, got " + to_string(options.structure));
     }
-    if (options.grid_resolution < 0 || options.grid_resolution > 2048) {
-        throw Error("build options: grid_resolution must be in [0, 2048] (0 = automatic), got " +
-                    std::to_string(options.grid_resolution));
+    if (options.grid.resolution < 0 || options.grid.resolution > 2048) {
+        throw Error("build options: grid.resolution must be in [0, 2048] (0 = automatic), got " +
+                    std::to_string(options.grid.resolution));
     }
     if (options.threads < 0) {
         throw Error("build options: threads must be >= 0 (0 = all cores), got " + std::to_string(options.threads));
@@ -25,7 +25,7 @@ std::unique_ptr<Accel> make_grid_accel(const SceneGeometry& geometry, const Buil
     const bool proximity = options.structure == Structure::ProximityGrid;
     const auto start = std::chrono::steady_clock::now();
     UniformGrid grid = parallel::with_threads(options.threads, [&] {
-        return build_uniform_grid(geometry.triangles, options.grid_resolution, proximity);
+        return build_uniform_grid(geometry.triangles, options.grid.resolution, proximity);
     });
     const double build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     const auto& dims = grid.layout.dims;

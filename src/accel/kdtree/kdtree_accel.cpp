@@ -1,5 +1,5 @@
-// The kd-tree's rf::Accel: build timing and the traversal chosen by the
-// options, as a compile-time parameter of the tracer.
+// The kd-tree's rf::Accel: build timing and the traversal chosen by
+// options.kdtree.traversal, as a compile-time parameter of the tracer.
 #include "accel/kdtree/kdtree_accel.h"
 
 #include <chrono>
@@ -52,9 +52,12 @@ std::unique_ptr<Accel> make_kdtree_accel(const SceneGeometry& geometry, KdTree t
 
 std::unique_ptr<Accel> make_kdtree_accel(const SceneGeometry& geometry, const BuildOptions& options) {
     const auto start = std::chrono::steady_clock::now();
-    KdTree tree = parallel::with_threads(options.threads, [&] { return build_kdtree(geometry.triangles, options); });
+    KdTree tree = parallel::with_threads(options.threads, [&] {
+        return build_kdtree(geometry.triangles, options.sah, options.binned, options.kdtree);
+    });
     const double build_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    return make_kdtree_accel(geometry, std::move(tree), options.kd_traversal, options.kd_short_stack_size, build_ms);
+    return make_kdtree_accel(geometry, std::move(tree), options.kdtree.traversal, options.kdtree.short_stack_size,
+                             build_ms);
 }
 
 }  // namespace rf

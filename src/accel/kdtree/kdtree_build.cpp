@@ -3,7 +3,7 @@
 // the exact O(N log N) event sweep of Wald and Havran 2006 below
 // kKdExactSweepThreshold references. Optional perfect splits clip straddling
 // triangles to each child cell (polygon_clip.h); the SAH discounts splits
-// that cut off empty space by options.kd_empty_bonus.
+// that cut off empty space by KdTreeOptions::empty_bonus.
 #include "accel/kdtree/kdtree_build.h"
 
 #include <algorithm>
@@ -31,7 +31,7 @@ namespace {
 
 constexpr size_t kParallelSubtreeRefs = 1024;   // subtrees over more references become tasks
 constexpr size_t kParallelNodeRefs = 1 << 16;   // nodes this big bin and clip in parallel
-constexpr int kMaxBins = 256;                   // BuildOptions::bin_count is at most this
+constexpr int kMaxBins = 256;                   // BinnedSahOptions::bin_count is at most this
 constexpr uint32_t kMaxEventRef = (1u << 30) - 1;
 constexpr uint32_t kNoRef = 0xFFFFFFFFu;
 constexpr float kInf = std::numeric_limits<float>::infinity();
@@ -40,7 +40,7 @@ struct Config {
     const Triangle* triangles = nullptr;
     float traversal_cost = 1.0f;
     float intersection_cost = 1.0f;
-    float empty_factor = 0.8f;  // 1 - kd_empty_bonus: the SAH of a split with an empty child is scaled by it
+    float empty_factor = 0.8f;  // 1 - empty_bonus: the SAH of a split with an empty child is scaled by it
     bool perfect_splits = true;
     int max_depth = 0;
     int bins = 16;
@@ -510,7 +510,8 @@ void lay_out(const TempNode& node, size_t slot, KdTree& tree) {
 
 }  // namespace
 
-KdTree build_kdtree(std::span<const Triangle> triangles, const BuildOptions& options) {
+KdTree build_kdtree(std::span<const Triangle> triangles, const SahCosts& sah, const BinnedSahOptions& binned,
+                    const KdTreeOptions& kdtree) {
     KdTree tree;
     std::vector<Ref> refs;
     budgeted_reserve(refs, triangles.size(), "kd-tree references");
@@ -528,12 +529,12 @@ KdTree build_kdtree(std::span<const Triangle> triangles, const BuildOptions& opt
 
     Config c;
     c.triangles = triangles.data();
-    c.traversal_cost = options.traversal_cost;
-    c.intersection_cost = options.intersection_cost;
-    c.empty_factor = 1.0f - options.kd_empty_bonus;
-    c.perfect_splits = options.kd_perfect_splits;
+    c.traversal_cost = sah.traversal;
+    c.intersection_cost = sah.intersection;
+    c.empty_factor = 1.0f - kdtree.empty_bonus;
+    c.perfect_splits = kdtree.perfect_splits;
     c.max_depth = kdtree_max_depth(refs.size());
-    c.bins = std::clamp(options.bin_count, 2, kMaxBins);
+    c.bins = std::clamp(binned.bin_count, 2, kMaxBins);
     tree.bounds = bounds;
     tree.max_depth = c.max_depth;
 

@@ -21,10 +21,11 @@ inline constexpr size_t kKdExactSweepThreshold = 4096;
 // capped at kKdMaxDepth.
 int kdtree_max_depth(size_t triangle_count);
 
-// Builds over `triangles` with options.traversal_cost / intersection_cost (SAH
-// constants), kd_perfect_splits, kd_empty_bonus and bin_count. Subtrees are
-// built as parallel tasks; the result does not depend on the thread count.
-// Zero-area triangles (which never produce hits) are left out.
-KdTree build_kdtree(std::span<const Triangle> triangles, const BuildOptions& options);
+// Builds over `triangles` with the SAH costs `sah`, binned.bin_count (the
+// binned upper levels) and kdtree.perfect_splits and empty_bonus. Subtrees
+// are built as parallel tasks; the result does not depend on the thread
+// count. Zero-area triangles (which never produce hits) are left out.
+KdTree build_kdtree(std::span<const Triangle> triangles, const SahCosts& sah, const BinnedSahOptions& binned,
+                    const KdTreeOptions& kdtree);
 
 }  // namespace rf

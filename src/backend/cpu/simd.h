@@ -1,5 +1,6 @@
 // Minimal fixed-width SIMD wrappers for the wide BVH traversals
-// (backend/cpu/wide_bvh_traversal.h, backend/cpu/wide_bvh_packet_traversal.h).
+// (backend/cpu/wide_bvh_traversal.h, backend/cpu/wide_bvh_packet_traversal.h)
+// and the binned SAH builder's boxes (accel/bvh/builders/binned_sah.cpp).
 //
 // vfloat<4> maps to SSE, vfloat<8> to AVX (compiled in when __AVX2__ is
 // defined); any other case falls back to plain arrays, so the traversals build
@@ -284,6 +285,58 @@ RF_SIMD_INLINE int bit_count(unsigned mask) {
     for (; mask; mask &= mask - 1) ++n;
     return n;
 #endif
+}
+
+// ---- Four lanes for the builders (binned SAH): boxes as (x, y, z, w) ----
+// Same semantics in the fallback as on SSE.
+#if defined(RF_SIMD_SSE)
+RF_SIMD_INLINE vfloat<4> set(float x, float y, float z, float w) { return {_mm_setr_ps(x, y, z, w)}; }
+// Lane 3 cleared (+0): it may hold integer bits (denormals, which slow arithmetic down).
+RF_SIMD_INLINE vfloat<4> xyz0(vfloat<4> a) {
+    return {_mm_and_ps(a.v, _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0)))};
+}
+// (a[I0], a[I1], a[I2], a[I3]).
+template <int I0, int I1, int I2, int I3>
+RF_SIMD_INLINE vfloat<4> shuffle(vfloat<4> a) {
+    return {_mm_shuffle_ps(a.v, a.v, _MM_SHUFFLE(I3, I2, I1, I0))};
+}
+template <int I>
+RF_SIMD_INLINE float lane(vfloat<4> a) {
+    if constexpr (I == 0) return _mm_cvtss_f32(a.v);
+    else if constexpr (I == 2) return _mm_cvtss_f32(_mm_movehl_ps(a.v, a.v));
+    else return _mm_cvtss_f32(_mm_shuffle_ps(a.v, a.v, _MM_SHUFFLE(I, I, I, I)));
+}
+// Truncated to integers (values within the int32 range).
+RF_SIMD_INLINE void store_truncated(int32_t* p, vfloat<4> a) {
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(p), _mm_cvttps_epi32(a.v));
+}
+#else
+RF_SIMD_INLINE vfloat<4> set(float x, float y, float z, float w) { return {{x, y, z, w}}; }
+RF_SIMD_INLINE vfloat<4> xyz0(vfloat<4> a) { return {{a.v[0], a.v[1], a.v[2], 0.0f}}; }
+template <int I0, int I1, int I2, int I3>
+RF_SIMD_INLINE vfloat<4> shuffle(vfloat<4> a) {
+    return {{a.v[I0], a.v[I1], a.v[I2], a.v[I3]}};
+}
+template <int I>
+RF_SIMD_INLINE float lane(vfloat<4> a) {
+    return a.v[I];
+}
+RF_SIMD_INLINE void store_truncated(int32_t* p, vfloat<4> a) {
+    for (int i = 0; i < 4; ++i) p[i] = static_cast<int32_t>(a.v[i]);
+}
+#endif
+
+// std::min(a, b) and std::max(a, b) lane by lane (b < a ? b : a and
+// a < b ? b : a): min and max with their arguments swapped, so that boxes
+// grown with them match scalar std::min / std::max code bit for bit,
+// signed zeros included.
+template <int N>
+RF_SIMD_INLINE vfloat<N> std_min(vfloat<N> a, vfloat<N> b) {
+    return min(b, a);
+}
+template <int N>
+RF_SIMD_INLINE vfloat<N> std_max(vfloat<N> a, vfloat<N> b) {
+    return max(b, a);
 }
 
 }  // namespace rf::simd

@@ -6,7 +6,9 @@
 
 #include "accel/bvh/optimize/reinsertion.h"
 #include "backend/backends.h"
+#include "backend/cpu/parallel.h"
 #include "backend/cuda/device_builders.h"
+#include "backend/cuda/device_bvh_builders.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {
@@ -23,28 +25,41 @@ bool has_device_builder(Builder builder) {
     }
 }
 
+namespace {
+
+Bvh run_device_builder(std::span<const Triangle> triangles, const BuildOptions& options, DeviceBuildStages& s,
+                       int device) {
+    const BvhBuildConfig config = bvh_build_config(options);
+    switch (options.builder) {
+        case Builder::Lbvh30: return build_lbvh_on_device(triangles, config, 30, &s, device);
+        case Builder::Lbvh63: return build_lbvh_on_device(triangles, config, 63, &s, device);
+        case Builder::Hlbvh2: return build_hlbvh2_on_device(triangles, config, &s, device);
+        case Builder::Ploc: return build_ploc_on_device(triangles, config, options.ploc, &s, device);
+        case Builder::GridBvh: return build_grid_bvh_on_device(triangles, config, options.grid_bvh, false, &s, device);
+        case Builder::GridBvhSplit:
+            return build_grid_bvh_on_device(triangles, config, options.grid_bvh, true, &s, device);
+        default: throw Error("cuda: the " + to_string(options.builder) + " builder has no device version");
+    }
+}
+
+}  // namespace
+
 Bvh build_bvh_on_device(std::span<const Triangle> triangles, const BuildOptions& options, DeviceBuildStages* stages,
                         int device) {
     DeviceBuildStages local;
     DeviceBuildStages& s = stages ? *stages : local;
     s = {};
-    Bvh bvh;
-    switch (options.builder) {
-        case Builder::Lbvh30: bvh = build_lbvh_on_device(triangles, options, 30, &s, device); break;
-        case Builder::Lbvh63: bvh = build_lbvh_on_device(triangles, options, 63, &s, device); break;
-        case Builder::Hlbvh2: bvh = build_hlbvh2_on_device(triangles, options, &s, device); break;
-        case Builder::Ploc: bvh = build_ploc_on_device(triangles, options, &s, device); break;
-        case Builder::GridBvh: bvh = build_grid_bvh_on_device(triangles, options, false, &s, device); break;
-        case Builder::GridBvhSplit: bvh = build_grid_bvh_on_device(triangles, options, true, &s, device); break;
-        default: throw Error("cuda: the " + to_string(options.builder) + " builder has no device version");
-    }
-    s.on_device = true;
-    if (options.optimize) {
-        const auto start = std::chrono::steady_clock::now();
-        optimize_reinsertion(bvh, triangles, options);
-        s.optimize_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    }
-    return bvh;
+    return parallel::with_threads(options.threads, [&] {
+        Bvh bvh = run_device_builder(triangles, options, s, device);
+        s.on_device = true;
+        if (options.reinsertion.enabled) {
+            const auto start = std::chrono::steady_clock::now();
+            optimize_reinsertion(bvh, triangles, options.sah, options.reinsertion);
+            s.optimize_ms =
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        }
+        return bvh;
+    });
 }
 
 Bvh build_bvh(std::span<const Triangle> triangles, const BuildOptions& options, BuildReport* report) {

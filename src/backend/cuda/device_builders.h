@@ -1,7 +1,9 @@
 // Acceleration-structure builders on a CUDA device, with the per-stage
 // timing and peak device memory of each build (the public face is
-// rf::build_bvh and rf::build_accel with a CUDA BuildOptions::device). No
-// CUDA header is needed to include this.
+// rf::build_bvh and rf::build_accel with a CUDA BuildOptions::device). The
+// BVH builders are reached through build_bvh_on_device, as the CPU's through
+// build_bvh_on_cpu; each one alone (device_bvh_builders.h) takes what its
+// CPU counterpart takes. No CUDA header is needed to include this.
 #pragma once
 
 #include <cstddef>
@@ -54,7 +56,7 @@ struct DeviceBuildStages {
     double proximity_ms = 0.0;    // proximity-cloud distance transform
 
     // Any builder:
-    double optimize_ms = 0.0;     // host: reinsertion optimizer (options.optimize) after a device build
+    double optimize_ms = 0.0;     // host: reinsertion optimizer (options.reinsertion) after a device build
     double layout_ms = 0.0;       // device layout conversion (node pairs, CWBVH) when a tracer asked for one
     bool on_device = false;       // false: this structure was built on the host (no device builder, or asked so)
 
@@ -74,43 +76,13 @@ BuildReport describe_device_build(const DeviceBuildStages& stages, const Device&
 // ploc, gridbvh, gridbvh-split.
 bool has_device_builder(Builder builder);
 
-// The BVH of options.builder built on device `device` (then the host's
-// reinsertion optimizer when options.optimize is set): the same BVH as
-// rf::build_bvh. Throws rf::Error for a builder without a device version.
+// The BVH of options.builder built on device `device` with its options
+// group (then the host's reinsertion optimizer when
+// options.reinsertion.enabled is set), the host's share on at most
+// options.threads threads: the same BVH as rf::build_bvh. Throws rf::Error
+// for a builder without a device version.
 Bvh build_bvh_on_device(std::span<const Triangle> triangles, const BuildOptions& options,
                         DeviceBuildStages* stages = nullptr, int device = 0);
-
-// LBVH (Karras 2012) on device `device`: the same BVH as rf::build_lbvh with
-// the same options and Morton bits (30 or 63): same nodes, same primitive
-// order. The device computes boxes, codes, the sort, the radix tree and its
-// boxes, then collapses leaves by the SAH and writes the canonical layout
-// (the host does the last two when the tree is deeper than kBvhMaxDepth).
-// Throws rf::Error for invalid bits or CUDA failures (out of memory names the buffer).
-Bvh build_lbvh_on_device(std::span<const Triangle> triangles, const BuildOptions& options, int morton_bits,
-                         DeviceBuildStages* stages = nullptr, int device = 0);
-
-// HLBVH2 (Garanzha, Pantaleoni and McAllister 2011; Garanzha 2014 ch. 5) on
-// device `device`: the same BVH as rf::build_hlbvh2 with the same options.
-// The device sorts 30-bit codes once, compacts the 15-bit clusters, builds
-// the bottom levels by work queues and the top level over the clusters by
-// task queues (the grid SAH of ch. 4 on the top grid, 8 threads per task),
-// with the boxes of every level, then the leaf collapse and the canonical
-// layout (the host does those when the tree is deeper than kBvhMaxDepth,
-// and checks the forest then). 0 and 1 triangles are handled on the host. Throws
-// rf::Error for CUDA failures (out of memory names the buffer).
-Bvh build_hlbvh2_on_device(std::span<const Triangle> triangles, const BuildOptions& options,
-                           DeviceBuildStages* stages = nullptr, int device = 0);
-
-// PLOC (Meister and Bittner 2018) on device `device`: the same BVH as
-// rf::build_ploc with the same options (radius options.ploc_radius).
-Bvh build_ploc_on_device(std::span<const Triangle> triangles, const BuildOptions& options,
-                         DeviceBuildStages* stages = nullptr, int device = 0);
-
-// GridBvh, or GridBvhSplit with `partial_triangles` (Garanzha 2014 ch. 4), on
-// device `device`: the same BVH as rf::build_grid_bvh with the same options;
-// GridBvhSplit adds at most floor(options.split_budget * triangles) references.
-Bvh build_grid_bvh_on_device(std::span<const Triangle> triangles, const BuildOptions& options,
-                             bool partial_triangles, DeviceBuildStages* stages = nullptr, int device = 0);
 
 }  // namespace rf::cuda
 

@@ -237,17 +237,17 @@ Placed place_bvh(DeviceTracer::Impl& impl, std::span<const Triangle> triangles, 
 
 // The SAH kd-tree, built on the CPU (it has no device builder).
 Placed place_kdtree(DeviceTracer::Impl& impl, std::span<const Triangle> triangles, const BuildOptions& build) {
-    const KdTree tree = build_kdtree(triangles, build);
+    const KdTree tree = build_kdtree(triangles, build.sah, build.binned, build.kdtree);
     const Triangle* device_triangles = upload_triangles(impl, triangles);
     impl.kd_nodes.upload(tree.nodes);
     impl.prim_indices.upload(tree.prim_indices);
     const KdTreeView kd{impl.kd_nodes.data(), impl.prim_indices.data(), device_triangles, uint32_t(tree.nodes.size()),
-                        tree.bounds, build.kd_short_stack_size};
+                        tree.bounds, build.kdtree.short_stack_size};
     impl.kd_short_stack.tree = kd;
     impl.kd_restart.tree = kd;
     impl.stats.node_count = tree.nodes.size();
     impl.stats.leaf_count = tree.leaf_count();
-    impl.stats.sah_cost = tree.sah_cost(build.traversal_cost, build.intersection_cost);
+    impl.stats.sah_cost = tree.sah_cost(build.sah.traversal, build.sah.intersection);
     return {tree.memory_bytes(), 0.0};
 }
 
@@ -256,8 +256,8 @@ Placed place_grid(DeviceTracer::Impl& impl, std::span<const Triangle> triangles,
     const bool proximity = impl.kernel == GpuKernel::ProximityGrid;
     const UniformGrid grid =
         build.build_on_device
-            ? build_uniform_grid_on_device(triangles, build.grid_resolution, proximity, &impl.build_stages, impl.device)
-            : build_uniform_grid(triangles, build.grid_resolution, proximity);
+            ? build_uniform_grid_on_device(triangles, build.grid.resolution, proximity, &impl.build_stages, impl.device)
+            : build_uniform_grid(triangles, build.grid.resolution, proximity);
     impl.build_stages.on_device = build.build_on_device;
     const Triangle* device_triangles = upload_triangles(impl, triangles);
     impl.cell_start.upload(grid.cell_start);

@@ -72,6 +72,7 @@
 #include "backend/cuda/cub_run.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/device_builders.h"
+#include "backend/cuda/device_bvh_builders.h"
 #include "backend/cuda/launch.h"
 #include "rayforge/core/error.h"
 
@@ -491,12 +492,12 @@ bool split_pass(GridBvhOnDevice& g, float max_width, uint64_t available, BuildCo
 // Stage 1, timed as partial_triangles_ms: the references, the frame and,
 // for GridBvhSplit, at most two splitting passes within
 // floor(split_budget n) added references.
-void make_references(GridBvhOnDevice& g, const BuildOptions& options, bool partial_triangles, BuildContext& build,
+void make_references(GridBvhOnDevice& g, const GridBvhOptions& grid_bvh, bool partial_triangles, BuildContext& build,
                      DeviceBuffer<uint8_t>& scratch) {
     triangle_references(g, build, scratch);
     const float scene_extent = std::max(g.frame.extent.x, std::max(g.frame.extent.y, g.frame.extent.z));
     const float max_width = scene_extent / 128.0f;  // formula 4.1, sceneDividePortion = 1/128
-    const float budget = options.split_budget;
+    const float budget = grid_bvh.split_budget;
     if (partial_triangles && max_width > 0.0f && budget > 0.0f) {
         const uint64_t budget_slots = uint64_t(std::floor(double(budget) * double(g.n)));
         uint64_t used = 0;
@@ -820,20 +821,20 @@ void emit_bvh(const Hierarchy& h, const LeafGroups& groups, const FinishedLeaves
 // The device pipeline for n >= 1 triangles: returns true with the BVH in
 // `bvh` when the device emitted it, false with `hierarchy` filled for the
 // host emission when a leaf was too large for one thread.
-bool build_on_device(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles,
-                     DeviceBuildStages& stages, GridHierarchy& hierarchy, Bvh& bvh) {
+bool build_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config, const GridBvhOptions& grid_bvh,
+                     bool partial_triangles, DeviceBuildStages& stages, GridHierarchy& hierarchy, Bvh& bvh) {
     BuildContext build(stages);
     DeviceBuffer<uint8_t> scratch(build.meter, "GridBvh: CUB temporary storage");  // grows; CUB's, every stage's
     GridBvhOnDevice g;
     g.n = static_cast<uint32_t>(triangles.size());
-    g.leaf_size = static_cast<uint32_t>(std::max(1, options.max_leaf_size));
+    g.leaf_size = static_cast<uint32_t>(std::max(1, config.max_leaf_size));
     g.triangles = DeviceBuffer<Triangle>(build.meter, "GridBvh: triangles", g.n);
     build.timer.start();
     g.triangles.upload(triangles);
     stages.upload_ms = build.timer.stop_ms();
 
     // 1. References, the scene box, partial triangles.
-    make_references(g, options, partial_triangles, build, scratch);
+    make_references(g, grid_bvh, partial_triangles, build, scratch);
     // 2-5. The sparse grid, spent by the hierarchy over it.
     Hierarchy h = emit_hierarchy(build_sparse_grid(g, build, scratch), g, build);
     // 6. Leaf gathering.
@@ -844,7 +845,7 @@ bool build_on_device(std::span<const Triangle> triangles, const BuildOptions& op
     }
     // 7. Leaf finishing; the regions were for the descent (and the host's emission).
     h.regions.release();
-    const FinishOptions finish{g.leaf_size, options.traversal_cost, options.intersection_cost};
+    const FinishOptions finish{g.leaf_size, config.sah.traversal, config.sah.intersection};
     const FinishedLeaves finished = finish_leaves(std::move(g.refs), std::move(groups.refs), std::move(h.leaves),
                                                   groups.begin, g.ref_count, h.leaf_count, finish, build);
     // 8. Emission.
@@ -854,22 +855,23 @@ bool build_on_device(std::span<const Triangle> triangles, const BuildOptions& op
 
 }  // namespace
 
-Bvh build_grid_bvh_on_device(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles,
-                             DeviceBuildStages* stages, int device) {
+Bvh build_grid_bvh_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config,
+                             const GridBvhOptions& grid_bvh, bool partial_triangles, DeviceBuildStages* stages,
+                             int device) {
     DeviceBuildStages local;
     DeviceBuildStages& s = stages ? *stages : local;
     s = {};
-    if (triangles.empty()) return build_grid_bvh(triangles, options, partial_triangles);  // nothing to build
+    if (triangles.empty()) return build_grid_bvh(triangles, config, grid_bvh, partial_triangles);  // nothing to build
     if (triangles.size() >= (size_t{1} << 30))  // node and leaf links keep their top bit as the leaf flag
         throw Error("GridBvh device build: 2^30 triangles or more");
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
     GridHierarchy hierarchy;
     Bvh bvh;
-    s.emitted_on_device = build_on_device(triangles, options, partial_triangles, s, hierarchy, bvh);
+    s.emitted_on_device = build_on_device(triangles, config, grid_bvh, partial_triangles, s, hierarchy, bvh);
     if (s.emitted_on_device) return bvh;
     GridBvhStages host;
-    bvh = emit_grid_bvh_hierarchy(triangles, options, partial_triangles, std::move(hierarchy), &host);
+    bvh = emit_grid_bvh_hierarchy(triangles, config, partial_triangles, std::move(hierarchy), &host);
     s.leaf_finish_ms += host.leaf_finish_ms;  // device gathering + (host) merging and splitting of leaves
     s.emit_ms = host.emission_ms;            // (host): boxes bottom-up and the canonical layout
     return bvh;

@@ -46,6 +46,7 @@
 #include "backend/cuda/build_context.h"
 #include "backend/cuda/cub_run.h"
 #include "backend/cuda/device_buffer.h"
+#include "backend/cuda/device_bvh_builders.h"
 #include "backend/cuda/hlbvh2_build.h"
 #include "backend/cuda/hlbvh2_top_level.h"
 #include "backend/cuda/launch.h"
@@ -263,7 +264,7 @@ DeviceTopLevel build_top_level(const ForestOnDevice& f, const Clusters& found, c
 }
 
 // Stage 6: the emission on the device, of the tree alone.
-bool emit_on_device(const ForestOnDevice& f, uint32_t root, const BuildOptions& options, BuildContext& build,
+bool emit_on_device(const ForestOnDevice& f, uint32_t root, const BvhBuildConfig& config, BuildContext& build,
                     Bvh& bvh) {
     DeviceRawTree tree;
     tree.children = f.refs.data();
@@ -277,7 +278,7 @@ bool emit_on_device(const ForestOnDevice& f, uint32_t root, const BuildOptions& 
     tree.order = f.sorted.order.data();
     tree.leaf_runs = f.leaf_runs.data();
     tree.sparse_slots = true;  // leaf runs leave most split positions without a node
-    return emit_raw_tree_on_device(tree, options, "HLBVH2", build, bvh);
+    return emit_raw_tree_on_device(tree, config, "HLBVH2", build, bvh);
 }
 
 // The raw tree for the host's refit and emission, timed into download_ms:
@@ -305,11 +306,11 @@ void download_forest(const ForestOnDevice& f, const Clusters* found, const Fores
 }
 
 // The device pipeline for n >= 2 triangles. `raw`: the raw forest comes
-// back whole. Otherwise, with `options`, the device emits the BVH into `bvh`
+// back whole. Otherwise, with `config`, the device emits the BVH into `bvh`
 // and returns true; false when it could not (too deep, or one leaf), and
 // then the forest came back in `out`.
 bool build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, DeviceBuildStages& stages,
-                  DeviceHlbvh2Forest& out, bool raw, const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
+                  DeviceHlbvh2Forest& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
     BuildContext build(stages);
     ForestOnDevice f;
     f.n = static_cast<uint32_t>(triangles.size());
@@ -335,20 +336,20 @@ bool build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
         out.forest.cluster_prefix = download_all(found.prefix, f.clusters);
     }
     // 6. Emission on the device.
-    if (emit_on_device(f, root, *options, build, *bvh)) return true;
+    if (emit_on_device(f, root, *config, build, *bvh)) return true;
     download_forest(f, nullptr, nullptr, build, out);
     return false;
 }
 
-// Returns true when the device emitted the BVH into *bvh (options and bvh given).
+// Returns true when the device emitted the BVH into *bvh (config and bvh given).
 bool build_raw(std::span<const Triangle> triangles, uint32_t leaf_size, DeviceBuildStages& stages, int device,
-               DeviceHlbvh2Forest& out, bool raw, const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
+               DeviceHlbvh2Forest& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
     if (triangles.size() >= hlbvh2::kLeafRef / 2) throw Error("HLBVH2 device build: more than 2^30-1 triangles");
     if (leaf_size < 1 || leaf_size > 255) throw Error("HLBVH2 device build: leaf size must be in [1, 255]");
     if (triangles.size() < 2) return false;  // no inner nodes: the host does it
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
-    return build_forest(triangles, leaf_size, stages, out, raw, options, bvh);
+    return build_forest(triangles, leaf_size, stages, out, raw, config, bvh);
 }
 
 }  // namespace
@@ -361,21 +362,21 @@ DeviceHlbvh2Forest build_hlbvh2_forest_on_device(std::span<const Triangle> trian
     return forest;
 }
 
-Bvh build_hlbvh2_on_device(std::span<const Triangle> triangles, const BuildOptions& options,
+Bvh build_hlbvh2_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config,
                            DeviceBuildStages* stages, int device) {
     DeviceBuildStages local;
     DeviceBuildStages& s = stages ? *stages : local;
     s = {};
-    if (triangles.size() < 2) return build_hlbvh2(triangles, options);  // 0 or 1 triangles: nothing to queue
+    if (triangles.size() < 2) return build_hlbvh2(triangles, config);  // 0 or 1 triangles: nothing to queue
     DeviceHlbvh2Forest raw;
     Bvh bvh;
-    if (build_raw(triangles, static_cast<uint32_t>(std::max(options.max_leaf_size, 1)), s, device, raw, false,
-                  &options, &bvh)) {
+    if (build_raw(triangles, static_cast<uint32_t>(std::max(config.max_leaf_size, 1)), s, device, raw, false,
+                  &config, &bvh)) {
         s.emitted_on_device = true;
         return bvh;
     }
     Hlbvh2Stages host;
-    bvh = emit_hlbvh2_forest(triangles, options, std::move(raw.forest), &host);
+    bvh = emit_hlbvh2_forest(triangles, config, std::move(raw.forest), &host);
     s.emit_ms = host.top_ms + host.emit_ms;  // the host checks and finalizes the device's top level
     return bvh;
 }

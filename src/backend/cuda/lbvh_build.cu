@@ -34,6 +34,7 @@
 #include "backend/backends.h"
 #include "backend/cuda/build_context.h"
 #include "backend/cuda/device_buffer.h"
+#include "backend/cuda/device_bvh_builders.h"
 #include "backend/cuda/launch.h"
 #include "backend/cuda/lbvh_build.h"
 #include "backend/cuda/morton_sort.h"
@@ -110,7 +111,7 @@ void refit_and_download(const DeviceMortonOrder<Key>& sorted, const KarrasLinks&
 // back in `out` for the host.
 template <class Key>
 bool emit_on_device(const DeviceMortonOrder<Key>& sorted, const KarrasLinks& links, uint32_t n,
-                    const BuildOptions& options, BuildContext& build, DeviceKarrasTree& out, Bvh& bvh) {
+                    const BvhBuildConfig& config, BuildContext& build, DeviceKarrasTree& out, Bvh& bvh) {
     DeviceRawTree tree;
     tree.children = links.children.data();
     tree.node_slots = n - 1;
@@ -121,7 +122,7 @@ bool emit_on_device(const DeviceMortonOrder<Key>& sorted, const KarrasLinks& lin
     tree.order = sorted.order.data();
     tree.node_parent = links.inner_parent.data();
     tree.leaf_parent = links.leaf_parent.data();
-    const bool emitted = emit_raw_tree_on_device(tree, options, "LBVH", build, bvh);
+    const bool emitted = emit_raw_tree_on_device(tree, config, "LBVH", build, bvh);
     if (!emitted) {
         build.timer.start();
         out.order = download_all(sorted.order, n);
@@ -133,12 +134,12 @@ bool emit_on_device(const DeviceMortonOrder<Key>& sorted, const KarrasLinks& lin
 }
 
 // The device pipeline for n >= 2 triangles. `raw`: every array of the tree
-// comes back in `out`. Otherwise, with `options`, the device emits the BVH
+// comes back in `out`. Otherwise, with `config`, the device emits the BVH
 // into `bvh` and returns true; false when the tree was too deep, and then
 // only the order and the children came back in `out`.
 template <class Key>
 bool build_on_device(std::span<const Triangle> triangles, DeviceBuildStages& stages, DeviceKarrasTree& out, bool raw,
-                     const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
+                     const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
     BuildContext build(stages);
     // 1-3. Boxes, centroid bounds, Morton codes, the sort (morton_sort.cu).
@@ -149,7 +150,7 @@ bool build_on_device(std::span<const Triangle> triangles, DeviceBuildStages& sta
         refit_and_download(sorted, links, n, build, out);
         return false;
     }
-    return emit_on_device(sorted, links, n, *options, build, out, *bvh);
+    return emit_on_device(sorted, links, n, *config, build, out, *bvh);
 }
 
 void check_input(std::span<const Triangle> triangles, int morton_bits) {
@@ -159,9 +160,9 @@ void check_input(std::span<const Triangle> triangles, int morton_bits) {
     if (triangles.size() >= karras::kLeafRef) throw Error("Morton BVH build: more than 2^31-1 triangles");
 }
 
-// Returns true when the device emitted the BVH into *bvh (options and bvh given).
+// Returns true when the device emitted the BVH into *bvh (config and bvh given).
 bool build_raw(std::span<const Triangle> triangles, int morton_bits, DeviceBuildStages& stages, int device,
-               DeviceKarrasTree& out, bool raw, const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
+               DeviceKarrasTree& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
     check_input(triangles, morton_bits);
     const size_t n = triangles.size();
     if (n < 2) {  // no inner nodes: nothing for the device to do
@@ -170,8 +171,8 @@ bool build_raw(std::span<const Triangle> triangles, int morton_bits, DeviceBuild
     }
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
-    if (morton_bits == 30) return build_on_device<uint32_t>(triangles, stages, out, raw, options, bvh);
-    return build_on_device<uint64_t>(triangles, stages, out, raw, options, bvh);
+    if (morton_bits == 30) return build_on_device<uint32_t>(triangles, stages, out, raw, config, bvh);
+    return build_on_device<uint64_t>(triangles, stages, out, raw, config, bvh);
 }
 
 }  // namespace
@@ -184,19 +185,19 @@ DeviceKarrasTree build_karras_tree_on_device(std::span<const Triangle> triangles
     return tree;
 }
 
-Bvh build_lbvh_on_device(std::span<const Triangle> triangles, const BuildOptions& options, int morton_bits,
+Bvh build_lbvh_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config, int morton_bits,
                          DeviceBuildStages* stages, int device) {
     DeviceBuildStages local;
     DeviceBuildStages& s = stages ? *stages : local;
     s = {};
     DeviceKarrasTree tree;
     Bvh bvh;
-    if (build_raw(triangles, morton_bits, s, device, tree, false, &options, &bvh)) {
+    if (build_raw(triangles, morton_bits, s, device, tree, false, &config, &bvh)) {
         s.emitted_on_device = true;
         return bvh;
     }
     const auto start = std::chrono::steady_clock::now();
-    bvh = emit_karras_tree(triangles, options, std::move(tree.order), tree.children);
+    bvh = emit_karras_tree(triangles, config, std::move(tree.order), tree.children);
     s.emit_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return bvh;
 }

@@ -44,6 +44,7 @@
 #include "backend/cuda/build_context.h"
 #include "backend/cuda/cub_run.h"
 #include "backend/cuda/device_buffer.h"
+#include "backend/cuda/device_bvh_builders.h"
 #include "backend/cuda/launch.h"
 #include "backend/cuda/morton_sort.h"
 #include "backend/cuda/ploc_build.h"
@@ -228,11 +229,11 @@ PlocNodes cluster(DeviceMortonOrder<uint64_t>& sorted, uint32_t n, uint32_t radi
 }
 
 // The device pipeline for n >= 2 triangles. `raw`: the node boxes are kept
-// and the raw tree comes back. Otherwise, with `options`, the device emits
+// and the raw tree comes back. Otherwise, with `config`, the device emits
 // the BVH into `bvh` and returns true; false when the tree was too deep, and
 // then the raw tree came back in `out`.
 bool build_on_device(std::span<const Triangle> triangles, uint32_t radius, DeviceBuildStages& stages,
-                     DevicePlocTree& out, bool raw, const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
+                     DevicePlocTree& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
     BuildContext build(stages);
     // 1. Boxes, centroid bounds, 63-bit Morton codes, the sort (morton_sort.cu).
@@ -251,7 +252,7 @@ bool build_on_device(std::span<const Triangle> triangles, uint32_t radius, Devic
         tree.boxes = sorted.boxes.data();
         tree.boxes_by_triangle = true;
         tree.order = sorted.order.data();
-        if (emit_raw_tree_on_device(tree, *options, "PLOC", build, *bvh)) return true;
+        if (emit_raw_tree_on_device(tree, *config, "PLOC", build, *bvh)) return true;
     }
 
     // The clustering back to the host.
@@ -263,9 +264,9 @@ bool build_on_device(std::span<const Triangle> triangles, uint32_t radius, Devic
     return false;
 }
 
-// Returns true when the device emitted the BVH into *bvh (options and bvh given).
+// Returns true when the device emitted the BVH into *bvh (config and bvh given).
 bool build_raw(std::span<const Triangle> triangles, int radius, DeviceBuildStages& stages, int device,
-               DevicePlocTree& out, bool raw, const BuildOptions* options = nullptr, Bvh* bvh = nullptr) {
+               DevicePlocTree& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
     if (triangles.size() >= ploc::kLeafRef) throw Error("PLOC on the device: more than 2^31-1 triangles");
     const size_t n = triangles.size();
     if (n < 2) {  // no merges: nothing for the device to do
@@ -274,7 +275,7 @@ bool build_raw(std::span<const Triangle> triangles, int radius, DeviceBuildStage
     }
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
-    return build_on_device(triangles, ploc::clamp_radius(radius), stages, out, raw, options, bvh);
+    return build_on_device(triangles, ploc::clamp_radius(radius), stages, out, raw, config, bvh);
 }
 
 }  // namespace
@@ -287,19 +288,19 @@ DevicePlocTree build_ploc_tree_on_device(std::span<const Triangle> triangles, in
     return tree;
 }
 
-Bvh build_ploc_on_device(std::span<const Triangle> triangles, const BuildOptions& options, DeviceBuildStages* stages,
-                         int device) {
+Bvh build_ploc_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config,
+                         const PlocOptions& ploc_options, DeviceBuildStages* stages, int device) {
     DeviceBuildStages local;
     DeviceBuildStages& s = stages ? *stages : local;
     s = {};
     DevicePlocTree tree;
     Bvh bvh;
-    if (build_raw(triangles, options.ploc_radius, s, device, tree, false, &options, &bvh)) {
+    if (build_raw(triangles, ploc_options.radius, s, device, tree, false, &config, &bvh)) {
         s.emitted_on_device = true;
         return bvh;
     }
     const auto start = std::chrono::steady_clock::now();
-    bvh = emit_ploc_tree(triangles, options, std::move(tree.order), tree.children, tree.iteration_nodes);
+    bvh = emit_ploc_tree(triangles, config, std::move(tree.order), tree.children, tree.iteration_nodes);
     s.emit_ms = elapsed_ms(start);
     return bvh;
 }

@@ -21,7 +21,7 @@ struct DevicePlocTree {
     std::vector<Box3f> node_boxes;          // n - 1, as the merges wrote them
 };
 
-// radius: clamped to 1 .. 2^16 like BuildOptions::ploc_radius.
+// radius: clamped to 1 .. 2^16 like PlocOptions::radius.
 DevicePlocTree build_ploc_tree_on_device(std::span<const Triangle> triangles, int radius,
                                          DeviceBuildStages* stages = nullptr, int device = 0);
 

@@ -54,7 +54,7 @@ __global__ void emit_level_kernel(raw_emit::RawTreeView tree, const raw_emit::Em
 }
 
 // The steps' view of `tree`; the emission's own arrays are set by its stages.
-raw_emit::RawTreeView raw_tree_view(const DeviceRawTree& tree, const BuildOptions& options) {
+raw_emit::RawTreeView raw_tree_view(const DeviceRawTree& tree, const BvhBuildConfig& config) {
     raw_emit::RawTreeView view{};
     view.children = tree.children;
     view.high_children = tree.high_children;
@@ -66,8 +66,8 @@ raw_emit::RawTreeView raw_tree_view(const DeviceRawTree& tree, const BuildOption
     view.boxes_by_triangle = tree.boxes_by_triangle;
     view.order = tree.order;
     view.leaf_runs = tree.leaf_runs;
-    view.costs = {options.traversal_cost, options.intersection_cost,
-                  static_cast<uint32_t>(std::clamp(options.max_leaf_size, 1, 255))};
+    view.costs = {config.sah.traversal, config.sah.intersection,
+                  static_cast<uint32_t>(std::clamp(config.max_leaf_size, 1, 255))};
     // Read only by the emitter; the view's pointers are shared with the
     // builder's arrays (null: the emitter scatters its own).
     view.node_parent = const_cast<uint32_t*>(tree.node_parent);
@@ -186,9 +186,9 @@ void emit_levels(const raw_emit::RawTreeView& view, const raw_emit::NodeInfo& ro
 
 }  // namespace
 
-bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& options, const std::string& label,
+bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BvhBuildConfig& config, const std::string& label,
                              BuildContext& build, Bvh& out) {
-    raw_emit::RawTreeView view = raw_tree_view(tree, options);
+    raw_emit::RawTreeView view = raw_tree_view(tree, config);
     const bool own_parents = tree.node_parent == nullptr;
     DeviceBuffer<uint32_t> node_parent(build.meter, label + ": emission node parents",
                                        own_parents ? tree.node_slots : 0);

@@ -8,9 +8,9 @@
 #include <cstdint>
 #include <string>
 
+#include "accel/bvh/builders/bvh_build_config.h"
 #include "backend/cuda/build_context.h"
 #include "backend/cuda/device_builders.h"
-#include "rayforge/accel/accel.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/math/box.h"
 
@@ -45,7 +45,7 @@ struct DeviceRawTree {
 // rebuild this emitter does not do. Adds the device time to
 // build.stages.device_emit_ms and the download to download_ms; its buffers
 // (named after `label`) are counted by build.meter and freed on return.
-bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BuildOptions& options, const std::string& label,
+bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BvhBuildConfig& config, const std::string& label,
                              BuildContext& build, Bvh& out);
 
 }  // namespace rf::cuda

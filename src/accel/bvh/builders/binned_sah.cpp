@@ -4,15 +4,21 @@
 // Top-down: each node's primitive centroids are counted into `bin_count` bins
 // per axis, a sweep over the bins evaluates the SAH for every bin boundary on
 // all three axes, and the primitive references are partitioned in place.
+// From the top-down skeleton (top_down_sah.h) it takes the recursion, the
+// leaf decision and its fallbacks (the object median where no bin boundary
+// splits or the depth limit is near), the node allocation, subtree tasks and
+// the depth-first copy; this file finds the split and partitions.
 //
 // Data layout: every primitive's box is computed once into a 32-byte,
 // 32-byte aligned record (lo, triangle index, hi, padding), so binning and
-// partitioning load it as two float4 and grow boxes with SSE min/max. A
-// node's bins are swept over the non-empty bins only (a boundary inside a run
-// of empty bins costs the same as the first one, which is the one chosen),
-// found from a bit mask. Scratch arrays are left uninitialised, and large
-// ones are asked for transparent huge pages, as their page faults otherwise
-// cost about as much as writing them.
+// partitioning load it as two float4 and grow boxes with SIMD min/max
+// (backend/cpu/simd.h). A node's bins are swept over the non-empty bins only
+// (a boundary inside a run of empty bins costs the same as the first one,
+// which is the one chosen), found from a bit mask. Scratch arrays are left
+// uninitialised, and large ones are asked for transparent huge pages, as
+// their page faults otherwise cost about as much as writing them. Leaves
+// name ranges of the partitioned records, which are already in depth-first
+// order.
 //
 // Most nodes are small, so their fixed costs matter: a node of two
 // primitives needs no bins at all, up to 16 primitives only the bins in use
@@ -23,126 +29,52 @@
 // plain algorithm.
 //
 // Parallelism (TBB, through backend/cpu/parallel.h): large nodes bin their
-// primitives in parallel, and subtrees above a size threshold are built as
-// separate tasks. Tasks allocate child pairs from a shared counter, so the
-// first pass lays nodes out in whatever order tasks ran; a second pass copies
-// the tree into depth-first order (a node's children pair, then the left
-// subtree, then the right). Every decision depends only on the primitives of
-// a node, and parallel binning only merges counts and min/max bounds, so the
+// primitives in parallel; the skeleton builds subtrees above a size
+// threshold as separate tasks and copies the task-ordered tree into
+// depth-first order. Every decision depends only on the primitives of a
+// node, and parallel binning only merges counts and min/max bounds, so the
 // output is identical for every thread count.
 #include "accel/bvh/builders/binned_sah.h"
 
 #include <algorithm>
-#include <atomic>
 #include <bit>
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
 #include <memory>
 #include <type_traits>
-#include <vector>
 
-#if defined(__SSE2__) || defined(_M_X64)
-#include <immintrin.h>
-#define RF_BINNED_SSE 1
-#endif
-
-#include "core/huge_pages.h"
+#include "accel/bvh/builders/sweep_common.h"
+#include "accel/bvh/builders/top_down_sah.h"
 #include "backend/cpu/parallel.h"
+#include "backend/cpu/simd.h"
 #include "rayforge/core/memory_budget.h"
-
 
 namespace rf {
 namespace {
+
+using Float4 = simd::vfloat<4>;  // loads and stores 16-byte aligned
+using simd::add;
+using simd::load;
+using simd::mul;
+using simd::set1;
+using simd::std_max;
+using simd::std_min;
+using simd::store;
+using simd::sub;
+using simd::xyz0;
 
 constexpr int kMaxBins = 256;
 constexpr uint32_t kSmallNodeSize = 16;               // prims per node to initialise only the bins in use
 constexpr uint32_t kSmallPartitionSize = 64;          // prims per node to partition by bit mask (at most 64)
 constexpr uint32_t kTwoSetBinningSize = 256;          // prims per range to bin into two sets
 constexpr uint32_t kParallelBinningSize = 64 * 1024;  // prims per node to bin in parallel
-constexpr uint32_t kParallelSubtreeSize = 1024;       // prims per node to spawn child tasks
-constexpr uint32_t kParallelCopySize = 4096;          // nodes per subtree to copy in parallel
 constexpr uint32_t kGrainSize = 16 * 1024;
 
-// Four floats: SSE where available, else plain arrays with the same
-// semantics. min(a, b) and max(a, b) are std::min(a, b) and std::max(a, b)
-// lane by lane (b < a ? b : a and a < b ? b : a), so results match scalar
-// code bit for bit, signed zeros included.
-#if RF_BINNED_SSE
-struct F4 {
-    __m128 v;
-};
-inline F4 load4(const float* p) { return {_mm_load_ps(p)}; }  // 16-byte aligned
-inline void store4(float* p, F4 a) { _mm_store_ps(p, a.v); }
-inline F4 set4(float x, float y, float z, float w) { return {_mm_setr_ps(x, y, z, w)}; }
-inline F4 splat4(float x) { return {_mm_set1_ps(x)}; }
-inline F4 operator+(F4 a, F4 b) { return {_mm_add_ps(a.v, b.v)}; }
-inline F4 operator-(F4 a, F4 b) { return {_mm_sub_ps(a.v, b.v)}; }
-inline F4 operator*(F4 a, F4 b) { return {_mm_mul_ps(a.v, b.v)}; }
-inline F4 min4(F4 a, F4 b) { return {_mm_min_ps(b.v, a.v)}; }
-inline F4 max4(F4 a, F4 b) { return {_mm_max_ps(b.v, a.v)}; }
-// Lane 3 cleared: it may hold integer bits (denormals, which slow arithmetic down).
-inline F4 xyz0(F4 a) { return {_mm_and_ps(a.v, _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0)))}; }
-// Bin indices: x > 0 ? x : 0 (NaN to 0), then x < last ? x : last, truncated.
-inline void bin_indices(F4 x, F4 last, int32_t* out) {
-    x.v = _mm_max_ps(x.v, _mm_setzero_ps());
-    x.v = _mm_min_ps(x.v, last.v);
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm_cvttps_epi32(x.v));
-}
-// Bit i set where the bin index (as above) in lane i is below `bin`.
-inline int bins_below(F4 x, F4 last, int bin) {
-    x.v = _mm_max_ps(x.v, _mm_setzero_ps());
-    x.v = _mm_min_ps(x.v, last.v);
-    const __m128i below = _mm_cmplt_epi32(_mm_cvttps_epi32(x.v), _mm_set1_epi32(bin));
-    return _mm_movemask_ps(_mm_castsi128_ps(below));
-}
-#else
-struct F4 {
-    float v[4];
-};
-inline F4 load4(const float* p) { return {{p[0], p[1], p[2], p[3]}}; }
-inline void store4(float* p, F4 a) { for (int i = 0; i < 4; ++i) p[i] = a.v[i]; }
-inline F4 set4(float x, float y, float z, float w) { return {{x, y, z, w}}; }
-inline F4 splat4(float x) { return {{x, x, x, x}}; }
-#define RF_BINNED_OP(op)                                               \
-    inline F4 operator op(F4 a, F4 b) {                                \
-        F4 r;                                                          \
-        for (int i = 0; i < 4; ++i) r.v[i] = a.v[i] op b.v[i];         \
-        return r;                                                      \
-    }
-RF_BINNED_OP(+)
-RF_BINNED_OP(-)
-RF_BINNED_OP(*)
-#undef RF_BINNED_OP
-inline F4 min4(F4 a, F4 b) {
-    F4 r;
-    for (int i = 0; i < 4; ++i) r.v[i] = std::min(a.v[i], b.v[i]);
-    return r;
-}
-inline F4 max4(F4 a, F4 b) {
-    F4 r;
-    for (int i = 0; i < 4; ++i) r.v[i] = std::max(a.v[i], b.v[i]);
-    return r;
-}
-inline F4 xyz0(F4 a) { return {{a.v[0], a.v[1], a.v[2], 0.0f}}; }
-inline void bin_indices(F4 x, F4 last, int32_t* out) {
-    for (int i = 0; i < 4; ++i) {
-        float t = x.v[i] > 0.0f ? x.v[i] : 0.0f;
-        t = t < last.v[i] ? t : last.v[i];
-        out[i] = static_cast<int32_t>(t);
-    }
-}
-inline int bins_below(F4 x, F4 last, int bin) {
-    int32_t b[4];
-    bin_indices(x, last, b);
-    return (b[0] < bin ? 1 : 0) | (b[1] < bin ? 2 : 0) | (b[2] < bin ? 4 : 0) | (b[3] < bin ? 8 : 0);
-}
-#endif
-
-inline Box3f to_box(F4 lo, F4 hi) {
+inline Box3f to_box(Float4 lo, Float4 hi) {
     alignas(16) float l[4], h[4];
-    store4(l, lo);
-    store4(h, hi);
+    store<4>(l, lo);
+    store<4>(h, hi);
     return {{l[0], l[1], l[2]}, {h[0], h[1], h[2]}};
 }
 
@@ -154,48 +86,30 @@ struct alignas(32) PrimRef {
     uint32_t id;
     float hi[3];
     uint32_t unused;
-    [[nodiscard]] F4 lo4() const { return load4(lo); }  // lane 3 holds the id: no arithmetic on it
-    [[nodiscard]] F4 hi4() const { return load4(hi); }
-    [[nodiscard]] F4 centroid4() const { return (xyz0(lo4()) + xyz0(hi4())) * splat4(0.5f); }
+    [[nodiscard]] Float4 lo4() const { return load<4>(lo); }  // lane 3 holds the id: no arithmetic on it
+    [[nodiscard]] Float4 hi4() const { return load<4>(hi); }
+    [[nodiscard]] Float4 centroid4() const { return mul(add(xyz0(lo4()), xyz0(hi4())), set1<4>(0.5f)); }
 };
 static_assert(sizeof(PrimRef) == 32 && std::is_trivially_default_constructible_v<PrimRef>);
 
-// A node in allocation order; same layout as BvhNode, but plain data.
-struct ScratchNode {
-    float lo[3], hi[3];
-    uint32_t first, count;
-    [[nodiscard]] bool is_leaf() const { return count != 0; }
-    [[nodiscard]] BvhNode to_node() const { return {{{lo[0], lo[1], lo[2]}, {hi[0], hi[1], hi[2]}}, first, count}; }
-};
-static_assert(sizeof(ScratchNode) == 32 && std::is_trivially_default_constructible_v<ScratchNode>);
-
-// Uninitialised array of plain data (budget-checked), hinted for huge pages when large.
-template <class T>
-std::unique_ptr<T[]> scratch_array(size_t count, std::string_view what) {
-    checked_array_bytes(what, count, sizeof(T));
-    std::unique_ptr<T[]> a(new T[count]);
-    hint_huge_pages(a.get(), count * sizeof(T));
-    return a;
-}
-
 // Bounds of a set of primitives and of their centroids (lane 3 unused).
 struct RangeBounds {
-    F4 lo = splat4(FLT_MAX), hi = splat4(-FLT_MAX);
-    F4 clo = splat4(FLT_MAX), chi = splat4(-FLT_MAX);
+    Float4 lo = set1<4>(FLT_MAX), hi = set1<4>(-FLT_MAX);
+    Float4 clo = set1<4>(FLT_MAX), chi = set1<4>(-FLT_MAX);
     void add(const PrimRef& p) { add(p.lo4(), p.hi4()); }
     // A primitive by its bounds as loaded by PrimRef::lo4 and hi4.
-    void add(F4 l, F4 h) {
-        lo = min4(lo, l);
-        hi = max4(hi, h);
-        const F4 c = (xyz0(l) + xyz0(h)) * splat4(0.5f);  // PrimRef::centroid4
-        clo = min4(clo, c);
-        chi = max4(chi, c);
+    void add(Float4 l, Float4 h) {
+        lo = std_min(lo, l);
+        hi = std_max(hi, h);
+        const Float4 c = mul(simd::add(xyz0(l), xyz0(h)), set1<4>(0.5f));  // PrimRef::centroid4
+        clo = std_min(clo, c);
+        chi = std_max(chi, c);
     }
     void add(const RangeBounds& o) {
-        lo = min4(lo, o.lo);
-        hi = max4(hi, o.hi);
-        clo = min4(clo, o.clo);
-        chi = max4(chi, o.chi);
+        lo = std_min(lo, o.lo);
+        hi = std_max(hi, o.hi);
+        clo = std_min(clo, o.clo);
+        chi = std_max(chi, o.chi);
     }
     [[nodiscard]] Box3f bounds() const { return to_box(lo, hi); }
     [[nodiscard]] Box3f centroids() const { return to_box(clo, chi); }
@@ -203,9 +117,9 @@ struct RangeBounds {
 
 // Maps centroids to bins along each axis of a node's centroid bounds.
 struct BinMapping {
-    F4 origin;
-    F4 scale;  // bins per unit length; 0 on axes where all centroids coincide
-    F4 last;   // bin_count - 1
+    Float4 origin;
+    Float4 scale;  // bins per unit length; 0 on axes where all centroids coincide
+    Float4 last;   // bin_count - 1
     bool usable[3];
 
     BinMapping(const Box3f& centroids, int bins) {
@@ -217,20 +131,23 @@ struct BinMapping {
             s[axis] = (extent[axis] > 0.0f && std::isfinite(t)) ? t : 0.0f;
             usable[axis] = s[axis] > 0.0f;
         }
-        origin = set4(centroids.lo.x, centroids.lo.y, centroids.lo.z, 0.0f);
-        scale = set4(s[0], s[1], s[2], 0.0f);
-        last = splat4(static_cast<float>(bins - 1));
+        origin = simd::set(centroids.lo.x, centroids.lo.y, centroids.lo.z, 0.0f);
+        scale = simd::set(s[0], s[1], s[2], 0.0f);
+        last = set1<4>(static_cast<float>(bins - 1));
     }
-    // Bin of the centroid of p on each axis.
-    void indices(const PrimRef& p, int32_t* out) const {
-        const F4 c = p.centroid4();
-        bin_indices((c - origin) * scale, last, out);
+    // The bin of p's centroid on each axis, as a float: x > 0 ? x : 0 (NaN
+    // to 0), then x < last ? x : last, to be truncated.
+    [[nodiscard]] Float4 bin_positions(const PrimRef& p) const {
+        const Float4 x = mul(sub(p.centroid4(), origin), scale);
+        return simd::min(simd::max(x, set1<4>(0.0f)), last);
     }
-    // Whether the bin of p's centroid on `axis` is below `bin` (no round
-    // trip through memory, for partitioning).
-    [[nodiscard]] bool below(const PrimRef& p, int axis, int bin) const {
-        const F4 c = p.centroid4();
-        return ((bins_below((c - origin) * scale, last, bin) >> axis) & 1) != 0;
+    void indices(const PrimRef& p, int32_t* out) const { simd::store_truncated(out, bin_positions(p)); }
+    // Whether the bin of p's centroid on `axis` is below the bin `bin` (all
+    // lanes: its index as a float), without a round trip through memory, for
+    // partitioning: a position in [0, last] truncates to below an integer
+    // exactly where it is below it.
+    [[nodiscard]] bool below(const PrimRef& p, int axis, Float4 bin) const {
+        return ((simd::bits(simd::cmp_lt(bin_positions(p), bin)) >> axis) & 1u) != 0;
     }
 };
 
@@ -259,8 +176,8 @@ struct BinSet {
     void clear(int bin_count) {
         for (int axis = 0; axis < 3; ++axis) {
             for (int i = 0; i < bin_count; ++i) {
-                store4(lo(axis, i), splat4(FLT_MAX));
-                store4(hi(axis, i), splat4(-FLT_MAX));
+                store<4>(lo(axis, i), set1<4>(FLT_MAX));
+                store<4>(hi(axis, i), set1<4>(-FLT_MAX));
                 count(axis, i) = 0;
             }
         }
@@ -271,11 +188,11 @@ struct BinSet {
         add(bin, p);
     }
     void add(const int32_t* bin, const PrimRef& p) {
-        const F4 l = p.lo4(), h = p.hi4();
+        const Float4 l = p.lo4(), h = p.hi4();
         for (int axis = 0; axis < 3; ++axis) {
             const int b = bin[axis];
-            store4(lo(axis, b), min4(load4(lo(axis, b)), l));
-            store4(hi(axis, b), max4(load4(hi(axis, b)), h));
+            store<4>(lo(axis, b), std_min(load<4>(lo(axis, b)), l));
+            store<4>(hi(axis, b), std_max(load<4>(hi(axis, b)), h));
             ++count(axis, b);
         }
     }
@@ -290,11 +207,11 @@ struct BinSet {
         }
         for (uint32_t k = 0; k < n; ++k) {
             map.indices(prims[k], bins[k]);
-            const F4 l = prims[k].lo4(), h = prims[k].hi4();
+            const Float4 l = prims[k].lo4(), h = prims[k].hi4();
             for (int axis = 0; axis < 3; ++axis) {
                 const int b = bins[k][axis];
-                store4(lo(axis, b), l);
-                store4(hi(axis, b), h);
+                store<4>(lo(axis, b), l);
+                store<4>(hi(axis, b), h);
                 count(axis, b) = 0;
                 used[axis][b / 64] |= uint64_t{1} << (b % 64);
             }
@@ -323,8 +240,8 @@ struct BinSet {
     void merge(const BinSet& o, int bin_count) {
         for (int axis = 0; axis < 3; ++axis) {
             for (int i = 0; i < bin_count; ++i) {
-                store4(lo(axis, i), min4(load4(lo(axis, i)), load4(o.lo(axis, i))));
-                store4(hi(axis, i), max4(load4(hi(axis, i)), load4(o.hi(axis, i))));
+                store<4>(lo(axis, i), std_min(load<4>(lo(axis, i)), load<4>(o.lo(axis, i))));
+                store<4>(hi(axis, i), std_max(load<4>(hi(axis, i)), load<4>(o.hi(axis, i))));
                 count(axis, i) += o.count(axis, i);
             }
         }
@@ -334,15 +251,10 @@ static_assert(kMaxBins % 64 == 0);
 
 // Box3f::surface_area of a non-empty box, 2 * (x * y + y * z + z * x) in
 // the same order of operations, so the result is the same bit for bit.
-inline float surface_area(F4 lo, F4 hi) {
-#if RF_BINNED_SSE
-    const __m128 e = _mm_sub_ps(xyz0(hi).v, xyz0(lo).v);
-    const __m128 p = _mm_mul_ps(e, _mm_shuffle_ps(e, e, _MM_SHUFFLE(3, 0, 2, 1)));  // xy, yz, zx
-    const __m128 s = _mm_add_ss(p, _mm_shuffle_ps(p, p, _MM_SHUFFLE(3, 2, 1, 1)));
-    return 2.0f * _mm_cvtss_f32(_mm_add_ss(s, _mm_movehl_ps(p, p)));
-#else
-    return to_box(lo, hi).surface_area();
-#endif
+inline float surface_area(Float4 lo, Float4 hi) {
+    const Float4 e = sub(xyz0(hi), xyz0(lo));
+    const Float4 p = mul(e, simd::shuffle<1, 2, 0, 3>(e));  // xy, yz, zx
+    return 2.0f * ((simd::lane<0>(p) + simd::lane<1>(p)) + simd::lane<2>(p));
 }
 
 // A split plane: primitives whose centroid bin on `axis` is below `bin` go left.
@@ -354,55 +266,43 @@ struct Split {
     [[nodiscard]] bool valid() const { return axis >= 0; }
 };
 
-// Levels of halving needed until `count` primitives fit in leaves of `leaf_size`.
-int median_levels(uint32_t count, uint32_t leaf_size) {
-    const uint32_t leaves = (count + leaf_size - 1) / leaf_size;
-    return leaves <= 1 ? 0 : std::bit_width(leaves - 1);
-}
+// The skeleton's view of a node: its primitives refs_[begin, end) and their bounds.
+struct BinnedTask {
+    uint32_t begin = 0, end = 0;
+    RangeBounds range;
+    [[nodiscard]] uint32_t count() const { return end - begin; }
+    [[nodiscard]] Box3f bounds() const { return range.bounds(); }
+};
 
-class BinnedSahBuilder {
+// The best bin boundary of a node, with the node's bins (to partition by).
+struct BinnedSplit {
+    BinMapping map;
+    Split plane;
+    [[nodiscard]] bool valid() const { return plane.valid(); }
+    [[nodiscard]] float cost() const { return plane.cost; }
+    [[nodiscard]] uint32_t larger_child(uint32_t count) const {
+        return std::max(plane.left_count, count - plane.left_count);
+    }
+};
+
+class BinnedSahBuilder : public top_down::TopDownSahBuilder<BinnedSahBuilder, BinnedTask> {
 public:
-    BinnedSahBuilder(std::span<const Triangle> triangles, const BuildOptions& options)
-        : triangles_(triangles),
-          bin_count_(options.bin_count),
-          max_leaf_size_(static_cast<uint32_t>(options.max_leaf_size)),
-          traversal_cost_(options.traversal_cost),
-          intersection_cost_(options.intersection_cost) {}
+    BinnedSahBuilder(std::span<const Triangle> triangles, const BvhBuildConfig& config, const BinnedSahOptions& binned)
+        : TopDownSahBuilder(config), triangles_(triangles), bin_count_(binned.bin_count) {}
 
     Bvh build() {
-        Bvh bvh;
         const uint32_t count = checked_index_count("BVH primitive count", triangles_.size());
-        if (count == 0) return bvh;
-        refs_ = scratch_array<PrimRef>(count, "BVH build: primitive references");
-        const RangeBounds root = make_prim_refs(count);
-
-        // At most 2n - 1 nodes: every leaf holds at least one primitive.
-        const size_t max_nodes = 2 * size_t{count} - 1;
-        scratch_ = scratch_array<ScratchNode>(max_nodes, "BVH build: scratch nodes");
-        subtree_size_ = scratch_array<uint32_t>(max_nodes, "BVH build: subtree sizes");
-        next_node_.store(1, std::memory_order_relaxed);
-        build_node(0, 0, count, root, 0);
-
-        const uint32_t node_count = subtree_size_[0];
-        parallel::invoke(
-            [&] {
-                checked_array_bytes("BVH nodes", node_count, sizeof(BvhNode));
-                bvh.nodes.reserve(node_count);
-                hint_huge_pages(bvh.nodes.data(), size_t{node_count} * sizeof(BvhNode));
-                bvh.nodes.resize(node_count);
-                bvh.nodes[0] = scratch_[0].to_node();
-                copy_descendants(bvh.nodes, 0, 0, 1);
-            },
-            [&] {
-                budgeted_resize(bvh.prim_indices, count, "BVH primitive indices");
-                parallel::for_range(0u, count, kGrainSize, [&](uint32_t lo, uint32_t hi) {
-                    for (uint32_t i = lo; i != hi; ++i) bvh.prim_indices[i] = refs_[i].id;
-                });
-            });
-        return bvh;
+        if (count == 0) return Bvh{};
+        refs_ = top_down::scratch_array<PrimRef>(count, "BVH build: primitive references");
+        BinnedTask root{0, count, make_prim_refs(count)};
+        return build_tree(root, count);
     }
 
 private:
+    friend TopDownSahBuilder;
+    static constexpr const char* kName = "BVH build";
+    static constexpr uint32_t kParallelSubtreeSize = 1024;  // prims per node to spawn child tasks
+    static constexpr bool kLeavesInPlace = true;
 
     RangeBounds make_prim_refs(uint32_t count) {
         return parallel::reduce(
@@ -410,7 +310,8 @@ private:
             [&](uint32_t lo, uint32_t hi, RangeBounds acc) {
                 for (uint32_t i = lo; i != hi; ++i) {
                     const Triangle& t = triangles_[i];
-                    const Vec3f l = vmin(t.v0, vmin(t.v1, t.v2)), h = vmax(t.v0, vmax(t.v1, t.v2));
+                    const Vec3f l = sweep::vmin(t.v0, sweep::vmin(t.v1, t.v2));
+                    const Vec3f h = sweep::vmax(t.v0, sweep::vmax(t.v1, t.v2));
                     refs_[i] = PrimRef{{l.x, l.y, l.z}, i, {h.x, h.y, h.z}, 0};
                     acc.add(refs_[i]);
                 }
@@ -419,64 +320,33 @@ private:
             [](RangeBounds a, const RangeBounds& b) { a.add(b); return a; });
     }
 
-    static Vec3f vmin(const Vec3f& a, const Vec3f& b) {
-        return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)};
+    // ---- The skeleton's hooks.
+
+    BinnedSplit find_split(const BinnedTask& task, int /*depth*/) const {
+        BinnedSplit split{BinMapping(task.range.centroids(), bin_count_), Split{}};
+        split.plane = best_plane(task.begin, task.end, split.map);
+        return split;
     }
-    static Vec3f vmax(const Vec3f& a, const Vec3f& b) {
-        return {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)};
+    void partition(const BinnedTask& task, const BinnedSplit& split, BinnedTask& left, BinnedTask& right) {
+        const uint32_t mid = partition_by_bin(task.begin, task.end, split.map, split.plane, left.range, right.range);
+        set_ranges(task, mid, left, right);
     }
+    void partition_at_median(const BinnedTask& task, const BinnedSplit& /*split*/, BinnedTask& left,
+                             BinnedTask& right) {
+        const uint32_t mid = partition_by_median(task.begin, task.end, task.range.centroids(), left.range, right.range);
+        set_ranges(task, mid, left, right);
+    }
+    static uint32_t place_leaf(const BinnedTask& task) { return task.begin; }
+    [[nodiscard]] uint32_t slot_prim(uint32_t slot) const { return refs_[slot].id; }
 
-    // Builds the subtree of scratch_[node] over refs_[begin, end); returns its node count.
-    uint32_t build_node(uint32_t node, uint32_t begin, uint32_t end, const RangeBounds& range, int depth) {
-        const uint32_t count = end - begin;
-        ScratchNode& out = scratch_[node];
-        const Box3f bounds = range.bounds();
-        out.lo[0] = bounds.lo.x; out.lo[1] = bounds.lo.y; out.lo[2] = bounds.lo.z;
-        out.hi[0] = bounds.hi.x; out.hi[1] = bounds.hi.y; out.hi[2] = bounds.hi.z;
-        if (count <= 1) return make_leaf(node, begin, count);
-
-        const Box3f centroids = range.centroids();
-        const float area = bounds.surface_area();
-        const BinMapping map(centroids, bin_count_);
-        Split split = find_split(begin, end, map);
-        const float leaf_cost = intersection_cost_ * area * static_cast<float>(count);
-        const float split_cost = traversal_cost_ * area + intersection_cost_ * split.cost;
-        if (count <= max_leaf_size_ && (!split.valid() || split_cost >= leaf_cost)) {
-            return make_leaf(node, begin, count);
-        }
-        // A lopsided SAH split deep in the tree could exceed kBvhMaxDepth; from
-        // here on, halving still reaches leaves in time.
-        if (split.valid()) {
-            const uint32_t larger = std::max(split.left_count, count - split.left_count);
-            if (depth + 1 + median_levels(larger, max_leaf_size_) > kBvhMaxDepth) split = Split{};
-        }
-        if (!split.valid() && count <= max_leaf_size_) return make_leaf(node, begin, count);
-
-        RangeBounds left, right;
-        const uint32_t mid = split.valid() ? partition_by_bin(begin, end, map, split, left, right)
-                                           : partition_by_median(begin, end, centroids, left, right);
-
-        const uint32_t pair = next_node_.fetch_add(2, std::memory_order_relaxed);
-        out.first = pair;
-        out.count = 0;
-        uint32_t left_size = 0, right_size = 0;
-        if (count > kParallelSubtreeSize) {
-            parallel::invoke([&] { left_size = build_node(pair, begin, mid, left, depth + 1); },
-                             [&] { right_size = build_node(pair + 1, mid, end, right, depth + 1); });
-        } else {
-            left_size = build_node(pair, begin, mid, left, depth + 1);
-            right_size = build_node(pair + 1, mid, end, right, depth + 1);
-        }
-        subtree_size_[node] = 1 + left_size + right_size;
-        return subtree_size_[node];
+    static void set_ranges(const BinnedTask& task, uint32_t mid, BinnedTask& left, BinnedTask& right) {
+        left.begin = task.begin;
+        left.end = mid;
+        right.begin = mid;
+        right.end = task.end;
     }
 
-    uint32_t make_leaf(uint32_t node, uint32_t begin, uint32_t count) {
-        scratch_[node].first = begin;
-        scratch_[node].count = count;
-        subtree_size_[node] = 1;
-        return 1;
-    }
+    // ---- Binning.
 
     void bin_range(uint32_t begin, uint32_t end, const BinMapping& map, BinSet& set) const {
         set.clear(bin_count_);
@@ -521,10 +391,10 @@ private:
 
     // The cheapest bin boundary over all three axes (invalid when every
     // centroid falls into one bin on every axis).
-    Split find_split(uint32_t begin, uint32_t end, const BinMapping& map) const {
+    Split best_plane(uint32_t begin, uint32_t end, const BinMapping& map) const {
         Split best;
         if (!map.usable[0] && !map.usable[1] && !map.usable[2]) return best;
-        if (end - begin == 2) return find_split_pair(begin, map);
+        if (end - begin == 2) return best_plane_of_pair(begin, map);
         BinSet set;  // plain data: only the bins in use get initialised
         if (end - begin <= kSmallNodeSize) {
             set.bin_sparse(map, refs_.get() + begin, end - begin);
@@ -538,11 +408,11 @@ private:
         return best;
     }
 
-    // find_split for two primitives: every axis that puts them into
+    // best_plane for two primitives: every axis that puts them into
     // different bins splits them apart at the same cost (the same two boxes,
     // and float addition commutes), so the first such axis is the one the
     // sweep keeps, at the boundary after the lower bin.
-    Split find_split_pair(uint32_t begin, const BinMapping& map) const {
+    Split best_plane_of_pair(uint32_t begin, const BinMapping& map) const {
         const PrimRef& a = refs_[begin];
         const PrimRef& b = refs_[begin + 1];
         alignas(16) int32_t bin_a[4], bin_b[4];
@@ -569,24 +439,24 @@ private:
         float right_area[kMaxBins];
         uint32_t right_count[kMaxBins];
         // Suffix sweep: right side of the boundary before used bin t.
-        F4 lo = splat4(FLT_MAX), hi = splat4(-FLT_MAX);
+        Float4 lo = set1<4>(FLT_MAX), hi = set1<4>(-FLT_MAX);
         uint32_t n = 0;
         for (int t = m - 1; t > 0; --t) {
             const int i = used[t];
-            lo = min4(lo, load4(set.lo(axis, i)));
-            hi = max4(hi, load4(set.hi(axis, i)));
+            lo = std_min(lo, load<4>(set.lo(axis, i)));
+            hi = std_max(hi, load<4>(set.hi(axis, i)));
             n += set.count(axis, i);
             right_area[t] = surface_area(lo, hi);
             right_count[t] = n;
         }
         // Prefix sweep: evaluate the boundary after each used bin but the last.
-        lo = splat4(FLT_MAX);
-        hi = splat4(-FLT_MAX);
+        lo = set1<4>(FLT_MAX);
+        hi = set1<4>(-FLT_MAX);
         n = 0;
         for (int t = 0; t + 1 < m; ++t) {
             const int i = used[t];
-            lo = min4(lo, load4(set.lo(axis, i)));
-            hi = max4(hi, load4(set.hi(axis, i)));
+            lo = std_min(lo, load<4>(set.lo(axis, i)));
+            hi = std_max(hi, load<4>(set.hi(axis, i)));
             n += set.count(axis, i);
             const float cost = surface_area(lo, hi) * static_cast<float>(n) +
                                right_area[t + 1] * static_cast<float>(right_count[t + 1]);
@@ -594,11 +464,15 @@ private:
         }
     }
 
+    // ---- Partitioning.
+
     // Hoare partition of refs_[begin, end) by the split; fills both sides' bounds.
     uint32_t partition_by_bin(uint32_t begin, uint32_t end, const BinMapping& map, const Split& split,
                               RangeBounds& left, RangeBounds& right) {
         if (end - begin <= kSmallPartitionSize) return partition_small(begin, end, map, split, left, right);
-        auto goes_left = [&](const PrimRef& p) { return map.below(p, split.axis, split.bin); };
+        const int axis = split.axis;
+        const Float4 bin = set1<4>(static_cast<float>(split.bin));
+        auto goes_left = [&](const PrimRef& p) { return map.below(p, axis, bin); };
         PrimRef* refs = refs_.get();
         RangeBounds l, r;  // locals stay in registers
         uint32_t i = begin, j = end;
@@ -610,11 +484,11 @@ private:
             // both sides of the pair are known: no need to test them again.
             PrimRef& a = refs[i++];
             PrimRef& b = refs[--j];
-            const F4 a_lo = a.lo4(), a_hi = a.hi4(), b_lo = b.lo4(), b_hi = b.hi4();
-            store4(a.lo, b_lo);  // lane 3: the id
-            store4(a.hi, b_hi);
-            store4(b.lo, a_lo);
-            store4(b.hi, a_hi);
+            const Float4 a_lo = a.lo4(), a_hi = a.hi4(), b_lo = b.lo4(), b_hi = b.hi4();
+            store<4>(a.lo, b_lo);  // lane 3: the id
+            store<4>(a.hi, b_hi);
+            store<4>(b.lo, a_lo);
+            store<4>(b.hi, a_hi);
             l.add(b_lo, b_hi);
             r.add(a_lo, a_hi);
         }
@@ -633,9 +507,10 @@ private:
                              RangeBounds& left, RangeBounds& right) {
         PrimRef* refs = refs_.get() + begin;
         const uint32_t n = end - begin;
+        const Float4 bin = set1<4>(static_cast<float>(split.bin));
         uint64_t goes_left = 0;
         for (uint32_t k = 0; k < n; ++k) {
-            goes_left |= uint64_t{map.below(refs[k], split.axis, split.bin)} << k;
+            goes_left |= uint64_t{map.below(refs[k], split.axis, bin)} << k;
         }
         const uint32_t mid = static_cast<uint32_t>(std::popcount(goes_left));
         const uint64_t low = mid == 64 ? ~uint64_t{0} : (uint64_t{1} << mid) - 1;
@@ -675,44 +550,17 @@ private:
         return mid;
     }
 
-    // Writes the descendants of scratch_[from] (copied to out[at]) into
-    // out[base, base + subtree size - 1): children pair first, then the left
-    // subtree's descendants, then the right's.
-    void copy_descendants(std::vector<BvhNode>& out, uint32_t from, uint32_t at, uint32_t base) const {
-        const ScratchNode& node = scratch_[from];
-        if (node.is_leaf()) return;
-        const uint32_t left = node.first;
-        out[at].first = base;
-        out[base] = scratch_[left].to_node();
-        out[base + 1] = scratch_[left + 1].to_node();
-        const uint32_t left_size = subtree_size_[left];
-        const uint32_t right_base = base + 2 + (left_size - 1);
-        if (subtree_size_[from] > kParallelCopySize) {
-            parallel::invoke([&] { copy_descendants(out, left, base, base + 2); },
-                             [&] { copy_descendants(out, left + 1, base + 1, right_base); });
-        } else {
-            copy_descendants(out, left, base, base + 2);
-            copy_descendants(out, left + 1, base + 1, right_base);
-        }
-    }
-
     std::span<const Triangle> triangles_;
     int bin_count_;
-    uint32_t max_leaf_size_;
-    float traversal_cost_;
-    float intersection_cost_;
-
     std::unique_ptr<PrimRef[]> refs_;
-    std::unique_ptr<ScratchNode[]> scratch_;   // nodes in allocation order
-    std::unique_ptr<uint32_t[]> subtree_size_;  // per scratch node: nodes in its subtree
-    std::atomic<uint32_t> next_node_{1};
 };
 
 }  // namespace
 
-Bvh build_binned_sah(std::span<const Triangle> triangles, const BuildOptions& options) {
-    BinnedSahBuilder builder(triangles, options);
-    return parallel::with_threads(options.threads, [&] { return builder.build(); });
+Bvh build_binned_sah(std::span<const Triangle> triangles, const BvhBuildConfig& config,
+                     const BinnedSahOptions& binned) {
+    BinnedSahBuilder builder(triangles, config, binned);
+    return builder.build();
 }
 
 }  // namespace rf

@@ -1,6 +1,7 @@
 #include "accel/bvh/builders/build_bvh.h"
 
 #include "accel/bvh/builders/binned_sah.h"
+#include "accel/bvh/builders/bvh_build_config.h"
 #include "accel/bvh/builders/grid_bvh.h"
 #include "accel/bvh/builders/hlbvh2.h"
 #include "accel/bvh/builders/lbvh.h"
@@ -8,26 +9,37 @@
 #include "accel/bvh/builders/sbvh.h"
 #include "accel/bvh/builders/sweep_sah.h"
 #include "accel/bvh/optimize/reinsertion.h"
+#include "backend/cpu/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf {
 
-Bvh build_bvh_on_cpu(std::span<const Triangle> triangles, const BuildOptions& options) {
-    Bvh bvh;
+namespace {
+
+Bvh run_builder(std::span<const Triangle> triangles, const BuildOptions& options) {
+    const BvhBuildConfig config = bvh_build_config(options);
     switch (options.builder) {
-        case Builder::BinnedSah: bvh = build_binned_sah(triangles, options); break;
-        case Builder::SweepSah: bvh = build_sweep_sah(triangles, options); break;
-        case Builder::Sbvh: bvh = build_sbvh(triangles, options); break;
-        case Builder::Lbvh30: bvh = build_lbvh(triangles, options, 30); break;
-        case Builder::Lbvh63: bvh = build_lbvh(triangles, options, 63); break;
-        case Builder::Hlbvh2: bvh = build_hlbvh2(triangles, options); break;
-        case Builder::GridBvh: bvh = build_grid_bvh(triangles, options, false); break;
-        case Builder::GridBvhSplit: bvh = build_grid_bvh(triangles, options, true); break;
-        case Builder::Ploc: bvh = build_ploc(triangles, options); break;
-        default: throw Error("build_bvh: unknown builder");
+        case Builder::BinnedSah: return build_binned_sah(triangles, config, options.binned);
+        case Builder::SweepSah: return build_sweep_sah(triangles, config);
+        case Builder::Sbvh: return build_sbvh(triangles, config, options.sbvh);
+        case Builder::Lbvh30: return build_lbvh(triangles, config, 30);
+        case Builder::Lbvh63: return build_lbvh(triangles, config, 63);
+        case Builder::Hlbvh2: return build_hlbvh2(triangles, config);
+        case Builder::GridBvh: return build_grid_bvh(triangles, config, options.grid_bvh, false);
+        case Builder::GridBvhSplit: return build_grid_bvh(triangles, config, options.grid_bvh, true);
+        case Builder::Ploc: return build_ploc(triangles, config, options.ploc);
     }
-    if (options.optimize) optimize_reinsertion(bvh, triangles, options);
-    return bvh;
+    throw Error("build_bvh: unknown builder");
+}
+
+}  // namespace
+
+Bvh build_bvh_on_cpu(std::span<const Triangle> triangles, const BuildOptions& options) {
+    return parallel::with_threads(options.threads, [&] {
+        Bvh bvh = run_builder(triangles, options);
+        if (options.reinsertion.enabled) optimize_reinsertion(bvh, triangles, options.sah, options.reinsertion);
+        return bvh;
+    });
 }
 
 }  // namespace rf

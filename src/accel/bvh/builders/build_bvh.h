@@ -1,6 +1,8 @@
 // The CPU's one entry point for every BVH builder: runs the builder named in
-// options.builder, then the optimizer when options.optimize is set. The
-// public rf::build_bvh (rayforge/accel/accel.h) calls it for the CPU.
+// options.builder with its options group, then the optimizer when
+// options.reinsertion.enabled is set, all on at most options.threads
+// threads. The public rf::build_bvh (rayforge/accel/accel.h) calls it for
+// the CPU.
 #pragma once
 
 #include <span>

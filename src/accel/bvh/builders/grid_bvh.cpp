@@ -25,7 +25,7 @@
 //    over reference centroids (8 bins), instead of the dissertation's trivial
 //    cut of the list, so every leaf obeys the limit; like the binned builder,
 //    a leaf of up to max_leaf_size references is also split where the SAH
-//    (options' C_trav, C_int) says a split is cheaper (the dissertation stops
+//    (SahCosts C_trav, C_int) says a split is cheaper (the dissertation stops
 //    at <= 4 references; on the bunny, Sponza and Conference that cost 2-4%
 //    SAH at C_trav = C_int = 1).
 // 5. Canonical emission: subtree sizes and boxes bottom-up per tree level
@@ -120,13 +120,13 @@ struct SortOnAxis {
 
 class GridBvhBuilder {
 public:
-    GridBvhBuilder(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles,
-                   GridBvhStages& stages)
+    GridBvhBuilder(std::span<const Triangle> triangles, const BvhBuildConfig& config, const GridBvhOptions& grid_bvh,
+                   bool partial_triangles, GridBvhStages& stages)
         : triangles_(triangles),
-          max_leaf_size_(uint32_t(std::max(1, options.max_leaf_size))),
-          traversal_cost_(options.traversal_cost),
-          intersection_cost_(options.intersection_cost),
-          split_budget_(options.split_budget),
+          max_leaf_size_(uint32_t(std::max(1, config.max_leaf_size))),
+          traversal_cost_(config.sah.traversal),
+          intersection_cost_(config.sah.intersection),
+          split_budget_(grid_bvh.split_budget),
           partial_triangles_(partial_triangles),
           stages_(stages) {}
 
@@ -498,22 +498,24 @@ private:
 
 }  // namespace
 
-Bvh build_grid_bvh(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles,
-                   GridBvhStages* stages) {
+Bvh build_grid_bvh(std::span<const Triangle> triangles, const BvhBuildConfig& config, const GridBvhOptions& grid_bvh,
+                   bool partial_triangles, GridBvhStages* stages) {
     GridBvhStages local;
-    GridBvhBuilder builder(triangles, options, partial_triangles, stages ? *stages : local);
-    return parallel::with_threads(options.threads, [&] { return builder.build(); });
+    GridBvhBuilder builder(triangles, config, grid_bvh, partial_triangles, stages ? *stages : local);
+    return builder.build();
 }
 
-Bvh emit_grid_bvh_hierarchy(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles,
+Bvh emit_grid_bvh_hierarchy(std::span<const Triangle> triangles, const BvhBuildConfig& config, bool partial_triangles,
                             GridHierarchy&& hierarchy, GridBvhStages* stages) {
     GridBvhStages local;
-    GridBvhBuilder builder(triangles, options, partial_triangles, stages ? *stages : local);
-    return parallel::with_threads(options.threads, [&] { return builder.emit(std::move(hierarchy)); });
+    // The references come split already: the split budget is not read.
+    GridBvhBuilder builder(triangles, config, GridBvhOptions{}, partial_triangles, stages ? *stages : local);
+    return builder.emit(std::move(hierarchy));
 }
 
-Bvh build_grid_bvh(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles) {
-    return build_grid_bvh(triangles, options, partial_triangles, nullptr);
+Bvh build_grid_bvh(std::span<const Triangle> triangles, const BvhBuildConfig& config, const GridBvhOptions& grid_bvh,
+                   bool partial_triangles) {
+    return build_grid_bvh(triangles, config, grid_bvh, partial_triangles, nullptr);
 }
 
 }  // namespace rf

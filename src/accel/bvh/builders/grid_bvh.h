@@ -6,7 +6,7 @@
 #include <cstddef>
 #include <span>
 
-#include "rayforge/accel/accel.h"
+#include "accel/bvh/builders/bvh_build_config.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/scene/scene_geometry.h"
 
@@ -31,15 +31,15 @@ struct GridBvhStages {
     size_t large_leaves = 0;            // of those, leaves with more than max_leaf_size references
 };
 
-// Builds over `triangles` with options.max_leaf_size, traversal_cost and
-// intersection_cost (leaf finishing), threads and, when `partial_triangles`
-// is set, split_budget (at most floor(split_budget * triangles) extra
-// references). The result is the same for every thread count; no triangles
-// give an empty Bvh. Throws rf::Error when an allocation exceeds the memory
-// budget.
-Bvh build_grid_bvh(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles);
+// Builds over `triangles` with config's max_leaf_size and SAH costs (leaf
+// finishing) and, when `partial_triangles` is set, grid_bvh.split_budget (at
+// most floor(split_budget * triangles) extra references). The result is the
+// same for every thread count; no triangles give an empty Bvh. Throws
+// rf::Error when an allocation exceeds the memory budget.
+Bvh build_grid_bvh(std::span<const Triangle> triangles, const BvhBuildConfig& config, const GridBvhOptions& grid_bvh,
+                   bool partial_triangles);
 // The same, also reporting the stage breakdown when `stages` is not null.
-Bvh build_grid_bvh(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles,
-                   GridBvhStages* stages);
+Bvh build_grid_bvh(std::span<const Triangle> triangles, const BvhBuildConfig& config, const GridBvhOptions& grid_bvh,
+                   bool partial_triangles, GridBvhStages* stages);
 
 }  // namespace rf

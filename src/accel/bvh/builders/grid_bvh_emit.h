@@ -42,7 +42,7 @@ struct GridHierarchy {
 // after its own hierarchy. stages->leaf_finish_ms, emission_ms, references
 // and hierarchy_leaves are set. Throws rf::Error for a malformed hierarchy
 // (links outside the next level, leaves out of range, malformed leaf groups).
-Bvh emit_grid_bvh_hierarchy(std::span<const Triangle> triangles, const BuildOptions& options, bool partial_triangles,
+Bvh emit_grid_bvh_hierarchy(std::span<const Triangle> triangles, const BvhBuildConfig& config, bool partial_triangles,
                             GridHierarchy&& hierarchy, GridBvhStages* stages = nullptr);
 
 }  // namespace rf

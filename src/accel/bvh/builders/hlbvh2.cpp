@@ -11,7 +11,7 @@
 //     where the highest bit in which codes[a] and codes[b-1] differ turns
 //     from 0 to 1, found by binary search (O(log n) code reads; geometrically
 //     a midpoint split of the node's Morton cell). A range of at most
-//     numLeafTri (= options.max_leaf_size) triangles is a leaf. Ranges whose
+//     numLeafTri (= config.max_leaf_size) triangles is a leaf. Ranges whose
 //     codes are all equal are halved by position (hlbvh2_bottom_steps.h, shared
 //     with the CUDA builder's work queues). The GPU work queues (one
 //     node per thread, one level per launch) become TBB tasks: clusters in
@@ -102,8 +102,8 @@ void build_top_task(std::span<hlbvh2::TopCluster> clusters, const hlbvh2::TopTas
 
 class Hlbvh2Builder {
 public:
-    Hlbvh2Builder(std::span<const Triangle> triangles, const BuildOptions& options)
-        : tree_(triangles, options), leaf_size_(static_cast<uint32_t>(std::max(options.max_leaf_size, 1))) {}
+    Hlbvh2Builder(std::span<const Triangle> triangles, const BvhBuildConfig& config)
+        : tree_(triangles, config), leaf_size_(static_cast<uint32_t>(std::max(config.max_leaf_size, 1))) {}
 
     Bvh build(Hlbvh2Stages& stages) {
         Stopwatch clock;
@@ -312,19 +312,19 @@ private:
 
 }  // namespace
 
-Bvh build_hlbvh2(std::span<const Triangle> triangles, const BuildOptions& options, Hlbvh2Stages* stages) {
+Bvh build_hlbvh2(std::span<const Triangle> triangles, const BvhBuildConfig& config, Hlbvh2Stages* stages) {
     Hlbvh2Stages local;
-    Hlbvh2Builder builder(triangles, options);
-    Bvh bvh = parallel::with_threads(options.threads, [&] { return builder.build(local); });
+    Hlbvh2Builder builder(triangles, config);
+    Bvh bvh = builder.build(local);
     if (stages) *stages = local;
     return bvh;
 }
 
-Bvh emit_hlbvh2_forest(std::span<const Triangle> triangles, const BuildOptions& options, Hlbvh2Forest&& forest,
+Bvh emit_hlbvh2_forest(std::span<const Triangle> triangles, const BvhBuildConfig& config, Hlbvh2Forest&& forest,
                        Hlbvh2Stages* stages) {
     Hlbvh2Stages local;
-    Hlbvh2Builder builder(triangles, options);
-    Bvh bvh = parallel::with_threads(options.threads, [&] { return builder.build_from_forest(std::move(forest), local); });
+    Hlbvh2Builder builder(triangles, config);
+    Bvh bvh = builder.build_from_forest(std::move(forest), local);
     if (stages) {
         stages->top_ms = local.top_ms;
         stages->emit_ms = local.bottom_ms + local.emit_ms;  // the bottom refit is part of the host's emission
@@ -332,8 +332,8 @@ Bvh emit_hlbvh2_forest(std::span<const Triangle> triangles, const BuildOptions& 
     return bvh;
 }
 
-Bvh build_hlbvh2(std::span<const Triangle> triangles, const BuildOptions& options) {
-    return build_hlbvh2(triangles, options, nullptr);
+Bvh build_hlbvh2(std::span<const Triangle> triangles, const BvhBuildConfig& config) {
+    return build_hlbvh2(triangles, config, nullptr);
 }
 
 std::vector<uint32_t> build_hlbvh2_top_level(std::span<hlbvh2::TopCluster> clusters, uint32_t top_base) {

@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <span>
 
-#include "rayforge/accel/accel.h"
+#include "accel/bvh/builders/bvh_build_config.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/scene/scene_geometry.h"
 
@@ -26,8 +26,8 @@ struct Hlbvh2Stages {
     }
 };
 
-Bvh build_hlbvh2(std::span<const Triangle> triangles, const BuildOptions& options);
+Bvh build_hlbvh2(std::span<const Triangle> triangles, const BvhBuildConfig& config);
 // The same build, also reporting stage timings into *stages (when not null).
-Bvh build_hlbvh2(std::span<const Triangle> triangles, const BuildOptions& options, Hlbvh2Stages* stages);
+Bvh build_hlbvh2(std::span<const Triangle> triangles, const BvhBuildConfig& config, Hlbvh2Stages* stages);
 
 }  // namespace rf

@@ -43,7 +43,7 @@ std::vector<uint32_t> build_hlbvh2_top_level(std::span<hlbvh2::TopCluster> clust
 // max_leaf_size, a top level that is not a tree over the cluster roots).
 // stages->top_ms (the top level) and ->emit_ms (the bottom refit and the
 // emission) are set when stages is given; nothing else.
-Bvh emit_hlbvh2_forest(std::span<const Triangle> triangles, const BuildOptions& options, Hlbvh2Forest&& forest,
+Bvh emit_hlbvh2_forest(std::span<const Triangle> triangles, const BvhBuildConfig& config, Hlbvh2Forest&& forest,
                        Hlbvh2Stages* stages = nullptr);
 
 }  // namespace rf

@@ -102,8 +102,8 @@ void build_karras_tree(const Key* keys, uint32_t n, morton::RawTree& tree) {
 }
 
 template <class Key>
-Bvh build_with_keys(std::span<const Triangle> triangles, const BuildOptions& options) {
-    morton::RawTree tree(triangles, options);
+Bvh build_with_keys(std::span<const Triangle> triangles, const BvhBuildConfig& config) {
+    morton::RawTree tree(triangles, config);
     morton::Buffer<Key> keys;
     tree.sort_by_morton_codes(keys);
     const uint32_t n = tree.size();
@@ -116,37 +116,33 @@ Bvh build_with_keys(std::span<const Triangle> triangles, const BuildOptions& opt
 
 }  // namespace
 
-Bvh emit_karras_tree(std::span<const Triangle> triangles, const BuildOptions& options, std::vector<uint32_t>&& order,
+Bvh emit_karras_tree(std::span<const Triangle> triangles, const BvhBuildConfig& config, std::vector<uint32_t>&& order,
                      std::span<const uint32_t> children) {
     if (order.size() != triangles.size()) throw Error("LBVH emission: order and triangles differ in size");
     const uint32_t n = static_cast<uint32_t>(order.size());
     if (n == 0) return {};
     if (children.size() != 2 * (size_t{n} - 1)) throw Error("LBVH emission: expected 2 (n - 1) child references");
-    return parallel::with_threads(options.threads, [&] {
-        morton::RawTree tree(triangles, options);
-        tree.set_order(std::move(order));
-        if (n == 1) return tree.emit_in_order(kLeafRef | 0u);
-        budgeted_resize(tree.nodes, n - 1, "LBVH: inner nodes");
-        morton::RawNode* nodes = tree.nodes.data();
-        parallel::for_range(0u, n - 1, kGrain, [&](uint32_t lo, uint32_t hi) {
-            for (uint32_t i = lo; i != hi; ++i) {
-                nodes[i].child[0] = children[2 * size_t{i}];
-                nodes[i].child[1] = children[2 * size_t{i} + 1];
-            }
-        });
-        KarrasRefit(tree).refit(0, 0, n - 1);
-        return tree.emit_in_order(0);
+    morton::RawTree tree(triangles, config);
+    tree.set_order(std::move(order));
+    if (n == 1) return tree.emit_in_order(kLeafRef | 0u);
+    budgeted_resize(tree.nodes, n - 1, "LBVH: inner nodes");
+    morton::RawNode* nodes = tree.nodes.data();
+    parallel::for_range(0u, n - 1, kGrain, [&](uint32_t lo, uint32_t hi) {
+        for (uint32_t i = lo; i != hi; ++i) {
+            nodes[i].child[0] = children[2 * size_t{i}];
+            nodes[i].child[1] = children[2 * size_t{i} + 1];
+        }
     });
+    KarrasRefit(tree).refit(0, 0, n - 1);
+    return tree.emit_in_order(0);
 }
 
-Bvh build_lbvh(std::span<const Triangle> triangles, const BuildOptions& options, int morton_bits) {
+Bvh build_lbvh(std::span<const Triangle> triangles, const BvhBuildConfig& config, int morton_bits) {
     if (morton_bits != 30 && morton_bits != 63) {
         throw Error("LBVH: Morton code bits must be 30 or 63, got " + std::to_string(morton_bits));
     }
-    return parallel::with_threads(options.threads, [&] {
-        return morton_bits == 30 ? build_with_keys<uint32_t>(triangles, options)
-                                 : build_with_keys<uint64_t>(triangles, options);
-    });
+    return morton_bits == 30 ? build_with_keys<uint32_t>(triangles, config)
+                             : build_with_keys<uint64_t>(triangles, config);
 }
 
 }  // namespace rf

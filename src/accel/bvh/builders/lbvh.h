@@ -5,12 +5,12 @@
 
 #include <span>
 
-#include "rayforge/accel/accel.h"
+#include "accel/bvh/builders/bvh_build_config.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/scene/scene_geometry.h"
 
 namespace rf {
 
-Bvh build_lbvh(std::span<const Triangle> triangles, const BuildOptions& options, int morton_bits);
+Bvh build_lbvh(std::span<const Triangle> triangles, const BvhBuildConfig& config, int morton_bits);
 
 }  // namespace rf

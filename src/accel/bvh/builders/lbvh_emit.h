@@ -6,7 +6,7 @@
 #include <span>
 #include <vector>
 
-#include "rayforge/accel/accel.h"
+#include "accel/bvh/builders/bvh_build_config.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/scene/scene_geometry.h"
 
@@ -17,7 +17,7 @@ namespace rf {
 // karras::build_inner writes them. Computes every inner node's box, count,
 // SAH cost and leaf collapse (as build_lbvh does) and emits the canonical
 // BVH, which is then build_lbvh's on the same order and tree.
-Bvh emit_karras_tree(std::span<const Triangle> triangles, const BuildOptions& options, std::vector<uint32_t>&& order,
+Bvh emit_karras_tree(std::span<const Triangle> triangles, const BvhBuildConfig& config, std::vector<uint32_t>&& order,
                      std::span<const uint32_t> children);
 
 }  // namespace rf

@@ -144,10 +144,10 @@ int balanced_levels(uint32_t count, uint32_t leaf_size) {
     return leaves <= 1 ? 0 : std::bit_width(leaves - 1);
 }
 
-RawTree::RawTree(std::span<const Triangle> tris, const BuildOptions& options)
+RawTree::RawTree(std::span<const Triangle> tris, const BvhBuildConfig& config)
     : triangles(tris),
-      max_leaf_size_(static_cast<uint32_t>(std::clamp(options.max_leaf_size, 1, 255))),
-      costs_{options.traversal_cost, options.intersection_cost, max_leaf_size_} {}
+      max_leaf_size_(static_cast<uint32_t>(std::clamp(config.max_leaf_size, 1, 255))),
+      costs_{config.sah.traversal, config.sah.intersection, max_leaf_size_} {}
 
 void RawTree::set_order(std::vector<uint32_t>&& sorted) {
     order = std::move(sorted);

@@ -20,7 +20,7 @@
 #include "accel/bvh/builders/karras_tree_steps.h"
 #include "accel/bvh/builders/morton_buffer.h"
 #include "accel/bvh/builders/raw_tree_emit_steps.h"
-#include "rayforge/accel/accel.h"
+#include "accel/bvh/builders/bvh_build_config.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/scene/scene_geometry.h"
 
@@ -75,7 +75,7 @@ void compute_morton_codes(std::span<const Triangle> triangles, std::vector<uint6
 
 class RawTree {
 public:
-    RawTree(std::span<const Triangle> triangles, const BuildOptions& options);
+    RawTree(std::span<const Triangle> triangles, const BvhBuildConfig& config);
 
     // Sorts the triangles by the Morton codes of their box centres inside the
     // bounds of those centres (30-bit codes for uint32_t keys, 63-bit codes

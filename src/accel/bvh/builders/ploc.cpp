@@ -6,7 +6,7 @@
 //  2. Iterate until one cluster is left (the per-cluster steps are
 //     ploc_steps.h's, shared with the CUDA builder, backend/cuda/ploc_build.cu):
 //     a. nearest neighbour: every cluster i looks at the clusters within
-//        +-options.ploc_radius positions and picks the one whose merged box
+//        +-PlocOptions::radius positions and picks the one whose merged box
 //        has the smallest surface area (ties broken by a total order on
 //        pairs, so the globally closest pair is always mutual and every
 //        iteration merges at least once);
@@ -47,8 +47,8 @@ constexpr uint32_t kFinalizeGrain = 4096;
 
 class PlocBuilder {
 public:
-    PlocBuilder(std::span<const Triangle> triangles, const BuildOptions& options)
-        : tree_(triangles, options), radius_(ploc::clamp_radius(options.ploc_radius)) {}
+    PlocBuilder(std::span<const Triangle> triangles, const BvhBuildConfig& config, const PlocOptions& ploc_options)
+        : tree_(triangles, config), radius_(ploc::clamp_radius(ploc_options.radius)) {}
 
     Bvh build() {
         std::vector<uint64_t> keys;
@@ -168,32 +168,30 @@ void check_ploc_tree(uint32_t n, std::span<const uint32_t> children, std::span<c
 
 }  // namespace
 
-Bvh build_ploc(std::span<const Triangle> triangles, const BuildOptions& options) {
-    PlocBuilder builder(triangles, options);
-    return parallel::with_threads(options.threads, [&] { return builder.build(); });
+Bvh build_ploc(std::span<const Triangle> triangles, const BvhBuildConfig& config, const PlocOptions& ploc_options) {
+    PlocBuilder builder(triangles, config, ploc_options);
+    return builder.build();
 }
 
-Bvh emit_ploc_tree(std::span<const Triangle> triangles, const BuildOptions& options, std::vector<uint32_t>&& order,
+Bvh emit_ploc_tree(std::span<const Triangle> triangles, const BvhBuildConfig& config, std::vector<uint32_t>&& order,
                    std::span<const uint32_t> children, std::span<const uint32_t> iteration_nodes) {
     if (order.size() != triangles.size()) throw Error("PLOC emission: order and triangles differ in size");
     const uint32_t n = static_cast<uint32_t>(order.size());
     if (n == 0) return {};
     check_ploc_tree(n, children, iteration_nodes);
-    return parallel::with_threads(options.threads, [&] {
-        morton::RawTree tree(triangles, options);
-        tree.set_order(std::move(order));
-        if (n == 1) return tree.emit(kLeafRef | 0u);
-        budgeted_resize(tree.nodes, n - 1, "PLOC: nodes");
-        // Children before parents: iteration by iteration, each in parallel.
-        uint32_t begin = 0;
-        for (uint32_t nodes : iteration_nodes) {
-            parallel::for_range(begin, begin + nodes, kFinalizeGrain, [&](uint32_t lo, uint32_t hi) {
-                for (uint32_t i = lo; i != hi; ++i) tree.finalize(i, children[2 * size_t{i}], children[2 * size_t{i} + 1]);
-            });
-            begin += nodes;
-        }
-        return tree.emit(n - 2);  // the last node created
-    });
+    morton::RawTree tree(triangles, config);
+    tree.set_order(std::move(order));
+    if (n == 1) return tree.emit(kLeafRef | 0u);
+    budgeted_resize(tree.nodes, n - 1, "PLOC: nodes");
+    // Children before parents: iteration by iteration, each in parallel.
+    uint32_t begin = 0;
+    for (uint32_t nodes : iteration_nodes) {
+        parallel::for_range(begin, begin + nodes, kFinalizeGrain, [&](uint32_t lo, uint32_t hi) {
+            for (uint32_t i = lo; i != hi; ++i) tree.finalize(i, children[2 * size_t{i}], children[2 * size_t{i} + 1]);
+        });
+        begin += nodes;
+    }
+    return tree.emit(n - 2);  // the last node created
 }
 
 }  // namespace rf

@@ -7,7 +7,7 @@
 #include <span>
 #include <vector>
 
-#include "rayforge/accel/accel.h"
+#include "accel/bvh/builders/bvh_build_config.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/scene/scene_geometry.h"
 
@@ -22,7 +22,7 @@ namespace rf {
 // iteration by iteration, as build_ploc does, and emits the canonical BVH,
 // which is then build_ploc's for the same clustering. Throws rf::Error when
 // the arrays are inconsistent (sizes, a child not created before its parent).
-Bvh emit_ploc_tree(std::span<const Triangle> triangles, const BuildOptions& options, std::vector<uint32_t>&& order,
+Bvh emit_ploc_tree(std::span<const Triangle> triangles, const BvhBuildConfig& config, std::vector<uint32_t>&& order,
                    std::span<const uint32_t> children, std::span<const uint32_t> iteration_nodes);
 
 }  // namespace rf

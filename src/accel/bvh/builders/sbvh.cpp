@@ -6,11 +6,11 @@
 //  - object split: a full SAH sweep over the references sorted by box centre
 //    on each axis;
 //  - spatial split, tried only where the children of the best object split
-//    overlap by more than sbvh_alpha times the root's area: the node's box is
-//    cut into slabs per axis (2 per reference, 8 to 32), every reference is
-//    chopped into the slabs it spans (the triangle clipped against the slab
-//    planes, so each piece has a tight box), and a sweep over the slab
-//    boundaries evaluates the SAH with entry/exit counts;
+//    overlap by more than SbvhOptions::alpha times the root's area: the
+//    node's box is cut into slabs per axis (2 per reference, 8 to 32), every
+//    reference is chopped into the slabs it spans (the triangle clipped
+//    against the slab planes, so each piece has a tight box), and a sweep
+//    over the slab boundaries evaluates the SAH with entry/exit counts;
 //  - reference unsplitting (section 4.3): a straddling reference is kept whole
 //    on one side where that is cheaper than splitting it.
 // The best spatial candidate is applied (with unsplitting) and chosen where
@@ -18,22 +18,26 @@
 // best object split's: the binned estimate counts every straddling reference
 // on both sides, and unsplitting often makes a candidate that looked worse
 // the cheaper split.
-// Leaves are made by SAH (traversal_cost, intersection_cost, compared with the
-// chosen split's cost) within max_leaf_size. Memory stays bounded by a
-// reference budget: at most kReferenceBudget (2) times the triangle count. A
-// node gets a share of the spare references and hands what its split does not
-// use to its children in proportion to their SAH weights (box area times
-// references): subtrees of large triangles, where spatial splits pay off,
-// get more than their count alone would give. Below the parallel subtree size
-// children are built one after the other, and what the left subtree leaves
-// unused goes on to the right one. Neither depends on the order in which
-// tasks run, so neither does the tree.
+// From the top-down skeleton (top_down_sah.h) it takes the recursion, the
+// leaf decision by SAH within max_leaf_size and its fallbacks (the object
+// median where the depth limit is near), the node allocation, subtree tasks
+// and the depth-first copy, which renumbers the leaf slots; this file finds
+// and applies the splits and places the leaves.
+// Memory stays bounded by a reference budget: at most kReferenceBudget (2)
+// times the triangle count. A node gets a share of the spare references and
+// hands what its split does not use to its children in proportion to their
+// SAH weights (box area times references): subtrees of large triangles,
+// where spatial splits pay off, get more than their count alone would give.
+// Below the parallel subtree size children are built one after the other,
+// and what the left subtree leaves unused goes on to the right one (the
+// skeleton's carry). Neither depends on the order in which tasks run, so
+// neither does the tree.
 //
-// Parallelism (TBB via backend/cpu/parallel.h): subtrees above a size threshold are
-// built as tasks, and large nodes evaluate the three axes as tasks. Nodes and
-// leaf slots come from shared counters; the tree is then re-emitted in
-// depth-first order with slots renumbered, so the output is the same for
-// every thread count.
+// Parallelism (TBB via backend/cpu/parallel.h): the skeleton builds subtrees
+// above a size threshold as tasks, and large nodes evaluate the three axes
+// as tasks. Leaf slots come from a shared counter in task order; the
+// depth-first copy renumbers them, so the output is the same for every
+// thread count.
 #include "accel/bvh/builders/sbvh.h"
 
 #include <algorithm>
@@ -44,6 +48,7 @@
 #include <vector>
 
 #include "accel/bvh/builders/sweep_common.h"
+#include "accel/bvh/builders/top_down_sah.h"
 #include "backend/cpu/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
@@ -52,13 +57,11 @@ namespace rf {
 namespace {
 
 using sweep::grow;
-using sweep::ScratchNode;
 
 constexpr int kSpatialBins = 32;         // slabs per axis for large nodes
 constexpr int kMinSpatialBins = 8;       // ... and small ones (2 per reference in between)
 constexpr double kReferenceBudget = 2.0;          // references per triangle, at most
 constexpr uint32_t kParallelAxesSize = 4 * 1024;  // refs per node to evaluate the axes as tasks
-constexpr uint32_t kParallelSubtreeSize = 512;    // refs per node to spawn child tasks
 constexpr uint32_t kGrainSize = 16 * 1024;
 
 struct Ref {
@@ -209,14 +212,55 @@ inline int spatial_bins(size_t refs) {
     return static_cast<int>(std::clamp<size_t>(2 * refs, kMinSpatialBins, kSpatialBins));
 }
 
-class SbvhBuilder {
+// A reference's place in a node's order along one axis: by box centre, ties
+// by triangle id (unique within a node, since the pieces of a split
+// reference go to different children), so the order is total and the same
+// as the sweep SAH builder's.
+struct SortItem {
+    uint64_t key;
+    uint32_t index;  // into the node's references
+    bool operator<(const SortItem& o) const { return key < o.key; }
+};
+struct SortedAxes {
+    std::vector<SortItem> keys[3];
+};
+
+// The skeleton's view of a node: its references, its box and the spare
+// references its subtree may add.
+struct SbvhTask {
+    std::vector<Ref> refs;
+    Box3f box;
+    uint64_t spare = 0;
+    [[nodiscard]] uint32_t count() const { return static_cast<uint32_t>(refs.size()); }
+    [[nodiscard]] const Box3f& bounds() const { return box; }
+};
+
+// A node's split: the best object split (with the node's sorted axes, which
+// the object median reuses), or a spatial split already applied, with its
+// children.
+struct SbvhSplit {
+    SortedAxes sorted;
+    ObjectSplit object;
+    bool spatial = false;
+    uint32_t spatial_larger = 0;     // references of its larger side, as binned (at least as many as applied)
+    float spatial_cost = kInfinity;  // A_L N_L + A_R N_R of its children as applied
+    std::vector<Ref> left, right;
+    Box3f left_box, right_box;
+    // A node of two or more references always has an object split.
+    [[nodiscard]] bool valid() const { return true; }
+    [[nodiscard]] float cost() const { return spatial ? spatial_cost : object.cost; }
+    [[nodiscard]] uint32_t larger_child(uint32_t count) const {
+        return spatial ? spatial_larger : std::max(object.position, count - object.position);
+    }
+};
+
+// The skeleton's carry: the spare references a finished subtree did not use.
+using SpareRefs = uint64_t;
+
+class SbvhBuilder : public top_down::TopDownSahBuilder<SbvhBuilder, SbvhTask, SpareRefs> {
 public:
-    SbvhBuilder(std::span<const Triangle> triangles, const BuildOptions& options)
-        : triangles_(triangles),
-          max_leaf_size_(static_cast<uint32_t>(options.max_leaf_size)),
-          traversal_cost_(options.traversal_cost),
-          intersection_cost_(options.intersection_cost),
-          alpha_(options.sbvh_alpha) {}
+    SbvhBuilder(std::span<const Triangle> triangles, const BvhBuildConfig& config, const SbvhOptions& sbvh)
+        : TopDownSahBuilder(config), triangles_(triangles), alpha_(sbvh.alpha) {}
 
     Bvh build() {
         const uint32_t count = checked_index_count("BVH primitive count", triangles_.size());
@@ -225,44 +269,35 @@ public:
             "SBVH reference budget",
             std::max<uint64_t>(count, static_cast<uint64_t>(kReferenceBudget * static_cast<double>(count))));
 
-        std::vector<Ref> refs;
-        budgeted_resize(refs, count, "SBVH build: references");
-        const Box3f root = parallel::reduce(
+        SbvhTask root;
+        budgeted_resize(root.refs, count, "SBVH build: references");
+        root.box = parallel::reduce(
             0u, count, kGrainSize, Box3f{},
             [&](uint32_t lo, uint32_t hi, Box3f acc) {
                 for (uint32_t i = lo; i != hi; ++i) {
                     const Triangle& t = triangles_[i];
-                    refs[i] = Ref{sweep::vmin(t.v0, sweep::vmin(t.v1, t.v2)), i,
-                                  sweep::vmax(t.v0, sweep::vmax(t.v1, t.v2))};
-                    grow(acc, refs[i].lo, refs[i].hi);
+                    root.refs[i] = Ref{sweep::vmin(t.v0, sweep::vmin(t.v1, t.v2)), i,
+                                       sweep::vmax(t.v0, sweep::vmax(t.v1, t.v2))};
+                    grow(acc, root.refs[i].lo, root.refs[i].hi);
                 }
                 return acc;
             },
             [](Box3f a, const Box3f& b) { grow(a, b); return a; });
-        root_area_ = root.surface_area();
+        root_area_ = root.box.surface_area();
+        root.spare = max_refs - count;
 
-        // Every leaf holds at least one reference.
-        budgeted_resize(scratch_, 2 * max_refs - 1, "SBVH build: scratch nodes");
         budgeted_resize(slots_, max_refs, "SBVH build: leaf slots");
-        next_node_.store(1, std::memory_order_relaxed);
         next_slot_.store(0, std::memory_order_relaxed);
-        build_node(0, std::move(refs), root, 0, max_refs - count);
-        return sweep::emit_depth_first(scratch_, 0, next_node_.load(), slots_, next_slot_.load());
+        return build_tree(root, max_refs);
     }
 
 private:
-    // A reference's place in a node's order along one axis: by box centre,
-    // ties by triangle id (unique within a node, since the pieces of a split
-    // reference go to different children), so the order is total and the
-    // same as the sweep SAH builder's.
-    struct SortItem {
-        uint64_t key;
-        uint32_t index;  // into the node's references
-        bool operator<(const SortItem& o) const { return key < o.key; }
-    };
-    struct SortedAxes {
-        std::vector<SortItem> keys[3];
-    };
+    friend TopDownSahBuilder;
+    static constexpr const char* kName = "SBVH build";
+    // Refs per node to spawn child tasks. Also part of the result: below it,
+    // what a left subtree leaves of its spare references goes on to the right one.
+    static constexpr uint32_t kParallelSubtreeSize = 512;
+    static constexpr bool kLeavesInPlace = false;
 
     template <class F>
     static void for_axes(size_t count, F&& f) {
@@ -274,6 +309,56 @@ private:
             f(2);
         }
     }
+
+    // ---- The skeleton's hooks.
+
+    // The best object split and, where a spatial split may pay off, the best
+    // spatial candidate, applied (with reference unsplitting) and kept where
+    // its cost after unsplitting is below the object split's, so both are
+    // compared on the children they really produce.
+    SbvhSplit find_split(const SbvhTask& task, int depth) const {
+        SbvhSplit split;
+        split.object = find_object_split(task.refs, split.sorted);
+        if (task.spare > 0) try_spatial_split(task, depth, split);
+        return split;
+    }
+    void partition(SbvhTask& task, SbvhSplit& split, SbvhTask& left, SbvhTask& right) const {
+        if (split.spatial) {
+            left.refs = std::move(split.left);
+            right.refs = std::move(split.right);
+            left.box = split.left_box;
+            right.box = split.right_box;
+        } else {
+            apply_object_split(task.refs, split.sorted, split.object, left.refs, right.refs);
+            left.box = split.object.left;
+            right.box = split.object.right;
+        }
+        hand_down_spare(task, left, right);
+        split = SbvhSplit{};  // spent: its sorted axes are not kept while the children are built
+    }
+    // Object median on the axis where the centres spread most.
+    void partition_at_median(SbvhTask& task, SbvhSplit& split, SbvhTask& left, SbvhTask& right) const {
+        split.object = median_split(task.refs, split.sorted);
+        split.spatial = false;
+        partition(task, split, left, right);
+    }
+    // Takes leaf slots (in x order, as the sweep SAH builder lays leaves out).
+    uint32_t place_leaf(SbvhTask& task) {
+        std::vector<Ref>& refs = task.refs;
+        const auto n = static_cast<uint32_t>(refs.size());
+        const uint32_t slot = next_slot_.fetch_add(n, std::memory_order_relaxed);
+        if (size_t{slot} + n > slots_.size()) throw Error("SBVH build: reference budget exceeded (internal error)");
+        std::sort(refs.begin(), refs.end(), [](const Ref& a, const Ref& b) {
+            return sweep::sort_key(a.centre(0), a.id) < sweep::sort_key(b.centre(0), b.id);
+        });
+        for (uint32_t i = 0; i < n; ++i) slots_[slot + i] = refs[i].id;
+        return slot;
+    }
+    [[nodiscard]] uint32_t slot_prim(uint32_t slot) const { return slots_[slot]; }
+    static SpareRefs leaf_carry(const SbvhTask& task) { return task.spare; }
+    static void hand_over(SpareRefs left_rest, SbvhTask& right) { right.spare += left_rest; }
+
+    // ---- Object splits.
 
     // Full sweep over the references sorted by centre on each axis.
     ObjectSplit find_object_split(const std::vector<Ref>& refs, SortedAxes& sorted) const {
@@ -337,6 +422,35 @@ private:
         split.position = static_cast<uint32_t>(n / 2);
         side_boxes(refs, sorted.keys[split.axis], split);
         return split;
+    }
+
+    // ---- Spatial splits.
+
+    // Where the children of the object split overlap by more than alpha times
+    // the root's area: the best spatial candidate that fits the spare
+    // references and the depth limit, applied, becomes `split` where its
+    // children's SAH is below the object split's.
+    void try_spatial_split(const SbvhTask& task, int depth, SbvhSplit& split) const {
+        const Box3f overlap = intersect(split.object.left, split.object.right);
+        if (empty_box(overlap) || !(overlap.surface_area() > alpha_ * root_area_)) return;
+        const SpatialSplit spatial = find_spatial_split(task.refs, task.box, task.spare);
+        if (!spatial.valid()) return;
+        // Deep in the tree a lopsided split could exceed kBvhMaxDepth.
+        const uint32_t larger = std::max(spatial.left_count, spatial.right_count);
+        if (!top_down::depth_allows(depth, larger, max_leaf_size())) return;
+        std::vector<Ref> left, right;
+        Box3f left_box, right_box;
+        if (!apply_spatial_split(task.refs, task.box, spatial, left, right, left_box, right_box)) return;
+        const float cost = left_box.surface_area() * static_cast<float>(left.size()) +
+                           right_box.surface_area() * static_cast<float>(right.size());
+        if (!(cost < split.object.cost)) return;
+        split.spatial = true;
+        split.spatial_larger = larger;
+        split.spatial_cost = cost;
+        split.left = std::move(left);
+        split.right = std::move(right);
+        split.left_box = left_box;
+        split.right_box = right_box;
     }
 
     // Chopped-reference binning and a sweep over the slab boundaries; only
@@ -465,48 +579,7 @@ private:
         return !left.empty() && !right.empty();
     }
 
-    bool depth_ok(int depth, uint64_t larger) const {
-        return depth + 1 + sweep::median_levels(larger, max_leaf_size_) <= kBvhMaxDepth;
-    }
-
-    // Chooses the split of a node of n >= 2 references and distributes its
-    // references; returns the split's SAH (A_L N_L + A_R N_R of the children
-    // as built), or infinity where the node can only be a leaf (the depth
-    // bound with n <= max_leaf_size). A spatial candidate is applied, with
-    // reference unsplitting, and kept where its cost after unsplitting is
-    // below the best object split's, so both are compared on the children
-    // they really produce.
-    float split_node(const std::vector<Ref>& refs, const Box3f& bounds, int depth, uint64_t spare,
-                     std::vector<Ref>& left, std::vector<Ref>& right, Box3f& left_box, Box3f& right_box) const {
-        const auto n = static_cast<uint32_t>(refs.size());
-        SortedAxes sorted;
-        ObjectSplit object = find_object_split(refs, sorted);
-        SpatialSplit spatial;
-        if (spare > 0) {
-            const Box3f overlap = intersect(object.left, object.right);
-            if (!empty_box(overlap) && overlap.surface_area() > alpha_ * root_area_) {
-                spatial = find_spatial_split(refs, bounds, spare);
-            }
-        }
-        // Deep in the tree a lopsided split could exceed kBvhMaxDepth; from
-        // there on, object medians reach leaves in time.
-        if (spatial.valid() && depth_ok(depth, std::max(spatial.left_count, spatial.right_count)) &&
-            apply_spatial_split(refs, bounds, spatial, left, right, left_box, right_box)) {
-            const float cost = left_box.surface_area() * static_cast<float>(left.size()) +
-                               right_box.surface_area() * static_cast<float>(right.size());
-            if (cost < object.cost) return cost;
-        }
-        left.clear();
-        right.clear();
-        if (!depth_ok(depth, std::max(object.position, n - object.position))) {
-            if (n <= max_leaf_size_) return kInfinity;
-            object = median_split(refs, sorted);  // n > max_leaf_size: the cost is not looked at
-        }
-        apply_object_split(refs, sorted, object, left, right);
-        left_box = object.left;
-        right_box = object.right;
-        return object.cost;
-    }
+    // ---- The reference budget.
 
     // The spare references a split leaves over go to its children in
     // proportion to their SAH weights (area times references): spatial
@@ -524,79 +597,30 @@ private:
         return {left_spare, rest - left_spare};
     }
 
-    // Returns the spare references the subtree did not use.
-    uint64_t build_node(uint32_t node, std::vector<Ref> refs, const Box3f& bounds, int depth, uint64_t spare) {
-        const auto n = static_cast<uint32_t>(refs.size());
-        ScratchNode& out = scratch_[node];
-        out.bounds = bounds;
-        if (n == 1) {
-            make_leaf(out, refs);
-            return spare;
-        }
-
-        std::vector<Ref> left, right;
-        Box3f left_box, right_box;
-        const float split_cost = split_node(refs, bounds, depth, spare, left, right, left_box, right_box);
-        const float area = bounds.surface_area();
-        const float leaf_cost = intersection_cost_ * area * static_cast<float>(n);
-        if (n <= max_leaf_size_ && traversal_cost_ * area + intersection_cost_ * split_cost >= leaf_cost) {
-            make_leaf(out, refs);
-            return spare;
-        }
-        const uint64_t used = left.size() + right.size() - n;
-        if (used > spare) throw Error("SBVH build: reference budget exceeded (internal error)");
-        std::vector<Ref>().swap(refs);
-        const auto [left_spare, right_spare] = share_spare(spare - used, left.size(), right.size(), left_box, right_box);
-
-        const uint32_t pair = next_node_.fetch_add(2, std::memory_order_relaxed);
-        out.a = pair;
-        out.b = pair + 1;
-        out.leaf = false;
-        if (n > kParallelSubtreeSize) {
-            uint64_t left_rest = 0, right_rest = 0;
-            parallel::invoke(
-                [&] { left_rest = build_node(pair, std::move(left), left_box, depth + 1, left_spare); },
-                [&] { right_rest = build_node(pair + 1, std::move(right), right_box, depth + 1, right_spare); });
-            return left_rest + right_rest;
-        }
-        // Small nodes build their children one after the other (whatever the
-        // thread count), so what the left subtree leaves over goes on to the right.
-        const uint64_t left_rest = build_node(pair, std::move(left), left_box, depth + 1, left_spare);
-        return build_node(pair + 1, std::move(right), right_box, depth + 1, right_spare + left_rest);
-    }
-
-    void make_leaf(ScratchNode& out, std::vector<Ref>& refs) {
-        const auto n = static_cast<uint32_t>(refs.size());
-        const uint32_t slot = next_slot_.fetch_add(n, std::memory_order_relaxed);
-        if (size_t{slot} + n > slots_.size()) throw Error("SBVH build: reference budget exceeded (internal error)");
-        // In x order, as the sweep SAH builder lays leaves out.
-        std::sort(refs.begin(), refs.end(), [](const Ref& a, const Ref& b) {
-            return sweep::sort_key(a.centre(0), a.id) < sweep::sort_key(b.centre(0), b.id);
-        });
-        for (uint32_t i = 0; i < n; ++i) slots_[slot + i] = refs[i].id;
-        out.a = slot;
-        out.b = n;
-        out.leaf = true;
+    // Checks the references the split added against the node's spare ones,
+    // hands the rest down to the children and frees the node's references.
+    static void hand_down_spare(SbvhTask& task, SbvhTask& left, SbvhTask& right) {
+        const uint64_t used = left.refs.size() + right.refs.size() - task.refs.size();
+        if (used > task.spare) throw Error("SBVH build: reference budget exceeded (internal error)");
+        std::vector<Ref>().swap(task.refs);
+        const auto [left_spare, right_spare] =
+            share_spare(task.spare - used, left.refs.size(), right.refs.size(), left.box, right.box);
+        left.spare = left_spare;
+        right.spare = right_spare;
     }
 
     std::span<const Triangle> triangles_;
-    uint32_t max_leaf_size_;
-    float traversal_cost_;
-    float intersection_cost_;
     float alpha_;
     float root_area_ = 0.0f;
-
-    std::vector<ScratchNode> scratch_;  // nodes in allocation order
-    std::vector<uint32_t> slots_;       // leaf slots in allocation order
-    std::atomic<uint32_t> next_node_{1};
+    std::vector<uint32_t> slots_;  // leaf slots in allocation order
     std::atomic<uint32_t> next_slot_{0};
 };
 
 }  // namespace
 
-Bvh build_sbvh(std::span<const Triangle> triangles, const BuildOptions& options) {
-    SbvhBuilder builder(triangles, options);
-    return parallel::with_threads(options.threads, [&] { return builder.build(); });
+Bvh build_sbvh(std::span<const Triangle> triangles, const BvhBuildConfig& config, const SbvhOptions& sbvh) {
+    SbvhBuilder builder(triangles, config, sbvh);
+    return builder.build();
 }
 
 }  // namespace rf

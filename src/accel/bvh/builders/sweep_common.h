@@ -1,14 +1,11 @@
-// Helpers shared by the full-sweep SAH builder, the SBVH builder and the
-// reinsertion optimizer: fast box growth, sortable float keys, a parallel
-// merge sort, the depth-limit rule and the depth-first re-emission of a tree
-// whose nodes were allocated in arbitrary (task) order.
+// Helpers shared by the SAH builders (binned, full sweep, SBVH) and the
+// reinsertion optimizer: fast box growth, sortable float keys and a
+// parallel merge sort. Their common top-down recursion is top_down_sah.h.
 #pragma once
 
 #include <algorithm>
 #include <bit>
 #include <cstdint>
-#include <span>
-#include <utility>
 #include <vector>
 
 #include "backend/cpu/parallel.h"
@@ -41,12 +38,6 @@ inline uint64_t sort_key(float value, uint32_t index) {
     return (uint64_t{sortable_key(value)} << 32) | index;
 }
 
-// Levels of halving needed until `count` references fit in leaves of `leaf_size`.
-inline int median_levels(uint64_t count, uint32_t leaf_size) {
-    const uint64_t leaves = (count + leaf_size - 1) / leaf_size;
-    return leaves <= 1 ? 0 : static_cast<int>(std::bit_width(leaves - 1));
-}
-
 // Merge sort of data[0, n) on TBB tasks (via backend/cpu/parallel.h); tmp has room
 // for n values. Small ranges fall back to std::sort.
 inline void parallel_sort(uint64_t* data, uint64_t* tmp, size_t n) {
@@ -60,49 +51,6 @@ inline void parallel_sort(uint64_t* data, uint64_t* tmp, size_t n) {
                      [&] { parallel_sort(data + half, tmp + half, n - half); });
     std::merge(data, data + half, data + half, data + n, tmp);
     std::copy(tmp, tmp + n, data);
-}
-
-// A node of a tree under construction: inner nodes name their two children
-// (anywhere in the node array), leaves a range of a primitive slot array.
-struct ScratchNode {
-    Box3f bounds;
-    uint32_t a = 0;      // inner: left child; leaf: first slot
-    uint32_t b = 0;      // inner: right child; leaf: slot count
-    bool leaf = false;
-};
-
-// Copies the tree under scratch[root] into the canonical layout: nodes in
-// depth-first order with each children pair adjacent (a node's pair, then the
-// left subtree's descendants, then the right's), and leaf slots renumbered in
-// the order the leaves are laid out.
-inline Bvh emit_depth_first(std::span<const ScratchNode> scratch, uint32_t root, uint32_t node_count,
-                            std::span<const uint32_t> slots, size_t slot_count) {
-    Bvh bvh;
-    budgeted_resize(bvh.nodes, node_count, "BVH nodes");
-    budgeted_resize(bvh.prim_indices, slot_count, "BVH primitive indices");
-    std::vector<std::pair<uint32_t, uint32_t>> stack;  // (scratch node, output index)
-    stack.reserve(2 * kBvhMaxDepth + 4);
-    stack.emplace_back(root, 0u);
-    uint32_t next_node = 1, next_slot = 0;
-    while (!stack.empty()) {
-        const auto [from, at] = stack.back();
-        stack.pop_back();
-        const ScratchNode& node = scratch[from];
-        BvhNode& out = bvh.nodes[at];
-        out.bounds = node.bounds;
-        if (node.leaf) {
-            out.first = next_slot;
-            out.count = node.b;
-            for (uint32_t i = 0; i < node.b; ++i) bvh.prim_indices[next_slot++] = slots[node.a + i];
-            continue;
-        }
-        out.first = next_node;
-        out.count = 0;
-        next_node += 2;
-        stack.emplace_back(node.b, out.first + 1);  // popped after the left subtree is done
-        stack.emplace_back(node.a, out.first);
-    }
-    return bvh;
 }
 
 }  // namespace rf::sweep

@@ -7,22 +7,26 @@
 // so the order is total). A node owns the same range [begin, end) of all three
 // sorted lists; a sweep over each list evaluates the SAH at every split
 // position, and the chosen split partitions the other two lists stably, so
-// they stay sorted: O(N log N) for the sort plus O(N) per tree level.
+// they stay sorted: O(N log N) for the sort plus O(N) per tree level. Leaves
+// name ranges of the x-sorted list, which are already in depth-first order.
+// From the top-down skeleton (top_down_sah.h) it takes the recursion, the
+// leaf decision and its fallbacks (halving along the widest centroid axis
+// where the depth limit is near), the node allocation, subtree tasks and the
+// depth-first copy; this file sweeps and partitions.
 //
 // Parallelism (TBB via backend/cpu/parallel.h): the three initial sorts run at once,
 // each a parallel merge sort; large nodes sweep and partition their three axes
-// as separate tasks; subtrees above a size threshold are separate tasks. Child
-// pairs come from a shared counter, and a final pass re-emits the tree in
-// depth-first order. Every decision depends only on the node's primitives, so
+// as separate tasks; the skeleton builds subtrees above a size threshold as
+// separate tasks. Every decision depends only on the node's primitives, so
 // the output is the same for every thread count.
 #include "accel/bvh/builders/sweep_sah.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cstdint>
 #include <vector>
 
 #include "accel/bvh/builders/sweep_common.h"
+#include "accel/bvh/builders/top_down_sah.h"
 #include "backend/cpu/parallel.h"
 #include "rayforge/core/memory_budget.h"
 
@@ -30,10 +34,8 @@ namespace rf {
 namespace {
 
 using sweep::grow;
-using sweep::ScratchNode;
 
 constexpr uint32_t kParallelAxesSize = 8 * 1024;      // prims per node to sweep the axes as tasks
-constexpr uint32_t kParallelSubtreeSize = 1024;       // prims per node to spawn child tasks
 constexpr uint32_t kGrainSize = 16 * 1024;
 
 struct AxisSplit {
@@ -42,33 +44,48 @@ struct AxisSplit {
     [[nodiscard]] bool valid() const { return position != 0; }
 };
 
-class SweepSahBuilder {
+// The skeleton's view of a node: its range of the sorted lists and its box.
+struct SweepTask {
+    uint32_t begin = 0, end = 0;
+    Box3f box;
+    [[nodiscard]] uint32_t count() const { return end - begin; }
+    [[nodiscard]] const Box3f& bounds() const { return box; }
+};
+
+// The cheapest split over the three sorted lists.
+struct SweepSplit {
+    int axis = 0;
+    AxisSplit best;
+    [[nodiscard]] bool valid() const { return best.valid(); }
+    [[nodiscard]] float cost() const { return best.cost; }
+    [[nodiscard]] uint32_t larger_child(uint32_t count) const {
+        return std::max(best.position, count - best.position);
+    }
+};
+
+class SweepSahBuilder : public top_down::TopDownSahBuilder<SweepSahBuilder, SweepTask> {
 public:
-    SweepSahBuilder(std::span<const Triangle> triangles, const BuildOptions& options)
-        : triangles_(triangles),
-          max_leaf_size_(static_cast<uint32_t>(options.max_leaf_size)),
-          traversal_cost_(options.traversal_cost),
-          intersection_cost_(options.intersection_cost) {}
+    SweepSahBuilder(std::span<const Triangle> triangles, const BvhBuildConfig& config)
+        : TopDownSahBuilder(config), triangles_(triangles) {}
 
     Bvh build() {
         const uint32_t count = checked_index_count("BVH primitive count", triangles_.size());
         if (count == 0) return Bvh{};
         budgeted_resize(boxes_, count, "sweep SAH build: primitive boxes");
-        const Box3f root = make_boxes(count);
+        SweepTask root{0, count, make_boxes(count)};
         sort_axes(count);
         for (auto& a : right_area_) budgeted_resize(a, count, "sweep SAH build: sweep areas");
         for (auto& t : temp_) budgeted_resize(t, count, "sweep SAH build: partition buffer");
         budgeted_resize(goes_left_, count, "sweep SAH build: partition flags");
-        budgeted_resize(scratch_, 2 * size_t{count} - 1, "sweep SAH build: scratch nodes");
-
-        next_node_.store(1, std::memory_order_relaxed);
-        build_node(0, 0, count, root, 0);
-        const uint32_t node_count = next_node_.load(std::memory_order_relaxed);
-        // Leaves name ranges of the x-sorted list, which holds each id once.
-        return sweep::emit_depth_first(scratch_, 0, node_count, order_[0], count);
+        return build_tree(root, count);
     }
 
 private:
+    friend TopDownSahBuilder;
+    static constexpr const char* kName = "sweep SAH build";
+    static constexpr uint32_t kParallelSubtreeSize = 1024;  // prims per node to spawn child tasks
+    static constexpr bool kLeavesInPlace = true;
+
     Box3f make_boxes(uint32_t count) {
         return parallel::reduce(
             0u, count, kGrainSize, Box3f{},
@@ -117,6 +134,29 @@ private:
         }
     }
 
+    // ---- The skeleton's hooks.
+
+    SweepSplit find_split(const SweepTask& task, int /*depth*/) {
+        AxisSplit splits[3];
+        for_axes(task.count(), [&](int axis) { splits[axis] = sweep_axis(axis, task.begin, task.end); });
+        SweepSplit split;  // ties go to the lower axis: the same choice on every run
+        for (int a = 1; a < 3; ++a) {
+            if (splits[a].cost < splits[split.axis].cost) split.axis = a;
+        }
+        split.best = splits[split.axis];
+        return split;
+    }
+    void partition(const SweepTask& task, const SweepSplit& split, SweepTask& left, SweepTask& right) {
+        partition_lists(task, split.axis, task.begin + split.best.position, left, right);
+    }
+    // Halves along the widest centroid axis.
+    void partition_at_median(const SweepTask& task, const SweepSplit& /*split*/, SweepTask& left, SweepTask& right) {
+        const uint32_t mid = task.begin + task.count() / 2;
+        partition_lists(task, widest_centroid_axis(task.begin, task.end), mid, left, right);
+    }
+    static uint32_t place_leaf(const SweepTask& task) { return task.begin; }
+    [[nodiscard]] uint32_t slot_prim(uint32_t slot) const { return order_[0][slot]; }
+
     // The cheapest split of the sorted list of `axis` over [begin, end).
     AxisSplit sweep_axis(int axis, uint32_t begin, uint32_t end) {
         const uint32_t* ids = order_[axis].data();
@@ -139,67 +179,23 @@ private:
         return best;
     }
 
-    void build_node(uint32_t node, uint32_t begin, uint32_t end, const Box3f& bounds, int depth) {
-        const uint32_t count = end - begin;
-        ScratchNode& out = scratch_[node];
-        out.bounds = bounds;
-        if (count == 1) return make_leaf(out, begin, count);
-
-        AxisSplit splits[3];
-        for_axes(count, [&](int axis) { splits[axis] = sweep_axis(axis, begin, end); });
-        int axis = 0;  // ties go to the lower axis: the same choice on every run
-        for (int a = 1; a < 3; ++a) {
-            if (splits[a].cost < splits[axis].cost) axis = a;
-        }
-        AxisSplit split = splits[axis];
-
-        const float area = bounds.surface_area();
-        const float leaf_cost = intersection_cost_ * area * static_cast<float>(count);
-        const float split_cost = traversal_cost_ * area + intersection_cost_ * split.cost;
-        if (count <= max_leaf_size_ && split_cost >= leaf_cost) return make_leaf(out, begin, count);
-
-        // A lopsided SAH split deep in the tree could exceed kBvhMaxDepth; from
-        // here on, halving along the widest centroid axis reaches leaves in time.
-        const uint32_t larger = std::max(split.position, count - split.position);
-        if (depth + 1 + sweep::median_levels(larger, max_leaf_size_) > kBvhMaxDepth) {
-            if (count <= max_leaf_size_) return make_leaf(out, begin, count);
-            axis = widest_centroid_axis(begin, end);
-            split = AxisSplit{0.0f, count / 2};
-        }
-        const uint32_t mid = begin + split.position;
-
-        // Flag the left side, then partition the other two lists stably.
+    // The references before `mid` in the sorted list of `axis` go left:
+    // flag them, then partition the other two lists stably.
+    void partition_lists(const SweepTask& task, int axis, uint32_t mid, SweepTask& left, SweepTask& right) {
         const uint32_t* ids = order_[axis].data();
-        Box3f left_box, right_box;
-        for (uint32_t i = begin; i < mid; ++i) {
+        left = SweepTask{task.begin, mid, Box3f{}};
+        right = SweepTask{mid, task.end, Box3f{}};
+        for (uint32_t i = task.begin; i < mid; ++i) {
             goes_left_[ids[i]] = 1;
-            grow(left_box, boxes_[ids[i]]);
+            grow(left.box, boxes_[ids[i]]);
         }
-        for (uint32_t i = mid; i < end; ++i) {
+        for (uint32_t i = mid; i < task.end; ++i) {
             goes_left_[ids[i]] = 0;
-            grow(right_box, boxes_[ids[i]]);
+            grow(right.box, boxes_[ids[i]]);
         }
-        for_axes(count, [&](int a) {
-            if (a != axis) stable_partition(a, begin, end, mid);
+        for_axes(task.count(), [&](int a) {
+            if (a != axis) stable_partition(a, task.begin, task.end, mid);
         });
-
-        const uint32_t pair = next_node_.fetch_add(2, std::memory_order_relaxed);
-        out.a = pair;
-        out.b = pair + 1;
-        out.leaf = false;
-        if (count > kParallelSubtreeSize) {
-            parallel::invoke([&] { build_node(pair, begin, mid, left_box, depth + 1); },
-                             [&] { build_node(pair + 1, mid, end, right_box, depth + 1); });
-        } else {
-            build_node(pair, begin, mid, left_box, depth + 1);
-            build_node(pair + 1, mid, end, right_box, depth + 1);
-        }
-    }
-
-    static void make_leaf(ScratchNode& out, uint32_t begin, uint32_t count) {
-        out.a = begin;
-        out.b = count;
-        out.leaf = true;
     }
 
     // The sorted lists' ends give each axis' centroid extent for free.
@@ -230,24 +226,18 @@ private:
     }
 
     std::span<const Triangle> triangles_;
-    uint32_t max_leaf_size_;
-    float traversal_cost_;
-    float intersection_cost_;
-
     std::vector<Box3f> boxes_;               // per triangle
     std::vector<uint32_t> order_[3];         // ids sorted per axis; a node owns one range of each
     std::vector<float> right_area_[3];       // sweep scratch, per axis, indexed like order_
     std::vector<uint32_t> temp_[3];          // partition scratch, per axis
     std::vector<uint8_t> goes_left_;         // per triangle: side of the current split
-    std::vector<ScratchNode> scratch_;       // nodes in allocation order
-    std::atomic<uint32_t> next_node_{1};
 };
 
 }  // namespace
 
-Bvh build_sweep_sah(std::span<const Triangle> triangles, const BuildOptions& options) {
-    SweepSahBuilder builder(triangles, options);
-    return parallel::with_threads(options.threads, [&] { return builder.build(); });
+Bvh build_sweep_sah(std::span<const Triangle> triangles, const BvhBuildConfig& config) {
+    SweepSahBuilder builder(triangles, config);
+    return builder.build();
 }
 
 }  // namespace rf

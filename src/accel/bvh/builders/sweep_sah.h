@@ -4,12 +4,12 @@
 
 #include <span>
 
-#include "rayforge/accel/accel.h"
+#include "accel/bvh/builders/bvh_build_config.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/scene/scene_geometry.h"
 
 namespace rf {
 
-Bvh build_sweep_sah(std::span<const Triangle> triangles, const BuildOptions& options);
+Bvh build_sweep_sah(std::span<const Triangle> triangles, const BvhBuildConfig& config);
 
 }  // namespace rf

@@ -12,7 +12,7 @@
 // always among the candidates, so a move never raises the SAH; moves that
 // would push a leaf below kBvhMaxDepth are not considered. Batches repeat
 // until one improves the cost by less than 0.1% (at most kDefaultBatches), or
-// exactly options.optimize_iterations times. Leaves keep their primitives, so
+// exactly ReinsertionOptions::iterations times. Leaves keep their primitives, so
 // only inner node areas change. The result is re-emitted in canonical
 // depth-first order, and kept only if its SAH is not above the input's.
 #include "accel/bvh/optimize/reinsertion.h"
@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <functional>
 #include <queue>
+#include <utility>
 #include <vector>
 
 #include "accel/bvh/builders/sweep_common.h"
@@ -48,8 +49,8 @@ inline double area(const Box3f& b) { return b.surface_area(); }
 
 class Reinserter {
 public:
-    Reinserter(const Bvh& bvh, const BuildOptions& options)
-        : traversal_cost_(options.traversal_cost), intersection_cost_(options.intersection_cost) {
+    Reinserter(const Bvh& bvh, const SahCosts& sah)
+        : traversal_cost_(sah.traversal), intersection_cost_(sah.intersection) {
         budgeted_resize(nodes_, bvh.nodes.size(), "BVH reinsertion: nodes");
         // Canonical order puts children after their parent, so a reverse pass
         // sees both children before the parent.
@@ -88,16 +89,39 @@ public:
         }
     }
 
+    // The tree in the canonical layout: nodes in depth-first order with each
+    // children pair adjacent (a node's pair, then the left subtree's
+    // descendants, then the right's), and `original`'s leaf slots renumbered
+    // in the order the leaves are laid out.
     [[nodiscard]] Bvh emit(const Bvh& original) const {
-        std::vector<sweep::ScratchNode> scratch;
-        budgeted_resize(scratch, nodes_.size(), "BVH reinsertion: output nodes");
-        for (size_t i = 0; i < nodes_.size(); ++i) {
-            const Node& n = nodes_[i];
-            scratch[i] = n.leaf() ? sweep::ScratchNode{n.box, n.first, n.count, true}
-                                  : sweep::ScratchNode{n.box, n.left, n.right, false};
+        Bvh bvh;
+        budgeted_resize(bvh.nodes, nodes_.size(), "BVH nodes");
+        budgeted_resize(bvh.prim_indices, original.prim_indices.size(), "BVH primitive indices");
+        std::vector<std::pair<uint32_t, uint32_t>> stack;  // (node, output index)
+        stack.reserve(2 * kBvhMaxDepth + 4);
+        stack.emplace_back(root_, 0u);
+        uint32_t next_node = 1, next_slot = 0;
+        while (!stack.empty()) {
+            const auto [from, at] = stack.back();
+            stack.pop_back();
+            const Node& node = nodes_[from];
+            BvhNode& out = bvh.nodes[at];
+            out.bounds = node.box;
+            if (node.leaf()) {
+                out.first = next_slot;
+                out.count = node.count;
+                for (uint32_t i = 0; i < node.count; ++i) {
+                    bvh.prim_indices[next_slot++] = original.prim_indices[node.first + i];
+                }
+                continue;
+            }
+            out.first = next_node;
+            out.count = 0;
+            next_node += 2;
+            stack.emplace_back(node.right, out.first + 1);  // popped after the left subtree is done
+            stack.emplace_back(node.left, out.first);
         }
-        return sweep::emit_depth_first(scratch, root_, static_cast<uint32_t>(nodes_.size()), original.prim_indices,
-                                       original.prim_indices.size());
+        return bvh;
     }
 
 private:
@@ -252,16 +276,14 @@ private:
 
 }  // namespace
 
-void optimize_reinsertion(Bvh& bvh, std::span<const Triangle> /*triangles*/, const BuildOptions& options) {
+void optimize_reinsertion(Bvh& bvh, std::span<const Triangle> /*triangles*/, const SahCosts& sah,
+                          const ReinsertionOptions& reinsertion) {
     if (bvh.nodes.size() < 5) return;
-    Bvh optimized = parallel::with_threads(options.threads, [&] {
-        Reinserter reinserter(bvh, options);
-        reinserter.run(options.optimize_iterations);
-        return reinserter.emit(bvh);
-    });
+    Reinserter reinserter(bvh, sah);
+    reinserter.run(reinsertion.iterations);
+    Bvh optimized = reinserter.emit(bvh);
     // Guards against rounding: the input stays unless the SAH really did not rise.
-    if (optimized.sah_cost(options.traversal_cost, options.intersection_cost) <=
-        bvh.sah_cost(options.traversal_cost, options.intersection_cost)) {
+    if (optimized.sah_cost(sah.traversal, sah.intersection) <= bvh.sah_cost(sah.traversal, sah.intersection)) {
         bvh = std::move(optimized);
     }
 }

@@ -10,6 +10,9 @@
 
 namespace rf {
 
-void optimize_reinsertion(Bvh& bvh, std::span<const Triangle> triangles, const BuildOptions& options);
+// Runs reinsertion.iterations batches (0: until a batch gains too little),
+// whatever reinsertion.enabled says; the caller decides whether to run it.
+void optimize_reinsertion(Bvh& bvh, std::span<const Triangle> triangles, const SahCosts& sah,
+                          const ReinsertionOptions& reinsertion);
 
 }  // namespace rf
