@@ -47,7 +47,9 @@
 // the depth limit) does not fit one thread: then 7-8 run on the host, the
 // CPU builder's own code (emit_grid_bvh_hierarchy) on the downloaded
 // references, hierarchy and leaf groups (stages.emitted_on_device = false).
-// Stages are timed with CUDA events; buffers are counted by a MemoryMeter.
+// Stages are timed with CUDA events; buffers are counted by a MemoryMeter
+// and live in the scope of the stages that use them. One CUB scratch buffer
+// grows over the build and lives to its end.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -65,12 +67,13 @@
 #include "accel/bvh/builders/grid_bvh_emit.h"
 #include "accel/bvh/builders/grid_bvh_finish_steps.h"
 #include "accel/bvh/builders/grid_bvh_steps.h"
-#include "backend/cuda/device_buffer.h"
-#include "backend/cuda/device_bvh_builders.h"
-#include "backend/cuda/event_timer.h"
-#include "backend/cuda/morton_sort.h"
 #include "backend/backends.h"
+#include "backend/cuda/build_context.h"
+#include "backend/cuda/cub_run.h"
+#include "backend/cuda/device_buffer.h"
 #include "backend/cuda/device_builders.h"
+#include "backend/cuda/device_bvh_builders.h"
+#include "backend/cuda/launch.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {
@@ -89,37 +92,13 @@ using gridbvh::SplitTask;
 using gridbvh::TaskBins;
 using gridbvh::TaskOutcome;
 
-constexpr int kBlockSize = 256;   // a multiple of 32: every warp is full, so full-mask ballots are valid
+// kBlockSize (launch.h) is a multiple of 32: every warp is full, so full-mask ballots are valid.
 constexpr int kTaskThreads = 8;   // threads per split task (one per bin of an axis)
 constexpr int kTasksPerWarp = 32 / kTaskThreads;
 constexpr int kTasksPerBlock = kBlockSize / kTaskThreads;
 constexpr uint32_t kFullMask = 0xffffffffu;
 constexpr uint32_t kMaxQueueBlocks = 4096;  // warps loop over the queue beyond this
 constexpr uint32_t kTopCells = uint32_t(gridbvh::kTopRes) * gridbvh::kTopRes * gridbvh::kTopRes;
-
-uint32_t blocks_for(uint64_t threads) { return static_cast<uint32_t>((threads + kBlockSize - 1) / kBlockSize); }
-
-template <class T>
-T download_value(const T* device_value) {
-    T value{};
-    RF_CUDA_CHECK(cudaMemcpy(&value, device_value, sizeof value, cudaMemcpyDeviceToHost));
-    return value;
-}
-
-// CUB's temporary storage, counted by the meter; released on return.
-class CubTemp {
-public:
-    CubTemp(MemoryMeter& meter, const char* name) : meter_(meter), buffer_(name) {}
-    ~CubTemp() { meter_.release(buffer_); }
-    void* get(size_t bytes) {
-        if (buffer_.bytes() < bytes || buffer_.data() == nullptr) meter_.allocate(buffer_, bytes > 0 ? bytes : 1);
-        return buffer_.data();
-    }
-
-private:
-    MemoryMeter& meter_;
-    DeviceBuffer<uint8_t> buffer_;
-};
 
 // The CPU folds into an accumulator that starts at +-FLT_MAX, so a NaN
 // coordinate never wins there; CUB combines in tree order, so NaN must lose
@@ -429,337 +408,448 @@ __global__ void emit_copy_kernel(const uint32_t* hnodes, uint32_t node_count, co
                        out_prims);
 }
 
+// ---- the host's stages ----
+
+// What lives through the build: the triangles (on the device to its end,
+// as they always were), the references and their frame.
+struct GridBvhOnDevice {
+    uint32_t n = 0;          // triangles
+    uint32_t ref_count = 0;  // references, after splitting
+    uint32_t leaf_size = 0;
+    GridFrame frame;
+    DeviceBuffer<Triangle> triangles;
+    DeviceBuffer<GridRef> refs;
+};
+
+// Stage 1a: one reference per triangle and the scene box (a reduction of
+// the reference boxes, freed on return) as the frame. Starts the stage's timer.
+void triangle_references(GridBvhOnDevice& g, BuildContext& build, DeviceBuffer<uint8_t>& scratch) {
+    g.refs = DeviceBuffer<GridRef>(build.meter, "GridBvh: references", g.n);
+    g.ref_count = g.n;
+    DeviceBuffer<Box3f> boxes(build.meter, "GridBvh: reference boxes", g.n),
+        scene_box(build.meter, "GridBvh: scene box", 1);
+    build.timer.start();
+    launch(triangle_refs_kernel, g.n, g.triangles.data(), g.n, g.refs.data(), boxes.data());
+    cub_run(scratch, [&](void* temp, size_t& bytes) {
+        return cub::DeviceReduce::Reduce(temp, bytes, boxes.data(), scene_box.data(), g.n, BoxUnion{}, Box3f{});
+    });
+    g.frame = GridFrame(download_value(scene_box.data()));
+}
+
+// The parts one splitting pass writes, one per output slot (empty parts
+// where a share was not used), and the count cub::DeviceSelect::If keeps.
+struct SplitParts {
+    DeviceBuffer<GridRef> parts;
+    DeviceBuffer<uint32_t> kept;
+};
+
+// Stage 1b's requests and parts: each reference's request, the total
+// asked, each one's share of the `available` slots, the output slots by a
+// scan, then the parts. No parts when nothing was asked. The requests and
+// the slot ends are freed on return.
+SplitParts write_parts(const GridBvhOnDevice& g, float max_width, uint64_t available, BuildContext& build,
+                       DeviceBuffer<uint8_t>& scratch) {
+    const uint32_t count = g.ref_count;
+    DeviceBuffer<uint64_t> requests(build.meter, "GridBvhSplit: split requests", count),
+        ends(build.meter, "GridBvhSplit: slot ends", count);
+    launch(split_request_kernel, count, g.refs.data(), count, max_width, requests.data());
+    cub_run(scratch, [&](void* temp, size_t& bytes) {
+        return cub::DeviceScan::InclusiveSum(temp, bytes, requests.data(), ends.data(), count);
+    });
+    const uint64_t asked = download_value(ends.data() + count - 1);
+    if (asked == 0) return {};
+    launch(split_slots_kernel, count, requests.data(), count, asked, available, ends.data());
+    cub_run(scratch, [&](void* temp, size_t& bytes) {
+        return cub::DeviceScan::InclusiveSum(temp, bytes, ends.data(), ends.data(), count);
+    });
+    const uint64_t slots = download_value(ends.data() + count - 1);
+    // Node and leaf links keep their top bit as the leaf flag (kLeafBit).
+    if (slots >= (uint64_t{1} << 30)) throw Error("GridBvhSplit device build: more than 2^30 parts");
+    SplitParts out{DeviceBuffer<GridRef>(build.meter, "GridBvhSplit: partial triangles", slots),
+                   DeviceBuffer<uint32_t>(build.meter, "GridBvhSplit: kept parts", 1)};
+    launch(write_parts_kernel, count, g.triangles.data(), g.refs.data(), requests.data(), ends.data(), count, asked,
+           available, g.frame, out.parts.data());
+    return out;
+}
+
+// Stage 1b: one splitting pass (§4.4); the non-empty parts, in order, are
+// the new references. False when nothing was wider than the limit (later
+// passes would ask nothing either).
+bool split_pass(GridBvhOnDevice& g, float max_width, uint64_t available, BuildContext& build,
+                DeviceBuffer<uint8_t>& scratch) {
+    const SplitParts split = write_parts(g, max_width, available, build, scratch);
+    if (split.parts.size() == 0) return false;
+    const auto slots = static_cast<int64_t>(split.parts.size());
+    g.refs.allocate(split.parts.size());  // reallocated: the old references are freed before the new count
+    cub_run(scratch, [&](void* temp, size_t& bytes) {
+        return cub::DeviceSelect::If(temp, bytes, split.parts.data(), g.refs.data(), split.kept.data(), slots,
+                                     ValidRef{});
+    });
+    g.ref_count = download_value(split.kept.data());
+    return true;
+}
+
+// Stage 1, timed as partial_triangles_ms: the references, the frame and,
+// for GridBvhSplit, at most two splitting passes within
+// floor(split_budget n) added references.
+void make_references(GridBvhOnDevice& g, const GridBvhOptions& grid_bvh, bool partial_triangles, BuildContext& build,
+                     DeviceBuffer<uint8_t>& scratch) {
+    triangle_references(g, build, scratch);
+    const float scene_extent = std::max(g.frame.extent.x, std::max(g.frame.extent.y, g.frame.extent.z));
+    const float max_width = scene_extent / 128.0f;  // formula 4.1, sceneDividePortion = 1/128
+    const float budget = grid_bvh.split_budget;
+    if (partial_triangles && max_width > 0.0f && budget > 0.0f) {
+        const uint64_t budget_slots = uint64_t(std::floor(double(budget) * double(g.n)));
+        uint64_t used = 0;
+        for (int pass = 0; pass < 2 && used < budget_slots; ++pass) {
+            const uint32_t before = g.ref_count;
+            if (!split_pass(g, max_width, budget_slots - used, build, scratch)) break;
+            used += g.ref_count - before;
+        }
+    }
+    build.stages.partial_triangles_ms = build.timer.stop_ms();
+    build.stages.references = g.ref_count;
+}
+
+// The references' Grid0 keys and ids, sorted by key.
+struct SortedCells {
+    DeviceBuffer<uint32_t> keys, ids;
+};
+
+// Stage 2, timed as sort_ms: 30-bit Grid0 keys of the reference centres,
+// sorted once with the reference ids by a stable radix sort; the halves
+// that did not end sorted are freed on return.
+SortedCells sort_cell_keys(const GridBvhOnDevice& g, BuildContext& build, DeviceBuffer<uint8_t>& scratch) {
+    const uint32_t count = g.ref_count;
+    DeviceBuffer<uint32_t> keys[2] = {DeviceBuffer<uint32_t>(build.meter, "GridBvh: cell keys", count),
+                                      DeviceBuffer<uint32_t>(build.meter, "GridBvh: sorted cell keys", count)};
+    DeviceBuffer<uint32_t> ids[2] = {DeviceBuffer<uint32_t>(build.meter, "GridBvh: reference ids", count),
+                                     DeviceBuffer<uint32_t>(build.meter, "GridBvh: sorted references", count)};
+    build.timer.start();
+    launch(cell_keys_kernel, count, g.refs.data(), count, g.frame, keys[0].data(), ids[0].data());
+    cub::DoubleBuffer<uint32_t> key_buffers(keys[0].data(), keys[1].data()), id_buffers(ids[0].data(), ids[1].data());
+    cub_run(scratch, [&](void* temp, size_t& bytes) {
+        return cub::DeviceRadixSort::SortPairs(temp, bytes, key_buffers, id_buffers, count, 0, 30);
+    });
+    build.stages.sort_ms = build.timer.stop_ms();
+    const int sorted = key_buffers.Current() == keys[0].data() ? 0 : 1;
+    return {std::move(keys[sorted]), std::move(ids[sorted])};
+}
+
+// TopGrid0 (128^3 ranks) and the bottom grids: the sparse Grid0.
+struct Grid0 {
+    uint32_t occupied = 0;  // non-empty top cells
+    uint32_t cells = 0;     // non-empty Grid0 cells
+    DeviceBuffer<uint32_t> top_index, top_key, top_begin, top_cells, fine_begin;
+    DeviceBuffer<unsigned long long> top_mask;
+};
+
+// Stage 3a: each sorted position's top-cell and Grid0-cell rank plus one
+// (inclusive scans of the flags where the 21-bit and the 30-bit key change;
+// the flags are freed on return).
+void rank_cells(const uint32_t* sorted_keys, uint32_t count, uint32_t* top_rank, uint32_t* fine_rank,
+                BuildContext& build, DeviceBuffer<uint8_t>& scratch) {
+    DeviceBuffer<uint32_t> top_flags(build.meter, "GridBvh: top cell starts", count),
+        fine_flags(build.meter, "GridBvh: Grid0 cell starts", count);
+    launch(cell_start_flags_kernel, count, sorted_keys, count, top_flags.data(), fine_flags.data());
+    cub_run(scratch, [&](void* temp, size_t& bytes) {
+        return cub::DeviceScan::InclusiveSum(temp, bytes, top_flags.data(), top_rank, count);
+    });
+    cub_run(scratch, [&](void* temp, size_t& bytes) {
+        return cub::DeviceScan::InclusiveSum(temp, bytes, fine_flags.data(), fine_rank, count);
+    });
+}
+
+// Stage 3, timed as grid0_ms: Grid0 by compaction (§4.2 steps 4-5): the
+// ranks (freed on return), then one thread per sorted position scattering
+// the first positions, the top keys and the bottom grids' occupancy bits,
+// then TopGrid0 by scatter.
+Grid0 build_grid0(const SortedCells& sorted, uint32_t count, BuildContext& build, DeviceBuffer<uint8_t>& scratch) {
+    DeviceBuffer<uint32_t> top_rank(build.meter, "GridBvh: top cell ranks", count),
+        fine_rank(build.meter, "GridBvh: Grid0 cell ranks", count);
+    build.timer.start();
+    rank_cells(sorted.keys.data(), count, top_rank.data(), fine_rank.data(), build, scratch);
+    Grid0 grid;
+    grid.occupied = download_value(top_rank.data() + count - 1);
+    grid.cells = download_value(fine_rank.data() + count - 1);
+    const uint32_t occupied = grid.occupied;
+    grid.top_index = DeviceBuffer<uint32_t>(build.meter, "GridBvh: TopGrid0", kTopCells);
+    grid.top_key = DeviceBuffer<uint32_t>(build.meter, "GridBvh: top cell keys", occupied);
+    grid.top_begin = DeviceBuffer<uint32_t>(build.meter, "GridBvh: top cell starts", size_t{occupied} + 1);
+    grid.top_cells = DeviceBuffer<uint32_t>(build.meter, "GridBvh: top cell first Grid0 cells", size_t{occupied} + 1);
+    grid.top_mask = DeviceBuffer<unsigned long long>(build.meter, "GridBvh: bottom grid occupancy",
+                                                     size_t{occupied} * gridbvh::kMaskWords);
+    grid.fine_begin = DeviceBuffer<uint32_t>(build.meter, "GridBvh: Grid0 cell starts", size_t{grid.cells} + 1);
+    RF_CUDA_CHECK(cudaMemsetAsync(grid.top_mask.data(), 0, grid.top_mask.bytes()));
+    RF_CUDA_CHECK(cudaMemsetAsync(grid.top_index.data(), 0xff, grid.top_index.bytes()));  // kEmptyCell
+    launch(grid0_scatter_kernel, count, sorted.keys.data(), count, top_rank.data(), fine_rank.data(), occupied,
+           grid.cells, grid.top_key.data(), grid.top_begin.data(), grid.top_cells.data(), grid.top_mask.data(),
+           grid.fine_begin.data());
+    launch(top_index_kernel, occupied, grid.top_key.data(), occupied, grid.top_index.data());
+    build.stages.grid0_ms = build.timer.stop_ms();
+    build.stages.occupied_top_cells = occupied;
+    return grid;
+}
+
+// The sparse grid EmitHierarchy reads: Grid0 and the count-only levels.
+struct SparseGrid {
+    Grid0 grid0;
+    DeviceBuffer<uint32_t> dense[4];  // Grid4..Grid7
+    [[nodiscard]] SparseGridView view() const {
+        return {grid0.top_index.data(),
+                grid0.top_begin.data(),
+                grid0.top_cells.data(),
+                reinterpret_cast<const uint64_t*>(grid0.top_mask.data()),
+                grid0.fine_begin.data(),
+                {dense[0].data(), dense[1].data(), dense[2].data(), dense[3].data()}};
+    }
+};
+
+// Stage 4, timed as coarse_levels_ms: Grid4 by atomicAdd from the top
+// cells, Grid5..Grid7 one thread per cell summing its 8 children (§4.2 step 6).
+void count_coarse_levels(SparseGrid& grid, BuildContext& build) {
+    const char* const names[4] = {"GridBvh: Grid4", "GridBvh: Grid5", "GridBvh: Grid6", "GridBvh: Grid7"};
+    for (int k = 0; k < 4; ++k) {
+        const size_t res = size_t(gridbvh::kFineRes) >> (4 + k);
+        grid.dense[k] = DeviceBuffer<uint32_t>(build.meter, names[k], res * res * res);
+    }
+    const Grid0& g0 = grid.grid0;
+    build.timer.start();
+    RF_CUDA_CHECK(cudaMemsetAsync(grid.dense[0].data(), 0, grid.dense[0].bytes()));
+    launch(grid4_kernel, g0.occupied, g0.top_key.data(), g0.top_begin.data(), g0.occupied, grid.dense[0].data());
+    for (int k = 1; k < 4; ++k) {
+        const uint32_t res = uint32_t(gridbvh::kFineRes) >> (4 + k);
+        launch(coarser_level_kernel, size_t{res} * res * res, grid.dense[k - 1].data(), res, grid.dense[k].data());
+    }
+    build.stages.coarse_levels_ms = build.timer.stop_ms();
+}
+
+// Stages 2-4: the sparse grid of the references. The sorted keys and ids
+// live until Grid0 is built: the hierarchy reads counts only, and the
+// leaves find their references by descent.
+SparseGrid build_sparse_grid(const GridBvhOnDevice& g, BuildContext& build, DeviceBuffer<uint8_t>& scratch) {
+    SparseGrid grid;
+    {
+        const SortedCells sorted = sort_cell_keys(g, build, scratch);
+        grid.grid0 = build_grid0(sorted, g.ref_count, build, scratch);
+    }
+    count_coarse_levels(grid, build);
+    return grid;
+}
+
+// EmitHierarchy's tree: nodes numbered level by level.
+struct Hierarchy {
+    DeviceBuffer<uint32_t> hnodes;       // per node: left child, or kLeafBit | leaf
+    DeviceBuffer<NodeRegion> regions;    // per node: its IBB at creation
+    DeviceBuffer<SplitTask> leaves;      // per leaf: its refined task
+    std::vector<uint32_t> level_offset;  // first node of each tree level, plus the node count
+    uint32_t leaf_count = 0;
+    [[nodiscard]] uint32_t nodes() const { return level_offset.back(); }
+};
+
+// Stage 5, timed as hierarchy_ms: EmitHierarchy, one launch per tree level.
+// A level holds at most ref_count tasks (disjoint, none empty), the tree
+// 2 ref_count - 1 nodes. The grid is spent: it and the queues are freed on return.
+Hierarchy emit_hierarchy(SparseGrid grid, const GridBvhOnDevice& g, BuildContext& build) {
+    const uint32_t ref_count = g.ref_count;
+    const size_t max_nodes = 2 * size_t{ref_count} - 1;
+    DeviceBuffer<SplitTask> queue[2] = {DeviceBuffer<SplitTask>(build.meter, "GridBvh: task queue A", ref_count),
+                                        DeviceBuffer<SplitTask>(build.meter, "GridBvh: task queue B", ref_count)};
+    Hierarchy h{DeviceBuffer<uint32_t>(build.meter, "GridBvh: hierarchy nodes", max_nodes),
+                DeviceBuffer<NodeRegion>(build.meter, "GridBvh: hierarchy node regions", max_nodes),
+                DeviceBuffer<SplitTask>(build.meter, "GridBvh: hierarchy leaves", ref_count),
+                {0}};
+    DeviceBuffer<unsigned long long> counters(build.meter, "GridBvh: queue counters", 2);
+    const SplitTask root = gridbvh::root_task(ref_count);
+    const NodeRegion root_region{root.box, root.level};
+    RF_CUDA_CHECK(cudaMemcpy(queue[0].data(), &root, sizeof root, cudaMemcpyHostToDevice));
+    RF_CUDA_CHECK(cudaMemcpy(h.regions.data(), &root_region, sizeof root_region, cudaMemcpyHostToDevice));
+    const SparseGridView view = grid.view();
+    uint32_t count = 1;
+    int in = 0;
+    build.timer.start();
+    while (count != 0) {
+        const uint32_t next_base = h.level_offset.back() + count;
+        h.level_offset.push_back(next_base);
+        RF_CUDA_CHECK(cudaMemsetAsync(counters.data(), 0, counters.bytes()));
+        const LevelOutput out{queue[1 - in].data(), h.hnodes.data(), h.regions.data(), h.leaves.data(), next_base,
+                              h.leaf_count};
+        launch_shaped(split_level_kernel, {strided_blocks_for(count, kMaxQueueBlocks, kTasksPerBlock)}, view, g.frame,
+                      queue[in].data(), count, g.leaf_size, out, counters.data());
+        const unsigned long long made = download_value(counters.data() + 1);  // waits for the level
+        const uint32_t splits = uint32_t(made & 0xffffffffu), new_leaves = uint32_t(made >> 32);
+        h.leaf_count += new_leaves;
+        count = 2 * splits;
+        if (count > ref_count || next_base + size_t{count} > max_nodes || h.leaf_count > ref_count) {
+            throw Error("GridBvh device build: task queue overflow");
+        }
+        in = 1 - in;
+    }
+    build.stages.hierarchy_ms = build.timer.stop_ms();
+    return h;
+}
+
+// The references grouped by leaf.
+struct LeafGroups {
+    DeviceBuffer<uint32_t> refs;   // reference ids by leaf, ascending within a leaf (as the CPU orders them)
+    DeviceBuffer<uint32_t> begin;  // per leaf its first position in refs, plus the end
+};
+
+// Stage 6a: each reference's leaf by descent, one stable sort of (leaf,
+// reference) pairs, the leaf ranges; the leaves of the references and the
+// unsorted ids are freed on return. Starts the timer of leaf_finish_ms
+// (gathering and finishing).
+LeafGroups group_by_leaf(const GridBvhOnDevice& g, const Hierarchy& h, BuildContext& build,
+                         DeviceBuffer<uint8_t>& scratch) {
+    const uint32_t count = g.ref_count;
+    DeviceBuffer<uint32_t> leaf_of[2] = {DeviceBuffer<uint32_t>(build.meter, "GridBvh: leaf of reference", count),
+                                         DeviceBuffer<uint32_t>(build.meter, "GridBvh: sorted leaves", count)};
+    DeviceBuffer<uint32_t> leaf_ids[2] = {DeviceBuffer<uint32_t>(build.meter, "GridBvh: leaf reference ids", count),
+                                          DeviceBuffer<uint32_t>(build.meter, "GridBvh: leaf references", count)};
+    LeafGroups groups{{}, DeviceBuffer<uint32_t>(build.meter, "GridBvh: leaf ranges", size_t{h.leaf_count} + 1)};
+    int leaf_bits = 1;
+    while (leaf_bits < 32 && (h.leaf_count >> leaf_bits) != 0) ++leaf_bits;
+    build.timer.start();
+    launch(leaf_of_kernel, count, h.hnodes.data(), h.regions.data(), g.frame, g.refs.data(), count,
+           leaf_of[0].data(), leaf_ids[0].data());
+    cub::DoubleBuffer<uint32_t> leaf_keys(leaf_of[0].data(), leaf_of[1].data()),
+        leaf_values(leaf_ids[0].data(), leaf_ids[1].data());
+    cub_run(scratch, [&](void* temp, size_t& bytes) {
+        return cub::DeviceRadixSort::SortPairs(temp, bytes, leaf_keys, leaf_values, count, 0, leaf_bits);
+    });
+    launch(leaf_begin_kernel, count, leaf_keys.Current(), count, h.leaf_count, groups.begin.data());
+    const int grouped = leaf_values.Current() == leaf_ids[0].data() ? 0 : 1;
+    groups.refs = std::move(leaf_ids[grouped]);
+    return groups;
+}
+
+// Stage 6b: whether every leaf fits one thread (at most kDeviceFinishRefs references).
+bool leaves_fit_one_thread(const LeafGroups& groups, uint32_t leaf_count, BuildContext& build) {
+    DeviceBuffer<uint32_t> oversized(build.meter, "GridBvh: oversized leaf flag", 1);
+    RF_CUDA_CHECK(cudaMemsetAsync(oversized.data(), 0, oversized.bytes()));
+    launch(oversized_leaf_kernel, leaf_count, groups.begin.data(), leaf_count, oversized.data());
+    return download_value(oversized.data()) == 0;
+}
+
+// A leaf too large for one thread: the hierarchy and the leaf groups go
+// back to the host, which finishes and emits.
+void hand_over_to_host(const GridBvhOnDevice& g, Hierarchy& h, const LeafGroups& groups, BuildContext& build,
+                       GridHierarchy& hierarchy) {
+    build.stages.leaf_finish_ms = build.timer.stop_ms();  // the host's finishing is added later
+    build.stages.peak_device_bytes = build.meter.peak();
+    const uint32_t nodes = h.nodes();
+    build.timer.start();
+    hierarchy.frame = g.frame;
+    hierarchy.refs = download_all(g.refs, g.ref_count);
+    hierarchy.hnodes = download_all(h.hnodes, nodes);
+    hierarchy.regions = download_all(h.regions, nodes);
+    hierarchy.leaves = download_all(h.leaves, h.leaf_count);
+    hierarchy.level_offset = std::move(h.level_offset);
+    hierarchy.leaf_refs = download_all(groups.refs, g.ref_count);
+    hierarchy.leaf_begin = download_all(groups.begin, size_t{h.leaf_count} + 1);
+    build.stages.download_ms = build.timer.stop_ms();
+}
+
+// The finished leaves: per leaf its summary, and its subtree's nodes (at
+// 2 leaf_begin) and triangles (at leaf_begin) in slots by reference range.
+struct FinishedLeaves {
+    DeviceBuffer<LeafSummary> summaries;
+    DeviceBuffer<BvhNode> nodes;    // 2 per reference
+    DeviceBuffer<uint32_t> prims;   // 1 per reference
+};
+
+// Stage 7, ends leaf_finish_ms: one thread per leaf finishes it into its
+// slots. The references, the grouped ids and the leaf tasks are spent:
+// freed on return.
+FinishedLeaves finish_leaves(DeviceBuffer<GridRef> refs, DeviceBuffer<uint32_t> leaf_refs,
+                             DeviceBuffer<SplitTask> leaves, const DeviceBuffer<uint32_t>& leaf_begin,
+                             uint32_t ref_count, uint32_t leaf_count, const FinishOptions& finish,
+                             BuildContext& build) {
+    FinishedLeaves out{DeviceBuffer<LeafSummary>(build.meter, "GridBvh: finished leaves", leaf_count),
+                       DeviceBuffer<BvhNode>(build.meter, "GridBvh: leaf subtrees", 2 * size_t{ref_count}),
+                       DeviceBuffer<uint32_t>(build.meter, "GridBvh: leaf triangles", ref_count)};
+    launch(finish_leaves_kernel, leaf_count, refs.data(), leaf_refs.data(), leaf_begin.data(), leaves.data(),
+           leaf_count, finish, out.summaries.data(), out.nodes.data(), out.prims.data());
+    build.stages.leaf_finish_ms = build.timer.stop_ms();
+    return out;
+}
+
+// Subtree sizes and boxes bottom-up, then positions top-down, one launch
+// per tree level (levelOffset of Algorithm 4.1). Returns the root's size:
+// the BVH's.
+SubtreeSize size_and_place(const Hierarchy& h, const FinishedLeaves& finished, SubtreeSize* sizes, Box3f* boxes,
+                           EmitPosition* at) {
+    const size_t levels = h.level_offset.size() - 1;
+    for (size_t l = levels; l-- > 0;) {
+        const uint32_t first = h.level_offset[l], end = h.level_offset[l + 1];
+        launch(emit_sizes_kernel, end - first, h.hnodes.data(), finished.summaries.data(), first, end, sizes, boxes);
+    }
+    const SubtreeSize total = download_value(sizes);
+    const EmitPosition root_at = gridbvh::root_position();
+    RF_CUDA_CHECK(cudaMemcpy(at, &root_at, sizeof root_at, cudaMemcpyHostToDevice));
+    for (size_t l = 0; l < levels; ++l) {
+        const uint32_t first = h.level_offset[l], end = h.level_offset[l + 1];
+        launch(emit_positions_kernel, end - first, h.hnodes.data(), sizes, first, end, at);
+    }
+    return total;
+}
+
+// Stage 8, timed as device_emit_ms: the canonical emission, sizes and
+// positions then one copy kernel writing the BvhNodes and triangle
+// indices; only the BVH is downloaded.
+void emit_bvh(const Hierarchy& h, const LeafGroups& groups, const FinishedLeaves& finished, BuildContext& build,
+              Bvh& bvh) {
+    const uint32_t nodes = h.nodes();
+    DeviceBuffer<SubtreeSize> sizes(build.meter, "GridBvh: subtree sizes", nodes);
+    DeviceBuffer<Box3f> node_boxes(build.meter, "GridBvh: hierarchy boxes", nodes);
+    DeviceBuffer<EmitPosition> at(build.meter, "GridBvh: emission positions", nodes);
+    build.timer.start();
+    const SubtreeSize total = size_and_place(h, finished, sizes.data(), node_boxes.data(), at.data());
+    DeviceBuffer<BvhNode> out_nodes(build.meter, "GridBvh: BVH nodes", total.nodes);
+    DeviceBuffer<uint32_t> out_prims(build.meter, "GridBvh: BVH primitive indices", total.prims);
+    launch(emit_copy_kernel, nodes, h.hnodes.data(), nodes, node_boxes.data(), at.data(), finished.summaries.data(),
+           groups.begin.data(), finished.nodes.data(), finished.prims.data(), out_nodes.data(), out_prims.data());
+    build.stages.device_emit_ms = build.timer.stop_ms();
+    build.stages.peak_device_bytes = build.meter.peak();
+
+    build.timer.start();
+    bvh.nodes = download_all(out_nodes, total.nodes);
+    bvh.prim_indices = download_all(out_prims, total.prims);
+    build.stages.download_ms = build.timer.stop_ms();
+}
+
 // The device pipeline for n >= 1 triangles: returns true with the BVH in
 // `bvh` when the device emitted it, false with `hierarchy` filled for the
 // host emission when a leaf was too large for one thread.
 bool build_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config, const GridBvhOptions& grid_bvh,
                      bool partial_triangles, DeviceBuildStages& stages, GridHierarchy& hierarchy, Bvh& bvh) {
-    const uint32_t n = static_cast<uint32_t>(triangles.size());
-    const uint32_t leaf_size = static_cast<uint32_t>(std::max(1, config.max_leaf_size));
-    MemoryMeter meter;
-    EventTimer timer;
-    CubTemp temp(meter, "GridBvh: CUB temporary storage");
-    size_t temp_bytes = 0;
-
-    DeviceBuffer<Triangle> device_triangles("GridBvh: triangles");
-    meter.allocate(device_triangles, n);
-    timer.start();
-    device_triangles.upload(triangles);
-    stages.upload_ms = timer.stop_ms();
+    BuildContext build(stages);
+    DeviceBuffer<uint8_t> scratch(build.meter, "GridBvh: CUB temporary storage");  // grows; CUB's, every stage's
+    GridBvhOnDevice g;
+    g.n = static_cast<uint32_t>(triangles.size());
+    g.leaf_size = static_cast<uint32_t>(std::max(1, config.max_leaf_size));
+    g.triangles = DeviceBuffer<Triangle>(build.meter, "GridBvh: triangles", g.n);
+    build.timer.start();
+    g.triangles.upload(triangles);
+    stages.upload_ms = build.timer.stop_ms();
 
     // 1. References, the scene box, partial triangles.
-    DeviceBuffer<GridRef> refs("GridBvh: references");
-    DeviceBuffer<Box3f> boxes("GridBvh: reference boxes"), scene_box("GridBvh: scene box");
-    meter.allocate(refs, n);
-    meter.allocate(boxes, n);
-    meter.allocate(scene_box, 1);
-    timer.start();
-    triangle_refs_kernel<<<blocks_for(n), kBlockSize>>>(device_triangles.data(), n, refs.data(), boxes.data());
-    RF_CUDA_CHECK(cub::DeviceReduce::Reduce(nullptr, temp_bytes, boxes.data(), scene_box.data(), n, BoxUnion{}, Box3f{}));
-    RF_CUDA_CHECK(cub::DeviceReduce::Reduce(temp.get(temp_bytes), temp_bytes, boxes.data(), scene_box.data(), n,
-                                            BoxUnion{}, Box3f{}));
-    const GridFrame frame(download_value(scene_box.data()));
-    meter.release(boxes);
-    meter.release(scene_box);
-    uint32_t ref_count = n;
-    const float scene_extent = std::max(frame.extent.x, std::max(frame.extent.y, frame.extent.z));
-    const float max_width = scene_extent / 128.0f;  // formula 4.1, sceneDividePortion = 1/128
-    const float budget = grid_bvh.split_budget;
-    if (partial_triangles && max_width > 0.0f && budget > 0.0f) {
-        const uint64_t budget_slots = uint64_t(std::floor(double(budget) * double(n)));
-        uint64_t used = 0;
-        for (int pass = 0; pass < 2 && used < budget_slots; ++pass) {
-            const uint64_t available = budget_slots - used;
-            DeviceBuffer<uint64_t> requests("GridBvhSplit: split requests"), ends("GridBvhSplit: slot ends");
-            meter.allocate(requests, ref_count);
-            meter.allocate(ends, ref_count);
-            split_request_kernel<<<blocks_for(ref_count), kBlockSize>>>(refs.data(), ref_count, max_width,
-                                                                        requests.data());
-            RF_CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, requests.data(), ends.data(), ref_count));
-            RF_CUDA_CHECK(cub::DeviceScan::InclusiveSum(temp.get(temp_bytes), temp_bytes, requests.data(), ends.data(),
-                                                        ref_count));
-            const uint64_t asked = download_value(ends.data() + ref_count - 1);
-            if (asked == 0) break;  // nothing wider than the limit: later passes ask nothing either
-            split_slots_kernel<<<blocks_for(ref_count), kBlockSize>>>(requests.data(), ref_count, asked, available,
-                                                                      ends.data());
-            RF_CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, ends.data(), ends.data(), ref_count));
-            RF_CUDA_CHECK(
-                cub::DeviceScan::InclusiveSum(temp.get(temp_bytes), temp_bytes, ends.data(), ends.data(), ref_count));
-            const uint64_t slots = download_value(ends.data() + ref_count - 1);
-            // Node and leaf links keep their top bit as the leaf flag (kLeafBit).
-            if (slots >= (uint64_t{1} << 30)) throw Error("GridBvhSplit device build: more than 2^30 parts");
-            DeviceBuffer<GridRef> parts("GridBvhSplit: partial triangles");
-            DeviceBuffer<uint32_t> kept("GridBvhSplit: kept parts");
-            meter.allocate(parts, slots);
-            meter.allocate(kept, 1);
-            write_parts_kernel<<<blocks_for(ref_count), kBlockSize>>>(device_triangles.data(), refs.data(),
-                                                                      requests.data(), ends.data(), ref_count, asked,
-                                                                      available, frame, parts.data());
-            meter.release(requests);
-            meter.release(ends);
-            meter.release(refs);
-            meter.allocate(refs, slots);
-            RF_CUDA_CHECK(cub::DeviceSelect::If(nullptr, temp_bytes, parts.data(), refs.data(), kept.data(),
-                                                static_cast<int64_t>(slots), ValidRef{}));
-            RF_CUDA_CHECK(cub::DeviceSelect::If(temp.get(temp_bytes), temp_bytes, parts.data(), refs.data(),
-                                                kept.data(), static_cast<int64_t>(slots), ValidRef{}));
-            const uint32_t next_count = download_value(kept.data());
-            meter.release(parts);
-            meter.release(kept);
-            used += next_count - ref_count;
-            ref_count = next_count;
-        }
-    }
-    stages.partial_triangles_ms = timer.stop_ms();
-    stages.references = ref_count;
-
-    // 2. Keys, sorted once.
-    DeviceBuffer<uint32_t> keys[2] = {DeviceBuffer<uint32_t>("GridBvh: cell keys"),
-                                      DeviceBuffer<uint32_t>("GridBvh: sorted cell keys")};
-    DeviceBuffer<uint32_t> ids[2] = {DeviceBuffer<uint32_t>("GridBvh: reference ids"),
-                                     DeviceBuffer<uint32_t>("GridBvh: sorted references")};
-    for (int b = 0; b < 2; ++b) {
-        meter.allocate(keys[b], ref_count);
-        meter.allocate(ids[b], ref_count);
-    }
-    timer.start();
-    cell_keys_kernel<<<blocks_for(ref_count), kBlockSize>>>(refs.data(), ref_count, frame, keys[0].data(),
-                                                            ids[0].data());
-    cub::DoubleBuffer<uint32_t> key_buffers(keys[0].data(), keys[1].data()), id_buffers(ids[0].data(), ids[1].data());
-    RF_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, key_buffers, id_buffers, ref_count, 0, 30));
-    RF_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp.get(temp_bytes), temp_bytes, key_buffers, id_buffers, ref_count,
-                                                  0, 30));
-    stages.sort_ms = timer.stop_ms();
-    const int sorted = key_buffers.Current() == keys[0].data() ? 0 : 1;
-    meter.release(keys[1 - sorted]);
-    meter.release(ids[1 - sorted]);
-    const uint32_t* sorted_keys = keys[sorted].data();
-
-    // 3. Grid0: top cells and bottom grids by compaction.
-    DeviceBuffer<uint32_t> top_rank("GridBvh: top cell ranks"), fine_rank("GridBvh: Grid0 cell ranks");
-    meter.allocate(top_rank, ref_count);
-    meter.allocate(fine_rank, ref_count);
-    timer.start();
-    {
-        DeviceBuffer<uint32_t> top_flags("GridBvh: top cell starts"), fine_flags("GridBvh: Grid0 cell starts");
-        meter.allocate(top_flags, ref_count);
-        meter.allocate(fine_flags, ref_count);
-        cell_start_flags_kernel<<<blocks_for(ref_count), kBlockSize>>>(sorted_keys, ref_count, top_flags.data(),
-                                                                       fine_flags.data());
-        RF_CUDA_CHECK(cub::DeviceScan::InclusiveSum(nullptr, temp_bytes, top_flags.data(), top_rank.data(), ref_count));
-        RF_CUDA_CHECK(cub::DeviceScan::InclusiveSum(temp.get(temp_bytes), temp_bytes, top_flags.data(), top_rank.data(),
-                                                    ref_count));
-        RF_CUDA_CHECK(cub::DeviceScan::InclusiveSum(temp.get(temp_bytes), temp_bytes, fine_flags.data(),
-                                                    fine_rank.data(), ref_count));
-        meter.release(top_flags);
-        meter.release(fine_flags);
-    }
-    const uint32_t occupied = download_value(top_rank.data() + ref_count - 1);
-    const uint32_t cells = download_value(fine_rank.data() + ref_count - 1);
-    DeviceBuffer<uint32_t> top_index("GridBvh: TopGrid0"), top_key("GridBvh: top cell keys"),
-        top_begin("GridBvh: top cell starts"), top_cells("GridBvh: top cell first Grid0 cells"),
-        fine_begin("GridBvh: Grid0 cell starts");
-    DeviceBuffer<unsigned long long> top_mask("GridBvh: bottom grid occupancy");
-    meter.allocate(top_index, kTopCells);
-    meter.allocate(top_key, occupied);
-    meter.allocate(top_begin, size_t{occupied} + 1);
-    meter.allocate(top_cells, size_t{occupied} + 1);
-    meter.allocate(top_mask, size_t{occupied} * gridbvh::kMaskWords);
-    meter.allocate(fine_begin, size_t{cells} + 1);
-    RF_CUDA_CHECK(cudaMemsetAsync(top_mask.data(), 0, top_mask.bytes()));
-    RF_CUDA_CHECK(cudaMemsetAsync(top_index.data(), 0xff, top_index.bytes()));  // kEmptyCell
-    grid0_scatter_kernel<<<blocks_for(ref_count), kBlockSize>>>(sorted_keys, ref_count, top_rank.data(),
-                                                                fine_rank.data(), occupied, cells, top_key.data(),
-                                                                top_begin.data(), top_cells.data(), top_mask.data(),
-                                                                fine_begin.data());
-    top_index_kernel<<<blocks_for(occupied), kBlockSize>>>(top_key.data(), occupied, top_index.data());
-    stages.grid0_ms = timer.stop_ms();
-    stages.occupied_top_cells = occupied;
-    meter.release(top_rank);
-    meter.release(fine_rank);
-    meter.release(keys[sorted]);
-    meter.release(ids[sorted]);  // the hierarchy reads counts only; the leaves find their references by descent
-
-    // 4. Count-only levels Grid4..Grid7.
-    DeviceBuffer<uint32_t> dense[4] = {DeviceBuffer<uint32_t>("GridBvh: Grid4"), DeviceBuffer<uint32_t>("GridBvh: Grid5"),
-                                       DeviceBuffer<uint32_t>("GridBvh: Grid6"), DeviceBuffer<uint32_t>("GridBvh: Grid7")};
-    for (int k = 0; k < 4; ++k) {
-        const size_t res = size_t(gridbvh::kFineRes) >> (4 + k);
-        meter.allocate(dense[k], res * res * res);
-    }
-    timer.start();
-    RF_CUDA_CHECK(cudaMemsetAsync(dense[0].data(), 0, dense[0].bytes()));
-    grid4_kernel<<<blocks_for(occupied), kBlockSize>>>(top_key.data(), top_begin.data(), occupied, dense[0].data());
-    for (int k = 1; k < 4; ++k) {
-        const uint32_t res = uint32_t(gridbvh::kFineRes) >> (4 + k);
-        coarser_level_kernel<<<blocks_for(size_t{res} * res * res), kBlockSize>>>(dense[k - 1].data(), res,
-                                                                                   dense[k].data());
-    }
-    stages.coarse_levels_ms = timer.stop_ms();
-    const SparseGridView view{top_index.data(), top_begin.data(), top_cells.data(),
-                              reinterpret_cast<const uint64_t*>(top_mask.data()), fine_begin.data(),
-                              {dense[0].data(), dense[1].data(), dense[2].data(), dense[3].data()}};
-
-    // 5. EmitHierarchy: one launch per tree level. A level holds at most
-    // ref_count tasks (disjoint, none empty), the tree 2 ref_count - 1 nodes.
-    const size_t max_nodes = 2 * size_t{ref_count} - 1;
-    DeviceBuffer<SplitTask> queue[2] = {DeviceBuffer<SplitTask>("GridBvh: task queue A"),
-                                        DeviceBuffer<SplitTask>("GridBvh: task queue B")};
-    DeviceBuffer<uint32_t> hnodes("GridBvh: hierarchy nodes");
-    DeviceBuffer<NodeRegion> regions("GridBvh: hierarchy node regions");
-    DeviceBuffer<SplitTask> leaves("GridBvh: hierarchy leaves");
-    DeviceBuffer<unsigned long long> counters("GridBvh: queue counters");
-    meter.allocate(queue[0], ref_count);
-    meter.allocate(queue[1], ref_count);
-    meter.allocate(hnodes, max_nodes);
-    meter.allocate(regions, max_nodes);
-    meter.allocate(leaves, ref_count);
-    meter.allocate(counters, 2);
-    const SplitTask root = gridbvh::root_task(ref_count);
-    const NodeRegion root_region{root.box, root.level};
-    RF_CUDA_CHECK(cudaMemcpy(queue[0].data(), &root, sizeof root, cudaMemcpyHostToDevice));
-    RF_CUDA_CHECK(cudaMemcpy(regions.data(), &root_region, sizeof root_region, cudaMemcpyHostToDevice));
-    std::vector<uint32_t> level_offset{0};
-    uint32_t count = 1, leaf_count = 0;
-    int in = 0;
-    timer.start();
-    while (count != 0) {
-        const uint32_t next_base = level_offset.back() + count;
-        level_offset.push_back(next_base);
-        RF_CUDA_CHECK(cudaMemsetAsync(counters.data(), 0, counters.bytes()));
-        const LevelOutput out{queue[1 - in].data(), hnodes.data(), regions.data(), leaves.data(), next_base, leaf_count};
-        const uint32_t blocks = std::min<uint32_t>((count + kTasksPerBlock - 1) / kTasksPerBlock, kMaxQueueBlocks);
-        split_level_kernel<<<blocks, kBlockSize>>>(view, frame, queue[in].data(), count, leaf_size, out,
-                                                   counters.data());
-        RF_CUDA_CHECK(cudaGetLastError());
-        const unsigned long long made = download_value(counters.data() + 1);  // waits for the level
-        const uint32_t splits = uint32_t(made & 0xffffffffu), new_leaves = uint32_t(made >> 32);
-        leaf_count += new_leaves;
-        count = 2 * splits;
-        if (count > ref_count || next_base + size_t{count} > max_nodes || leaf_count > ref_count) {
-            throw Error("GridBvh device build: task queue overflow");
-        }
-        in = 1 - in;
-    }
-    stages.hierarchy_ms = timer.stop_ms();
-    meter.release(queue[0]);
-    meter.release(queue[1]);
-    meter.release(counters);
-    for (DeviceBuffer<uint32_t>& level : dense) meter.release(level);
-    meter.release(top_index);
-    meter.release(top_key);
-    meter.release(top_begin);
-    meter.release(top_cells);
-    meter.release(top_mask);
-    meter.release(fine_begin);
-
-    // 6. Leaf gathering: each reference's leaf, one stable sort of (leaf,
-    // reference) pairs (ascending references within a leaf, as the CPU
-    // orders them), the leaf ranges.
-    DeviceBuffer<uint32_t> leaf_of[2] = {DeviceBuffer<uint32_t>("GridBvh: leaf of reference"),
-                                         DeviceBuffer<uint32_t>("GridBvh: sorted leaves")};
-    DeviceBuffer<uint32_t> leaf_ids[2] = {DeviceBuffer<uint32_t>("GridBvh: leaf reference ids"),
-                                          DeviceBuffer<uint32_t>("GridBvh: leaf references")};
-    DeviceBuffer<uint32_t> leaf_begin("GridBvh: leaf ranges");
-    for (int b = 0; b < 2; ++b) {
-        meter.allocate(leaf_of[b], ref_count);
-        meter.allocate(leaf_ids[b], ref_count);
-    }
-    meter.allocate(leaf_begin, size_t{leaf_count} + 1);
-    int leaf_bits = 1;
-    while (leaf_bits < 32 && (leaf_count >> leaf_bits) != 0) ++leaf_bits;
-    timer.start();
-    leaf_of_kernel<<<blocks_for(ref_count), kBlockSize>>>(hnodes.data(), regions.data(), frame, refs.data(), ref_count,
-                                                          leaf_of[0].data(), leaf_ids[0].data());
-    cub::DoubleBuffer<uint32_t> leaf_keys(leaf_of[0].data(), leaf_of[1].data()),
-        leaf_values(leaf_ids[0].data(), leaf_ids[1].data());
-    RF_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, leaf_keys, leaf_values, ref_count, 0, leaf_bits));
-    RF_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp.get(temp_bytes), temp_bytes, leaf_keys, leaf_values, ref_count, 0,
-                                                  leaf_bits));
-    leaf_begin_kernel<<<blocks_for(ref_count), kBlockSize>>>(leaf_keys.Current(), ref_count, leaf_count,
-                                                             leaf_begin.data());
-    meter.release(leaf_of[0]);
-    meter.release(leaf_of[1]);
-    const int grouped = leaf_values.Current() == leaf_ids[0].data() ? 0 : 1;
-    meter.release(leaf_ids[1 - grouped]);
-    DeviceBuffer<uint32_t> oversized("GridBvh: oversized leaf flag");
-    meter.allocate(oversized, 1);
-    RF_CUDA_CHECK(cudaMemsetAsync(oversized.data(), 0, oversized.bytes()));
-    oversized_leaf_kernel<<<blocks_for(leaf_count), kBlockSize>>>(leaf_begin.data(), leaf_count, oversized.data());
-    const bool fits = download_value(oversized.data()) == 0;
-    meter.release(oversized);
-    const uint32_t nodes = level_offset.back();
-
-    if (!fits) {
-        // A leaf too large for one thread: the host finishes and emits.
-        stages.leaf_finish_ms = timer.stop_ms();  // the host's finishing is added later
-        stages.peak_device_bytes = meter.peak();
-        timer.start();
-        hierarchy.frame = frame;
-        hierarchy.refs = download_all(refs, ref_count);
-        hierarchy.hnodes = download_all(hnodes, nodes);
-        hierarchy.regions = download_all(regions, nodes);
-        hierarchy.leaves = download_all(leaves, leaf_count);
-        hierarchy.level_offset = std::move(level_offset);
-        hierarchy.leaf_refs = download_all(leaf_ids[grouped], ref_count);
-        hierarchy.leaf_begin = download_all(leaf_begin, size_t{leaf_count} + 1);
-        stages.download_ms = timer.stop_ms();
+    make_references(g, grid_bvh, partial_triangles, build, scratch);
+    // 2-5. The sparse grid, spent by the hierarchy over it.
+    Hierarchy h = emit_hierarchy(build_sparse_grid(g, build, scratch), g, build);
+    // 6. Leaf gathering.
+    LeafGroups groups = group_by_leaf(g, h, build, scratch);
+    if (!leaves_fit_one_thread(groups, h.leaf_count, build)) {
+        hand_over_to_host(g, h, groups, build, hierarchy);
         return false;
     }
-
-    // 7. Leaf finishing: per-leaf slots at the leaf's reference range.
-    meter.release(regions);
-    DeviceBuffer<LeafSummary> summaries("GridBvh: finished leaves");
-    DeviceBuffer<BvhNode> leaf_nodes("GridBvh: leaf subtrees");
-    DeviceBuffer<uint32_t> leaf_prims("GridBvh: leaf triangles");
-    meter.allocate(summaries, leaf_count);
-    meter.allocate(leaf_nodes, 2 * size_t{ref_count});
-    meter.allocate(leaf_prims, ref_count);
-    const FinishOptions finish{leaf_size, config.sah.traversal, config.sah.intersection};
-    finish_leaves_kernel<<<blocks_for(leaf_count), kBlockSize>>>(refs.data(), leaf_ids[grouped].data(),
-                                                                 leaf_begin.data(), leaves.data(), leaf_count, finish,
-                                                                 summaries.data(), leaf_nodes.data(), leaf_prims.data());
-    stages.leaf_finish_ms = timer.stop_ms();
-    meter.release(refs);
-    meter.release(leaf_ids[grouped]);
-    meter.release(leaves);
-
-    // 8. Emission: sizes and boxes bottom-up, positions top-down, the copy.
-    DeviceBuffer<SubtreeSize> sizes("GridBvh: subtree sizes");
-    DeviceBuffer<Box3f> node_boxes("GridBvh: hierarchy boxes");
-    DeviceBuffer<EmitPosition> at("GridBvh: emission positions");
-    meter.allocate(sizes, nodes);
-    meter.allocate(node_boxes, nodes);
-    meter.allocate(at, nodes);
-    const size_t levels = level_offset.size() - 1;
-    timer.start();
-    for (size_t l = levels; l-- > 0;) {
-        const uint32_t first = level_offset[l], end = level_offset[l + 1];
-        emit_sizes_kernel<<<blocks_for(end - first), kBlockSize>>>(hnodes.data(), summaries.data(), first, end,
-                                                                   sizes.data(), node_boxes.data());
-    }
-    const SubtreeSize total = download_value(sizes.data());
-    const EmitPosition root_at = gridbvh::root_position();
-    RF_CUDA_CHECK(cudaMemcpy(at.data(), &root_at, sizeof root_at, cudaMemcpyHostToDevice));
-    for (size_t l = 0; l < levels; ++l) {
-        const uint32_t first = level_offset[l], end = level_offset[l + 1];
-        emit_positions_kernel<<<blocks_for(end - first), kBlockSize>>>(hnodes.data(), sizes.data(), first, end,
-                                                                       at.data());
-    }
-    DeviceBuffer<BvhNode> out_nodes("GridBvh: BVH nodes");
-    DeviceBuffer<uint32_t> out_prims("GridBvh: BVH primitive indices");
-    meter.allocate(out_nodes, total.nodes);
-    meter.allocate(out_prims, total.prims);
-    emit_copy_kernel<<<blocks_for(nodes), kBlockSize>>>(hnodes.data(), nodes, node_boxes.data(), at.data(), summaries.data(),
-                                                        leaf_begin.data(), leaf_nodes.data(), leaf_prims.data(),
-                                                        out_nodes.data(), out_prims.data());
-    stages.device_emit_ms = timer.stop_ms();
-    stages.peak_device_bytes = meter.peak();
-
-    timer.start();
-    bvh.nodes = download_all(out_nodes, total.nodes);
-    bvh.prim_indices = download_all(out_prims, total.prims);
-    stages.download_ms = timer.stop_ms();
+    // 7. Leaf finishing; the regions were for the descent (and the host's emission).
+    h.regions.release();
+    const FinishOptions finish{g.leaf_size, config.sah.traversal, config.sah.intersection};
+    const FinishedLeaves finished = finish_leaves(std::move(g.refs), std::move(groups.refs), std::move(h.leaves),
+                                                  groups.begin, g.ref_count, h.leaf_count, finish, build);
+    // 8. Emission.
+    emit_bvh(h, groups, finished, build, bvh);
     return true;
 }
 

@@ -28,7 +28,8 @@
 //     comes back raw (order, references, clusters, top level) and the host
 //     checks, refits and emits it (emit_hlbvh2_forest). Either way the BVH
 //     is build_hlbvh2's.
-// Stages are timed with CUDA events; buffers are counted by a MemoryMeter.
+// Stages are timed with CUDA events; buffers are counted by a MemoryMeter
+// and live in the scope of the stages that use them.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -39,15 +40,18 @@
 #include <utility>
 #include <vector>
 
-#include "accel/bvh/builders/hlbvh2_emit.h"
 #include "accel/bvh/builders/hlbvh2_bottom_steps.h"
+#include "accel/bvh/builders/hlbvh2_emit.h"
+#include "backend/backends.h"
+#include "backend/cuda/build_context.h"
+#include "backend/cuda/cub_run.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/device_bvh_builders.h"
-#include "backend/cuda/raw_tree_emit.h"
 #include "backend/cuda/hlbvh2_build.h"
 #include "backend/cuda/hlbvh2_top_level.h"
+#include "backend/cuda/launch.h"
 #include "backend/cuda/morton_sort.h"
-#include "backend/backends.h"
+#include "backend/cuda/raw_tree_emit.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {
@@ -55,12 +59,9 @@ namespace {
 
 using hlbvh2::Task;
 
-constexpr int kBlockSize = 256;  // a multiple of 32: every warp is full, so full-mask ballots are valid
-constexpr uint32_t kWarp = 32;
+constexpr uint32_t kWarp = 32;  // kBlockSize (launch.h) is a multiple: full-mask ballots are valid
 constexpr uint32_t kFullMask = 0xffffffffu;
 constexpr uint32_t kMaxQueueBlocks = 4096;  // warps loop over the queue beyond this
-
-uint32_t blocks_for(uint64_t threads) { return static_cast<uint32_t>((threads + kBlockSize - 1) / kBlockSize); }
 
 // Stage 2a: 1 where a cluster starts (the top 15 bits change).
 __global__ void cluster_flags_kernel(const uint32_t* keys, uint32_t n, uint8_t* flags) {
@@ -124,10 +125,184 @@ __global__ void cluster_boxes_kernel(hlbvh2::BoxView view, const uint32_t* roots
     boxes[c] = hlbvh2::reference_box(view, roots[c]);
 }
 
-uint32_t download_value(const uint32_t* device_value) {
-    uint32_t value = 0;
-    RF_CUDA_CHECK(cudaMemcpy(&value, device_value, sizeof value, cudaMemcpyDeviceToHost));
-    return value;
+// What lives to the end of a build: the sorted triangles, the bottom
+// trees (references, leaf runs) and the top level.
+struct ForestOnDevice {
+    uint32_t n = 0, clusters = 0;
+    DeviceMortonOrder<uint32_t> sorted;
+    DeviceBuffer<uint32_t> refs;  // 2 (n - 1) split slots, then the cluster roots
+    DeviceBuffer<uint8_t> leaf_runs;
+    std::vector<uint32_t> level_sizes;  // bottom tasks per work-queue level
+    DeviceTopLevel top;
+    [[nodiscard]] size_t ref_count() const { return 2 * (size_t{n} - 1) + clusters; }
+    [[nodiscard]] const uint32_t* cluster_roots() const { return refs.data() + 2 * (size_t{n} - 1); }
+};
+
+// The bottom levels' task queues, ping-ponged; level 0 (the clusters) in buffers[0].
+struct TaskQueues {
+    DeviceBuffer<Task> buffers[2];
+    uint32_t capacity = 0;
+};
+
+// Runs of equal 15-bit prefixes of the sorted codes.
+struct Clusters {
+    DeviceBuffer<uint32_t> begin;   // first sorted position of each
+    DeviceBuffer<uint32_t> prefix;  // 15-bit prefix of each
+    TaskQueues queues;
+};
+
+// Stage 2a: flags where the prefix changes, compacted into the cluster
+// starts (`begin`, room for n); the flags, the count and the scratch are
+// freed on return. Starts the stage's timer; returns the cluster count.
+uint32_t compact_cluster_starts(const ForestOnDevice& f, DeviceBuffer<uint32_t>& begin, BuildContext& build) {
+    const uint32_t n = f.n;
+    DeviceBuffer<uint8_t> flags(build.meter, "HLBVH2: cluster flags", n);
+    DeviceBuffer<uint32_t> selected(build.meter, "HLBVH2: cluster count", 1);
+    DeviceBuffer<uint8_t> scratch(build.meter, "HLBVH2: cluster compaction temporary storage");
+    const thrust::counting_iterator<uint32_t> positions(0u);
+    const auto select = [&](void* temp, size_t& bytes) {
+        return cub::DeviceSelect::Flagged(temp, bytes, positions, flags.data(), begin.data(), selected.data(), n);
+    };
+    cub_reserve(scratch, select);
+    build.timer.start();
+    launch(cluster_flags_kernel, n, f.sorted.keys.data(), n, flags.data());
+    cub_run(scratch, select);
+    return download_value(selected.data());
+}
+
+// Stage 2, timed as clusters_ms: the clusters, their prefixes and the
+// level-0 tasks in the first queue. A later task has more than leaf_size
+// primitives, disjoint from the others', so a level holds at most
+// n / (leaf_size + 1) tasks.
+Clusters find_clusters(ForestOnDevice& f, uint32_t leaf_size, BuildContext& build) {
+    Clusters found;
+    found.begin = DeviceBuffer<uint32_t>(build.meter, "HLBVH2: cluster starts", f.n);  // at most one per triangle
+    f.clusters = compact_cluster_starts(f, found.begin, build);
+    build.stages.cluster_count = f.clusters;
+    TaskQueues& queues = found.queues;
+    queues.capacity = std::max(f.clusters, f.n / (leaf_size + 1) + 1);
+    queues.buffers[0] = DeviceBuffer<Task>(build.meter, "HLBVH2: task queue A", queues.capacity);
+    queues.buffers[1] = DeviceBuffer<Task>(build.meter, "HLBVH2: task queue B", queues.capacity);
+    found.prefix = DeviceBuffer<uint32_t>(build.meter, "HLBVH2: cluster prefixes", f.clusters);
+    launch(level0_tasks_kernel, f.clusters, f.sorted.keys.data(), f.n, found.begin.data(), f.clusters,
+           queues.buffers[0].data(), found.prefix.data());
+    build.stages.clusters_ms = build.timer.stop_ms();
+    return found;
+}
+
+// Stage 3, timed as bottom_ms: the bottom levels, one launch per level,
+// into f.refs and f.leaf_runs. Returns the levels' recorded nodes (every
+// level-0 task, then distinct inner nodes; level_base: each level's first);
+// the sorted codes and the queues are spent, freed on return.
+DeviceBuffer<uint32_t> build_bottom_levels(ForestOnDevice& f, DeviceBuffer<uint32_t> sorted_keys, TaskQueues queues,
+                                           uint32_t leaf_size, BuildContext& build,
+                                           std::vector<uint32_t>& level_base) {
+    f.refs = DeviceBuffer<uint32_t>(build.meter, "HLBVH2: child references", f.ref_count());
+    DeviceBuffer<uint32_t> level_nodes(build.meter, "HLBVH2: level nodes", size_t{f.clusters} + f.n - 1);
+    DeviceBuffer<uint32_t> counters(build.meter, "HLBVH2: queue counters", 2);  // input head, output tail
+    f.leaf_runs = DeviceBuffer<uint8_t>(build.meter, "HLBVH2: leaf run sizes", f.n);
+    uint32_t count = f.clusters, base = 0;
+    int in = 0;
+    build.timer.start();
+    // Split positions no task reaches leave their node slot unused: marked for the emission.
+    RF_CUDA_CHECK(cudaMemsetAsync(f.refs.data(), 0xff, f.refs.bytes()));
+    while (count != 0) {
+        if (base + size_t{count} > level_nodes.size()) throw Error("HLBVH2: bottom levels overran their node list");
+        f.level_sizes.push_back(count);
+        level_base.push_back(base);
+        RF_CUDA_CHECK(cudaMemsetAsync(counters.data(), 0, counters.bytes()));
+        launch_shaped(bottom_level_kernel, {strided_blocks_for(count, kMaxQueueBlocks)}, sorted_keys.data(),
+                      queues.buffers[in].data(), count, queues.buffers[1 - in].data(), counters.data(), leaf_size,
+                      f.refs.data(), f.leaf_runs.data(), level_nodes.data() + base);
+        base += count;
+        count = download_value(counters.data() + 1);  // the next level's size (waits for this one)
+        if (count > queues.capacity) throw Error("HLBVH2: work queue overflow");
+        in = 1 - in;
+    }
+    build.stages.bottom_ms = build.timer.stop_ms();
+    build.stages.bottom_levels = static_cast<uint32_t>(f.level_sizes.size());
+    return level_nodes;
+}
+
+// The bottom trees' boxes.
+struct ForestBoxes {
+    DeviceBuffer<Box3f> inner;     // per inner node
+    DeviceBuffer<Box3f> clusters;  // per cluster
+    [[nodiscard]] hlbvh2::BoxView view(const ForestOnDevice& f) const {
+        return {f.refs.data(), f.leaf_runs.data(), f.sorted.order.data(), f.sorted.boxes.data(), inner.data()};
+    }
+};
+
+// Stage 4, timed as boxes_ms: boxes level by level, deepest first, then the
+// clusters'; the recorded level nodes are spent, freed on return.
+ForestBoxes box_bottom_levels(const ForestOnDevice& f, DeviceBuffer<uint32_t> level_nodes,
+                              const std::vector<uint32_t>& level_base, BuildContext& build) {
+    ForestBoxes boxes{DeviceBuffer<Box3f>(build.meter, "HLBVH2: inner node boxes", f.n - 1),
+                      DeviceBuffer<Box3f>(build.meter, "HLBVH2: cluster boxes", f.clusters)};
+    const hlbvh2::BoxView view = boxes.view(f);
+    build.timer.start();
+    for (size_t l = f.level_sizes.size(); l-- > 0;) {
+        launch(level_boxes_kernel, f.level_sizes[l], view, level_nodes.data() + level_base[l], f.level_sizes[l]);
+    }
+    launch(cluster_boxes_kernel, f.clusters, view, f.cluster_roots(), f.clusters, boxes.clusters.data());
+    build.stages.boxes_ms = build.timer.stop_ms();
+    return boxes;
+}
+
+// Stage 5: the top level over the clusters (hlbvh2_top_level.cu).
+DeviceTopLevel build_top_level(const ForestOnDevice& f, const Clusters& found, const ForestBoxes& boxes,
+                               BuildContext& build) {
+    DeviceTopLevelInput input;
+    input.n = f.n;
+    input.clusters = f.clusters;
+    input.cluster_begin = found.begin.data();
+    input.cluster_prefix = found.prefix.data();
+    input.cluster_boxes = boxes.clusters.data();
+    input.cluster_roots = f.cluster_roots();
+    input.bottom = boxes.view(f);
+    return build_top_level_on_device(input, build);
+}
+
+// Stage 6: the emission on the device, of the tree alone.
+bool emit_on_device(const ForestOnDevice& f, uint32_t root, const BvhBuildConfig& config, BuildContext& build,
+                    Bvh& bvh) {
+    DeviceRawTree tree;
+    tree.children = f.refs.data();
+    tree.high_children = f.clusters >= 2 ? f.top.top_refs.data() : nullptr;
+    tree.high_base = f.n - 1;
+    tree.node_slots = f.n - 1 + (f.clusters - 1);
+    tree.root = root;
+    tree.primitives = f.n;
+    tree.boxes = f.sorted.boxes.data();
+    tree.boxes_by_triangle = true;
+    tree.order = f.sorted.order.data();
+    tree.leaf_runs = f.leaf_runs.data();
+    tree.sparse_slots = true;  // leaf runs leave most split positions without a node
+    return emit_raw_tree_on_device(tree, config, "HLBVH2", build, bvh);
+}
+
+// The raw tree for the host's refit and emission, timed into download_ms:
+// the order, the references, the clusters (unless taken already: `found`
+// null) and the top level; with `raw_boxes`, the boxes and level sizes of
+// the raw forest too.
+void download_forest(const ForestOnDevice& f, const Clusters* found, const ForestBoxes* raw_boxes,
+                     BuildContext& build, DeviceHlbvh2Forest& out) {
+    build.timer.start();
+    out.forest.order = download_all(f.sorted.order, f.n);
+    out.forest.refs = download_all(f.refs, f.ref_count());
+    if (found != nullptr) {
+        out.forest.cluster_begin = download_all(found->begin, f.clusters);
+        out.forest.cluster_prefix = download_all(found->prefix, f.clusters);
+    }
+    out.forest.cluster_begin.push_back(f.n);
+    if (f.clusters >= 2) out.forest.top_refs = download_all(f.top.top_refs, 2 * (size_t{f.clusters} - 1));
+    if (raw_boxes != nullptr) {
+        out.cluster_boxes = download_all(raw_boxes->clusters, f.clusters);
+        out.level_sizes = f.level_sizes;
+        if (f.clusters >= 2) out.top_boxes = download_all(f.top.top_boxes, f.clusters - 1);
+        out.top_level_sizes = f.top.level_sizes;
+    }
+    build.stages.download_ms += build.timer.stop_ms();
 }
 
 // The device pipeline for n >= 2 triangles. `raw`: the raw forest comes
@@ -136,160 +311,33 @@ uint32_t download_value(const uint32_t* device_value) {
 // then the forest came back in `out`.
 bool build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, DeviceBuildStages& stages,
                   DeviceHlbvh2Forest& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
-    const uint32_t n = static_cast<uint32_t>(triangles.size());
-    MemoryMeter meter;
-    EventTimer timer;
-
+    BuildContext build(stages);
+    ForestOnDevice f;
+    f.n = static_cast<uint32_t>(triangles.size());
     // 1. Boxes, bounds, codes, the sort.
-    DeviceMortonOrder<uint32_t> sorted;
-    sort_triangles_by_morton_codes(triangles, "HLBVH2", stages, meter, timer, sorted);
-
-    // 2. Clusters.
-    DeviceBuffer<uint8_t> flags("HLBVH2: cluster flags");
-    DeviceBuffer<uint32_t> cluster_begin("HLBVH2: cluster starts"), selected("HLBVH2: cluster count");
-    meter.allocate(flags, n);
-    meter.allocate(cluster_begin, n);  // at most one cluster per triangle
-    meter.allocate(selected, 1);
-    const thrust::counting_iterator<uint32_t> positions(0u);
-    size_t temp_bytes = 0;
-    RF_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, temp_bytes, positions, flags.data(), cluster_begin.data(),
-                                             selected.data(), n));
-    DeviceBuffer<uint8_t> temp("HLBVH2: cluster compaction temporary storage");
-    meter.allocate(temp, temp_bytes > 0 ? temp_bytes : 1);
-    timer.start();
-    cluster_flags_kernel<<<blocks_for(n), kBlockSize>>>(sorted.keys.data(), n, flags.data());
-    RF_CUDA_CHECK(cub::DeviceSelect::Flagged(temp.data(), temp_bytes, positions, flags.data(), cluster_begin.data(),
-                                             selected.data(), n));
-    const uint32_t clusters = download_value(selected.data());
-    stages.cluster_count = clusters;
-
-    // Queues: level 0 holds the clusters; a later task has more than
-    // leaf_size primitives, disjoint from the others', so a level holds at
-    // most n / (leaf_size + 1).
-    const uint32_t capacity = std::max(clusters, n / (leaf_size + 1) + 1);
-    DeviceBuffer<Task> queue[2] = {DeviceBuffer<Task>("HLBVH2: task queue A"), DeviceBuffer<Task>("HLBVH2: task queue B")};
-    DeviceBuffer<uint32_t> prefix("HLBVH2: cluster prefixes");
-    meter.release(temp);
-    meter.release(flags);
-    meter.allocate(queue[0], capacity);
-    meter.allocate(queue[1], capacity);
-    meter.allocate(prefix, clusters);
-    level0_tasks_kernel<<<blocks_for(clusters), kBlockSize>>>(sorted.keys.data(), n, cluster_begin.data(), clusters,
-                                                              queue[0].data(), prefix.data());
-    stages.clusters_ms = timer.stop_ms();
-
-    // 3. Bottom levels.
-    const size_t ref_count = 2 * (size_t{n} - 1) + clusters;
-    DeviceBuffer<uint32_t> refs("HLBVH2: child references"), level_nodes("HLBVH2: level nodes"),
-        counters("HLBVH2: queue counters");
-    DeviceBuffer<uint8_t> leaf_runs("HLBVH2: leaf run sizes");
-    meter.allocate(refs, ref_count);
-    meter.allocate(level_nodes, size_t{clusters} + n - 1);  // every level-0 task, then distinct inner nodes
-    meter.allocate(counters, 2);
-    meter.allocate(leaf_runs, n);
-    std::vector<uint32_t> level_sizes, level_base;
-    uint32_t count = clusters, base = 0;
-    int in = 0;
-    timer.start();
-    // Split positions no task reaches leave their node slot unused: marked for the emission.
-    RF_CUDA_CHECK(cudaMemsetAsync(refs.data(), 0xff, refs.bytes()));
-    while (count != 0) {
-        if (base + size_t{count} > level_nodes.size()) throw Error("HLBVH2: bottom levels overran their node list");
-        level_sizes.push_back(count);
-        level_base.push_back(base);
-        RF_CUDA_CHECK(cudaMemsetAsync(counters.data(), 0, counters.bytes()));
-        const uint32_t blocks = std::min(blocks_for(count), kMaxQueueBlocks);
-        bottom_level_kernel<<<blocks, kBlockSize>>>(sorted.keys.data(), queue[in].data(), count, queue[1 - in].data(),
-                                                    counters.data(), leaf_size, refs.data(), leaf_runs.data(),
-                                                    level_nodes.data() + base);
-        RF_CUDA_CHECK(cudaGetLastError());
-        base += count;
-        count = download_value(counters.data() + 1);  // the next level's size (waits for this one)
-        if (count > capacity) throw Error("HLBVH2: work queue overflow");
-        in = 1 - in;
-    }
-    stages.bottom_ms = timer.stop_ms();
-    stages.bottom_levels = static_cast<uint32_t>(level_sizes.size());
-    meter.release(queue[0]);
-    meter.release(queue[1]);
-    meter.release(sorted.keys);
-
-    // 4. Boxes, deepest level first, then the clusters'.
-    DeviceBuffer<Box3f> inner_boxes("HLBVH2: inner node boxes"), cluster_boxes("HLBVH2: cluster boxes");
-    meter.allocate(inner_boxes, n - 1);
-    meter.allocate(cluster_boxes, clusters);
-    const hlbvh2::BoxView view{refs.data(), leaf_runs.data(), sorted.order.data(), sorted.boxes.data(),
-                               inner_boxes.data()};
-    timer.start();
-    for (size_t l = level_sizes.size(); l-- > 0;) {
-        level_boxes_kernel<<<blocks_for(level_sizes[l]), kBlockSize>>>(view, level_nodes.data() + level_base[l],
-                                                                       level_sizes[l]);
-    }
-    cluster_boxes_kernel<<<blocks_for(clusters), kBlockSize>>>(view, refs.data() + 2 * (size_t{n} - 1), clusters,
-                                                               cluster_boxes.data());
-    stages.boxes_ms = timer.stop_ms();
-    meter.release(level_nodes);
-
-    // 5. The top level over the clusters.
-    DeviceTopLevel top;
-    if (clusters >= 2) {
-        DeviceTopLevelInput input;
-        input.n = n;
-        input.clusters = clusters;
-        input.cluster_begin = cluster_begin.data();
-        input.cluster_prefix = prefix.data();
-        input.cluster_boxes = cluster_boxes.data();
-        input.cluster_roots = refs.data() + 2 * (size_t{n} - 1);
-        input.bottom = view;
-        build_top_level_on_device(input, meter, timer, stages, top);
-    }
-    stages.peak_device_bytes = meter.peak();
-
-    // 6. Emission on the device.
-    if (!raw) {
-        const uint32_t root = clusters >= 2 ? n - 1 : download_value(refs.data() + 2 * (size_t{n} - 1));
-        if ((root & hlbvh2::kLeafRef) == 0) {
-            meter.release(inner_boxes);
-            meter.release(cluster_boxes);
-            meter.release(counters);
-            // The emission needs only the tree; the host's fallback gets the clusters from here.
-            out.forest.cluster_begin = download_all(cluster_begin, clusters);
-            out.forest.cluster_prefix = download_all(prefix, clusters);
-            meter.release(cluster_begin);
-            meter.release(prefix);
-            DeviceRawTree tree;
-            tree.children = refs.data();
-            tree.high_children = clusters >= 2 ? top.top_refs.data() : nullptr;
-            tree.high_base = n - 1;
-            tree.node_slots = n - 1 + (clusters - 1);
-            tree.root = root;
-            tree.primitives = n;
-            tree.boxes = sorted.boxes.data();
-            tree.boxes_by_triangle = true;
-            tree.order = sorted.order.data();
-            tree.leaf_runs = leaf_runs.data();
-            tree.sparse_slots = true;  // leaf runs leave most split positions without a node
-            if (emit_raw_tree_on_device(tree, *config, "HLBVH2", meter, timer, stages, *bvh)) return true;
+    f.sorted = sort_triangles_by_morton_codes<uint32_t>(triangles, "HLBVH2", build);
+    uint32_t root = f.n - 1;
+    {
+        // 2-5. The clusters and the boxes live in this scope: the device emission reads neither.
+        Clusters found = find_clusters(f, leaf_size, build);
+        std::vector<uint32_t> level_base;
+        DeviceBuffer<uint32_t> level_nodes =
+            build_bottom_levels(f, std::move(f.sorted.keys), std::move(found.queues), leaf_size, build, level_base);
+        const ForestBoxes boxes = box_bottom_levels(f, std::move(level_nodes), level_base, build);
+        if (f.clusters >= 2) f.top = build_top_level(f, found, boxes, build);
+        stages.peak_device_bytes = build.meter.peak();
+        if (!raw && f.clusters < 2) root = download_value(f.cluster_roots());
+        if (raw || (root & hlbvh2::kLeafRef) != 0) {
+            download_forest(f, &found, raw ? &boxes : nullptr, build, out);
+            return false;
         }
+        // The host's fallback gets the clusters from here.
+        out.forest.cluster_begin = download_all(found.begin, f.clusters);
+        out.forest.cluster_prefix = download_all(found.prefix, f.clusters);
     }
-
-    // The raw tree for the host's refit and emission.
-    timer.start();
-    out.forest.order = download_all(sorted.order, n);
-    out.forest.refs = download_all(refs, ref_count);
-    if (out.forest.cluster_begin.empty()) {  // not already taken before the device emission
-        out.forest.cluster_begin = download_all(cluster_begin, clusters);
-        out.forest.cluster_prefix = download_all(prefix, clusters);
-    }
-    out.forest.cluster_begin.push_back(n);
-    if (clusters >= 2) out.forest.top_refs = download_all(top.top_refs, 2 * (size_t{clusters} - 1));
-    if (raw) {
-        out.cluster_boxes = download_all(cluster_boxes, clusters);
-        out.level_sizes = level_sizes;
-        if (clusters >= 2) out.top_boxes = download_all(top.top_boxes, clusters - 1);
-        out.top_level_sizes = top.level_sizes;
-    }
-    stages.download_ms += timer.stop_ms();
+    // 6. Emission on the device.
+    if (emit_on_device(f, root, *config, build, *bvh)) return true;
+    download_forest(f, nullptr, nullptr, build, out);
     return false;
 }
 

@@ -33,9 +33,12 @@
 #include <cub/block/block_scan.cuh>
 
 #include <algorithm>
+#include <string>
+#include <vector>
 
 #include "accel/bvh/builders/hlbvh2_top_steps.h"
 #include "backend/cuda/hlbvh2_top_level.h"
+#include "backend/cuda/launch.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {
@@ -45,8 +48,7 @@ using hlbvh2::TopBin;
 using hlbvh2::TopCluster;
 using hlbvh2::TopTask;
 
-constexpr int kBlockSize = 256;  // a multiple of 32: every warp is full, so full-mask ballots are valid
-constexpr uint32_t kWarp = 32;
+constexpr uint32_t kWarp = 32;  // kBlockSize (launch.h) is a multiple: full-mask ballots are valid
 constexpr uint32_t kFullMask = 0xffffffffu;
 constexpr uint32_t kLanes = hlbvh2::kTopLanes;     // threads per task
 constexpr uint32_t kTasksPerWarp = kWarp / kLanes;
@@ -55,8 +57,6 @@ constexpr uint32_t kTopTaskBlock = 256;            // threads per large task (th
 constexpr uint32_t kTaskBlockWarps = kTopTaskBlock / kWarp;
 static_assert(kTopTaskBlock % kWarp == 0, "the block path's warps are full");
 static_assert(kWarp % kLanes == 0, "tasks do not straddle warps");
-
-uint32_t blocks_for(uint64_t threads) { return static_cast<uint32_t>((threads + kBlockSize - 1) / kBlockSize); }
 
 // Stage 1: the clusters as top-level primitives, and the root task.
 __global__ void top_clusters_kernel(DeviceTopLevelInput in, TopCluster* clusters, TopTask* root_task) {
@@ -364,41 +364,63 @@ __global__ void top_boxes_kernel(hlbvh2::TopBoxView view, const uint32_t* level_
     if (i < count) hlbvh2::top_node_box(view, level_nodes[i]);
 }
 
-}  // namespace
+// The top levels' ping-pong buffers: side s holds a level's input, 1 - s
+// its output.
+struct TopQueues {
+    DeviceBuffer<TopCluster> clusters[2];
+    DeviceBuffer<TopTask> small[2], large[2];
+    DeviceBuffer<uint32_t> counters;  // small head, small tail, large tail
+    uint32_t small_capacity = 0, large_capacity = 0;
+};
 
-void build_top_level_on_device(const DeviceTopLevelInput& in, MemoryMeter& meter, EventTimer& timer,
-                               DeviceBuildStages& stages, DeviceTopLevel& out) {
-    const uint32_t clusters = in.clusters;
-    if (clusters < 2) throw Error("HLBVH2 device top level: fewer than 2 clusters");
-    const uint32_t top_nodes = clusters - 1;
-    const uint32_t top_base = in.n - 1;
+TopQueues make_top_queues(uint32_t clusters, MemoryMeter& meter) {
+    TopQueues q;
     // Tasks hold >= 2 clusters each, disjoint: a level has at most clusters / 2
     // small ones and clusters / (kTopBlockTaskMin + 1) large ones.
-    const uint32_t capacity = clusters / 2;
-    const uint32_t large_capacity = std::max(1u, clusters / (hlbvh2::kTopBlockTaskMin + 1));
-    DeviceBuffer<TopCluster> cluster_buffer[2] = {DeviceBuffer<TopCluster>("HLBVH2: top clusters A"),
-                                                  DeviceBuffer<TopCluster>("HLBVH2: top clusters B")};
-    DeviceBuffer<TopTask> queue[2] = {DeviceBuffer<TopTask>("HLBVH2: top task queue A"),
-                                      DeviceBuffer<TopTask>("HLBVH2: top task queue B")};
-    DeviceBuffer<TopTask> large_queue[2] = {DeviceBuffer<TopTask>("HLBVH2: top large task queue A"),
-                                            DeviceBuffer<TopTask>("HLBVH2: top large task queue B")};
-    DeviceBuffer<uint32_t> level_nodes("HLBVH2: top level nodes"), counters("HLBVH2: top queue counters");
-    meter.allocate(cluster_buffer[0], clusters);
-    meter.allocate(cluster_buffer[1], clusters);
-    meter.allocate(queue[0], capacity);
-    meter.allocate(queue[1], capacity);
-    meter.allocate(large_queue[0], large_capacity);
-    meter.allocate(large_queue[1], large_capacity);
-    meter.allocate(level_nodes, top_nodes);  // every task is a distinct top node
-    meter.allocate(counters, 3);  // small head, small tail, large tail
-    meter.allocate(out.top_refs, 2 * size_t{top_nodes});
-    meter.allocate(out.top_boxes, top_nodes);
+    q.small_capacity = clusters / 2;
+    q.large_capacity = std::max(1u, clusters / (hlbvh2::kTopBlockTaskMin + 1));
+    const char* const side_name[2] = {"A", "B"};
+    for (int s = 0; s < 2; ++s) {
+        q.clusters[s] = DeviceBuffer<TopCluster>(meter, std::string("HLBVH2: top clusters ") + side_name[s], clusters);
+        q.small[s] =
+            DeviceBuffer<TopTask>(meter, std::string("HLBVH2: top task queue ") + side_name[s], q.small_capacity);
+        q.large[s] =
+            DeviceBuffer<TopTask>(meter, std::string("HLBVH2: top large task queue ") + side_name[s], q.large_capacity);
+    }
+    q.counters = DeviceBuffer<uint32_t>(meter, "HLBVH2: top queue counters", 3);
+    return q;
+}
 
-    timer.start();
-    const bool root_is_large = clusters > hlbvh2::kTopBlockTaskMin;
-    top_clusters_kernel<<<blocks_for(clusters), kBlockSize>>>(
-        in, cluster_buffer[0].data(), root_is_large ? large_queue[0].data() : queue[0].data());
-    RF_CUDA_CHECK(cudaGetLastError());
+// One level from side `side`: its large tasks' nodes first, then its small
+// tasks', at level_nodes.
+void launch_top_level(TopQueues& q, int side, uint32_t small, uint32_t large, uint32_t top_base, uint32_t* top_refs,
+                      uint32_t* level_nodes) {
+    const int next = 1 - side;
+    if (large != 0) {
+        launch_shaped(top_large_task_kernel, {large, kTopTaskBlock}, q.clusters[side].data(), q.clusters[next].data(),
+                      q.large[side].data(), q.small[next].data(), q.large[next].data(), q.counters.data(), top_base,
+                      top_refs, level_nodes);
+    }
+    if (small != 0) {
+        const uint32_t warps = (small + kTasksPerWarp - 1) / kTasksPerWarp;
+        launch_shaped(top_level_kernel, {strided_blocks_for(uint64_t{warps} * kWarp, kMaxQueueBlocks)},
+                      q.clusters[side].data(), q.clusters[next].data(), q.small[side].data(), small,
+                      q.small[next].data(), q.counters.data(), top_base, top_refs, level_nodes + large);
+    }
+}
+
+// Stages 1-2, timed as top_ms: the clusters as top-level primitives, then
+// the task-queue levels, their nodes into `level_nodes` and their sizes into
+// out.level_sizes. Returns each level's first index in `level_nodes`; the
+// queues are freed on return.
+std::vector<uint32_t> split_top_levels(const DeviceTopLevelInput& in, uint32_t* level_nodes, BuildContext& build,
+                                       DeviceTopLevel& out) {
+    const uint32_t top_nodes = in.clusters - 1, top_base = in.n - 1;
+    TopQueues q = make_top_queues(in.clusters, build.meter);
+    build.timer.start();
+    const bool root_is_large = in.clusters > hlbvh2::kTopBlockTaskMin;
+    launch(top_clusters_kernel, in.clusters, in, q.clusters[0].data(),
+           root_is_large ? q.large[0].data() : q.small[0].data());
     std::vector<uint32_t> level_base;
     out.level_sizes.clear();
     uint32_t small = root_is_large ? 0 : 1, large = root_is_large ? 1 : 0, base = 0;
@@ -408,49 +430,42 @@ void build_top_level_on_device(const DeviceTopLevelInput& in, MemoryMeter& meter
         if (base + size_t{count} > top_nodes) throw Error("HLBVH2: top levels overran their node list");
         out.level_sizes.push_back(count);
         level_base.push_back(base);
-        RF_CUDA_CHECK(cudaMemsetAsync(counters.data(), 0, counters.bytes()));
-        // The level's nodes: its large tasks' first, then its small tasks'.
-        if (large != 0) {
-            top_large_task_kernel<<<large, kTopTaskBlock>>>(
-                cluster_buffer[side].data(), cluster_buffer[1 - side].data(), large_queue[side].data(),
-                queue[1 - side].data(), large_queue[1 - side].data(), counters.data(), top_base,
-                out.top_refs.data(), level_nodes.data() + base);
-            RF_CUDA_CHECK(cudaGetLastError());
-        }
-        if (small != 0) {
-            const uint32_t warps = (small + kTasksPerWarp - 1) / kTasksPerWarp;
-            const uint32_t blocks = std::min(blocks_for(uint64_t{warps} * kWarp), kMaxQueueBlocks);
-            top_level_kernel<<<blocks, kBlockSize>>>(cluster_buffer[side].data(), cluster_buffer[1 - side].data(),
-                                                     queue[side].data(), small, queue[1 - side].data(),
-                                                     counters.data(), top_base, out.top_refs.data(),
-                                                     level_nodes.data() + base + large);
-            RF_CUDA_CHECK(cudaGetLastError());
-        }
+        RF_CUDA_CHECK(cudaMemsetAsync(q.counters.data(), 0, q.counters.bytes()));
+        launch_top_level(q, side, small, large, top_base, out.top_refs.data(), level_nodes + base);
         base += count;
         uint32_t next[3] = {};  // the next level's sizes (waits for this one)
-        RF_CUDA_CHECK(cudaMemcpy(next, counters.data(), sizeof next, cudaMemcpyDeviceToHost));
+        RF_CUDA_CHECK(cudaMemcpy(next, q.counters.data(), sizeof next, cudaMemcpyDeviceToHost));
         small = next[1];
         large = next[2];
-        if (small > capacity || large > large_capacity) throw Error("HLBVH2: top task queue overflow");
+        if (small > q.small_capacity || large > q.large_capacity) throw Error("HLBVH2: top task queue overflow");
         side = 1 - side;
     }
     if (base != top_nodes) throw Error("HLBVH2: the top levels made the wrong number of nodes");
-    stages.top_ms = timer.stop_ms();
-    stages.top_levels = static_cast<uint32_t>(out.level_sizes.size());
-    meter.release(queue[0]);
-    meter.release(queue[1]);
-    meter.release(large_queue[0]);
-    meter.release(large_queue[1]);
-    meter.release(cluster_buffer[0]);
-    meter.release(cluster_buffer[1]);
+    build.stages.top_ms = build.timer.stop_ms();
+    build.stages.top_levels = static_cast<uint32_t>(out.level_sizes.size());
+    return level_base;
+}
 
-    const hlbvh2::TopBoxView view{in.bottom, out.top_refs.data(), top_base, out.top_boxes.data()};
-    timer.start();
+}  // namespace
+
+DeviceTopLevel build_top_level_on_device(const DeviceTopLevelInput& in, BuildContext& build) {
+    if (in.clusters < 2) throw Error("HLBVH2 device top level: fewer than 2 clusters");
+    const uint32_t top_nodes = in.clusters - 1;
+    DeviceTopLevel out;
+    out.top_refs = DeviceBuffer<uint32_t>(build.meter, "HLBVH2: top-level child references", 2 * size_t{top_nodes});
+    out.top_boxes = DeviceBuffer<Box3f>(build.meter, "HLBVH2: top node boxes", top_nodes);
+    // Every task is a distinct top node.
+    DeviceBuffer<uint32_t> level_nodes(build.meter, "HLBVH2: top level nodes", top_nodes);
+    const std::vector<uint32_t> level_base = split_top_levels(in, level_nodes.data(), build, out);
+
+    // 3. The top nodes' boxes bottom-up, deepest level first.
+    const hlbvh2::TopBoxView view{in.bottom, out.top_refs.data(), in.n - 1, out.top_boxes.data()};
+    build.timer.start();
     for (size_t l = out.level_sizes.size(); l-- > 0;) {
-        top_boxes_kernel<<<blocks_for(out.level_sizes[l]), kBlockSize>>>(view, level_nodes.data() + level_base[l],
-                                                                         out.level_sizes[l]);
+        launch(top_boxes_kernel, out.level_sizes[l], view, level_nodes.data() + level_base[l], out.level_sizes[l]);
     }
-    stages.boxes_ms += timer.stop_ms();
+    build.stages.boxes_ms += build.timer.stop_ms();
+    return out;
 }
 
 }  // namespace rf::cuda

@@ -8,10 +8,8 @@
 #include <vector>
 
 #include "accel/bvh/builders/hlbvh2_bottom_steps.h"
+#include "backend/cuda/build_context.h"
 #include "backend/cuda/device_buffer.h"
-#include "backend/cuda/event_timer.h"
-#include "backend/cuda/morton_sort.h"
-#include "backend/cuda/device_builders.h"
 #include "rayforge/math/box.h"
 
 namespace rf::cuda {
@@ -27,10 +25,10 @@ struct DeviceTopLevelInput {
     hlbvh2::BoxView bottom{};                 // the bottom levels' boxes, for the top boxes
 };
 
-// What it leaves on the device.
+// What it leaves on the device (counted by the build's meter).
 struct DeviceTopLevel {
-    DeviceBuffer<uint32_t> top_refs{"HLBVH2: top-level child references"};  // 2 (clusters - 1): 2 k + side
-    DeviceBuffer<Box3f> top_boxes{"HLBVH2: top node boxes"};                  // clusters - 1
+    DeviceBuffer<uint32_t> top_refs;    // 2 (clusters - 1): 2 k + side
+    DeviceBuffer<Box3f> top_boxes;      // clusters - 1
     std::vector<uint32_t> level_sizes;  // tasks (= top nodes) per task-queue level, level 0 = the root
 };
 
@@ -39,8 +37,8 @@ struct DeviceTopLevel {
 // the same tree as the CPU's (build_hlbvh2_top_level), then the top nodes'
 // boxes bottom-up, one launch per level, deepest first. Sets stages.top_ms
 // (the task-queue levels) and stages.top_levels, and adds the top boxes'
-// time to stages.boxes_ms. Buffers are counted by `meter`.
-void build_top_level_on_device(const DeviceTopLevelInput& in, MemoryMeter& meter, EventTimer& timer,
-                               DeviceBuildStages& stages, DeviceTopLevel& out);
+// time to stages.boxes_ms. Buffers are counted by build.meter; the queues
+// are freed on return.
+DeviceTopLevel build_top_level_on_device(const DeviceTopLevelInput& in, BuildContext& build);
 
 }  // namespace rf::cuda

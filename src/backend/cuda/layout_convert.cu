@@ -48,19 +48,16 @@
 #include "accel/bvh/layout/cwbvh_emit_steps.h"
 #include "accel/bvh/layout/cwbvh_layout.h"
 #include "accel/bvh/layout/cwbvh_refine_steps.h"
-#include "backend/cuda/device_buffer.h"
-#include "backend/cuda/event_timer.h"
-#include "backend/cuda/morton_sort.h"
 #include "backend/backends.h"
+#include "backend/cuda/cub_run.h"
+#include "backend/cuda/device_buffer.h"
 #include "backend/cuda/device_builders.h"
+#include "backend/cuda/event_timer.h"
+#include "backend/cuda/launch.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {
 namespace {
-
-constexpr int kBlockSize = 256;
-
-uint32_t blocks_for(uint64_t threads) { return static_cast<uint32_t>((threads + kBlockSize - 1) / kBlockSize); }
 
 // ---- Aila-Laine node pairs ------------------------------------------------
 
@@ -184,28 +181,147 @@ __global__ void cwbvh_emit_kernel(cwbvh::EmitView view, uint32_t start, uint32_t
     if (k < count) cwbvh::emit(view, start + k);
 }
 
-template <class T>
-T download_one(const DeviceBuffer<T>& buffer, size_t index) {
-    T value;
-    RF_CUDA_CHECK(cudaMemcpy(&value, buffer.data() + index, sizeof(T), cudaMemcpyDeviceToHost));
-    return value;
-}
-
 // The canonical BVH and its triangles uploaded, each buffer counted by `meter`.
 struct CanonicalOnDevice {
     DeviceBuffer<BvhNode> nodes;
     DeviceBuffer<uint32_t> prims;
     DeviceBuffer<Triangle> triangles;
     CanonicalOnDevice(const Bvh& bvh, std::span<const Triangle> tris, MemoryMeter& meter, const std::string& what)
-        : nodes(what + ": canonical nodes"), prims(what + ": primitive indices"), triangles(what + ": triangles") {
-        meter.allocate(nodes, bvh.nodes.size());
-        meter.allocate(prims, bvh.prim_indices.size());
-        meter.allocate(triangles, tris.size());
+        : nodes(meter, what + ": canonical nodes", bvh.nodes.size()),
+          prims(meter, what + ": primitive indices", bvh.prim_indices.size()),
+          triangles(meter, what + ": triangles", tris.size()) {
         nodes.upload(bvh.nodes);
         prims.upload(bvh.prim_indices);
         triangles.upload(tris);
     }
 };
+
+// The CWBVH build's device arrays, all live to its end: refinement's state,
+// then the DP's, then the emission's per-wide-node arrays (at most one wide
+// node per refined node), then the scans' scratch.
+struct CwbvhArrays {
+    DeviceBuffer<uint32_t> extra, extra_base;
+    DeviceBuffer<cwbvh::RefineRef> leaf_refs;
+    DeviceBuffer<cwbvh::RefinedNode> nodes;
+    DeviceBuffer<uint32_t> parent, arrivals;
+    DeviceBuffer<float> cost;
+    DeviceBuffer<cwbvh::Choice> choices;
+    DeviceBuffer<uint32_t> wide_refined, slots, inner_count, first_child, wide_index, counters;
+    DeviceBuffer<cwbvh::OwnCounts> own, subtree, before;
+    DeviceBuffer<CwbvhNode> out_nodes;
+    DeviceBuffer<CwbvhTriangle> out_tris;
+    DeviceBuffer<uint8_t> scan_scratch;
+
+    // canonical: canonical nodes; n: refined nodes; references: refined leaves.
+    CwbvhArrays(MemoryMeter& m, uint32_t canonical, uint32_t n, size_t refined_extra, size_t references)
+        : extra(m, "CWBVH: refinement sizes", canonical),
+          extra_base(m, "CWBVH: refinement offsets", canonical),
+          leaf_refs(m, "CWBVH: leaf references", std::max<size_t>(refined_extra, 1)),
+          nodes(m, "CWBVH: refined nodes", n),
+          parent(m, "CWBVH: parents", n),
+          arrivals(m, "CWBVH: arrival counters", n),
+          cost(m, "CWBVH: DP cost tables", size_t{n} * cwbvh::kWidth),
+          choices(m, "CWBVH: DP decisions", n),
+          wide_refined(m, "CWBVH: wide-node queue", n),
+          slots(m, "CWBVH: slot children", size_t{n} * cwbvh::kWidth),
+          inner_count(m, "CWBVH: inner-child counts", n),
+          first_child(m, "CWBVH: first children", n),
+          wide_index(m, "CWBVH: wide-node indices", n),
+          counters(m, "CWBVH: leaf-slot and error counters", 2),
+          own(m, "CWBVH: own counts", n),
+          subtree(m, "CWBVH: subtree counts", n),
+          before(m, "CWBVH: depth-first prefixes", n),
+          out_nodes(m, "CWBVH: nodes", n),
+          out_tris(m, "CWBVH: triangles", references),
+          scan_scratch(m, "CWBVH: scan temporary storage") {
+        // Room for the largest scan, allocated outside the timed kernels.
+        cub_reserve(scan_scratch, [&](void* temp, size_t& bytes) {
+            return cub::DeviceScan::ExclusiveSum(temp, bytes, inner_count.data(), first_child.data(), n);
+        });
+        cub_reserve(scan_scratch, [&](void* temp, size_t& bytes) {
+            return cub::DeviceScan::ExclusiveSum(temp, bytes, extra.data(), extra_base.data(), canonical);
+        });
+    }
+    [[nodiscard]] cwbvh::EmitView view(const Triangle* triangles) const {
+        return {nodes.data(),   choices.data(),    triangles,          wide_refined.data(), slots.data(),
+                own.data(),     inner_count.data(), first_child.data(), subtree.data(),      wide_index.data(),
+                before.data(),  out_nodes.data(),  out_tris.data(),    counters.data(),     counters.data() + 1};
+    }
+};
+
+// A level of the wide tree: its wide nodes are [start, start + count).
+struct WideLevel {
+    uint32_t start, count;
+};
+
+// CWBVH 0: leaf refinement: sizes, their scan, one thread per canonical node.
+void refine_leaves(const CanonicalOnDevice& input, uint32_t canonical_count, CwbvhArrays& a) {
+    launch(cwbvh_extra_kernel, canonical_count, input.nodes.data(), canonical_count, a.extra.data());
+    cub_run(a.scan_scratch, [&](void* temp, size_t& bytes) {
+        return cub::DeviceScan::ExclusiveSum(temp, bytes, a.extra.data(), a.extra_base.data(), canonical_count);
+    });
+    launch(cwbvh_refine_kernel, canonical_count, input.nodes.data(), canonical_count, input.prims.data(),
+           input.triangles.data(), a.extra_base.data(), a.leaf_refs.data(), a.nodes.data());
+}
+
+// CWBVH 1-2: parents and the DP, after zeroing the counters and the root's
+// emission entries.
+void solve_collapse(CwbvhArrays& a, uint32_t n) {
+    RF_CUDA_CHECK(cudaMemsetAsync(a.parent.data(), 0xFF, a.parent.bytes()));  // root: kNoParent
+    RF_CUDA_CHECK(cudaMemsetAsync(a.arrivals.data(), 0, a.arrivals.bytes()));
+    RF_CUDA_CHECK(cudaMemsetAsync(a.counters.data(), 0, a.counters.bytes()));
+    RF_CUDA_CHECK(cudaMemsetAsync(a.wide_refined.data(), 0, sizeof(uint32_t)));  // the root covers refined node 0
+    RF_CUDA_CHECK(cudaMemsetAsync(a.wide_index.data(), 0, sizeof(uint32_t)));
+    RF_CUDA_CHECK(cudaMemsetAsync(a.before.data(), 0, sizeof(cwbvh::OwnCounts)));
+    launch(cwbvh_parents_kernel, n, a.nodes.data(), n, a.parent.data());
+    launch(cwbvh_dp_kernel, n, a.nodes.data(), n, a.parent.data(), a.cost.data(), a.choices.data(),
+           a.arrivals.data());
+}
+
+// CWBVH 3: the wide tree level by level from the root; a scan of the inner
+// counts places the next level's nodes.
+std::vector<WideLevel> discover_levels(CwbvhArrays& a, const cwbvh::EmitView& view) {
+    std::vector<WideLevel> levels;
+    for (WideLevel level{0, 1}; level.count != 0;) {
+        if (levels.size() == size_t{kCwbvhMaxDepth})
+            throw Error("build_cwbvh: wide BVH deeper than " + std::to_string(kCwbvhMaxDepth) + " levels");
+        levels.push_back(level);
+        launch(cwbvh_discover_kernel, level.count, view, level.start, level.count);
+        cub_run(a.scan_scratch, [&](void* temp, size_t& bytes) {
+            return cub::DeviceScan::ExclusiveSum(temp, bytes, a.inner_count.data() + level.start,
+                                                 a.first_child.data() + level.start, level.count);
+        });
+        const uint32_t last = level.start + level.count - 1;
+        const uint32_t next_count = download_value(a.first_child.data() + last) +
+                                    download_value(a.inner_count.data() + last);
+        launch(cwbvh_enqueue_kernel, level.count, view, level.start, level.count);
+        level = {level.start + level.count, next_count};
+    }
+    return levels;
+}
+
+// CWBVH 4-5: subtree counts bottom up, then the emission top down.
+void total_and_emit(const std::vector<WideLevel>& levels, const cwbvh::EmitView& view) {
+    for (size_t l = levels.size(); l-- > 0;) launch(cwbvh_totals_kernel, levels[l].count, view, levels[l].start,
+                                                   levels[l].count);
+    for (const WideLevel& level : levels) launch(cwbvh_emit_kernel, level.count, view, level.start, level.count);
+}
+
+// The wide BVH back to the host, after the device's consistency checks.
+CwbvhBvh download_cwbvh(const CwbvhArrays& a, uint32_t n, size_t references, size_t depth) {
+    const cwbvh::OwnCounts total = download_value(a.subtree.data());
+    const std::vector<uint32_t> counts = download_all(a.counters, 2);
+    if (counts[1] & cwbvh::kErrorQuantize)
+        throw Error("build_cwbvh: a box cannot be quantised (coordinates too large)");
+    if (total.triangles != references || total.inner + 1u > n)
+        throw Error("build_cwbvh_on_device: inconsistent wide tree (device error)");
+    CwbvhBvh out;
+    out.nodes = download_all(a.out_nodes, total.inner + 1u);
+    out.triangles = download_all(a.out_tris, references);
+    out.leaf_count = counts[0];
+    out.depth = static_cast<int>(depth);
+    return out;
+}
 
 }  // namespace
 
@@ -227,30 +343,19 @@ AilaLaineBvh convert_to_aila_laine_on_device(const Bvh& bvh, std::span<const Tri
     MemoryMeter meter;
     EventTimer timer;
 
-    CanonicalOnDevice input(bvh, triangles, meter, "node pairs");
-    DeviceBuffer<BvhNode>& nodes = input.nodes;
-    DeviceBuffer<uint32_t>& prims = input.prims;
-    DeviceBuffer<Triangle>& tris = input.triangles;
-
-    DeviceBuffer<uint32_t> parent("node pairs: parents"), arrivals("node pairs: arrival counters");
-    DeviceBuffer<aila_laine::SubtreeSize> size("node pairs: subtree sizes");
-    DeviceBuffer<AilaLaineNode> out_nodes("node pairs: nodes");
-    DeviceBuffer<AilaLaineFloat4> out_tris("node pairs: leaf lists");
-    meter.allocate(parent, n);
-    meter.allocate(arrivals, n);
-    meter.allocate(size, n);
-    meter.allocate(out_nodes, total.inner_nodes);
-    meter.allocate(out_tris, total.float4s);
+    const CanonicalOnDevice input(bvh, triangles, meter, "node pairs");
+    DeviceBuffer<uint32_t> parent(meter, "node pairs: parents", n), arrivals(meter, "node pairs: arrival counters", n);
+    DeviceBuffer<aila_laine::SubtreeSize> size(meter, "node pairs: subtree sizes", n);
+    DeviceBuffer<AilaLaineNode> out_nodes(meter, "node pairs: nodes", total.inner_nodes);
+    DeviceBuffer<AilaLaineFloat4> out_tris(meter, "node pairs: leaf lists", total.float4s);
 
     timer.start();
     RF_CUDA_CHECK(cudaMemsetAsync(parent.data(), 0xFF, parent.bytes()));  // root: kNoParent
     RF_CUDA_CHECK(cudaMemsetAsync(arrivals.data(), 0, arrivals.bytes()));
-    aila_laine_parents_kernel<<<blocks_for(n), kBlockSize>>>(nodes.data(), n, parent.data());
-    aila_laine_sizes_kernel<<<blocks_for(n), kBlockSize>>>(nodes.data(), n, parent.data(), size.data(),
-                                                           arrivals.data());
-    aila_laine_emit_kernel<<<blocks_for(n), kBlockSize>>>(nodes.data(), n, parent.data(), size.data(),
-                                                          prims.data(), tris.data(), out_nodes.data(),
-                                                          out_tris.data());
+    launch(aila_laine_parents_kernel, n, input.nodes.data(), n, parent.data());
+    launch(aila_laine_sizes_kernel, n, input.nodes.data(), n, parent.data(), size.data(), arrivals.data());
+    launch(aila_laine_emit_kernel, n, input.nodes.data(), n, parent.data(), size.data(), input.prims.data(),
+           input.triangles.data(), out_nodes.data(), out_tris.data());
     const double ms = timer.stop_ms();
     if (device_ms) *device_ms = ms;
 
@@ -266,8 +371,7 @@ AilaLaineBvh convert_to_aila_laine_on_device(const Bvh& bvh, std::span<const Tri
 CwbvhBvh build_cwbvh_on_device(const Bvh& bvh, std::span<const Triangle> triangles, double* device_ms,
                                int device) {
     if (device_ms) *device_ms = 0.0;
-    CwbvhBvh out;
-    if (bvh.nodes.empty()) return out;
+    if (bvh.nodes.empty()) return {};
     if (bvh.prim_indices.size() >= std::numeric_limits<uint32_t>::max())
         throw Error("build_cwbvh: too many triangle references");
     const CanonicalTotals checked = validate_canonical(bvh, triangles.size(), "build_cwbvh", 0);
@@ -281,111 +385,17 @@ CwbvhBvh build_cwbvh_on_device(const Bvh& bvh, std::span<const Triangle> triangl
     MemoryMeter meter;
     EventTimer timer;
 
-    CanonicalOnDevice input(bvh, triangles, meter, "CWBVH");
-    DeviceBuffer<BvhNode>& canonical = input.nodes;
-    DeviceBuffer<uint32_t>& prims = input.prims;
-    DeviceBuffer<Triangle>& tris = input.triangles;
-
-    // Refinement's state, then the DP's, then the emission's per-wide-node
-    // arrays (at most one wide node per refined node).
-    DeviceBuffer<uint32_t> extra("CWBVH: refinement sizes"), extra_base("CWBVH: refinement offsets");
-    DeviceBuffer<cwbvh::RefineRef> scratch("CWBVH: leaf references");
-    DeviceBuffer<cwbvh::RefinedNode> nodes("CWBVH: refined nodes");
-    meter.allocate(extra, canonical_count);
-    meter.allocate(extra_base, canonical_count);
-    meter.allocate(scratch, std::max<size_t>(checked.refined_extra, 1));
-    meter.allocate(nodes, n);
-    DeviceBuffer<uint32_t> parent("CWBVH: parents"), arrivals("CWBVH: arrival counters");
-    DeviceBuffer<float> cost("CWBVH: DP cost tables");
-    DeviceBuffer<cwbvh::Choice> choices("CWBVH: DP decisions");
-    meter.allocate(parent, n);
-    meter.allocate(arrivals, n);
-    meter.allocate(cost, size_t{n} * cwbvh::kWidth);
-    meter.allocate(choices, n);
-    DeviceBuffer<uint32_t> wide_refined("CWBVH: wide-node queue"), slots("CWBVH: slot children"),
-        inner_count("CWBVH: inner-child counts"), first_child("CWBVH: first children"),
-        wide_index("CWBVH: wide-node indices"), counters("CWBVH: leaf-slot and error counters");
-    DeviceBuffer<cwbvh::OwnCounts> own("CWBVH: own counts"), subtree("CWBVH: subtree counts"),
-        before("CWBVH: depth-first prefixes");
-    DeviceBuffer<CwbvhNode> out_nodes("CWBVH: nodes");
-    DeviceBuffer<CwbvhTriangle> out_tris("CWBVH: triangles");
-    meter.allocate(wide_refined, n);
-    meter.allocate(slots, size_t{n} * cwbvh::kWidth);
-    meter.allocate(inner_count, n);
-    meter.allocate(first_child, n);
-    meter.allocate(wide_index, n);
-    meter.allocate(counters, 2);
-    meter.allocate(own, n);
-    meter.allocate(subtree, n);
-    meter.allocate(before, n);
-    meter.allocate(out_nodes, n);
-    meter.allocate(out_tris, references);
-    size_t scan_bytes = 0, refine_scan_bytes = 0;
-    RF_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, scan_bytes, inner_count.data(), first_child.data(), n));
-    RF_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, refine_scan_bytes, extra.data(), extra_base.data(),
-                                                canonical_count));
-    scan_bytes = std::max(std::max(scan_bytes, refine_scan_bytes), size_t{1});
-    DeviceBuffer<unsigned char> scan_storage("CWBVH: scan temporary storage");
-    meter.allocate(scan_storage, scan_bytes);
-
-    const cwbvh::EmitView view{nodes.data(),       choices.data(),       tris.data(),       wide_refined.data(),
-                               slots.data(),       own.data(),           inner_count.data(), first_child.data(),
-                               subtree.data(),     wide_index.data(),    before.data(),     out_nodes.data(),
-                               out_tris.data(),    counters.data(),      counters.data() + 1};
+    const CanonicalOnDevice input(bvh, triangles, meter, "CWBVH");
+    CwbvhArrays arrays(meter, canonical_count, n, checked.refined_extra, references);
+    const cwbvh::EmitView view = arrays.view(input.triangles.data());
     timer.start();
-    // 0. Leaf refinement: sizes, their scan, one thread per canonical node.
-    cwbvh_extra_kernel<<<blocks_for(canonical_count), kBlockSize>>>(canonical.data(), canonical_count,
-                                                                    extra.data());
-    RF_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scan_storage.data(), scan_bytes, extra.data(), extra_base.data(),
-                                                canonical_count));
-    cwbvh_refine_kernel<<<blocks_for(canonical_count), kBlockSize>>>(canonical.data(), canonical_count,
-                                                                     prims.data(), tris.data(), extra_base.data(),
-                                                                     scratch.data(), nodes.data());
-    // 1-2. Parents, the DP.
-    RF_CUDA_CHECK(cudaMemsetAsync(parent.data(), 0xFF, parent.bytes()));  // root: kNoParent
-    RF_CUDA_CHECK(cudaMemsetAsync(arrivals.data(), 0, arrivals.bytes()));
-    RF_CUDA_CHECK(cudaMemsetAsync(counters.data(), 0, counters.bytes()));
-    RF_CUDA_CHECK(cudaMemsetAsync(wide_refined.data(), 0, sizeof(uint32_t)));  // the root covers refined node 0
-    RF_CUDA_CHECK(cudaMemsetAsync(wide_index.data(), 0, sizeof(uint32_t)));
-    RF_CUDA_CHECK(cudaMemsetAsync(before.data(), 0, sizeof(cwbvh::OwnCounts)));
-    cwbvh_parents_kernel<<<blocks_for(n), kBlockSize>>>(nodes.data(), n, parent.data());
-    cwbvh_dp_kernel<<<blocks_for(n), kBlockSize>>>(nodes.data(), n, parent.data(), cost.data(), choices.data(),
-                                                   arrivals.data());
-    // 3-5. The wide tree level by level.
-    struct Level {
-        uint32_t start, count;
-    };
-    std::vector<Level> levels;
-    for (Level level{0, 1}; level.count != 0;) {
-        if (levels.size() == size_t{kCwbvhMaxDepth})
-            throw Error("build_cwbvh: wide BVH deeper than " + std::to_string(kCwbvhMaxDepth) + " levels");
-        levels.push_back(level);
-        cwbvh_discover_kernel<<<blocks_for(level.count), kBlockSize>>>(view, level.start, level.count);
-        RF_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scan_storage.data(), scan_bytes, inner_count.data() + level.start,
-                                                    first_child.data() + level.start, level.count));
-        const uint32_t last = level.start + level.count - 1;
-        const uint32_t next_count = download_one(first_child, last) + download_one(inner_count, last);
-        cwbvh_enqueue_kernel<<<blocks_for(level.count), kBlockSize>>>(view, level.start, level.count);
-        level = {level.start + level.count, next_count};
-    }
-    for (size_t l = levels.size(); l-- > 0;)
-        cwbvh_totals_kernel<<<blocks_for(levels[l].count), kBlockSize>>>(view, levels[l].start, levels[l].count);
-    for (const Level& level : levels)
-        cwbvh_emit_kernel<<<blocks_for(level.count), kBlockSize>>>(view, level.start, level.count);
+    refine_leaves(input, canonical_count, arrays);
+    solve_collapse(arrays, n);
+    const std::vector<WideLevel> levels = discover_levels(arrays, view);
+    total_and_emit(levels, view);
     const double ms = timer.stop_ms();
     if (device_ms) *device_ms = ms;
-
-    const cwbvh::OwnCounts total = download_one(subtree, 0);
-    const std::vector<uint32_t> counts = download_all(counters, 2);
-    if (counts[1] & cwbvh::kErrorQuantize)
-        throw Error("build_cwbvh: a box cannot be quantised (coordinates too large)");
-    if (total.triangles != references || total.inner + 1u > n)
-        throw Error("build_cwbvh_on_device: inconsistent wide tree (device error)");
-    out.nodes = download_all(out_nodes, total.inner + 1u);
-    out.triangles = download_all(out_tris, references);
-    out.leaf_count = counts[0];
-    out.depth = static_cast<int>(levels.size());
-    return out;
+    return download_cwbvh(arrays, n, references, levels.size());
 }
 
 }  // namespace rf::cuda

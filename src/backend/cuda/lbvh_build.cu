@@ -19,9 +19,8 @@
 //     host emits it (emit_karras_tree, the CPU LBVH's own refit and emitter,
 //     whose depth-limited rebuild the device does not do). Either way the
 //     BVH is build_lbvh's.
-// Stages are timed with CUDA events around their kernels only; buffers are
-// allocated and freed between stages so the peak holds only what one stage
-// needs.
+// Stages are timed with CUDA events around their kernels only; each stage's
+// buffers live in its scope, so the peak holds only what one stage needs.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -32,20 +31,18 @@
 
 #include "accel/bvh/builders/karras_tree_steps.h"
 #include "accel/bvh/builders/lbvh_emit.h"
+#include "backend/backends.h"
+#include "backend/cuda/build_context.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/device_bvh_builders.h"
+#include "backend/cuda/launch.h"
 #include "backend/cuda/lbvh_build.h"
 #include "backend/cuda/morton_sort.h"
 #include "backend/cuda/raw_tree_emit.h"
-#include "backend/backends.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {
 namespace {
-
-constexpr int kBlockSize = 256;
-
-uint32_t blocks_for(uint64_t threads) { return static_cast<uint32_t>((threads + kBlockSize - 1) / kBlockSize); }
 
 // Stage 4: one thread per inner node.
 template <class Key>
@@ -63,6 +60,79 @@ __global__ void boxes_kernel(karras::BoxPassView tree, uint32_t n) {
     karras::propagate_boxes_from_leaf<karras::AtomicArrival>(tree, i);
 }
 
+// The radix tree's links (karras_tree_steps.h's indexing).
+struct KarrasLinks {
+    DeviceBuffer<uint32_t> children;      // 2 (n - 1)
+    DeviceBuffer<uint32_t> inner_parent;  // n - 1
+    DeviceBuffer<uint32_t> leaf_parent;   // n
+};
+
+// Stage 4: inner nodes and parent links; the sorted codes are spent.
+template <class Key>
+KarrasLinks build_inner_nodes(DeviceBuffer<Key> sorted_keys, uint32_t n, BuildContext& build) {
+    KarrasLinks links{DeviceBuffer<uint32_t>(build.meter, "LBVH: child references", 2 * size_t{n - 1}),
+                      DeviceBuffer<uint32_t>(build.meter, "LBVH: inner node parents", n - 1),
+                      DeviceBuffer<uint32_t>(build.meter, "LBVH: leaf parents", n)};
+    build.timer.start();
+    launch(inner_nodes_kernel<Key>, n - 1, sorted_keys.data(), n, links.children.data(), links.inner_parent.data(),
+           links.leaf_parent.data());
+    build.stages.inner_nodes_ms = build.timer.stop_ms();
+    return links;
+}
+
+// Stage 5 for the raw tree: bottom-up boxes, then every array to the host.
+template <class Key>
+void refit_and_download(const DeviceMortonOrder<Key>& sorted, const KarrasLinks& links, uint32_t n,
+                        BuildContext& build, DeviceKarrasTree& out) {
+    DeviceBuffer<Box3f> inner_boxes(build.meter, "LBVH: inner node boxes", n - 1);
+    DeviceBuffer<uint32_t> arrivals(build.meter, "LBVH: arrival counters", n - 1);
+    const karras::BoxPassView view{links.children.data(), links.inner_parent.data(), links.leaf_parent.data(),
+                                   sorted.boxes.data(),   sorted.order.data(),       inner_boxes.data(),
+                                   arrivals.data()};
+    build.timer.start();
+    RF_CUDA_CHECK(cudaMemsetAsync(arrivals.data(), 0, arrivals.bytes()));
+    launch(boxes_kernel, n, view, n);
+    build.stages.boxes_ms = build.timer.stop_ms();
+    build.stages.peak_device_bytes = build.meter.peak();
+
+    build.timer.start();
+    out.order = download_all(sorted.order, n);
+    out.children = download_all(links.children, 2 * size_t{n - 1});
+    out.inner_parent = download_all(links.inner_parent, n - 1);
+    out.leaf_parent = download_all(links.leaf_parent, n);
+    out.arrivals = download_all(arrivals, n - 1);
+    out.inner_boxes = download_all(inner_boxes, n - 1);
+    out.triangle_boxes = download_all(sorted.boxes, n);
+    build.stages.download_ms = build.timer.stop_ms();
+}
+
+// Stage 6: the emission on the device, which computes every box itself.
+// False when the tree was too deep: then the order and the children came
+// back in `out` for the host.
+template <class Key>
+bool emit_on_device(const DeviceMortonOrder<Key>& sorted, const KarrasLinks& links, uint32_t n,
+                    const BvhBuildConfig& config, BuildContext& build, DeviceKarrasTree& out, Bvh& bvh) {
+    DeviceRawTree tree;
+    tree.children = links.children.data();
+    tree.node_slots = n - 1;
+    tree.root = 0;
+    tree.primitives = n;
+    tree.boxes = sorted.boxes.data();
+    tree.boxes_by_triangle = true;
+    tree.order = sorted.order.data();
+    tree.node_parent = links.inner_parent.data();
+    tree.leaf_parent = links.leaf_parent.data();
+    const bool emitted = emit_raw_tree_on_device(tree, config, "LBVH", build, bvh);
+    if (!emitted) {
+        build.timer.start();
+        out.order = download_all(sorted.order, n);
+        out.children = download_all(links.children, 2 * size_t{n - 1});
+        build.stages.download_ms += build.timer.stop_ms();
+    }
+    build.stages.peak_device_bytes = build.meter.peak();
+    return emitted;
+}
+
 // The device pipeline for n >= 2 triangles. `raw`: every array of the tree
 // comes back in `out`. Otherwise, with `config`, the device emits the BVH
 // into `bvh` and returns true; false when the tree was too deep, and then
@@ -71,76 +141,16 @@ template <class Key>
 bool build_on_device(std::span<const Triangle> triangles, DeviceBuildStages& stages, DeviceKarrasTree& out, bool raw,
                      const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
-    MemoryMeter meter;
-    EventTimer timer;
-
+    BuildContext build(stages);
     // 1-3. Boxes, centroid bounds, Morton codes, the sort (morton_sort.cu).
-    DeviceMortonOrder<Key> sorted;
-    sort_triangles_by_morton_codes(triangles, "LBVH", stages, meter, timer, sorted);
-    DeviceBuffer<Box3f>& boxes = sorted.boxes;
-    const DeviceBuffer<Key>& sorted_keys = sorted.keys;
-    const DeviceBuffer<uint32_t>& order = sorted.order;
-
+    DeviceMortonOrder<Key> sorted = sort_triangles_by_morton_codes<Key>(triangles, "LBVH", build);
     // 4. Inner nodes and parent links.
-    DeviceBuffer<uint32_t> children("LBVH: child references"), inner_parent("LBVH: inner node parents"),
-        leaf_parent("LBVH: leaf parents");
-    meter.allocate(children, 2 * size_t{n - 1});
-    meter.allocate(inner_parent, n - 1);
-    meter.allocate(leaf_parent, n);
-    timer.start();
-    inner_nodes_kernel<Key><<<blocks_for(n - 1), kBlockSize>>>(sorted_keys.data(), n, children.data(),
-                                                               inner_parent.data(), leaf_parent.data());
-    stages.inner_nodes_ms = timer.stop_ms();
-    meter.release(sorted.keys);
-
-    if (!raw) {
-        // 6. Emission on the device; it computes every box itself.
-        DeviceRawTree tree;
-        tree.children = children.data();
-        tree.node_slots = n - 1;
-        tree.root = 0;
-        tree.primitives = n;
-        tree.boxes = boxes.data();
-        tree.boxes_by_triangle = true;
-        tree.order = order.data();
-        tree.node_parent = inner_parent.data();
-        tree.leaf_parent = leaf_parent.data();
-        if (emit_raw_tree_on_device(tree, *config, "LBVH", meter, timer, stages, *bvh)) {
-            stages.peak_device_bytes = meter.peak();
-            return true;
-        }
-        timer.start();
-        out.order = download_all(order, n);
-        out.children = download_all(children, 2 * size_t{n - 1});
-        stages.download_ms += timer.stop_ms();
-        stages.peak_device_bytes = meter.peak();
+    const KarrasLinks links = build_inner_nodes(std::move(sorted.keys), n, build);
+    if (raw) {
+        refit_and_download(sorted, links, n, build, out);
         return false;
     }
-
-    // 5. Bottom-up boxes.
-    DeviceBuffer<Box3f> inner_boxes("LBVH: inner node boxes");
-    DeviceBuffer<uint32_t> arrivals("LBVH: arrival counters");
-    meter.allocate(inner_boxes, n - 1);
-    meter.allocate(arrivals, n - 1);
-    const karras::BoxPassView view{children.data(), inner_parent.data(), leaf_parent.data(), boxes.data(),
-                                   order.data(),    inner_boxes.data(),  arrivals.data()};
-    timer.start();
-    RF_CUDA_CHECK(cudaMemsetAsync(arrivals.data(), 0, arrivals.bytes()));
-    boxes_kernel<<<blocks_for(n), kBlockSize>>>(view, n);
-    stages.boxes_ms = timer.stop_ms();
-    stages.peak_device_bytes = meter.peak();
-
-    // The raw tree back to the host.
-    timer.start();
-    out.order = download_all(order, n);
-    out.children = download_all(children, 2 * size_t{n - 1});
-    out.inner_parent = download_all(inner_parent, n - 1);
-    out.leaf_parent = download_all(leaf_parent, n);
-    out.arrivals = download_all(arrivals, n - 1);
-    out.inner_boxes = download_all(inner_boxes, n - 1);
-    out.triangle_boxes = download_all(boxes, n);
-    stages.download_ms = timer.stop_ms();
-    return false;
+    return emit_on_device(sorted, links, n, *config, build, out, *bvh);
 }
 
 void check_input(std::span<const Triangle> triangles, int morton_bits) {

@@ -3,21 +3,19 @@
 // stable radix sort (CUB) of (code, triangle).
 #include "backend/cuda/morton_sort.h"
 
-#include <algorithm>
 #include <cub/device/device_radix_sort.cuh>
 
 #include "accel/bvh/builders/karras_tree_steps.h"
 #include "accel/bvh/builders/morton_code.h"
+#include "backend/cuda/cub_run.h"
+#include "backend/cuda/launch.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {
 namespace {
 
-constexpr int kBlockSize = 256;
 constexpr int kWarps = kBlockSize / 32;
 constexpr uint32_t kMaxBoundsBlocks = 1024;  // block results the second reduction pass unions
-
-uint32_t blocks_for(uint64_t threads) { return static_cast<uint32_t>((threads + kBlockSize - 1) / kBlockSize); }
 
 // std::min / std::max exactly (b < a ? b : a; a < b ? b : a), in the
 // CPU's nesting, so boxes are bit-identical to morton_tree.cpp's.
@@ -108,73 +106,73 @@ __global__ void morton_kernel(const Box3f* boxes, uint32_t n, const Box3f* bound
     order[i] = i;
 }
 
-}  // namespace
-
+// Stage 1: the triangles' boxes and the centroid bounds, into `out`; the
+// uploaded triangles and the block results are freed on return.
 template <class Key>
-void sort_triangles_by_morton_codes(std::span<const Triangle> triangles, const std::string& label,
-                                    DeviceBuildStages& stages, MemoryMeter& meter, EventTimer& timer,
-                                    DeviceMortonOrder<Key>& out) {
+void bound_triangles(std::span<const Triangle> triangles, const std::string& label, BuildContext& build,
+                     DeviceMortonOrder<Key>& out) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
-    DeviceBuffer<Triangle> device_triangles(label + ": triangles");
-    meter.allocate(device_triangles, n);
-    timer.start();
+    DeviceBuffer<Triangle> device_triangles(build.meter, label + ": triangles", n);
+    build.timer.start();
     device_triangles.upload(triangles);
-    stages.upload_ms = timer.stop_ms();
+    build.stages.upload_ms = build.timer.stop_ms();
 
-    // 1. Triangle boxes and the centroid bounds.
-    DeviceBuffer<Box3f>& boxes = out.boxes;
-    boxes = DeviceBuffer<Box3f>(label + ": triangle boxes");
-    DeviceBuffer<Box3f> block_bounds(label + ": block bounds"), bounds(label + ": bounds");
-    const uint32_t bounds_blocks = std::min<uint32_t>(blocks_for(n), kMaxBoundsBlocks);
-    meter.allocate(boxes, n);
-    meter.allocate(block_bounds, bounds_blocks);
-    meter.allocate(bounds, 1);
-    timer.start();
-    triangle_boxes_kernel<<<bounds_blocks, kBlockSize>>>(device_triangles.data(), n, boxes.data(), block_bounds.data());
-    union_kernel<<<1, kBlockSize>>>(block_bounds.data(), bounds_blocks, bounds.data());
-    stages.bounds_ms = timer.stop_ms();
-    meter.release(device_triangles);
-    meter.release(block_bounds);
+    const uint32_t bounds_blocks = strided_blocks_for(n, kMaxBoundsBlocks);
+    out.boxes = DeviceBuffer<Box3f>(build.meter, label + ": triangle boxes", n);
+    DeviceBuffer<Box3f> block_bounds(build.meter, label + ": block bounds", bounds_blocks);
+    out.bounds = DeviceBuffer<Box3f>(build.meter, label + ": bounds", 1);
+    build.timer.start();
+    launch_shaped(triangle_boxes_kernel, {bounds_blocks}, device_triangles.data(), n, out.boxes.data(),
+                  block_bounds.data());
+    launch_shaped(union_kernel, {1}, block_bounds.data(), bounds_blocks, out.bounds.data());
+    build.stages.bounds_ms = build.timer.stop_ms();
+}
 
-    // 2. Morton codes, in the first halves of the sort's double buffers.
-    DeviceBuffer<Key> keys[2] = {DeviceBuffer<Key>(label + ": Morton codes"), DeviceBuffer<Key>(label + ": sorted codes")};
-    DeviceBuffer<uint32_t> values[2] = {DeviceBuffer<uint32_t>(label + ": triangle order"),
-                                        DeviceBuffer<uint32_t>(label + ": sorted order")};
-    for (int b = 0; b < 2; ++b) {
-        meter.allocate(keys[b], n);
-        meter.allocate(values[b], n);
-    }
-    timer.start();
-    morton_kernel<Key><<<blocks_for(n), kBlockSize>>>(boxes.data(), n, bounds.data(), keys[0].data(), values[0].data());
-    stages.morton_ms = timer.stop_ms();
-    // `bounds` is freed on return without leaving the meter: the LBVH always
-    // counted it live to the end, and its peak report stays as it was.
+// Stages 2-3: the codes, in the first halves of the sort's double buffers,
+// and the stable radix sort of (code, triangle) over the code bits; the
+// halves that did not end sorted are freed on return.
+template <class Key>
+void sort_by_codes(uint32_t n, const std::string& label, BuildContext& build, DeviceMortonOrder<Key>& out) {
+    DeviceBuffer<Key> keys[2] = {DeviceBuffer<Key>(build.meter, label + ": Morton codes", n),
+                                 DeviceBuffer<Key>(build.meter, label + ": sorted codes", n)};
+    DeviceBuffer<uint32_t> values[2] = {DeviceBuffer<uint32_t>(build.meter, label + ": triangle order", n),
+                                        DeviceBuffer<uint32_t>(build.meter, label + ": sorted order", n)};
+    build.timer.start();
+    launch(morton_kernel<Key>, n, out.boxes.data(), n, out.bounds.data(), keys[0].data(), values[0].data());
+    build.stages.morton_ms = build.timer.stop_ms();
 
-    // 3. Stable radix sort of (code, triangle) over the code bits.
     const int key_bits = sizeof(Key) == 4 ? 30 : 63;
     cub::DoubleBuffer<Key> key_buffers(keys[0].data(), keys[1].data());
     cub::DoubleBuffer<uint32_t> value_buffers(values[0].data(), values[1].data());
-    size_t temp_bytes = 0;
-    RF_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, key_buffers, value_buffers, n, 0, key_bits));
-    DeviceBuffer<uint8_t> temp(label + ": radix sort temporary storage");
-    meter.allocate(temp, temp_bytes > 0 ? temp_bytes : 1);  // a null buffer would make CUB only query
-    timer.start();
-    RF_CUDA_CHECK(
-        cub::DeviceRadixSort::SortPairs(temp.data(), temp_bytes, key_buffers, value_buffers, n, 0, key_bits));
-    stages.sort_ms = timer.stop_ms();
-    meter.release(temp);
+    const auto sort = [&](void* temp, size_t& bytes) {
+        return cub::DeviceRadixSort::SortPairs(temp, bytes, key_buffers, value_buffers, n, 0, key_bits);
+    };
+    {
+        DeviceBuffer<uint8_t> scratch(build.meter, label + ": radix sort temporary storage");
+        cub_reserve(scratch, sort);  // allocated outside the timed sort
+        build.timer.start();
+        cub_run(scratch, sort);
+        build.stages.sort_ms = build.timer.stop_ms();
+    }
     const int sorted = key_buffers.Current() == keys[0].data() ? 0 : 1;
-    meter.release(keys[1 - sorted]);
-    meter.release(values[1 - sorted]);
     out.keys = std::move(keys[sorted]);
     out.order = std::move(values[sorted]);
 }
 
-template void sort_triangles_by_morton_codes<uint32_t>(std::span<const Triangle>, const std::string&,
-                                                       DeviceBuildStages&, MemoryMeter&, EventTimer&,
-                                                       DeviceMortonOrder<uint32_t>&);
-template void sort_triangles_by_morton_codes<uint64_t>(std::span<const Triangle>, const std::string&,
-                                                       DeviceBuildStages&, MemoryMeter&, EventTimer&,
-                                                       DeviceMortonOrder<uint64_t>&);
+}  // namespace
+
+template <class Key>
+DeviceMortonOrder<Key> sort_triangles_by_morton_codes(std::span<const Triangle> triangles, const std::string& label,
+                                                      BuildContext& build) {
+    DeviceMortonOrder<Key> out;
+    bound_triangles(triangles, label, build, out);
+    sort_by_codes(static_cast<uint32_t>(triangles.size()), label, build, out);
+    return out;
+}
+
+template DeviceMortonOrder<uint32_t> sort_triangles_by_morton_codes<uint32_t>(std::span<const Triangle>,
+                                                                              const std::string&, BuildContext&);
+template DeviceMortonOrder<uint64_t> sort_triangles_by_morton_codes<uint64_t>(std::span<const Triangle>,
+                                                                              const std::string&, BuildContext&);
 
 }  // namespace rf::cuda

@@ -28,7 +28,8 @@
 //     kBvhMaxDepth comes back raw (order, children, nodes per iteration) and
 //     the host refits and emits it (emit_ploc_tree, the CPU PLOC's own).
 //     Either way the BVH is build_ploc's.
-// Stages are timed with CUDA events; buffers are counted by a MemoryMeter.
+// Stages are timed with CUDA events; buffers are counted by a MemoryMeter
+// and live in the scope of the stages that use them.
 #include <cuda_runtime.h>
 
 #include <chrono>
@@ -39,21 +40,22 @@
 
 #include "accel/bvh/builders/ploc_emit.h"
 #include "accel/bvh/builders/ploc_steps.h"
+#include "backend/backends.h"
+#include "backend/cuda/build_context.h"
+#include "backend/cuda/cub_run.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/device_bvh_builders.h"
-#include "backend/cuda/raw_tree_emit.h"
+#include "backend/cuda/launch.h"
 #include "backend/cuda/morton_sort.h"
 #include "backend/cuda/ploc_build.h"
-#include "backend/backends.h"
+#include "backend/cuda/raw_tree_emit.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {
 namespace {
 
-constexpr int kBlockSize = 256;             // threads per block, and clusters per neighbour window
+// kBlockSize (launch.h) is also the clusters per neighbour window.
 constexpr uint32_t kMaxWindowRadius = 256;  // beyond this the window would not fit in shared memory
-
-uint32_t blocks_for(uint64_t threads) { return static_cast<uint32_t>((threads + kBlockSize - 1) / kBlockSize); }
 
 size_t window_shared_bytes(uint32_t radius) {
     return kBlockSize * sizeof(uint64_t) + (kBlockSize + 2 * size_t{radius}) * sizeof(Box3f);
@@ -122,6 +124,110 @@ double elapsed_ms(std::chrono::steady_clock::time_point start) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
+// The clusters, ping-ponged by the iterations: references and boxes.
+struct ClusterBuffers {
+    DeviceBuffer<uint32_t> refs[2];
+    DeviceBuffer<Box3f> boxes[2];
+};
+
+// What the clustering leaves: the nodes, in creation order.
+struct PlocNodes {
+    DeviceBuffer<uint32_t> children;  // 2 (n - 1)
+    DeviceBuffer<Box3f> boxes;        // raw trees only: n - 1, as the merges wrote them
+};
+
+// Stage 2: the sorted triangles as the first clusters.
+ClusterBuffers first_clusters(const DeviceMortonOrder<uint64_t>& sorted, uint32_t n, BuildContext& build) {
+    ClusterBuffers clusters{{DeviceBuffer<uint32_t>(build.meter, "PLOC: cluster references", n),
+                             DeviceBuffer<uint32_t>(build.meter, "PLOC: next cluster references", n)},
+                            {DeviceBuffer<Box3f>(build.meter, "PLOC: cluster boxes", n),
+                             DeviceBuffer<Box3f>(build.meter, "PLOC: next cluster boxes", n)}};
+    build.timer.start();
+    launch(initial_clusters_kernel, n, sorted.boxes.data(), sorted.order.data(), n, clusters.refs[0].data(),
+           clusters.boxes[0].data());
+    build.stages.ploc_ms = build.timer.stop_ms();
+    return clusters;
+}
+
+// What an iteration works in, sized for the first (n clusters).
+struct IterationArrays {
+    DeviceBuffer<uint32_t> neighbour;
+    DeviceBuffer<uint64_t> flags, prefix;  // count + 1: the last flag is zero, so the scan ends with the total
+    DeviceBuffer<uint8_t> scratch;         // the scan's
+};
+
+// One iteration over `count` clusters in clusters[current] (3a-c): the
+// merges, the survivors into the other buffers. Returns the total of the
+// flags: (survivors << 32) | merges.
+uint64_t merge_iteration(ClusterBuffers& clusters, int current, uint32_t count, uint32_t radius, uint32_t next_node,
+                         IterationArrays& work, PlocNodes& nodes) {
+    const Box3f* cluster_boxes = clusters.boxes[current].data();
+    uint32_t* neighbour = work.neighbour.data();
+    if (radius <= kMaxWindowRadius) {
+        launch_shaped(window_neighbours_kernel, {blocks_for(count), kBlockSize, window_shared_bytes(radius)},
+                      cluster_boxes, count, radius, neighbour);
+    } else {
+        launch(neighbours_kernel, count, cluster_boxes, count, radius, neighbour);
+    }
+    launch(flags_kernel, size_t{count} + 1, neighbour, count, work.flags.data());
+    cub_run(work.scratch, [&](void* temp, size_t& bytes) {
+        return cub::DeviceScan::ExclusiveSum(temp, bytes, work.flags.data(), work.prefix.data(), count + 1);
+    });
+    const ploc::ClusterArrays arrays{clusters.refs[current].data(),     cluster_boxes,
+                                     clusters.refs[1 - current].data(), clusters.boxes[1 - current].data(),
+                                     nodes.children.data(),             nodes.boxes.data()};
+    launch(compact_kernel, count, arrays, neighbour, work.prefix.data(), count, next_node);
+    return download_value(work.prefix.data() + count);
+}
+
+// Stage 3: iterations until one cluster is left, timed as one; the nodes
+// made per iteration into `iteration_nodes`. The iterations' arrays are
+// freed on return.
+void merge_until_one(ClusterBuffers& clusters, uint32_t n, uint32_t radius, PlocNodes& nodes, BuildContext& build,
+                     std::vector<uint32_t>& iteration_nodes) {
+    IterationArrays work{DeviceBuffer<uint32_t>(build.meter, "PLOC: nearest neighbours", n),
+                         DeviceBuffer<uint64_t>(build.meter, "PLOC: compaction flags", size_t{n} + 1),
+                         DeviceBuffer<uint64_t>(build.meter, "PLOC: compaction prefix sums", size_t{n} + 1),
+                         DeviceBuffer<uint8_t>(build.meter, "PLOC: scan temporary storage")};
+    cub_reserve(work.scratch, [&](void* temp, size_t& bytes) {  // the largest scan, allocated outside the timing
+        return cub::DeviceScan::ExclusiveSum(temp, bytes, work.flags.data(), work.prefix.data(), n + 1);
+    });
+    uint32_t count = n, next_node = 0;
+    int current = 0;
+    iteration_nodes.clear();
+    build.timer.start();
+    while (count > 1) {
+        const uint64_t total = merge_iteration(clusters, current, count, radius, next_node, work, nodes);
+        const uint32_t survivors = static_cast<uint32_t>(total >> 32), merges = static_cast<uint32_t>(total);
+        // The closest pair is always mutual; anything else is a device fault, not a reason to spin.
+        if (merges == 0 || survivors != count - merges) {
+            throw Error("PLOC on the device: iteration " + std::to_string(iteration_nodes.size()) + " kept " +
+                        std::to_string(survivors) + " of " + std::to_string(count) + " clusters with " +
+                        std::to_string(merges) + " merges");
+        }
+        iteration_nodes.push_back(merges);
+        next_node += merges;
+        count = survivors;
+        current = 1 - current;
+    }
+    build.stages.ploc_ms += build.timer.stop_ms();
+    build.stages.ploc_iterations = static_cast<uint32_t>(iteration_nodes.size());
+    build.stages.peak_device_bytes = build.meter.peak();
+}
+
+// Stages 2-3: the clustering of the sorted triangles; the clusters are
+// freed on return. Raw trees keep the node boxes instead of the triangle
+// boxes, which only the device emission reads after the first clusters.
+PlocNodes cluster(DeviceMortonOrder<uint64_t>& sorted, uint32_t n, uint32_t radius, bool raw, BuildContext& build,
+                  std::vector<uint32_t>& iteration_nodes) {
+    ClusterBuffers clusters = first_clusters(sorted, n, build);
+    if (raw) sorted.boxes.release();
+    PlocNodes nodes{DeviceBuffer<uint32_t>(build.meter, "PLOC: child references", 2 * size_t{n - 1}),
+                    DeviceBuffer<Box3f>(build.meter, "PLOC: node boxes", raw ? n - 1 : 0)};
+    merge_until_one(clusters, n, radius, nodes, build, iteration_nodes);
+    return nodes;
+}
+
 // The device pipeline for n >= 2 triangles. `raw`: the node boxes are kept
 // and the raw tree comes back. Otherwise, with `config`, the device emits
 // the BVH into `bvh` and returns true; false when the tree was too deep, and
@@ -129,110 +235,32 @@ double elapsed_ms(std::chrono::steady_clock::time_point start) {
 bool build_on_device(std::span<const Triangle> triangles, uint32_t radius, DeviceBuildStages& stages,
                      DevicePlocTree& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
-    MemoryMeter meter;
-    EventTimer timer;
-
+    BuildContext build(stages);
     // 1. Boxes, centroid bounds, 63-bit Morton codes, the sort (morton_sort.cu).
-    DeviceMortonOrder<uint64_t> sorted;
-    sort_triangles_by_morton_codes(triangles, "PLOC", stages, meter, timer, sorted);
-    meter.release(sorted.keys);  // the order is all the clustering needs
-
-    // 2. The first clusters; the per-triangle boxes are then spent.
-    DeviceBuffer<uint32_t> refs[2] = {DeviceBuffer<uint32_t>("PLOC: cluster references"),
-                                      DeviceBuffer<uint32_t>("PLOC: next cluster references")};
-    DeviceBuffer<Box3f> boxes[2] = {DeviceBuffer<Box3f>("PLOC: cluster boxes"),
-                                    DeviceBuffer<Box3f>("PLOC: next cluster boxes")};
-    for (int b = 0; b < 2; ++b) {
-        meter.allocate(refs[b], n);
-        meter.allocate(boxes[b], n);
-    }
-    timer.start();
-    initial_clusters_kernel<<<blocks_for(n), kBlockSize>>>(sorted.boxes.data(), sorted.order.data(), n,
-                                                           refs[0].data(), boxes[0].data());
-    stages.ploc_ms = timer.stop_ms();
-    if (raw) meter.release(sorted.boxes);  // the device emission needs them
-
-    // 3. The iterations.
-    DeviceBuffer<uint32_t> neighbour("PLOC: nearest neighbours"), children("PLOC: child references");
-    DeviceBuffer<uint64_t> flags("PLOC: compaction flags"), prefix("PLOC: compaction prefix sums");
-    DeviceBuffer<Box3f> node_boxes("PLOC: node boxes");
-    meter.allocate(neighbour, n);
-    meter.allocate(children, 2 * size_t{n - 1});
-    meter.allocate(flags, size_t{n} + 1);
-    meter.allocate(prefix, size_t{n} + 1);
-    if (raw) meter.allocate(node_boxes, n - 1);
-    size_t temp_bytes = 0;
-    RF_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, flags.data(), prefix.data(), n + 1));
-    DeviceBuffer<uint8_t> temp("PLOC: scan temporary storage");
-    meter.allocate(temp, temp_bytes > 0 ? temp_bytes : 1);
-
-    const bool window = radius <= kMaxWindowRadius;
-    const size_t shared_bytes = window_shared_bytes(radius);
-    uint32_t count = n, next_node = 0;
-    int current = 0;
-    out.iteration_nodes.clear();
-    timer.start();
-    while (count > 1) {
-        const DeviceBuffer<Box3f>& cluster_boxes = boxes[current];
-        if (window) {
-            window_neighbours_kernel<<<blocks_for(count), kBlockSize, shared_bytes>>>(cluster_boxes.data(), count,
-                                                                                      radius, neighbour.data());
-        } else {
-            neighbours_kernel<<<blocks_for(count), kBlockSize>>>(cluster_boxes.data(), count, radius,
-                                                                 neighbour.data());
-        }
-        flags_kernel<<<blocks_for(size_t{count} + 1), kBlockSize>>>(neighbour.data(), count, flags.data());
-        RF_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(temp.data(), temp_bytes, flags.data(), prefix.data(), count + 1));
-        const ploc::ClusterArrays arrays{refs[current].data(),     cluster_boxes.data(), refs[1 - current].data(),
-                                         boxes[1 - current].data(), children.data(),
-                                         raw ? node_boxes.data() : nullptr};
-        compact_kernel<<<blocks_for(count), kBlockSize>>>(arrays, neighbour.data(), prefix.data(), count, next_node);
-        RF_CUDA_CHECK(cudaGetLastError());
-        uint64_t total = 0;
-        RF_CUDA_CHECK(cudaMemcpy(&total, prefix.data() + count, sizeof total, cudaMemcpyDeviceToHost));
-        const uint32_t survivors = static_cast<uint32_t>(total >> 32), merges = static_cast<uint32_t>(total);
-        // The closest pair is always mutual; anything else is a device fault, not a reason to spin.
-        if (merges == 0 || survivors != count - merges) {
-            throw Error("PLOC on the device: iteration " + std::to_string(out.iteration_nodes.size()) + " kept " +
-                        std::to_string(survivors) + " of " + std::to_string(count) + " clusters with " +
-                        std::to_string(merges) + " merges");
-        }
-        out.iteration_nodes.push_back(merges);
-        next_node += merges;
-        count = survivors;
-        current = 1 - current;
-    }
-    stages.ploc_ms += timer.stop_ms();
-    stages.ploc_iterations = static_cast<uint32_t>(out.iteration_nodes.size());
-    stages.peak_device_bytes = meter.peak();
+    DeviceMortonOrder<uint64_t> sorted = sort_triangles_by_morton_codes<uint64_t>(triangles, "PLOC", build);
+    sorted.keys.release();  // the order is all the clustering needs
+    // 2-3. The clustering.
+    const PlocNodes nodes = cluster(sorted, n, radius, raw, build, out.iteration_nodes);
 
     // 4. Emission on the device.
     if (!raw) {
-        for (int b = 0; b < 2; ++b) {
-            meter.release(refs[b]);
-            meter.release(boxes[b]);
-        }
-        meter.release(neighbour);
-        meter.release(flags);
-        meter.release(prefix);
-        meter.release(temp);
         DeviceRawTree tree;
-        tree.children = children.data();
+        tree.children = nodes.children.data();
         tree.node_slots = n - 1;
         tree.root = n - 2;
         tree.primitives = n;
         tree.boxes = sorted.boxes.data();
         tree.boxes_by_triangle = true;
         tree.order = sorted.order.data();
-        if (emit_raw_tree_on_device(tree, *config, "PLOC", meter, timer, stages, *bvh)) return true;
+        if (emit_raw_tree_on_device(tree, *config, "PLOC", build, *bvh)) return true;
     }
 
     // The clustering back to the host.
-    timer.start();
+    build.timer.start();
     out.order = download_all(sorted.order, n);
-    out.children = download_all(children, 2 * size_t{n - 1});
-    if (raw) out.node_boxes = download_all(node_boxes, n - 1);
-    stages.download_ms += timer.stop_ms();
+    out.children = download_all(nodes.children, 2 * size_t{n - 1});
+    if (raw) out.node_boxes = download_all(nodes.boxes, n - 1);
+    build.stages.download_ms += build.timer.stop_ms();
     return false;
 }
 

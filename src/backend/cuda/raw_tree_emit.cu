@@ -13,16 +13,14 @@
 #include <string>
 
 #include "accel/bvh/builders/raw_tree_emit_steps.h"
+#include "backend/cuda/cub_run.h"
 #include "backend/cuda/cuda_check.h"
+#include "backend/cuda/launch.h"
 #include "backend/cuda/raw_tree_emit.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {
 namespace {
-
-constexpr int kBlockSize = 256;
-
-uint32_t blocks_for(uint64_t threads) { return static_cast<uint32_t>((threads + kBlockSize - 1) / kBlockSize); }
 
 __global__ void scatter_parents_kernel(raw_emit::RawTreeView tree) {
     const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
@@ -55,147 +53,166 @@ __global__ void emit_level_kernel(raw_emit::RawTreeView tree, const raw_emit::Em
     }
 }
 
-}  // namespace
-
-bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BvhBuildConfig& config, const std::string& label,
-                             MemoryMeter& meter, EventTimer& timer, DeviceBuildStages& stages, Bvh& out) {
-    const uint32_t n = tree.primitives, slots = tree.node_slots;
-    DeviceBuffer<uint32_t> node_parent(label + ": emission node parents"), leaf_parent(label + ": emission leaf parents"),
-        arrivals(label + ": emission arrival counters");
-    DeviceBuffer<raw_emit::NodeInfo> info(label + ": emission node values");
+// The steps' view of `tree`; the emission's own arrays are set by its stages.
+raw_emit::RawTreeView raw_tree_view(const DeviceRawTree& tree, const BvhBuildConfig& config) {
     raw_emit::RawTreeView view{};
     view.children = tree.children;
     view.high_children = tree.high_children;
-    view.high_base = tree.high_children != nullptr ? tree.high_base : slots;
-    view.node_slots = slots;
+    view.high_base = tree.high_children != nullptr ? tree.high_base : tree.node_slots;
+    view.node_slots = tree.node_slots;
     view.root = tree.root;
-    view.primitives = n;
+    view.primitives = tree.primitives;
     view.boxes = tree.boxes;
     view.boxes_by_triangle = tree.boxes_by_triangle;
     view.order = tree.order;
     view.leaf_runs = tree.leaf_runs;
     view.costs = {config.sah.traversal, config.sah.intersection,
                   static_cast<uint32_t>(std::clamp(config.max_leaf_size, 1, 255))};
-    const bool own_parents = tree.node_parent == nullptr;
-    if (own_parents) {
-        meter.allocate(node_parent, slots);
-        meter.allocate(leaf_parent, n);
-        view.node_parent = node_parent.data();
-        view.leaf_parent = leaf_parent.data();
-    } else {
-        // Read only by the emitter; the view's pointers are shared with the builder's arrays.
-        view.node_parent = const_cast<uint32_t*>(tree.node_parent);
-        view.leaf_parent = const_cast<uint32_t*>(tree.leaf_parent);
-    }
+    // Read only by the emitter; the view's pointers are shared with the
+    // builder's arrays (null: the emitter scatters its own).
+    view.node_parent = const_cast<uint32_t*>(tree.node_parent);
+    view.leaf_parent = const_cast<uint32_t*>(tree.leaf_parent);
+    return view;
+}
 
-    // Sparse numberings: node values only for the slots in use (allocated
-    // here, outside the timed kernels).
-    DeviceBuffer<uint32_t> dense(label + ": emission value indices"), used(label + ": emission used slots");
-    DeviceBuffer<uint8_t> scan_temp(label + ": emission scan temporary storage");
-    size_t temp_bytes = 0;
-    if (tree.sparse_slots) {
-        meter.allocate(used, size_t{slots} + 1);
-        meter.allocate(dense, size_t{slots} + 1);
-        RF_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, used.data(), dense.data(), slots + 1));
-        meter.allocate(scan_temp, temp_bytes > 0 ? temp_bytes : 1);
-    }
+// Sparse slots: the used ones' value indices (empty otherwise).
+struct SlotNumbering {
+    DeviceBuffer<uint32_t> dense;
+    uint32_t values = 0;  // nodes that get values
+};
 
-    timer.start();
+// Stage 1, timed: the parents the builder did not give (into the view's
+// arrays) and, for sparse slots, the dense numbering of the used ones by a
+// prefix sum; the marks and the scan's scratch are freed on return.
+SlotNumbering scatter_parents_and_number_slots(const DeviceRawTree& tree, const raw_emit::RawTreeView& view,
+                                               bool own_parents, const std::string& label, BuildContext& build) {
+    const uint32_t slots = tree.node_slots;
+    const size_t marks = tree.sparse_slots ? size_t{slots} + 1 : 0;
+    SlotNumbering numbering{DeviceBuffer<uint32_t>(build.meter, label + ": emission value indices", marks), slots};
+    DeviceBuffer<uint32_t> used(build.meter, label + ": emission used slots", marks);
+    DeviceBuffer<uint8_t> scratch(build.meter, label + ": emission scan temporary storage");
+    const auto scan = [&](void* temp, size_t& bytes) {
+        return cub::DeviceScan::ExclusiveSum(temp, bytes, used.data(), numbering.dense.data(), slots + 1);
+    };
+    if (tree.sparse_slots) cub_reserve(scratch, scan);  // allocated outside the timed kernels
+    build.timer.start();
     if (own_parents) {
-        RF_CUDA_CHECK(cudaMemsetAsync(node_parent.data(), 0xff, node_parent.bytes()));
-        RF_CUDA_CHECK(cudaMemsetAsync(leaf_parent.data(), 0xff, leaf_parent.bytes()));
-        scatter_parents_kernel<<<blocks_for(slots), kBlockSize>>>(view);
+        RF_CUDA_CHECK(cudaMemsetAsync(view.node_parent, 0xff, size_t{slots} * sizeof(uint32_t)));
+        RF_CUDA_CHECK(cudaMemsetAsync(view.leaf_parent, 0xff, size_t{tree.primitives} * sizeof(uint32_t)));
+        launch(scatter_parents_kernel, slots, view);
     }
-    uint32_t values = slots;
     if (tree.sparse_slots) {
         RF_CUDA_CHECK(cudaMemsetAsync(used.data() + slots, 0, sizeof(uint32_t)));
-        used_slots_kernel<<<blocks_for(slots), kBlockSize>>>(view, used.data());
-        RF_CUDA_CHECK(
-            cub::DeviceScan::ExclusiveSum(scan_temp.data(), temp_bytes, used.data(), dense.data(), slots + 1));
+        launch(used_slots_kernel, slots, view, used.data());
+        cub_run(scratch, scan);
     }
-    stages.device_emit_ms += timer.stop_ms();
-    if (tree.sparse_slots) {
-        RF_CUDA_CHECK(cudaMemcpy(&values, dense.data() + slots, sizeof values, cudaMemcpyDeviceToHost));
-        meter.release(scan_temp);
-        meter.release(used);
-        view.dense = dense.data();
-    }
-    meter.allocate(info, values);
-    meter.allocate(arrivals, values);
-    view.info = info.data();
+    build.stages.device_emit_ms += build.timer.stop_ms();
+    if (tree.sparse_slots) numbering.values = download_value(numbering.dense.data() + slots);
+    return numbering;
+}
+
+// Stage 2, timed: every node's values bottom up, into view.info; the
+// arrival counters are freed on return.
+void finalize_nodes(raw_emit::RawTreeView view, uint32_t values, const std::string& label, BuildContext& build) {
+    DeviceBuffer<uint32_t> arrivals(build.meter, label + ": emission arrival counters", values);
     view.arrivals = arrivals.data();
-
-    timer.start();
+    build.timer.start();
     RF_CUDA_CHECK(cudaMemsetAsync(arrivals.data(), 0, arrivals.bytes()));
-    finalize_kernel<<<blocks_for(n), kBlockSize>>>(view);
-    stages.device_emit_ms += timer.stop_ms();
-    meter.release(arrivals);
-    if (own_parents) {  // the top-down pass walks only node parents
-        meter.release(leaf_parent);
-        view.leaf_parent = nullptr;
-    }
+    launch(finalize_kernel, view.primitives, view);
+    build.stages.device_emit_ms += build.timer.stop_ms();
+}
 
-    // The root's values decide the rest (n >= 2, so the root is a node).
-    if (raw_emit::is_leaf_ref(tree.root) || tree.root >= slots) {
+// The root's values, which decide the rest (n >= 2, so the root is a node).
+raw_emit::NodeInfo root_values(const DeviceRawTree& tree, const raw_emit::RawTreeView& view,
+                               const std::string& label) {
+    if (raw_emit::is_leaf_ref(tree.root) || tree.root >= tree.node_slots) {
         throw Error(label + " device emission: the root is not a node");
     }
-    raw_emit::NodeInfo root{};
-    uint32_t root_value = tree.root;
-    if (view.dense != nullptr) {
-        RF_CUDA_CHECK(cudaMemcpy(&root_value, dense.data() + tree.root, sizeof root_value, cudaMemcpyDeviceToHost));
-    }
-    RF_CUDA_CHECK(cudaMemcpy(&root, info.data() + root_value, sizeof root, cudaMemcpyDeviceToHost));
-    if (root.count != n) {
+    const uint32_t root_value = view.dense != nullptr ? download_value(view.dense + tree.root) : tree.root;
+    const raw_emit::NodeInfo root = download_value(view.info + root_value);
+    if (root.count != tree.primitives) {
         throw Error(label + " device emission: the tree holds " + std::to_string(root.count) + " of " +
-                    std::to_string(n) + " primitives");
+                    std::to_string(tree.primitives) + " primitives");
     }
-    if (!raw_emit::fits_depth_limit(root)) return false;
+    return root;
+}
 
-    // Top down, one launch per level; a level holds at most as many items as
-    // the emitted tree has leaves, (out_size + 1) / 2.
-    const uint32_t levels = raw_emit::emit_levels(root);
-    DeviceBuffer<BvhNode> nodes(label + ": BVH nodes");
-    DeviceBuffer<uint32_t> prims(label + ": BVH primitive indices"), counts(label + ": emission level sizes");
-    DeviceBuffer<raw_emit::EmitItem> items[2] = {DeviceBuffer<raw_emit::EmitItem>(label + ": emission level A"),
-                                                 DeviceBuffer<raw_emit::EmitItem>(label + ": emission level B")};
-    meter.allocate(nodes, root.out_size);
-    meter.allocate(prims, n);
-    meter.allocate(counts, size_t{levels} + 1);
-    const uint32_t widest = (root.out_size + 1) / 2;
-    meter.allocate(items[0], widest);
-    meter.allocate(items[1], widest);
+// The level launches' grid: as many blocks as the device keeps resident.
+uint32_t resident_blocks() {
     int device = 0, processors = 1;
     RF_CUDA_CHECK(cudaGetDevice(&device));
     RF_CUDA_CHECK(cudaDeviceGetAttribute(&processors, cudaDevAttrMultiProcessorCount, device));
-    const uint32_t grid = std::min(blocks_for(widest), static_cast<uint32_t>(processors) * 8u);
-    const raw_emit::EmitItem first = raw_emit::root_item(tree.root);
+    return static_cast<uint32_t>(processors) * 8u;
+}
+
+// Stage 3, timed: top down, one launch per level, back to back (a level
+// holds at most as many items as the emitted tree has leaves,
+// (out_size + 1) / 2); then the BVH back to the host.
+void emit_levels(const raw_emit::RawTreeView& view, const raw_emit::NodeInfo& root, const std::string& label,
+                 BuildContext& build, Bvh& out) {
+    const uint32_t n = view.primitives, levels = raw_emit::emit_levels(root);
+    const uint32_t widest = (root.out_size + 1) / 2;
+    DeviceBuffer<BvhNode> nodes(build.meter, label + ": BVH nodes", root.out_size);
+    DeviceBuffer<uint32_t> prims(build.meter, label + ": BVH primitive indices", n),
+        counts(build.meter, label + ": emission level sizes", size_t{levels} + 1);
+    DeviceBuffer<raw_emit::EmitItem> items[2] = {
+        DeviceBuffer<raw_emit::EmitItem>(build.meter, label + ": emission level A", widest),
+        DeviceBuffer<raw_emit::EmitItem>(build.meter, label + ": emission level B", widest)};
+    const uint32_t grid = strided_blocks_for(widest, resident_blocks());
+    const raw_emit::EmitItem first = raw_emit::root_item(view.root);
     const uint32_t one = 1;
-    timer.start();
+    build.timer.start();
     RF_CUDA_CHECK(cudaMemsetAsync(counts.data(), 0, counts.bytes()));
     RF_CUDA_CHECK(cudaMemcpyAsync(counts.data(), &one, sizeof one, cudaMemcpyHostToDevice));
     RF_CUDA_CHECK(cudaMemcpyAsync(items[0].data(), &first, sizeof first, cudaMemcpyHostToDevice));
     for (uint32_t level = 0; level < levels; ++level) {
-        emit_level_kernel<<<grid, kBlockSize>>>(view, items[level & 1].data(), counts.data() + level,
-                                                items[(level + 1) & 1].data(), counts.data() + level + 1, nodes.data(),
-                                                prims.data());
+        launch_shaped(emit_level_kernel, {grid}, view, items[level & 1].data(), counts.data() + level,
+                      items[(level + 1) & 1].data(), counts.data() + level + 1, nodes.data(), prims.data());
     }
-    stages.device_emit_ms += timer.stop_ms();
-    uint32_t left_over = 0;  // items queued below the last level: none in a tree of that height
-    RF_CUDA_CHECK(cudaMemcpy(&left_over, counts.data() + levels, sizeof left_over, cudaMemcpyDeviceToHost));
-    if (left_over != 0) throw Error(label + " device emission: the tree is deeper than its root's height");
-    for (auto* buffer : {&items[0], &items[1]}) meter.release(*buffer);
-    meter.release(counts);
-    meter.release(info);
-    meter.release(dense);
-    meter.release(node_parent);
-    stages.peak_device_bytes = std::max(stages.peak_device_bytes, meter.peak());
+    build.stages.device_emit_ms += build.timer.stop_ms();
+    // Items queued below the last level: none in a tree of that height.
+    if (download_value(counts.data() + levels) != 0) {
+        throw Error(label + " device emission: the tree is deeper than its root's height");
+    }
+    build.stages.peak_device_bytes = std::max(build.stages.peak_device_bytes, build.meter.peak());
 
-    timer.start();
+    build.timer.start();
     out.nodes.resize(root.out_size);
     out.prim_indices.resize(n);
     nodes.download(out.nodes);
     prims.download(out.prim_indices);
-    stages.download_ms += timer.stop_ms();
+    build.stages.download_ms += build.timer.stop_ms();
+}
+
+}  // namespace
+
+bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BvhBuildConfig& config, const std::string& label,
+                             BuildContext& build, Bvh& out) {
+    raw_emit::RawTreeView view = raw_tree_view(tree, config);
+    const bool own_parents = tree.node_parent == nullptr;
+    DeviceBuffer<uint32_t> node_parent(build.meter, label + ": emission node parents",
+                                       own_parents ? tree.node_slots : 0);
+    SlotNumbering numbering;
+    DeviceBuffer<raw_emit::NodeInfo> info;
+    {
+        // Leaf parents: read by the bottom-up pass only.
+        DeviceBuffer<uint32_t> leaf_parent(build.meter, label + ": emission leaf parents",
+                                           own_parents ? tree.primitives : 0);
+        if (own_parents) {
+            view.node_parent = node_parent.data();
+            view.leaf_parent = leaf_parent.data();
+        }
+        numbering = scatter_parents_and_number_slots(tree, view, own_parents, label, build);
+        view.dense = numbering.dense.data();
+        info = DeviceBuffer<raw_emit::NodeInfo>(build.meter, label + ": emission node values", numbering.values);
+        view.info = info.data();
+        finalize_nodes(view, numbering.values, label, build);
+    }
+    if (own_parents) view.leaf_parent = nullptr;  // the top-down pass walks only node parents
+
+    const raw_emit::NodeInfo root = root_values(tree, view, label);
+    if (!raw_emit::fits_depth_limit(root)) return false;
+    emit_levels(view, root, label, build, out);
     return true;
 }
 

@@ -8,10 +8,10 @@
 #include <cstdint>
 #include <string>
 
-#include "backend/cuda/morton_sort.h"
 #include "accel/bvh/builders/bvh_build_config.h"
-#include "rayforge/accel/bvh/bvh.h"
+#include "backend/cuda/build_context.h"
 #include "backend/cuda/device_builders.h"
+#include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/math/box.h"
 
 namespace rf::cuda {
@@ -43,9 +43,9 @@ struct DeviceRawTree {
 // Returns false, with `out` untouched, when the emitted tree would be deeper
 // than kBvhMaxDepth: the caller then emits on the host, whose depth-limited
 // rebuild this emitter does not do. Adds the device time to
-// stages.device_emit_ms and the download to stages.download_ms; buffers
-// (named after `label`) go through `meter`.
+// build.stages.device_emit_ms and the download to download_ms; its buffers
+// (named after `label`) are counted by build.meter and freed on return.
 bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BvhBuildConfig& config, const std::string& label,
-                             MemoryMeter& meter, EventTimer& timer, DeviceBuildStages& stages, Bvh& out);
+                             BuildContext& build, Bvh& out);
 
 }  // namespace rf::cuda

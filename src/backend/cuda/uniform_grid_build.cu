@@ -24,7 +24,8 @@
 //  7. cell_start, the sorted triangles and the proximity bytes go back to the
 //     host, into arrays under the host memory budget.
 // Stages are timed with CUDA events around their kernels; every device
-// buffer goes through the MemoryMeter, freed as soon as no later stage needs it.
+// buffer is counted by the MemoryMeter and lives in the scope of the stages
+// that need it.
 #include <cuda_runtime.h>
 
 #include <cub/device/device_radix_sort.cuh>
@@ -35,11 +36,12 @@
 
 #include "accel/grid/uniform_grid.h"
 #include "accel/grid/uniform_grid_steps.h"
-#include "backend/cuda/device_buffer.h"
-#include "backend/cuda/event_timer.h"
-#include "backend/cuda/morton_sort.h"
 #include "backend/backends.h"
+#include "backend/cuda/build_context.h"
+#include "backend/cuda/cub_run.h"
+#include "backend/cuda/device_buffer.h"
 #include "backend/cuda/device_builders.h"
+#include "backend/cuda/launch.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 
@@ -48,10 +50,7 @@ namespace {
 
 namespace steps = uniform_grid_steps;
 
-constexpr int kBlockSize = 256;
 constexpr uint32_t kMaxBoundsBlocks = 1024;  // block results the second reduction pass unions
-
-uint32_t blocks_for(uint64_t threads) { return static_cast<uint32_t>((threads + kBlockSize - 1) / kBlockSize); }
 
 // The grid shape a distance-transform thread needs.
 struct GridDims {
@@ -134,24 +133,139 @@ __global__ void chessboard_pass_kernel(const uint8_t* in, uint8_t* out, GridDims
     out[c] = steps::chessboard_pass_at(in, grid.dims, axis, c);
 }
 
-// The triangles' bounds; `kernel_ms` times the two kernels alone (the
-// allocations and the download are host work).
-Box3f device_bounds(const DeviceBuffer<Triangle>& triangles, uint32_t n, MemoryMeter& meter, EventTimer& timer,
-                    double& kernel_ms) {
-    DeviceBuffer<Box3f> block_bounds("uniform grid: block bounds"), bounds("uniform grid: bounds");
-    const uint32_t blocks = std::min<uint32_t>(blocks_for(n), kMaxBoundsBlocks);
-    meter.allocate(block_bounds, blocks);
-    meter.allocate(bounds, 1);
-    timer.start();
-    triangle_bounds_kernel<<<blocks, kBlockSize>>>(triangles.data(), n, block_bounds.data());
-    union_kernel<<<1, kBlockSize>>>(block_bounds.data(), blocks, bounds.data());
-    RF_CUDA_CHECK(cudaGetLastError());
-    kernel_ms = timer.stop_ms();
-    Box3f result;
-    bounds.download(std::span<Box3f>(&result, 1));
-    meter.release(block_bounds);
-    meter.release(bounds);
-    return result;
+// Stage 0, timed as bounds_ms (the two kernels alone: the allocations and
+// the download are host work): the triangles' bounds.
+Box3f device_bounds(const DeviceBuffer<Triangle>& triangles, uint32_t n, BuildContext& build) {
+    const uint32_t blocks = strided_blocks_for(n, kMaxBoundsBlocks);
+    DeviceBuffer<Box3f> block_bounds(build.meter, "uniform grid: block bounds", blocks),
+        bounds(build.meter, "uniform grid: bounds", 1);
+    build.timer.start();
+    launch_shaped(triangle_bounds_kernel, {blocks}, triangles.data(), n, block_bounds.data());
+    launch_shaped(union_kernel, {1}, block_bounds.data(), blocks, bounds.data());
+    build.stages.bounds_ms = build.timer.stop_ms();
+    return download_value(bounds.data());
+}
+
+// (cell, triangle) pairs.
+struct CellPairs {
+    DeviceBuffer<uint32_t> cells, triangles;
+};
+
+// The pairs in halves[0] and the sort's other half.
+struct PairBuffers {
+    CellPairs halves[2];
+    uint32_t count = 0;
+};
+
+// Stages 1-2, timed as cell_pairs_ms: each triangle's pair count and, by a
+// 64-bit exclusive scan, its write offset into `offsets`; returns the
+// total. The counts and the scan's scratch are freed on return.
+uint64_t count_cell_pairs(const steps::CellGridView& view, const DeviceBuffer<Triangle>& triangles, uint32_t n,
+                          DeviceBuffer<uint64_t>& offsets, BuildContext& build) {
+    DeviceBuffer<uint64_t> counts(build.meter, "uniform grid: pair counts", n);
+    DeviceBuffer<uint8_t> scratch(build.meter, "uniform grid: scan temporary storage");
+    const auto scan = [&](void* temp, size_t& bytes) {
+        return cub::DeviceScan::ExclusiveSum(temp, bytes, counts.data(), offsets.data(), n);
+    };
+    cub_reserve(scratch, scan);  // allocated outside the timed kernels
+    build.timer.start();
+    launch(count_pairs_kernel, n, view, triangles.data(), n, counts.data());
+    cub_run(scratch, scan);
+    build.stages.cell_pairs_ms = build.timer.stop_ms();
+    const uint64_t last_offset = download_value(offsets.data() + (n - 1));
+    return last_offset + download_value(counts.data() + (n - 1));
+}
+
+// Stages 1-3: the (cell, triangle) pairs in triangle order, in halves[0];
+// their number must fit 32 bits. The cell planes and the offsets are freed
+// on return.
+PairBuffers write_cell_pairs(const DeviceBuffer<Triangle>& triangles, uint32_t n, UniformGrid& grid,
+                             BuildContext& build) {
+    const steps::CellPlanes planes(grid.layout);
+    DeviceBuffer<double> device_planes(build.meter, "uniform grid: cell planes", planes.values.size());
+    device_planes.upload(planes.values);
+    const steps::CellGridView view = planes.view(grid.layout, grid.inflation, device_planes.data());
+    DeviceBuffer<uint64_t> offsets(build.meter, "uniform grid: pair offsets", n);
+    const uint64_t references = count_cell_pairs(view, triangles, n, offsets, build);
+    if (references > std::numeric_limits<uint32_t>::max()) {
+        throw Error("uniform grid: " + std::to_string(references) + " cell references exceed 32-bit offsets");
+    }
+    PairBuffers pairs;
+    pairs.count = static_cast<uint32_t>(references);
+    build.stages.references = pairs.count;
+    budgeted_resize(grid.cell_prims, pairs.count, "uniform grid: cell references");
+    const char* const cell_names[2] = {"uniform grid: pair cells", "uniform grid: sorted pair cells"};
+    const char* const triangle_names[2] = {"uniform grid: pair triangles", "uniform grid: sorted pair triangles"};
+    for (int b = 0; b < 2; ++b) {
+        pairs.halves[b] = CellPairs{DeviceBuffer<uint32_t>(build.meter, cell_names[b], pairs.count),
+                                    DeviceBuffer<uint32_t>(build.meter, triangle_names[b], pairs.count)};
+    }
+    if (pairs.count > 0) {
+        build.timer.start();
+        launch(write_pairs_kernel, n, view, triangles.data(), n, offsets.data(), pairs.halves[0].cells.data(),
+               pairs.halves[0].triangles.data());
+        build.stages.cell_pairs_ms += build.timer.stop_ms();
+    }
+    return pairs;
+}
+
+// Stage 4, timed as sort_ms: one stable radix sort of the pairs by cell,
+// over just the bits of the largest cell index; returns the sorted half
+// (the other is freed on return).
+CellPairs sort_pairs(PairBuffers pairs, uint64_t cells, BuildContext& build) {
+    int sorted = 0;
+    if (pairs.count > 0) {
+        cub::DoubleBuffer<uint32_t> keys(pairs.halves[0].cells.data(), pairs.halves[1].cells.data());
+        cub::DoubleBuffer<uint32_t> values(pairs.halves[0].triangles.data(), pairs.halves[1].triangles.data());
+        const int key_bits = steps::cell_key_bits(cells);
+        const auto sort = [&](void* temp, size_t& bytes) {
+            return cub::DeviceRadixSort::SortPairs(temp, bytes, keys, values, pairs.count, 0, key_bits);
+        };
+        DeviceBuffer<uint8_t> scratch(build.meter, "uniform grid: radix sort temporary storage");
+        cub_reserve(scratch, sort);  // allocated outside the timed sort
+        build.timer.start();
+        cub_run(scratch, sort);
+        build.stages.sort_ms = build.timer.stop_ms();
+        sorted = keys.Current() == pairs.halves[0].cells.data() ? 0 : 1;
+    }
+    return std::move(pairs.halves[sorted]);
+}
+
+// Stage 5, timed as cell_ranges_ms: each cell's first pair by binary
+// search, empty cells included (the CPU's cell_start); the sorted cells
+// are spent.
+DeviceBuffer<uint32_t> cell_ranges(DeviceBuffer<uint32_t> sorted_cells, uint32_t pairs, uint64_t cells,
+                                   BuildContext& build) {
+    DeviceBuffer<uint32_t> cell_start(build.meter, "uniform grid: cell offsets", cells + 1);
+    build.timer.start();
+    if (pairs > 0) {
+        launch(cell_starts_kernel, cells + 1, sorted_cells.data(), pairs, cells, cell_start.data());
+    } else {
+        RF_CUDA_CHECK(cudaMemset(cell_start.data(), 0, (cells + 1) * sizeof(uint32_t)));
+    }
+    build.stages.cell_ranges_ms = build.timer.stop_ms();
+    return cell_start;
+}
+
+// Stage 6, timed as proximity_ms: the occupancy from cell_start, then the
+// x, y and z passes of the distance transform; the pass buffer that does
+// not hold the result is freed on return.
+DeviceBuffer<uint8_t> proximity_distances(const DeviceBuffer<uint32_t>& cell_start, const GridLayout& layout,
+                                          BuildContext& build) {
+    const uint64_t cells = layout.cell_count();
+    DeviceBuffer<uint8_t> distance[2] = {
+        DeviceBuffer<uint8_t>(build.meter, "uniform grid: distance map", cells),
+        DeviceBuffer<uint8_t>(build.meter, "uniform grid: distance map (pass)", cells)};
+    const GridDims dims{{layout.dims[0], layout.dims[1], layout.dims[2]}};
+    int result = 0;
+    build.timer.start();
+    launch(occupancy_kernel, cells, cell_start.data(), cells, distance[0].data());
+    for (int axis = 0; axis < 3; ++axis) {
+        launch(chessboard_pass_kernel, cells, distance[result].data(), distance[1 - result].data(), dims, axis, cells);
+        result = 1 - result;
+    }
+    build.stages.proximity_ms = build.timer.stop_ms();
+    return std::move(distance[result]);
 }
 
 }  // namespace
@@ -172,132 +286,39 @@ UniformGrid build_uniform_grid_on_device(std::span<const Triangle> triangles, in
     }
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
-    MemoryMeter meter;
-    EventTimer timer;
-
-    DeviceBuffer<Triangle> device_triangles("uniform grid: triangles");
-    meter.allocate(device_triangles, n);
-    timer.start();
-    device_triangles.upload(triangles);
-    s.upload_ms = timer.stop_ms();
-
-    // 0. Bounds on the device, the layout and the margin on the host.
-    const Box3f bounds = device_bounds(device_triangles, n, meter, timer, s.bounds_ms);
-    grid.layout = choose_grid_layout(bounds, n, resolution);
+    BuildContext build(s);
+    PairBuffers pairs;
+    {
+        DeviceBuffer<Triangle> device_triangles(build.meter, "uniform grid: triangles", n);
+        build.timer.start();
+        device_triangles.upload(triangles);
+        s.upload_ms = build.timer.stop_ms();
+        // 0. Bounds on the device, the layout and the margin on the host.
+        grid.layout = choose_grid_layout(device_bounds(device_triangles, n, build), n, resolution);
+        const uint64_t cells = grid.layout.cell_count();
+        if (cells == 0) return grid;  // non-empty input always has cells; kept for symmetry with the CPU
+        grid.inflation = steps::cell_inflation(grid.layout);
+        // The host arrays first: over the budget, fail before any device work.
+        budgeted_resize(grid.cell_start, cells + 1, "uniform grid: cell offsets");
+        if (proximity_clouds) budgeted_resize(grid.proximity, cells, "uniform grid: proximity clouds");
+        // 1-3. Count, scan, write; the triangles are spent then.
+        pairs = write_cell_pairs(device_triangles, n, grid, build);
+    }
+    // 4-6. Sort, cell ranges, proximity clouds.
     const uint64_t cells = grid.layout.cell_count();
-    if (cells == 0) return grid;  // non-empty input always has cells; kept for symmetry with the CPU
-    grid.inflation = steps::cell_inflation(grid.layout);
-    const steps::CellPlanes planes(grid.layout);
-    // The host arrays first: over the budget, fail before any device work.
-    budgeted_resize(grid.cell_start, cells + 1, "uniform grid: cell offsets");
-    if (proximity_clouds) budgeted_resize(grid.proximity, cells, "uniform grid: proximity clouds");
-
-    DeviceBuffer<double> device_planes("uniform grid: cell planes");
-    meter.allocate(device_planes, planes.values.size());
-    device_planes.upload(planes.values);
-    const steps::CellGridView view = planes.view(grid.layout, grid.inflation, device_planes.data());
-
-    // 1-3. Count, scan, write.
-    DeviceBuffer<uint64_t> counts("uniform grid: pair counts"), offsets("uniform grid: pair offsets");
-    meter.allocate(counts, n);
-    meter.allocate(offsets, n);
-    size_t scan_bytes = 0;
-    RF_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, scan_bytes, counts.data(), offsets.data(), n));
-    DeviceBuffer<uint8_t> scan_temp("uniform grid: scan temporary storage");
-    meter.allocate(scan_temp, scan_bytes > 0 ? scan_bytes : 1);
-    timer.start();
-    count_pairs_kernel<<<blocks_for(n), kBlockSize>>>(view, device_triangles.data(), n, counts.data());
-    RF_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scan_temp.data(), scan_bytes, counts.data(), offsets.data(), n));
-    s.cell_pairs_ms = timer.stop_ms();
-    meter.release(scan_temp);
-    uint64_t last[2] = {0, 0};
-    RF_CUDA_CHECK(cudaMemcpy(&last[0], offsets.data() + (n - 1), sizeof(uint64_t), cudaMemcpyDeviceToHost));
-    RF_CUDA_CHECK(cudaMemcpy(&last[1], counts.data() + (n - 1), sizeof(uint64_t), cudaMemcpyDeviceToHost));
-    meter.release(counts);
-    const uint64_t references = last[0] + last[1];
-    if (references > std::numeric_limits<uint32_t>::max()) {
-        throw Error("uniform grid: " + std::to_string(references) + " cell references exceed 32-bit offsets");
-    }
-    const uint32_t pairs = static_cast<uint32_t>(references);
-    s.references = pairs;
-    budgeted_resize(grid.cell_prims, pairs, "uniform grid: cell references");
-
-    DeviceBuffer<uint32_t> pair_cells[2] = {DeviceBuffer<uint32_t>("uniform grid: pair cells"),
-                                            DeviceBuffer<uint32_t>("uniform grid: sorted pair cells")};
-    DeviceBuffer<uint32_t> pair_triangles[2] = {DeviceBuffer<uint32_t>("uniform grid: pair triangles"),
-                                                DeviceBuffer<uint32_t>("uniform grid: sorted pair triangles")};
-    for (int b = 0; b < 2; ++b) {
-        meter.allocate(pair_cells[b], pairs);
-        meter.allocate(pair_triangles[b], pairs);
-    }
-    if (pairs > 0) {
-        timer.start();
-        write_pairs_kernel<<<blocks_for(n), kBlockSize>>>(view, device_triangles.data(), n, offsets.data(),
-                                                          pair_cells[0].data(), pair_triangles[0].data());
-        s.cell_pairs_ms += timer.stop_ms();
-    }
-    meter.release(offsets);
-    meter.release(device_triangles);
-    meter.release(device_planes);
-
-    // 4. One stable radix sort of the pairs by cell.
-    int sorted = 0;
-    if (pairs > 0) {
-        cub::DoubleBuffer<uint32_t> keys(pair_cells[0].data(), pair_cells[1].data());
-        cub::DoubleBuffer<uint32_t> values(pair_triangles[0].data(), pair_triangles[1].data());
-        const int key_bits = steps::cell_key_bits(cells);
-        size_t sort_bytes = 0;
-        RF_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, sort_bytes, keys, values, pairs, 0, key_bits));
-        DeviceBuffer<uint8_t> sort_temp("uniform grid: radix sort temporary storage");
-        meter.allocate(sort_temp, sort_bytes > 0 ? sort_bytes : 1);  // a null buffer would make CUB only query
-        timer.start();
-        RF_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(sort_temp.data(), sort_bytes, keys, values, pairs, 0, key_bits));
-        s.sort_ms = timer.stop_ms();
-        meter.release(sort_temp);
-        sorted = keys.Current() == pair_cells[0].data() ? 0 : 1;
-    }
-    meter.release(pair_cells[1 - sorted]);
-    meter.release(pair_triangles[1 - sorted]);
-
-    // 5. Cell ranges.
-    DeviceBuffer<uint32_t> cell_start("uniform grid: cell offsets");
-    meter.allocate(cell_start, cells + 1);
-    timer.start();
-    if (pairs > 0) {
-        cell_starts_kernel<<<blocks_for(cells + 1), kBlockSize>>>(pair_cells[sorted].data(), pairs, cells,
-                                                                  cell_start.data());
-    } else {
-        RF_CUDA_CHECK(cudaMemset(cell_start.data(), 0, (cells + 1) * sizeof(uint32_t)));
-    }
-    s.cell_ranges_ms = timer.stop_ms();
-    meter.release(pair_cells[sorted]);
-
-    // 6. Proximity clouds: occupancy, then the x, y and z passes.
-    DeviceBuffer<uint8_t> distance[2] = {DeviceBuffer<uint8_t>("uniform grid: distance map"),
-                                         DeviceBuffer<uint8_t>("uniform grid: distance map (pass)")};
-    int result = 0;
-    if (proximity_clouds) {
-        meter.allocate(distance[0], cells);
-        meter.allocate(distance[1], cells);
-        const GridDims dims{{grid.layout.dims[0], grid.layout.dims[1], grid.layout.dims[2]}};
-        timer.start();
-        occupancy_kernel<<<blocks_for(cells), kBlockSize>>>(cell_start.data(), cells, distance[0].data());
-        for (int axis = 0; axis < 3; ++axis) {
-            chessboard_pass_kernel<<<blocks_for(cells), kBlockSize>>>(distance[result].data(),
-                                                                      distance[1 - result].data(), dims, axis, cells);
-            result = 1 - result;
-        }
-        s.proximity_ms = timer.stop_ms();
-        meter.release(distance[1 - result]);
-    }
+    const uint32_t pair_count = pairs.count;
+    CellPairs sorted = sort_pairs(std::move(pairs), cells, build);
+    const DeviceBuffer<uint32_t> cell_start = cell_ranges(std::move(sorted.cells), pair_count, cells, build);
+    DeviceBuffer<uint8_t> distance;
+    if (proximity_clouds) distance = proximity_distances(cell_start, grid.layout, build);
 
     // 7. Back to the host.
-    timer.start();
+    build.timer.start();
     cell_start.download(grid.cell_start);
-    pair_triangles[sorted].download(grid.cell_prims);
-    if (proximity_clouds) distance[result].download(grid.proximity);
-    s.download_ms = timer.stop_ms();
-    s.peak_device_bytes = meter.peak();
+    sorted.triangles.download(grid.cell_prims);
+    if (proximity_clouds) distance.download(grid.proximity);
+    s.download_ms = build.timer.stop_ms();
+    s.peak_device_bytes = build.meter.peak();
     return grid;
 }
 
