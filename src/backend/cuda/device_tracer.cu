@@ -17,6 +17,7 @@
 #include <chrono>
 #include <cstdio>
 #include <limits>
+#include <type_traits>
 
 #include "accel/bvh/builders/build_bvh.h"
 #include "accel/grid/uniform_grid.h"
@@ -25,17 +26,16 @@
 #include "backend/cuda/device_builders.h"
 #include "backend/cuda/device_tracer_impl.h"
 #include "backend/cuda/event_timer.h"
+#include "backend/cuda/launch.h"
 
 namespace rf::cuda {
 
 namespace {
 
-constexpr int kBlockSize = 128;
+// Threads per block of the trace kernels, and the grid of the grid-stride ones.
+constexpr uint32_t kTraceBlock = 128;
 
-int grid_blocks(size_t count) {
-    const size_t blocks = (count + kBlockSize - 1) / kBlockSize;
-    return int(std::min<size_t>(std::max<size_t>(blocks, 1), 65535u * 32u));
-}
+LaunchShape trace_shape(uint32_t rays) { return {strided_blocks_for(rays, 65535u * 32u, kTraceBlock), kTraceBlock}; }
 
 template <class Tracer>
 __global__ void intersect_kernel(Tracer tracer, const Ray* rays, Hit* hits, uint32_t count) {
@@ -126,10 +126,10 @@ void prepare_trace(DeviceTracer::Impl& impl, bool any_hit) {
     int per_sm = 0;
     if (any_hit)
         RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, aila_laine_persistent_kernel<true>,
-                                                                   kBlockSize, 0));
+                                                                   kTraceBlock, 0));
     else
         RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, aila_laine_persistent_kernel<false>,
-                                                                   kBlockSize, 0));
+                                                                   kTraceBlock, 0));
     blocks = std::max(1, per_sm) * impl.multiprocessors;
 }
 
@@ -137,24 +137,22 @@ void prepare_trace(DeviceTracer::Impl& impl, bool any_hit) {
 // (after prepare_trace).
 void launch_trace(DeviceTracer::Impl& impl, bool any_hit, uint32_t count) {
     if (impl.kernel == GpuKernel::AilaLaine) {
-        const int blocks = impl.persistent_blocks[any_hit ? 1 : 0];
+        const LaunchShape persistent{uint32_t(impl.persistent_blocks[any_hit ? 1 : 0]), kTraceBlock};
         if (any_hit)
-            aila_laine_persistent_kernel<true><<<blocks, kBlockSize>>>(impl.aila_laine.bvh, impl.rays.data(), nullptr,
-                                                                       impl.flags.data(), count,
-                                                                       impl.work_counter.data());
+            launch_shaped(aila_laine_persistent_kernel<true>, persistent, impl.aila_laine.bvh, impl.rays.data(),
+                          nullptr, impl.flags.data(), count, impl.work_counter.data());
         else
-            aila_laine_persistent_kernel<false><<<blocks, kBlockSize>>>(impl.aila_laine.bvh, impl.rays.data(),
-                                                                        impl.hits.data(), nullptr, count,
-                                                                        impl.work_counter.data());
-    } else {
-        impl.with_tracer([&](const auto& tracer) {
-            if (any_hit)
-                occluded_kernel<<<grid_blocks(count), kBlockSize>>>(tracer, impl.rays.data(), impl.flags.data(), count);
-            else
-                intersect_kernel<<<grid_blocks(count), kBlockSize>>>(tracer, impl.rays.data(), impl.hits.data(), count);
-        });
+            launch_shaped(aila_laine_persistent_kernel<false>, persistent, impl.aila_laine.bvh, impl.rays.data(),
+                          impl.hits.data(), nullptr, count, impl.work_counter.data());
+        return;
     }
-    RF_CUDA_CHECK(cudaGetLastError());
+    impl.with_tracer([&](const auto& tracer) {
+        using Tracer = std::decay_t<decltype(tracer)>;
+        if (any_hit)
+            launch_shaped(occluded_kernel<Tracer>, trace_shape(count), tracer, impl.rays.data(), impl.flags.data(), count);
+        else
+            launch_shaped(intersect_kernel<Tracer>, trace_shape(count), tracer, impl.rays.data(), impl.hits.data(), count);
+    });
 }
 
 uint32_t checked_ray_count(size_t count) {
@@ -370,9 +368,10 @@ void DeviceTracer::count_traversal(std::span<const Ray> rays, bool any_hit, Trav
     impl.totals.reserve(3);
     RF_CUDA_CHECK(cudaMemset(impl.totals.data(), 0, 3 * sizeof(unsigned long long)));
     impl.with_tracer([&](const auto& tracer) {
-        count_kernel<<<grid_blocks(count), kBlockSize>>>(tracer, impl.rays.data(), count, any_hit, impl.totals.data());
+        using Tracer = std::decay_t<decltype(tracer)>;
+        launch_shaped(count_kernel<Tracer>, trace_shape(count), tracer, impl.rays.data(), count, any_hit,
+                      impl.totals.data());
     });
-    RF_CUDA_CHECK(cudaGetLastError());
     unsigned long long sums[3] = {0, 0, 0};
     RF_CUDA_CHECK(cudaMemcpy(sums, impl.totals.data(), sizeof sums, cudaMemcpyDeviceToHost));
     totals.rays += count;

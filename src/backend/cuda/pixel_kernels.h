@@ -10,6 +10,7 @@
 #include <cuda_runtime.h>
 
 #include "backend/cuda/device_tracer_impl.h"
+#include "backend/cuda/launch.h"
 #include "render/counting_tracer.h"
 #include "render/pixel_sample.h"
 #include "render/scene_view.h"
@@ -48,8 +49,8 @@ __global__ void pixel_kernel(Tracer tracer, PixelPass p) {
 // Launches pixel_kernel with impl's tracer: the BVH tracers' instantiations
 // live in pixel_kernels_bvh.cu, the kd-tree and grid ones in
 // pixel_kernels_cells.cu. Checks the launch.
-void launch_pixel_kernel(const DeviceTracer::Impl& impl, const PixelPass& p, int blocks, int block_size);
-void launch_pixel_kernel_bvh(const DeviceTracer::Impl& impl, const PixelPass& p, int blocks, int block_size);
-void launch_pixel_kernel_cells(const DeviceTracer::Impl& impl, const PixelPass& p, int blocks, int block_size);
+void launch_pixel_kernel(const DeviceTracer::Impl& impl, const PixelPass& p, const LaunchShape& shape);
+void launch_pixel_kernel_bvh(const DeviceTracer::Impl& impl, const PixelPass& p, const LaunchShape& shape);
+void launch_pixel_kernel_cells(const DeviceTracer::Impl& impl, const PixelPass& p, const LaunchShape& shape);
 
 }  // namespace rf::cuda

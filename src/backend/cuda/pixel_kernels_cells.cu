@@ -4,13 +4,14 @@
 
 namespace rf::cuda {
 
-void launch_pixel_kernel_cells(const DeviceTracer::Impl& impl, const PixelPass& p, int blocks,
-                               int block_size) {
+void launch_pixel_kernel_cells(const DeviceTracer::Impl& impl, const PixelPass& p, const LaunchShape& shape) {
+    using ShortStack = KdTracer<KdTraversal::ShortStack>;
+    using Restart = KdTracer<KdTraversal::Restart>;
     switch (impl.kernel) {
-        case GpuKernel::KdShortStack: pixel_kernel<<<blocks, block_size>>>(impl.kd_short_stack, p); break;
-        case GpuKernel::KdRestart: pixel_kernel<<<blocks, block_size>>>(impl.kd_restart, p); break;
+        case GpuKernel::KdShortStack: launch_shaped(pixel_kernel<ShortStack>, shape, impl.kd_short_stack, p); break;
+        case GpuKernel::KdRestart: launch_shaped(pixel_kernel<Restart>, shape, impl.kd_restart, p); break;
         case GpuKernel::Grid:
-        case GpuKernel::ProximityGrid: pixel_kernel<<<blocks, block_size>>>(impl.grid, p); break;
+        case GpuKernel::ProximityGrid: launch_shaped(pixel_kernel<GridTracer>, shape, impl.grid, p); break;
         default: throw Error("launch_pixel_kernel_cells: not a kd-tree or grid kernel");
     }
 }

@@ -19,11 +19,14 @@
 #include <cub/device/device_radix_sort.cuh>
 
 #include <algorithm>
+#include <type_traits>
 
 #include "backend/backends.h"
+#include "backend/cuda/cub_run.h"
 #include "backend/cuda/cuda_accel.h"
 #include "backend/cuda/device_scene.h"
 #include "backend/cuda/device_tracer_impl.h"
+#include "backend/cuda/launch.h"
 #include "backend/cuda/pixel_kernels.h"
 #include "rayforge/core/error.h"
 #include "render/renderer_base.h"
@@ -33,9 +36,11 @@ namespace rf::cuda {
 
 namespace {
 
-constexpr int kBlock = 128;
+// Threads per block of the render kernels: their per-thread state (a path,
+// Whitted's ray stack) is large, so blocks stay small.
+constexpr uint32_t kRenderBlock = 128;
 
-int blocks_for(uint32_t count) { return int(std::max<uint32_t>(1, (count + kBlock - 1) / kBlock)); }
+LaunchShape render_shape(uint32_t items) { return {blocks_for(items, kRenderBlock), kRenderBlock}; }
 
 // The slot of this thread's item in a queue, with one atomicAdd per warp:
 // the warp's votes give each keeping lane its rank among them.
@@ -139,51 +144,43 @@ public:
         : tracer_(tracer), view_(view), settings_(settings), sample_(sample), films_(films), b_(buffers) {}
 
     void generate(uint32_t count) {
-        generate_kernel<<<blocks_for(count), kBlock>>>(settings_, sample_, b_.queues(), count);
-        RF_CUDA_CHECK(cudaGetLastError());
+        launch_shaped(generate_kernel, render_shape(count), settings_, sample_, b_.queues(), count);
     }
     void sort(uint32_t active) {
-        sort_keys_kernel<<<blocks_for(active), kBlock>>>(settings_, b_.queues(), active);
-        RF_CUDA_CHECK(cudaGetLastError());
-        size_t scratch = 0;
-        RF_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, scratch, b_.keys.data(), b_.sorted_keys.data(),
-                                                      b_.active.data(), b_.next_active.data(), int(active)));
-        b_.sort_scratch.reserve(scratch);
-        RF_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(b_.sort_scratch.data(), scratch, b_.keys.data(),
-                                                      b_.sorted_keys.data(), b_.active.data(),
-                                                      b_.next_active.data(), int(active)));
+        launch_shaped(sort_keys_kernel, render_shape(active), settings_, b_.queues(), active);
+        cub_run(b_.sort_scratch, [&](void* temp, size_t& bytes) {
+            return cub::DeviceRadixSort::SortPairs(temp, bytes, b_.keys.data(), b_.sorted_keys.data(),
+                                                   b_.active.data(), b_.next_active.data(), int(active));
+        });
         std::swap(b_.active, b_.next_active);
     }
     void extend(uint32_t active) {
         tracer_.with_tracer([&](const auto& t) {
-            extend_kernel<<<blocks_for(active), kBlock>>>(t, view_, b_.queues(), active);
+            using Tracer = std::decay_t<decltype(t)>;
+            launch_shaped(extend_kernel<Tracer>, render_shape(active), t, view_, b_.queues(), active);
         });
-        RF_CUDA_CHECK(cudaGetLastError());
         closest_rays += active;
     }
     void shade(uint32_t active) {
-        shade_kernel<<<blocks_for(active), kBlock>>>(view_, settings_.path, b_.queues(), active);
-        RF_CUDA_CHECK(cudaGetLastError());
+        launch_shaped(shade_kernel, render_shape(active), view_, settings_.path, b_.queues(), active);
     }
     WaveSizes compact(uint32_t active) {
         RF_CUDA_CHECK(cudaMemset(b_.counters.data(), 0, 2 * sizeof(uint32_t)));
-        compact_kernel<<<blocks_for(active), kBlock>>>(b_.queues(), active, b_.counters.data());
-        RF_CUDA_CHECK(cudaGetLastError());
+        launch_shaped(compact_kernel, render_shape(active), b_.queues(), active, b_.counters.data());
         uint32_t sizes[2] = {0, 0};
         RF_CUDA_CHECK(cudaMemcpy(sizes, b_.counters.data(), sizeof sizes, cudaMemcpyDeviceToHost));
         return {sizes[0], sizes[1]};
     }
     void connect(uint32_t shadows) {
         tracer_.with_tracer([&](const auto& t) {
-            connect_kernel<<<blocks_for(shadows), kBlock>>>(t, view_, b_.queues(), shadows);
+            using Tracer = std::decay_t<decltype(t)>;
+            launch_shaped(connect_kernel<Tracer>, render_shape(shadows), t, view_, b_.queues(), shadows);
         });
-        RF_CUDA_CHECK(cudaGetLastError());
         shadow_rays += shadows;
     }
     void swap_queues() { std::swap(b_.active, b_.next_active); }
     void accumulate(uint32_t count) {
-        accumulate_kernel<<<blocks_for(count), kBlock>>>(b_.queues(), count, settings_.clamp, films_);
-        RF_CUDA_CHECK(cudaGetLastError());
+        launch_shaped(accumulate_kernel, render_shape(count), b_.queues(), count, settings_.clamp, films_);
     }
 
     uint64_t closest_rays = 0, shadow_rays = 0;
@@ -233,8 +230,7 @@ private:
         ray_counts_.reserve(2);
         RF_CUDA_CHECK(cudaMemset(ray_counts_.data(), 0, 2 * sizeof(unsigned long long)));
         const PixelPass p{scene_->view(), settings(), uint32_t(passes()), films(), ray_counts_.data()};
-        launch_pixel_kernel(tracer_.impl(), p, blocks_for(uint32_t(options().width) * uint32_t(options().height)),
-                            kBlock);
+        launch_pixel_kernel(tracer_.impl(), p, render_shape(uint32_t(options().width) * uint32_t(options().height)));
         unsigned long long counted[2] = {0, 0};
         RF_CUDA_CHECK(cudaMemcpy(counted, ray_counts_.data(), sizeof(counted), cudaMemcpyDeviceToHost));
         stats.closest_rays = counted[0];

@@ -1,5 +1,6 @@
 // Failure injection for the GPU tests (self_test.h).
 #include "backend/cuda/device_buffer.h"
+#include "backend/cuda/launch.h"
 #include "backend/cuda/self_test.h"
 
 namespace rf::cuda::self_test {
@@ -24,8 +25,7 @@ std::vector<uint32_t> add_on_device(const std::vector<uint32_t>& values, uint32_
     const auto count = uint32_t(values.size());
     DeviceBuffer<uint32_t> buffer("self-test values", count);
     buffer.upload(std::span<const uint32_t>(values));
-    if (count > 0) add_kernel<<<(count + 255) / 256, 256>>>(buffer.data(), count, delta);
-    RF_CUDA_CHECK(cudaGetLastError());
+    launch(add_kernel, count, buffer.data(), count, delta);
     RF_CUDA_CHECK(cudaDeviceSynchronize());
     std::vector<uint32_t> result(count);
     buffer.download(std::span<uint32_t>(result));
