@@ -11,7 +11,11 @@ set -uo pipefail
 root=$1
 work=$2
 rm -rf "$work"
-mkdir -p "$work/bin" "$work/tools"
+mkdir -p "$work/bin" "$work/tools" "$work/repo/scripts"
+# A copy of the script in a repository of its own: it finds neither the
+# staged binaries nor the staged scenes of the real checkout (and so writes
+# nothing into it).
+cp "$root/scripts/gpu-run.sh" "$work/repo/scripts/"
 fail() { echo "gpu_run_script_test: $*"; exit 1; }
 
 # Fakes, steered by files in $work: device (present or not), tests (pass, skip, fail), sanitizer (ok, refused, errors).
@@ -43,7 +47,7 @@ chmod +x "$work/bin/"* "$work/tools/"*
 # run DEVICE TESTS SANITIZER STEPS...: the script's output in $out, its status in $rc.
 run() {
   echo "$1" > "$work/device"; echo "$2" > "$work/tests"; echo "$3" > "$work/sanitizer"; shift 3
-  out=$(PATH="$work/tools:$PATH" OUT="$work/out" RAYFORGE_GPU_RUN_BINARIES="$work/bin" bash "$root/scripts/gpu-run.sh" "$@" 2>&1)
+  out=$(PATH="$work/tools:$PATH" OUT="$work/out" RAYFORGE_GPU_RUN_BINARIES="$work/bin" bash "$work/repo/scripts/gpu-run.sh" "$@" 2>&1)
   rc=$?
 }
 expect() { grep -qF -- "$1" <<< "$out" || fail "expected '$1' in: $out"; }
