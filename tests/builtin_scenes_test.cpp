@@ -361,7 +361,7 @@ TEST(PathTracingScenes, MaterialSpheresHasGlassMetalsPlasticAnAreaLightAndTheSky
         ++emissive_triangles;
         EXPECT_GE(m.emission_strength, 10.0f);
         EXPECT_LE(m.emission_strength, 20.0f);
-        EXPECT_FALSE(m.double_sided);
+        EXPECT_FALSE(m.two_sided_emission);
         const Mesh& mesh = scene.meshes[scene.instances[geometry.triangle_instance[t]].mesh];
         ASSERT_EQ(mesh.name, "area_light");
         const uint32_t local = geometry.local_triangle[t];

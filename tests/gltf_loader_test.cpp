@@ -117,7 +117,7 @@ TEST(GltfLoader, MaterialFactorsExtensionsAndTextures) {
     EXPECT_FLOAT_EQ(m.ior, 1.33f);
     EXPECT_EQ(m.alpha_mode, AlphaMode::Mask);
     EXPECT_FLOAT_EQ(m.alpha_cutoff, 0.3f);
-    EXPECT_TRUE(m.double_sided);
+    EXPECT_TRUE(m.two_sided_emission);
     EXPECT_FLOAT_EQ(m.normal_scale, 0.5f);
 
     // Base color and emission share texture 0 (sRGB); MR and normal use texture 1 (linear).

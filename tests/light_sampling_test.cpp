@@ -41,12 +41,12 @@ struct TestWorld : TestScene {
     std::vector<TextureView> textures;
     std::unique_ptr<HostLightSet> light_set;
 
-    uint32_t add_emitter(Vec3f radiance, bool double_sided = false, int32_t texture = kNoTexture) {
+    uint32_t add_emitter(Vec3f radiance, bool two_sided_emission = false, int32_t texture = kNoTexture) {
         Material m;
         m.base_color = Vec3f(0.0f);
         m.emission = radiance;
         m.emission_texture = texture;
-        m.double_sided = double_sided;
+        m.two_sided_emission = two_sided_emission;
         return add_material(m);
     }
     void add_triangle(Vec3f a, Vec3f b, Vec3f c, uint32_t material) {
@@ -326,16 +326,16 @@ TEST(LightSamplingArea, EmissiveQuadMatchesLambertsPolygonFormula) {
 
 TEST(LightSamplingArea, OneSidedEmittersAreDarkFromBehindDoubleSidedAreNot) {
     const Vec3f centre(0, 1, 0), half_u(0.5f, 0, 0), half_v(0, 0, 0.5f);  // faces -y
-    for (bool double_sided : {false, true}) {
+    for (bool two_sided_emission : {false, true}) {
         TestWorld w;
-        w.add_quad(centre, half_u, half_v, w.add_emitter(Vec3f(1.0f), double_sided));
+        w.add_quad(centre, half_u, half_v, w.add_emitter(Vec3f(1.0f), two_sided_emission));
         w.finish();
         Vec3f above(0.1f, 2.0f, 0.0f), down(0, -1, 0);
         Stats s = estimate_irradiance(w, above, down, 20000, 6);
         std::vector<Vec3f> quad = {centre - half_u - half_v, centre + half_u - half_v, centre + half_u + half_v,
                                    centre - half_u + half_v};
-        float expected = double_sided ? float(polygon_irradiance(quad, above, down, 1.0)) : 0.0f;
-        expect_within_five_sigma(s, Vec3f(expected), double_sided ? "double-sided back" : "one-sided back");
+        float expected = two_sided_emission ? float(polygon_irradiance(quad, above, down, 1.0)) : 0.0f;
+        expect_within_five_sigma(s, Vec3f(expected), two_sided_emission ? "double-sided back" : "one-sided back");
     }
 }
 

@@ -114,7 +114,7 @@ Scene make_cornell() {
     Material light = diffuse("light", {0.78f, 0.78f, 0.78f});
     light.emission = {17.0f, 12.0f, 4.0f};
     light.emission_strength = 1.0f;
-    light.double_sided = false;  // only the face towards the room emits; the back would light the ceiling gap
+    light.two_sided_emission = false;  // only the face towards the room emits; the back would light the ceiling gap
     const uint32_t light_material = add_material(scene, light);
     Material mirror_material;
     mirror_material.name = "mirror";
@@ -668,7 +668,7 @@ Scene make_material_spheres() {
     Material lamp = diffuse("area_light", {0.8f, 0.8f, 0.8f});
     lamp.emission = {1.0f, 0.95f, 0.88f};
     lamp.emission_strength = 15.0f;
-    lamp.double_sided = false;  // emits downwards only
+    lamp.two_sided_emission = false;  // emits downwards only
     const uint32_t lamp_material = add_material(scene, lamp);
     Mesh light;
     light.name = "area_light";

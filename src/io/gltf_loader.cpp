@@ -414,7 +414,7 @@ void GltfReader::convert_materials(Scene& scene) {
         else if (gltf.alphaMode == "BLEND") m.alpha_mode = AlphaMode::Blend;
         else m.alpha_mode = AlphaMode::Opaque;
         m.alpha_cutoff = float(gltf.alphaCutoff);
-        m.double_sided = gltf.doubleSided;
+        m.two_sided_emission = gltf.doubleSided;
         scene.materials.push_back(std::move(m));
     }
 }
@@ -430,7 +430,7 @@ uint32_t GltfReader::material_index(int gltf_material, Scene& scene) {
         Material m;
         m.name = "gltf-default";
         m.base_color = Vec3f(1.0f);
-        m.double_sided = false;
+        m.two_sided_emission = false;
         default_material_ = int(scene.materials.size());
         scene.materials.push_back(m);
     }

@@ -207,7 +207,7 @@ Material JsonSceneReader::material(const std::string& name, const Json& value, c
     expect_object(value, where);
     expect_keys(value, where,
                 {"base_color", "alpha", "metallic", "roughness", "emission", "emission_strength",
-                 "transmission", "ior", "double_sided", "alpha_mode", "alpha_cutoff", "normal_scale",
+                 "transmission", "ior", "two_sided_emission", "alpha_mode", "alpha_cutoff", "normal_scale",
                  "base_color_texture", "metallic_roughness_texture", "normal_texture",
                  "emission_texture"});
     Material m;
@@ -233,9 +233,9 @@ Material JsonSceneReader::material(const std::string& name, const Json& value, c
         if (m.ior < 1.0f) fail(where + ".ior", "expected a number >= 1");
     }
     if (value.contains("normal_scale")) m.normal_scale = number(value["normal_scale"], where + ".normal_scale");
-    if (value.contains("double_sided")) {
-        if (!value["double_sided"].is_boolean()) fail(where + ".double_sided", "expected true or false");
-        m.double_sided = value["double_sided"].get<bool>();
+    if (value.contains("two_sided_emission")) {
+        if (!value["two_sided_emission"].is_boolean()) fail(where + ".two_sided_emission", "expected true or false");
+        m.two_sided_emission = value["two_sided_emission"].get<bool>();
     }
     if (value.contains("alpha_mode")) {
         const std::string mode = string(value["alpha_mode"], where + ".alpha_mode");

@@ -90,7 +90,7 @@ RF_HD bool sample_light(const View& view, const LightSet& lights, Vec3f p, float
         float cos_light = -dot(s.normal, wi);  // > 0 on the side the triangle faces
         SurfaceHit surface = view.emitter_surface(s);
         const ShadingMaterial& m = view.material(surface.material);
-        if (cos_light <= 0.0f && !m.double_sided) return false;  // one-sided: dark from behind
+        if (cos_light <= 0.0f && !m.two_sided_emission) return false;  // one-sided: dark from behind
         float abs_cos = fabsf(cos_light);
         if (!(abs_cos > 0.0f)) return false;
         out.wi = wi;

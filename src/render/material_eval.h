@@ -29,9 +29,11 @@ struct ShadingMaterial {
     int32_t emission_texture = kNoTexture;
     float transmission = 0.0f;
     float ior = 1.5f;
+    float specular = 1.0f;
+    Vec3f specular_color{1.0f, 1.0f, 1.0f};
     AlphaMode alpha_mode = AlphaMode::Opaque;
     float alpha_cutoff = 0.5f;
-    bool double_sided = true;
+    bool two_sided_emission = false;
 
     static ShadingMaterial from(const Material& m) {
         ShadingMaterial s;
@@ -47,9 +49,11 @@ struct ShadingMaterial {
         s.emission_texture = m.emission_texture;
         s.transmission = m.transmission;
         s.ior = m.ior;
+        s.specular = m.specular;
+        s.specular_color = m.specular_color;
         s.alpha_mode = m.alpha_mode;
         s.alpha_cutoff = m.alpha_cutoff;
-        s.double_sided = m.double_sided;
+        s.two_sided_emission = m.two_sided_emission;
         return s;
     }
 };
@@ -64,6 +68,8 @@ struct MaterialSample {
     Vec3f emission;
     float transmission = 0.0f;
     float ior = 1.5f;
+    float specular = 1.0f;      // in [0, 1]
+    Vec3f specular_color{1.0f};  // in [0, 1]
 };
 
 RF_HDI float saturate(float x) { return fminf(fmaxf(x, 0.0f), 1.0f); }
@@ -109,6 +115,8 @@ RF_HD MaterialSample evaluate_material(const View& view, const ShadingMaterial& 
     s.emission = max(s.emission, Vec3f(0.0f));
     s.transmission = saturate(m.transmission);
     s.ior = m.ior >= 1.0f ? m.ior : 1.0f;
+    s.specular = saturate(m.specular);
+    s.specular_color = min(max(m.specular_color, Vec3f(0.0f)), Vec3f(1.0f));
     return s;
 }
 

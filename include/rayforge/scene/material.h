@@ -1,5 +1,5 @@
 // Materials in the glTF 2.0 metallic-roughness model (with the
-// emissive_strength, transmission and ior extensions).
+// emissive_strength, transmission, ior and specular extensions).
 #pragma once
 
 #include <cstdint>
@@ -28,9 +28,15 @@ struct Material {
     int32_t emission_texture = kNoTexture;
     float transmission = 0.0f;             // KHR_materials_transmission
     float ior = 1.5f;                      // KHR_materials_ior
+    // KHR_materials_specular: strength and colour of the dielectric specular
+    // layer; specular = 0 leaves a purely Lambertian (or transmissive) base.
+    float specular = 1.0f;
+    Vec3f specular_color{1.0f, 1.0f, 1.0f};
     AlphaMode alpha_mode = AlphaMode::Opaque;
     float alpha_cutoff = 0.5f;
-    bool double_sided = true;
+    // Emission from both faces; otherwise only the front face (counter-
+    // clockwise winding seen from outside) emits. glTF: doubleSided.
+    bool two_sided_emission = false;
 
     [[nodiscard]] Vec3f emitted_radiance() const { return emission * emission_strength; }
     [[nodiscard]] bool is_emissive() const {

@@ -185,7 +185,7 @@ RF_HD bool shade_path(const View& view, const PathSettings& settings, PathState&
     }
 
     const Vec3f emission = si.material.emission;
-    if ((si.front_face || si.double_sided) && max_component(emission) > 0.0f) {
+    if ((si.front_face || si.two_sided_emission) && max_component(emission) > 0.0f) {
         float weight = 1.0f;
         if (!path.previous_delta) {
             if (!use_bsdf_hits) weight = 0.0f;

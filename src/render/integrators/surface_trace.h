@@ -28,7 +28,7 @@ struct SurfaceInteraction {
     MaterialSample material;
     float distance = 0.0f;   // from the ray's origin (the ray as given, |dir| units removed)
     float lod_base = -kInfinity;  // texture level of detail before the texture's own size (texture_lod.h)
-    bool double_sided = true;
+    bool two_sided_emission = true;
     AlphaMode alpha_mode = AlphaMode::Opaque;
     bool front_face = true;  // the ray arrived on the side the geometric normal points to
     Vec3f facing_geometric;  // geometric normal flipped towards the ray's origin
@@ -132,7 +132,7 @@ RF_HD void make_surface_interaction(const View& view, const Ray& ray, const Hit&
     out.material = evaluate_material(view, m, surface.uv, lod_base);
     out.distance = distance;
     out.lod_base = lod_base;
-    out.double_sided = m.double_sided;
+    out.two_sided_emission = m.two_sided_emission;
     out.alpha_mode = m.alpha_mode;
     out.front_face = front;
     out.facing_geometric = ng;

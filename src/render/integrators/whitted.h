@@ -156,7 +156,7 @@ RF_HD Vec3f direct_lighting(const Tracer& tracer, const View& view, const Surfac
             SurfaceHit light_surface = view.emitter_surface(ls);
             const ShadingMaterial& lm = view.material(light_surface.material);
             float cos_light = -dot(ls.normal, wi);
-            if (lm.double_sided) cos_light = fabsf(cos_light);
+            if (lm.two_sided_emission) cos_light = fabsf(cos_light);
             if (cos_light <= 0.0f) continue;
             Ray shadow;
             shadow.org = origin;
@@ -219,7 +219,7 @@ RF_HD Vec3f whitted_radiance(const Tracer& tracer, const View& view, const Ray& 
                 push(p - ng * epsilon, d, weight * (1.0f - m.alpha), item.reflections, item.refractions + 1);
             weight *= m.alpha;
         }
-        if (si.front_face || si.double_sided) radiance += weight * m.emission;
+        if (si.front_face || si.two_sided_emission) radiance += weight * m.emission;
 
         float transmission = m.transmission * (1.0f - m.metallic);
         float mirror = m.metallic * (1.0f - m.roughness);
