@@ -30,14 +30,14 @@ void triangle_uvs(const Scene& scene, const SceneGeometry& geometry, uint32_t pr
 // as the renderer reconstructs it: k x k stratified points (centres of
 // equal-area cells of the triangle), each a trilinear lookup at the level
 // whose texels are about one cell, so that the mip chain averages the texels
-// between points instead of skipping them. Footprints under 256 texels get
+// between points instead of skipping them. Footprints under 16 texels get
 // >= 16 points per texel on level 0: about the integral of the bilinear
-// reconstruction (within 1% on a sharp edge). At most 4096 lookups.
+// reconstruction (within 1% on a sharp edge). At most 256 lookups.
 Vec3f triangle_texture_mean(const MipTextureView& t, const Vec2f uv[3]) {
     const Vec2f d1 = uv[1] - uv[0], d2 = uv[2] - uv[0];
     const double texels =
         0.5 * std::fabs(double(d1.x) * d2.y - double(d1.y) * d2.x) * t.base().width * t.base().height;
-    const int k = std::isfinite(texels) ? std::clamp(int(std::ceil(4.0 * std::sqrt(texels))), 8, 64) : 8;
+    const int k = std::isfinite(texels) ? std::clamp(int(std::ceil(4.0 * std::sqrt(texels))), 8, 16) : 8;
     const float lod = 0.5f * float(std::log2(texels / double(k * k)));  // <= 0 (or NaN): level 0
     Vec3f sum(0.0f);
     for (int i = 0; i < k; ++i)
