@@ -48,7 +48,8 @@ Material lambert(float albedo) {
     Material m;
     m.base_color = Vec3f(albedo);
     m.roughness = 1.0f;
-    m.ior = 1.0f;  // no specular layer: a pure Lambert surface
+    m.specular = 0.0f;  // no specular layer: a pure Lambert surface
+    m.ior = 1.0f;       // (the same for a BSDF without the specular factor)
     return m;
 }
 
