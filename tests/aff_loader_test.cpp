@@ -60,11 +60,33 @@ TEST(AffLoader, PolygonsViewpointLightsAndMaterials) {
     const Material& green = scene.materials[mesh.material_ids[2]];
     expect_near3(red.base_color, {0.8f, 0.0f, 0.0f});  // color * Kd
     expect_near3(green.base_color, {0.0f, 1.0f, 0.0f});
+    EXPECT_FLOAT_EQ(red.specular, 0.2f);  // NFF Ks: the specular layer's strength
+    EXPECT_NEAR(red.roughness, std::pow(2.0f / 12.0f, 0.25f), 1e-6f);  // shine 10 (as MTL's Ns)
+    EXPECT_FLOAT_EQ(green.specular, 0.0f);  // Ks = 0: pure Lambertian
     EXPECT_EQ(mesh.material_ids[0], mesh.material_ids[1]);
     // The patch's normals (0,0,2) come out unit length.
     ASSERT_EQ(mesh.normals.size(), mesh.positions.size());
     expect_near3(mesh.normals[mesh.indices[6]], {0, 0, 1});
     expect_near3(mesh.positions[mesh.indices[6]], {0, 0, 1});
+}
+
+TEST(AffLoader, MirrorAndGlassFromNffMaterials) {
+    const fs::path dir = test::temp_dir("aff_mirror_glass");
+    write_file(dir / "m.aff",
+               "f 1 1 1 0.1 0.9 1000 0 1\np 3\n0 0 0\n1 0 0\n0 1 0\n"       // Ks dominates: mirror
+               "f 1 1 1 0 0.1 100 0.9 1.33\np 3\n0 0 1\n1 0 1\n0 1 1\n"     // T > 0: glass
+               "f 1 1 1 0.5 0 0 0.5 1\np 3\n0 0 2\n1 0 2\n0 1 2\n");        // index 1: index-matched
+    Scene scene = load_scene((dir / "m.aff").string());
+    const Mesh& mesh = scene.meshes[0];
+    ASSERT_EQ(mesh.material_ids.size(), 3u);
+    const Material& mirror = scene.materials[mesh.material_ids[0]];
+    EXPECT_FLOAT_EQ(mirror.metallic, 1.0f);
+    expect_near3(mirror.base_color, {0.9f, 0.9f, 0.9f});
+    const Material& glass = scene.materials[mesh.material_ids[1]];
+    EXPECT_FLOAT_EQ(glass.transmission, 0.9f);
+    EXPECT_FLOAT_EQ(glass.ior, 1.33f);
+    EXPECT_FLOAT_EQ(glass.roughness, 0.0f);
+    EXPECT_FLOAT_EQ(scene.materials[mesh.material_ids[2]].ior, 1.0f);
 }
 
 TEST(AffLoader, MeshIncludedTwiceWithStaticTransform) {

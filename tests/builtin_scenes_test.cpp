@@ -263,6 +263,16 @@ TEST(BuiltinBenchmarkScenes, CameraSeesTheFeaturedGeometry) {
 
 // ---- Path-tracing scenes --------------------------------------------------
 
+// The Cornell box's walls are Lambertian (no specular layer), its light
+// emits from the face towards the room only.
+TEST(BuiltinScenes, CornellWallsAreLambertianAndTheLightOneSided) {
+    const Scene scene = load_scene("builtin:cornell");
+    for (const Material& m : scene.materials) {
+        if (m.name == "white" || m.name == "red" || m.name == "green") EXPECT_EQ(m.specular, 0.0f) << m.name;
+        if (m.is_emissive()) EXPECT_FALSE(m.two_sided_emission) << m.name;
+    }
+}
+
 const Material* find_material(const Scene& scene, const std::string& name) {
     for (const Material& m : scene.materials)
         if (m.name == name) return &m;
@@ -351,6 +361,9 @@ TEST(PathTracingScenes, MaterialSpheresHasGlassMetalsPlasticAnAreaLightAndTheSky
         EXPECT_FALSE(m->is_emissive()) << e.name;
     }
     expect_vec(find_material(scene, "gold")->base_color, {1.0f, 0.78f, 0.34f});
+    // The matte sphere is Lambertian; the plastic keeps its specular coat.
+    EXPECT_EQ(find_material(scene, "diffuse")->specular, 0.0f);
+    EXPECT_EQ(find_material(scene, "glossy_plastic")->specular, 1.0f);
 
     // Exactly one emitter: a quad above the spheres, facing down, strength 10..20.
     const SceneGeometry geometry = SceneGeometry::build(scene);

@@ -6,6 +6,7 @@
 
 #include <cctype>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <string>
@@ -91,6 +92,33 @@ TEST(GltfLoader, BinaryGlbWithMatrixNode) {
     Box3f b = scene.bounds();
     expect_vec(b.lo, {-1, -1, -6});
     expect_vec(b.hi, {1, 1, -4});
+}
+
+// hierarchy.gltf with the first `from` in its text replaced by `to`.
+Scene load_edited_hierarchy(const std::string& test, const std::string& from, const std::string& to) {
+    std::ifstream in(gltf("hierarchy.gltf"));
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const size_t at = text.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    if (at != std::string::npos) text.replace(at, from.size(), to);
+    const std::string dir = test::temp_dir(test);
+    std::filesystem::copy_file(gltf("checker.png"), dir + "/checker.png");
+    std::ofstream(dir + "/edited.gltf") << text;
+    return load_gltf(dir + "/edited.gltf");
+}
+
+TEST(GltfLoader, KhrMaterialsSpecularFactorsAndSingleSidedEmission) {
+    Scene scene = load_edited_hierarchy(
+        "gltf_specular", "\"KHR_materials_ior\": {",
+        R"("KHR_materials_specular": {"specularFactor": 0.25, "specularColorFactor": [1, 0.5, 0.125],)"
+        R"( "specularTexture": {"index": 0}}, "KHR_materials_ior": {)");
+    const Material& m = scene.materials[scene.meshes[0].material_ids[0]];
+    EXPECT_FLOAT_EQ(m.specular, 0.25f);  // the texture is ignored (warned)
+    expect_vec(m.specular_color, {1.0f, 0.5f, 0.125f});
+
+    Scene one_sided = load_edited_hierarchy("gltf_one_sided", "\"doubleSided\": true", "\"doubleSided\": false");
+    EXPECT_FALSE(one_sided.materials[one_sided.meshes[0].material_ids[0]].two_sided_emission);
+    EXPECT_FLOAT_EQ(one_sided.materials[one_sided.meshes[0].material_ids[0]].specular, 1.0f);  // glTF default
 }
 
 TEST(GltfLoader, NodeHierarchyComposesTransforms) {

@@ -95,6 +95,31 @@ TEST(JsonScene, MaterialOverridesAndDefinitions) {
         for (uint32_t id : mesh.material_ids) EXPECT_LT(id, scene.materials.size());
 }
 
+// specular / specular_color, and the emission side: one-sided by default,
+// two_sided_emission or its older name double_sided turning both faces on.
+TEST(JsonScene, SpecularLayerAndEmissionSides) {
+    const std::string path = write_scene("json_scene_specular", R"({
+        "meshes": [{"file": "builtin:triangle"}],
+        "materials": {
+            "lambert": {"base_color": [0.5, 0.5, 0.5], "specular": 0},
+            "tinted": {"specular": 0.25, "specular_color": [1, 0.5, 0]},
+            "plain": {"emission": [1, 1, 1]},
+            "both": {"emission": [1, 1, 1], "two_sided_emission": true},
+            "legacy": {"emission": [1, 1, 1], "double_sided": true},
+            "agreeing": {"two_sided_emission": false, "double_sided": false}
+        }})");
+    Scene scene = load_scene(path);
+    auto m = [&](const char* name) { return scene.materials[size_t(material_index(scene, name))]; };
+    EXPECT_FLOAT_EQ(m("lambert").specular, 0.0f);
+    EXPECT_FLOAT_EQ(m("tinted").specular, 0.25f);
+    expect_vec(m("tinted").specular_color, {1.0f, 0.5f, 0.0f});
+    EXPECT_FLOAT_EQ(m("plain").specular, 1.0f);  // the glTF default
+    EXPECT_FALSE(m("plain").two_sided_emission);
+    EXPECT_TRUE(m("both").two_sided_emission);
+    EXPECT_TRUE(m("legacy").two_sided_emission);
+    EXPECT_FALSE(m("agreeing").two_sided_emission);
+}
+
 TEST(JsonScene, CameraLightsEnvironmentAndRenderSettings) {
     Scene scene = load_scene(json_fixture("scene.json"));
     ASSERT_TRUE(scene.camera.has_value());
@@ -200,6 +225,13 @@ TEST(JsonScene, TypeErrorsNameTheirPath) {
         {R"({"render": {"width": 1.5}})", "render.width: expected an integer"},
         {R"({"materials": {"m": {"roughness": 2}}})", "materials.m.roughness"},
         {R"({"materials": {"m": {"base_colour": [1, 1, 1]}}})", "materials.m.base_colour: unknown key"},
+        {R"({"materials": {"m": {"specular": 1.5}}})", "materials.m.specular: expected a number in [0, 1]"},
+        {R"({"materials": {"m": {"specular_color": [1, 2, 0]}}})", "materials.m.specular_color: expected 3 numbers"},
+        {R"({"materials": {"m": {"specular_color": 1}}})", "materials.m.specular_color: expected an array"},
+        {R"({"materials": {"m": {"two_sided_emission": 1}}})", "materials.m.two_sided_emission: expected true"},
+        {R"({"materials": {"m": {"double_sided": "yes"}}})", "materials.m.double_sided: expected true"},
+        {R"({"materials": {"m": {"two_sided_emission": true, "double_sided": false}}})",
+         "materials.m.double_sided: disagrees with two_sided_emission"},
         {R"({"meshes": {"file": "x.obj"}})", "meshes: expected an array"},
         {R"({"meshes": [{"transform": {}}]})", "meshes[0]: missing \"file\""},
         {R"({"meshes": [{"file": "builtin:triangle", "transform": {"matrix": [1, 2]}}]})",

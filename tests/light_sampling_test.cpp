@@ -353,6 +353,107 @@ TEST(LightSamplingArea, EmissionTextureScalesTheRadiance) {
     expect_within_five_sigma(s, Vec3f(1.0f, 0.5f, 4.0f) * e, "textured emitter");
 }
 
+// A unit quad in y = 1 facing -y, split into `columns` strips of two
+// triangles each, with uvs u = x and v = z over [0, 1]^2.
+void add_uv_quad(TestWorld& w, int columns, uint32_t material) {
+    Mesh mesh;
+    mesh.name = "uv_quad";
+    for (int i = 0; i <= columns; ++i)
+        for (float z : {0.0f, 1.0f}) {
+            const float x = float(i) / float(columns);
+            mesh.positions.push_back({x, 1.0f, z});
+            mesh.uvs.push_back({x, z});
+        }
+    for (uint32_t i = 0; i < uint32_t(columns); ++i) {
+        const uint32_t a = 2 * i, b = 2 * i + 1, c = 2 * i + 2, d = 2 * i + 3;  // a, c at z = 0
+        mesh.indices.insert(mesh.indices.end(), {a, c, d, a, d, b});       // wound to face -y
+        mesh.material_ids.insert(mesh.material_ids.end(), {material, material});
+    }
+    w.scene.meshes.push_back(mesh);
+}
+
+// The mean of the bilinear emission texture over triangle t of the
+// geometry, on a dense barycentric grid: the reference for the table.
+double brute_force_power(const TestWorld& w, uint32_t t, int n = 400) {
+    const uint32_t* idx = &w.scene.meshes[0].indices[3 * size_t(w.geometry.local_triangle[t])];
+    const std::vector<Vec2f>& uv = w.scene.meshes[0].uvs;
+    const ShadingMaterial& m = w.material(w.geometry.material[t]);
+    double sum = 0.0;
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) {
+            Vec2f b = sample_uniform_triangle({(float(i) + 0.5f) / float(n), (float(j) + 0.5f) / float(n)});
+            Vec2f p = uv[idx[0]] * (1.0f - b.x - b.y) + uv[idx[1]] * b.x + uv[idx[2]] * b.y;
+            Vec4f c = sample_texture(*w.texture(m.emission_texture), p);
+            sum += luminance(m.emission * Vec3f(c.x, c.y, c.z));
+        }
+    return sum / double(n) / double(n) * double(w.geometry.triangles[t].area());
+}
+
+// Emission texture black on the left half (with margin for the bilinear
+// filter) and white on the right: the black triangles are not lights, the
+// others are chosen in proportion to their textured power, and the light
+// samples still estimate the irradiance of the whole quad.
+TEST(LightSamplingArea, EmissionTexturesWeighTheEmitterTable) {
+    TestWorld w;
+    std::vector<float> rgb;
+    for (int y = 0; y < 4; ++y)
+        for (int x = 0; x < 64; ++x)
+            for (int k = 0; k < 3; ++k) rgb.push_back(x < 33 ? 0.0f : 1.0f);  // black past u = 0.5 + half a texel
+    int32_t tex = w.add_float_texture(64, 4, rgb);
+    w.scene.textures.back().wrap_s = TextureWrap::ClampToEdge;
+    add_uv_quad(w, 8, w.add_emitter(Vec3f(3.0f), false, tex));
+    w.finish();
+    const LightSet& lights = w.lights();
+    ASSERT_EQ(lights.emitters.count, 8u);  // 8 of 16 triangles lie in the black half
+    double total = 0.0;
+    for (uint32_t t = 0; t < w.geometry.triangles.size(); ++t) total += brute_force_power(w, t);
+    for (uint32_t t = 0; t < w.geometry.triangles.size(); ++t) {
+        const uint32_t i = lights.emitter_index(t);
+        const double expected = brute_force_power(w, t) / total;
+        if (expected == 0.0) {
+            EXPECT_EQ(i, lights.emitters.count) << "black triangle " << t << " in the table";
+            continue;
+        }
+        ASSERT_LT(i, lights.emitters.count) << "triangle " << t;
+        const float probability = lights.emitters.cdf[i] - (i > 0 ? lights.emitters.cdf[i - 1] : 0.0f);
+        EXPECT_NEAR(probability, expected, 0.01 * expected) << "triangle " << t;
+    }
+
+    // Reference irradiance below the quad by uniform area sampling of all of it.
+    const Vec3f p(0.3f, 0.0f, 0.4f), n(0, 1, 0);
+    Uniform rng(21);
+    double reference = 0.0;
+    const int m = 400000;
+    for (int i = 0; i < m; ++i) {
+        Vec2f u = rng.next2();
+        Vec3f q(u.x, 1.0f, u.y), d = q - p;
+        float d2 = dot(d, d);
+        float cos_both = dot(normalize(d), n) * dot(normalize(d), n);  // receiver and light normals are parallel
+        Vec4f c = sample_texture(w.textures[size_t(tex)], u);
+        reference += 3.0 * c.x * cos_both / d2;
+    }
+    reference /= m;
+    Stats s = estimate_irradiance(w, p, n, 40000, 22);
+    EXPECT_NEAR(s.mean[0], reference, 5.0 * s.standard_error(0) + 3e-3 * reference);
+}
+
+TEST(LightSamplingSelection, TwoSidedEmittersWeighTwiceAsMuch) {
+    TestWorld w;
+    w.add_quad({0, 1, 0}, {0.5f, 0, 0}, {0, 0, 0.5f}, w.add_emitter(Vec3f(1.0f), false));
+    w.add_quad({3, 1, 0}, {0.5f, 0, 0}, {0, 0, 0.5f}, w.add_emitter(Vec3f(1.0f), true));
+    w.scene.lights.push_back(point_light({0, 3, 0}, {1, 1, 1}, 1.0f));
+    w.finish();
+    const LightSet& lights = w.lights();
+    ASSERT_EQ(lights.emitters.count, 4u);
+    for (uint32_t i = 0; i < 4; ++i) {
+        const float probability = lights.emitters.cdf[i] - (i > 0 ? lights.emitters.cdf[i - 1] : 0.0f);
+        EXPECT_NEAR(probability, i < 2 ? 1.0f / 6.0f : 2.0f / 6.0f, 1e-6f) << "emitter " << i;
+    }
+    // The area group's flux: pi L A per face, both faces of the second quad.
+    const double area_power = kPiD * (1.0 + 2.0), point_power = 4.0 * kPiD;
+    EXPECT_NEAR(lights.selection_probability(lights.area_entry()), area_power / (area_power + point_power), 1e-6);
+}
+
 TEST(LightSamplingArea, AreaLightPdfEqualsTheSampledPdf) {
     TestWorld w;
     // Emitters of different area and radiance, so the table is not uniform.

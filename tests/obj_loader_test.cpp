@@ -5,7 +5,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <string>
+#include <vector>
 
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
@@ -101,28 +103,85 @@ TEST(ObjLoader, MapsMtlIllumModels) {
     const Material& mirror = material_named(scene, "mirror");
     EXPECT_FLOAT_EQ(mirror.metallic, 1.0f);
     expect_vec3(mirror.base_color, {0.95f, 0.9f, 0.85f});
-    EXPECT_NEAR(mirror.roughness, std::sqrt(2.0f / 1002.0f), 1e-6f);
+    // Walter et al. 2007: Beckmann alpha = sqrt(2 / (Ns + 2)); rf roughness = sqrt(alpha).
+    EXPECT_NEAR(mirror.roughness, std::pow(2.0f / 1002.0f, 0.25f), 1e-6f);
 
     const Material& glass = material_named(scene, "glass");
     EXPECT_FLOAT_EQ(glass.transmission, 1.0f);
     EXPECT_FLOAT_EQ(glass.ior, 1.33f);
     EXPECT_FLOAT_EQ(glass.metallic, 0.0f);
+    EXPECT_FLOAT_EQ(glass.roughness, 0.0f);  // MTL refraction is ray traced: smooth
+    EXPECT_FLOAT_EQ(glass.specular, 1.0f);   // the interface's Fresnel, not Ks
 
     const Material& veil = material_named(scene, "veil");
     EXPECT_FLOAT_EQ(veil.alpha, 0.25f);
     EXPECT_EQ(veil.alpha_mode, AlphaMode::Blend);
     EXPECT_FLOAT_EQ(veil.transmission, 0.0f);
+    EXPECT_FLOAT_EQ(veil.specular, 0.0f);  // no Ks
 
     const Material& plastic = material_named(scene, "plastic");
     expect_vec3(plastic.base_color, {0.5f, 0.25f, 0.125f});
-    EXPECT_NEAR(plastic.roughness, std::sqrt(2.0f / 100.0f), 1e-6f);
+    EXPECT_NEAR(plastic.roughness, std::pow(2.0f / 100.0f, 0.25f), 1e-6f);
     EXPECT_FLOAT_EQ(plastic.metallic, 0.0f);
+    EXPECT_FLOAT_EQ(plastic.specular, 0.5f);  // Ks 0.5
+    expect_vec3(plastic.specular_color, {1.0f, 1.0f, 1.0f});
+    EXPECT_FLOAT_EQ(plastic.ior, 1.5f);
 
     // A usemtl name the library lacks gets a default material of that name.
     const Material& undefined = material_named(scene, "undefined_in_mtl");
     EXPECT_EQ(undefined.base_color_texture, kNoTexture);
+    EXPECT_FLOAT_EQ(undefined.specular, 0.0f);  // MTL's defaults have no Ks
     const Mesh& mesh = scene.meshes[0];
     EXPECT_EQ(scene.materials[mesh.material_ids[4]].name, "undefined_in_mtl");
+}
+
+// Loads `mtl` through an OBJ that uses every material it names.
+Scene load_mtl_text(const std::string& test, const std::string& mtl, const std::vector<std::string>& names) {
+    const std::string dir = test::temp_dir(test);
+    std::ofstream(dir + "/m.mtl") << mtl;
+    std::ofstream obj(dir + "/m.obj");
+    obj << "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n";
+    for (const std::string& name : names) obj << "usemtl " << name << "\nf 1 2 3\n";
+    obj.close();
+    return load_obj(dir + "/m.obj");
+}
+
+TEST(ObjLoader, MapsKsIllumAndNiByTheMtlSpec) {
+    Scene scene = load_mtl_text("obj_mtl_mapping",
+                                "newmtl lambert\nKd 0.5 0.5 0.5\nKs 0 0 0\nNs 50\nillum 2\n"
+                                "newmtl unlit\nKd 0.5 0.5 0.5\nKs 0.5 0.5 0.5\nillum 0\n"
+                                "newmtl diffuse_only\nKd 0.5 0.5 0.5\nKs 0.5 0.5 0.5\nillum 1\n"
+                                "newmtl no_illum\nKd 0.5 0.5 0.5\nKs 0.2 0.4 0.1\nNs 10\nNi 1.45\n"
+                                "newmtl glass_no_ni\nTf 0.9 1 0.8\nillum 7\n"
+                                "newmtl glass_matched\nNi 1.0\nillum 4\n"
+                                "newmtl dull_reflector\nKd 0.8 0.8 0.8\nKs 0.3 0.3 0.3\nillum 3\n"
+                                "newmtl cutout\nKd 1 0 0\nTr 0.75\n",
+                                {"lambert", "unlit", "diffuse_only", "no_illum", "glass_no_ni", "glass_matched",
+                                 "dull_reflector", "cutout"});
+    EXPECT_FLOAT_EQ(material_named(scene, "lambert").specular, 0.0f);
+    EXPECT_FLOAT_EQ(material_named(scene, "unlit").specular, 0.0f);         // illum 0: lit Lambert
+    EXPECT_FLOAT_EQ(material_named(scene, "diffuse_only").specular, 0.0f);  // illum 1 ignores Ks
+
+    const Material& coloured = material_named(scene, "no_illum");  // no illum line: as 2
+    EXPECT_FLOAT_EQ(coloured.specular, 0.4f);
+    expect_vec3(coloured.specular_color, {0.5f, 1.0f, 0.25f});
+    EXPECT_FLOAT_EQ(coloured.ior, 1.5f);  // Ni is for refraction only
+    EXPECT_FLOAT_EQ(coloured.transmission, 0.0f);
+
+    const Material& glass = material_named(scene, "glass_no_ni");
+    EXPECT_FLOAT_EQ(glass.transmission, 1.0f);
+    EXPECT_FLOAT_EQ(glass.ior, 1.5f);  // absent Ni (tinyobj reads 1) is not index-matched
+    expect_vec3(glass.base_color, {0.9f, 1.0f, 0.8f});  // Tf tints
+    EXPECT_FLOAT_EQ(material_named(scene, "glass_matched").ior, 1.0f);
+
+    const Material& dull = material_named(scene, "dull_reflector");  // Ks does not dominate: no metal
+    EXPECT_FLOAT_EQ(dull.metallic, 0.0f);
+    EXPECT_FLOAT_EQ(dull.specular, 0.3f);
+
+    const Material& cutout = material_named(scene, "cutout");
+    EXPECT_FLOAT_EQ(cutout.alpha, 0.25f);
+    EXPECT_EQ(cutout.alpha_mode, AlphaMode::Blend);
+    EXPECT_FLOAT_EQ(cutout.specular, 0.0f);
 }
 
 TEST(ObjLoader, ResolvesNegativeIndicesAndMixedNormals) {

@@ -48,7 +48,8 @@ Material lambert(float albedo) {
     Material m;
     m.base_color = Vec3f(albedo);
     m.roughness = 1.0f;
-    m.ior = 1.0f;  // no specular layer: a pure Lambert surface
+    m.specular = 0.0f;  // no specular layer: a pure Lambert surface
+    m.ior = 1.0f;       // (the same for a BSDF without the specular factor)
     return m;
 }
 
@@ -219,6 +220,45 @@ TEST(PathTracer, NeeBsdfAndMisEstimatesAgree) {
         }
     }
     EXPECT_GT(mean_of(images[0], 0, everywhere).mean, 0.05);  // the scene is lit
+}
+
+// An emitter facing away from a floor and from the camera: one-sided, it
+// lights nothing and is black from behind for every strategy (light samples,
+// BSDF hits, the camera ray) and for Whitted; two-sided, it lights the floor
+// and the strategies agree.
+TEST(PathTracer, OneSidedEmittersAreDarkFromBehindForEveryStrategy) {
+    for (bool two_sided : {false, true}) {
+        TestScene t;
+        t.add_quad(Vec3f(0.0f), {3, 0, 0}, {0, 3, 0}, t.add_material(lambert(0.7f)));  // faces +z
+        Material light = emitter(Vec3f(6.0f));
+        light.two_sided_emission = two_sided;
+        t.add_quad({0, 0, 1.0f}, {0.6f, 0, 0}, {0, 0.6f, 0}, t.add_material(light));  // faces +z: away
+        t.finish(Structure::Bvh);
+        const Camera camera = looking_at({0, -4, 0.6f}, {0, 0, 0.3f}, 50.0f);  // below the light
+        std::vector<Image> images;
+        for (LightSampling s : {LightSampling::Mis, LightSampling::Nee, LightSampling::Bsdf}) {
+            RenderOptions o = path_options(24, 16, 16);
+            o.max_depth = 3;
+            o.light_sampling = s;
+            images.push_back(t.render_with(camera, o));
+        }
+        RenderOptions whitted = options_for(IntegratorKind::Whitted, 24, 16);
+        whitted.spp = 4;
+        images.push_back(t.render_with(camera, whitted));
+        for (size_t i = 0; i < images.size(); ++i) {
+            const double mean = mean_of(images[i], 0, everywhere).mean;
+            if (two_sided) EXPECT_GT(mean, 0.02) << "image " << i;
+            else EXPECT_EQ(mean, 0.0) << "image " << i;
+        }
+        if (!two_sided) continue;
+        for (int b = 1; b < 3; ++b) {
+            Image difference(images[0].width, images[0].height);
+            for (size_t i = 0; i < difference.pixels.size(); ++i)
+                difference.pixels[i] = images[0].pixels[i] - images[size_t(b)].pixels[i];
+            MeanEstimate e = mean_of(difference, 0, everywhere);
+            EXPECT_NEAR(e.mean, 0.0, 5.0 * e.standard_error) << "MIS vs strategy " << b;
+        }
+    }
 }
 
 TEST(PathTracer, IdenticalWhateverTheThreadCountButSeedMatters) {

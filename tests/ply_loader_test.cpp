@@ -34,7 +34,10 @@ TEST(PlyLoader, LoadsAsciiPyramid) {
     EXPECT_FLOAT_EQ(mesh.uvs[4].x, 0.5f);
     EXPECT_FLOAT_EQ(mesh.uvs[4].y, 0.75f);  // v flipped: 0 is the top row
     EXPECT_EQ(mesh.indices, (std::vector<uint32_t>{0, 1, 2, 0, 2, 3, 0, 4, 1, 1, 4, 2, 2, 4, 3, 3, 4, 0}));
-    EXPECT_EQ(scene.materials.size(), 1u);  // the default material
+    ASSERT_EQ(scene.materials.size(), 1u);  // the default material: a grey Lambertian
+    EXPECT_FLOAT_EQ(scene.materials[0].specular, 0.0f);
+    EXPECT_FLOAT_EQ(scene.materials[0].metallic, 0.0f);
+    EXPECT_FALSE(scene.materials[0].two_sided_emission);
     EXPECT_EQ(scene.instances.size(), 1u);
     EXPECT_EQ(scene.source, ply_fixture("pyramid_ascii.ply"));
 }

@@ -84,12 +84,14 @@ Mesh make_sphere(const std::string& name, Vec3f center, float radius, int stacks
     return mesh;
 }
 
+// A pure Lambertian: no specular layer.
 Material diffuse(const std::string& name, Vec3f color) {
     Material m;
     m.name = name;
     m.base_color = color;
     m.metallic = 0.0f;
     m.roughness = 1.0f;
+    m.specular = 0.0f;
     return m;
 }
 
@@ -592,8 +594,9 @@ Scene make_cube_scene() {
 // The white furnace test: a closed, white, energy-conserving Lambertian
 // sphere inside a uniform environment of radiance 1 must render as radiance 1
 // everywhere (every bounce reflects all the light), so any gain or loss in
-// the integrator or the BSDF sampling shows up as a visible deviation. ior 1
-// removes the dielectric specular layer of the glTF model, leaving pure Lambert.
+// the integrator or the BSDF sampling shows up as a visible deviation.
+// diffuse() has specular 0 (no dielectric layer); ior 1 says the same to a
+// BSDF that predates the specular factor.
 Scene make_furnace() {
     Scene scene;
     Material white = diffuse("white_lambert", {1.0f, 1.0f, 1.0f});
@@ -651,6 +654,7 @@ Scene make_material_spheres() {
     copper.roughness = 0.4f;
     Material plastic = diffuse("glossy_plastic", {0.7f, 0.08f, 0.06f});
     plastic.roughness = 0.3f;
+    plastic.specular = 1.0f;  // the coat is what makes it plastic
     const Material matte = diffuse("diffuse", {0.2f, 0.35f, 0.7f});
 
     const Material sphere_materials[6] = {glass, rough_glass, plastic, gold, copper, matte};
@@ -699,6 +703,7 @@ Scene make_sky_sphere() {
     const uint32_t metal_id = add_material(scene, metal);
     Material glossy = diffuse("glossy", {0.2f, 0.6f, 0.3f});
     glossy.roughness = 0.25f;
+    glossy.specular = 1.0f;
     const uint32_t glossy_id = add_material(scene, glossy);
     const uint32_t orange = add_material(scene, diffuse("orange", {0.8f, 0.4f, 0.1f}));
 

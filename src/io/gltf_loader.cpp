@@ -224,6 +224,7 @@ private:
                            Scene& scene, Mesh& mesh);
     uint32_t material_index(int gltf_material, Scene& scene);
     void convert_materials(Scene& scene);
+    void convert_specular(const tinygltf::ExtensionMap& extensions, Material& m);
     int32_t texture_index(int gltf_texture, TextureEncoding encoding, Scene& scene);
     void add_light(int light_index, const Affine3f& world, Scene& scene) const;
     void set_camera(int camera_index, const Affine3f& world, Scene& scene);
@@ -237,6 +238,7 @@ private:
     size_t node_visits_ = 0;         // nodes visited so far, counting each time a shared node is reached
     int default_material_ = -1;      // appended for primitives without a material
     bool warned_non_triangles_ = false;
+    bool warned_specular_textures_ = false;
 };
 
 GltfReader::ElementView GltfReader::element_view(int accessor_index, const char* what) const {
@@ -387,6 +389,40 @@ Vec3f vec3_or(const std::vector<double>& v, Vec3f fallback) {
     return v.size() >= 3 ? Vec3f(float(v[0]), float(v[1]), float(v[2])) : fallback;
 }
 
+// An extension's array of 3 numbers, `fallback` when absent or malformed.
+Vec3f extension_vec3(const tinygltf::ExtensionMap& extensions, const char* extension, const char* key,
+                     Vec3f fallback) {
+    auto it = extensions.find(extension);
+    if (it == extensions.end() || !it->second.IsObject() || !it->second.Has(key)) return fallback;
+    const tinygltf::Value& value = it->second.Get(key);
+    if (!value.IsArray() || value.ArrayLen() != 3) return fallback;
+    Vec3f v;
+    for (int i = 0; i < 3; ++i) {
+        if (!value.Get(i).IsNumber()) return fallback;
+        v[i] = float(value.Get(i).GetNumberAsDouble());
+    }
+    return v;
+}
+
+// Whether an extension object names a texture under `key`.
+bool extension_has(const tinygltf::ExtensionMap& extensions, const char* extension, const char* key) {
+    auto it = extensions.find(extension);
+    return it != extensions.end() && it->second.IsObject() && it->second.Has(key);
+}
+
+// KHR_materials_specular: the factors only; its textures would need a
+// per-texel layer the material model does not carry, so they are dropped
+// (warned once per file).
+void GltfReader::convert_specular(const tinygltf::ExtensionMap& extensions, Material& m) {
+    const char* ext = "KHR_materials_specular";
+    m.specular = extension_number(extensions, ext, "specularFactor", 1.0f);
+    m.specular_color = extension_vec3(extensions, ext, "specularColorFactor", Vec3f(1.0f));
+    const bool textured = extension_has(extensions, ext, "specularTexture") ||
+                          extension_has(extensions, ext, "specularColorTexture");
+    if (textured && !warned_specular_textures_) warn(path_, "ignoring KHR_materials_specular textures (factors used)");
+    warned_specular_textures_ = warned_specular_textures_ || textured;
+}
+
 void GltfReader::convert_materials(Scene& scene) {
     for (size_t i = 0; i < model_.materials.size(); ++i) {
         const tinygltf::Material& gltf = model_.materials[i];
@@ -410,6 +446,7 @@ void GltfReader::convert_materials(Scene& scene) {
         m.transmission = extension_number(gltf.extensions, "KHR_materials_transmission",
                                           "transmissionFactor", 0.0f);
         m.ior = extension_number(gltf.extensions, "KHR_materials_ior", "ior", 1.5f);
+        convert_specular(gltf.extensions, m);
         if (gltf.alphaMode == "MASK") m.alpha_mode = AlphaMode::Mask;
         else if (gltf.alphaMode == "BLEND") m.alpha_mode = AlphaMode::Blend;
         else m.alpha_mode = AlphaMode::Opaque;

@@ -74,6 +74,7 @@ private:
     Material material(const std::string& name, const Json& value, const std::string& where,
                       Scene& scene) const;
     void read_materials(const Json& value, Scene& scene);
+    bool two_sided_emission(const Json& value, const std::string& where) const;
     void read_mesh_entry(const Json& value, const std::string& where, Scene& scene);
     Camera camera(const Json& value, const std::string& where) const;
     Light light(const Json& value, const std::string& where) const;
@@ -202,12 +203,27 @@ Affine3f JsonSceneReader::transform(const Json& value, const std::string& where)
     return t * r * s;
 }
 
+// "two_sided_emission", or its older name "double_sided"; false (front face
+// only) when neither is given.
+bool JsonSceneReader::two_sided_emission(const Json& value, const std::string& where) const {
+    std::optional<bool> result;
+    for (const char* key : {"two_sided_emission", "double_sided"}) {
+        if (!value.contains(key)) continue;
+        if (!value[key].is_boolean()) fail(where + "." + key, "expected true or false");
+        const bool b = value[key].get<bool>();
+        if (result && *result != b) fail(where + ".double_sided", "disagrees with two_sided_emission (same meaning)");
+        result = b;
+    }
+    return result.value_or(false);
+}
+
 Material JsonSceneReader::material(const std::string& name, const Json& value, const std::string& where,
                                    Scene& scene) const {
     expect_object(value, where);
     expect_keys(value, where,
                 {"base_color", "alpha", "metallic", "roughness", "emission", "emission_strength",
-                 "transmission", "ior", "two_sided_emission", "alpha_mode", "alpha_cutoff", "normal_scale",
+                 "transmission", "ior", "specular", "specular_color", "two_sided_emission", "double_sided",
+                 "alpha_mode", "alpha_cutoff", "normal_scale",
                  "base_color_texture", "metallic_roughness_texture", "normal_texture",
                  "emission_texture"});
     Material m;
@@ -223,6 +239,12 @@ Material JsonSceneReader::material(const std::string& name, const Json& value, c
     unit("roughness", m.roughness);
     unit("transmission", m.transmission);
     unit("alpha_cutoff", m.alpha_cutoff);
+    unit("specular", m.specular);
+    if (value.contains("specular_color")) {
+        m.specular_color = vec3(value["specular_color"], where + ".specular_color");
+        if (min_component(m.specular_color) < 0.0f || max_component(m.specular_color) > 1.0f)
+            fail(where + ".specular_color", "expected 3 numbers in [0, 1]");
+    }
     if (value.contains("emission")) m.emission = vec3(value["emission"], where + ".emission");
     if (value.contains("emission_strength")) {
         m.emission_strength = number(value["emission_strength"], where + ".emission_strength");
@@ -233,10 +255,7 @@ Material JsonSceneReader::material(const std::string& name, const Json& value, c
         if (m.ior < 1.0f) fail(where + ".ior", "expected a number >= 1");
     }
     if (value.contains("normal_scale")) m.normal_scale = number(value["normal_scale"], where + ".normal_scale");
-    if (value.contains("two_sided_emission")) {
-        if (!value["two_sided_emission"].is_boolean()) fail(where + ".two_sided_emission", "expected true or false");
-        m.two_sided_emission = value["two_sided_emission"].get<bool>();
-    }
+    m.two_sided_emission = two_sided_emission(value, where);
     if (value.contains("alpha_mode")) {
         const std::string mode = string(value["alpha_mode"], where + ".alpha_mode");
         if (mode == "opaque") m.alpha_mode = AlphaMode::Opaque;

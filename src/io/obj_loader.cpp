@@ -28,6 +28,7 @@
 #include "io/texture_batch.h"
 #include "io/number_parsing.h"
 #include "io/path_utils.h"
+#include "io/phong_material.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 #include "rayforge/io/image_io.h"
@@ -291,11 +292,40 @@ Mesh build_mesh(const std::string& path, const ObjGeometry& geo, const std::vect
 // ---------------------------------------------------------------------------
 // Materials
 
+// Which statements one MTL material wrote: tinyobj reads an absent Ni as 1
+// and an absent illum as 0, both of which mean something else when written.
+struct MtlStatements {
+    bool ni = false, illum = false;
+};
+
 struct MaterialLibrary {
     std::string path;  // the .mtl file, for resolving texture names
     std::vector<tinyobj::material_t> materials;
+    std::vector<MtlStatements> statements;  // parallel to materials
     std::map<std::string, int> by_name;
 };
+
+// The statements of each material in tinyobj's order (one per `newmtl` with
+// a non-empty name; tinyobj trims trailing blanks and skips leading ones).
+std::vector<MtlStatements> scan_mtl_statements(std::string_view text) {
+    std::vector<MtlStatements> out;
+    auto starts = [](std::string_view line, std::string_view word) {
+        return line.size() > word.size() && line.substr(0, word.size()) == word &&
+               (line[word.size()] == ' ' || line[word.size()] == '\t');
+    };
+    for (size_t pos = 0; pos < text.size();) {
+        size_t eol = std::min(text.find('\n', pos), text.size());
+        std::string_view line = text.substr(pos, eol - pos);
+        pos = eol + 1;
+        while (!line.empty() && (line.back() == ' ' || line.back() == '\t' || line.back() == '\r')) line.remove_suffix(1);
+        while (!line.empty() && (line.front() == ' ' || line.front() == '\t')) line.remove_prefix(1);
+        if (starts(line, "newmtl")) out.push_back({});
+        else if (out.empty()) continue;
+        else if (starts(line, "Ni")) out.back().ni = true;
+        else if (starts(line, "illum")) out.back().illum = true;
+    }
+    return out;
+}
 
 std::vector<MaterialLibrary> load_material_libraries(const std::string& obj_path,
                                                      const std::vector<std::string>& arguments) {
@@ -322,6 +352,8 @@ std::vector<MaterialLibrary> load_material_libraries(const std::string& obj_path
             std::istringstream stream(io::read_file(*found));
             std::string warnings, errors;
             tinyobj::LoadMtl(&library.by_name, &library.materials, &stream, &warnings, &errors);
+            library.statements = scan_mtl_statements(stream.str());
+            if (library.statements.size() != library.materials.size()) library.statements.clear();
             if (!errors.empty()) warn(*found + ": " + errors.substr(0, errors.find('\n')));
             libraries.push_back(std::move(library));
         }
@@ -329,37 +361,74 @@ std::vector<MaterialLibrary> load_material_libraries(const std::string& obj_path
     return libraries;
 }
 
-// Heuristic mapping of the Phong-era MTL parameters onto metallic-roughness:
-// - Kd is the base color; Ks == 0 means no highlight was intended (roughness 1),
-//   otherwise roughness = sqrt(2 / (Ns + 2)) (Blinn-Phong exponent to width).
-// - illum 3/5 with a strong Ks is a mirror: metallic, colored by Ks.
-// - illum 4/6/7 is glass: full transmission with ior Ni and a white base.
-// - d < 1 otherwise is opacity (alpha blend); map_d becomes an alpha mask.
-Material material_from_mtl(const tinyobj::material_t& m) {
+// MTL's illumination models (illum 0-10), grouped by what they ask for.
+enum class MtlModel { Diffuse, Highlight, Mirror, Glass };
+
+MtlModel mtl_model(int illum, bool written) {
+    if (!written) return MtlModel::Highlight;  // no illum line: Kd and Ks as written
+    switch (illum) {
+        case 0:  // "colour on, ambient off": unlit colour has no physical
+        case 1:  // counterpart, so like 1 (diffuse only): a lit Lambertian
+            return MtlModel::Diffuse;
+        case 3:  // ray-traced reflection
+        case 5:  // ... with Fresnel (Schlick from Ks, which a metal is)
+        case 8:  // reflection without ray tracing: the same surface
+            return MtlModel::Mirror;
+        case 4: case 6: case 7: case 9:  // glass / refraction
+            return MtlModel::Glass;
+        default:  // 2 (highlight), 10 (shadow matte: no such thing here), unknown
+            return MtlModel::Highlight;
+    }
+}
+
+// Transmissive: a smooth interface (MTL's refraction is ray traced, Ns only
+// shapes highlights) of index Ni, tinted by Tf. Its reflection is the
+// interface's Fresnel term, so Ks does not scale it. Ni 1 is index-matched;
+// without Ni, or with Ni < 1 (exporters write 0 for "unset"), ior is 1.5.
+void set_mtl_glass(const tinyobj::material_t& m, bool ni_written, Material& out) {
+    const Vec3f tf{m.transmittance[0], m.transmittance[1], m.transmittance[2]};
+    out.transmission = 1.0f;
+    out.base_color = max_component(tf) > 0.0f ? min(max(tf, Vec3f(0.0f)), Vec3f(1.0f)) : Vec3f(1.0f);
+    out.ior = ni_written && m.ior >= 1.0f ? float(m.ior) : 1.5f;
+    out.roughness = 0.0f;
+}
+
+// MTL onto the material model (the Ks/Ns rules are io/phong_material.h's):
+// Kd is the base colour, Ke the emission; illum picks the model (mtl_model);
+// opaque materials keep ior 1.5 for their specular layer (Ni is for
+// refraction); d < 1 (or Tr > 0) on an opaque model is alpha blending.
+Material material_from_mtl(const tinyobj::material_t& m, MtlStatements written) {
     Material out;
     out.name = m.name;
     const Vec3f kd{m.diffuse[0], m.diffuse[1], m.diffuse[2]};
     const Vec3f ks{m.specular[0], m.specular[1], m.specular[2]};
+    const float ns = float(m.shininess);
     out.base_color = kd;
-    const float ns = std::max(0.0f, float(m.shininess));
-    out.roughness = max_component(ks) < 0.01f ? 1.0f : std::clamp(std::sqrt(2.0f / (ns + 2.0f)), 0.0f, 1.0f);
     out.emission = Vec3f{m.emission[0], m.emission[1], m.emission[2]};
-    if (m.ior >= 1.01f) out.ior = m.ior;
-
-    const bool mirror_illum = m.illum == 3 || m.illum == 5;
-    const bool glass_illum = m.illum == 4 || m.illum == 6 || m.illum == 7;
-    if (mirror_illum && max_component(ks) >= 0.5f && max_component(ks) >= max_component(kd)) {
-        out.metallic = 1.0f;
-        out.base_color = ks;
+    const MtlModel model = mtl_model(m.illum, written.illum);
+    switch (model) {
+        case MtlModel::Diffuse: io::set_phong_specular(Vec3f(0.0f), ns, out); break;
+        case MtlModel::Highlight: io::set_phong_specular(ks, ns, out); break;
+        case MtlModel::Mirror:
+            if (io::phong_mirror(kd, ks)) io::set_phong_mirror(ks, ns, out);
+            else io::set_phong_specular(ks, ns, out);
+            break;
+        case MtlModel::Glass: set_mtl_glass(m, written.ni, out); break;
     }
-    if (glass_illum) {
-        out.transmission = 1.0f;
-        out.base_color = Vec3f{1.0f, 1.0f, 1.0f};
-    } else if (m.dissolve < 1.0f) {
+    if (model != MtlModel::Glass && m.dissolve < 1.0f) {
         out.alpha = std::clamp(float(m.dissolve), 0.0f, 1.0f);
         out.alpha_mode = AlphaMode::Blend;
     }
     return out;
+}
+
+// A material for faces with no usemtl or an unknown name: MTL's defaults
+// have no specular, so a grey Lambertian.
+Material default_obj_material(const std::string& name) {
+    Material m;
+    m.name = name;
+    m.specular = 0.0f;
+    return m;
 }
 
 // The textures one material asks for, as resolved file paths ("" = none).
@@ -503,12 +572,14 @@ std::vector<uint32_t> add_materials(Scene& scene, const std::string& obj_path, c
         scene_index[i] = uint32_t(scene.materials.size());
         if (!source) {
             if (!libraries.empty()) warn(obj_path + ": material '" + name + "' is not defined; using a default");
-            Material fallback;
-            fallback.name = name;
-            scene.materials.push_back(fallback);
+            scene.materials.push_back(default_obj_material(name));
             continue;
         }
-        scene.materials.push_back(material_from_mtl(*source));
+        const auto index = size_t(source - library->materials.data());
+        const MtlStatements written = index < library->statements.size()
+                                          ? library->statements[index]
+                                          : MtlStatements{source->ior != 1.0, source->illum != 0};
+        scene.materials.push_back(material_from_mtl(*source, written));
         MaterialTextures& t = wanted[i];
         t.base_color = textures.request(*library, source->diffuse_texname);
         t.mask = textures.request(*library, source->alpha_texname);
@@ -569,7 +640,7 @@ Scene load_obj(const std::string& path, const LoadOptions& options) {
         if (used == kAbsent) {
             if (default_material == kAbsent) {
                 default_material = uint32_t(scene.materials.size());
-                scene.materials.push_back(Material{.name = "default"});
+                scene.materials.push_back(default_obj_material("default"));
             }
             triangle_material[t] = default_material;
         } else {

@@ -4,7 +4,8 @@
 //
 // Only `vertex` (x, y, z, optional normals and texture coordinates) and
 // `face` (a vertex_indices / vertex_index list) are interpreted; every other
-// element and property is skipped. Polygons are fan-triangulated. The header's
+// element and property is skipped (vertex colours too). Every face gets one
+// grey Lambertian material. Polygons are fan-triangulated. The header's
 // counts are checked against the file size before anything is allocated.
 #include <bit>
 #include <charconv>
@@ -510,6 +511,12 @@ Scene load_ply(const std::string& path, const LoadOptions& options) {
 
     Scene scene;
     scene.source = path;
+    // PLY has no material model (vertex colours are not read): one grey
+    // Lambertian, without the specular layer the glTF-style default carries.
+    Material lambert;
+    lambert.name = "default";
+    lambert.specular = 0.0f;
+    scene.materials.push_back(lambert);
     scene.meshes.push_back(std::move(mesh));
     scene.finalize();
     return scene;

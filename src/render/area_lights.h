@@ -1,6 +1,6 @@
 // Choosing a point on the scene's emissive triangles (area lights), shared by
-// both backends. Triangles are picked in proportion to their power (area x
-// luminance of the emission factor) from a cumulative table, then a point is
+// both backends. Triangles are picked in proportion to their power (see
+// emitter_power in light_set.h) from a cumulative table, then a point is
 // drawn uniformly on the chosen triangle, so the cost per shading point is a
 // fixed number of samples however many emissive triangles the scene has.
 #pragma once

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "rayforge/core/host_device.h"
@@ -79,14 +80,21 @@ struct LightSet {
 
 // Power estimates used for selection (exposed for tests and diagnostics).
 float analytic_light_power(const Light& light, float scene_radius);
+// Emissive triangle `prim` over pi (flux of a Lambertian emitter / pi): area
+// x luminance of its emission (the texture's mean over the triangle's uvs
+// when it has one) x 2 when both faces emit. `textures` as the scene view's.
+double emitter_power(const Scene& scene, const SceneGeometry& geometry, const ShadingMaterial& m,
+                     std::span<const MipTextureView> textures, uint32_t prim);
 
 // Host owner of the tables a LightSet views. `scene`, `geometry` and their
 // textures must outlive it; the view stays valid when the owner is moved.
 class HostLightSet {
 public:
-    // materials[i] is the shading form of scene material i (ids out of range use 0).
-    HostLightSet(const Scene& scene, const SceneGeometry& geometry,
-                 const std::vector<ShadingMaterial>& materials);
+    // materials[i] is the shading form of scene material i (ids out of range
+    // use 0); textures[i] the view of scene texture i, with its mip chain
+    // (empty: single-level views of scene.textures).
+    HostLightSet(const Scene& scene, const SceneGeometry& geometry, const std::vector<ShadingMaterial>& materials,
+                 std::span<const MipTextureView> textures = {});
     HostLightSet(const HostLightSet&) = delete;
     HostLightSet& operator=(const HostLightSet&) = delete;
     HostLightSet(HostLightSet&&) = default;

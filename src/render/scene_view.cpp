@@ -50,7 +50,6 @@ void set_scene_scale(const SceneGeometry& geometry, SceneView& view) {
 SceneTables::SceneTables(const Scene& scene, const SceneGeometry& geometry)
     : materials_(shading_materials(scene)),
       shading_triangles_(build_shading_triangles(scene, geometry)),
-      lights_(std::make_unique<HostLightSet>(scene, geometry, materials_)),
       triangle_count_(uint32_t(geometry.triangles.size())) {
     const std::vector<uint8_t> needs_mips = textures_needing_mips(scene);
     mip_chains_.resize(scene.textures.size());
@@ -60,6 +59,7 @@ SceneTables::SceneTables(const Scene& scene, const SceneGeometry& geometry)
     textures_.reserve(scene.textures.size());
     for (size_t i = 0; i < scene.textures.size(); ++i)
         textures_.push_back(make_mip_view(scene.textures[i], mip_chains_[i].get()));
+    lights_ = std::make_unique<HostLightSet>(scene, geometry, materials_, textures_);  // weighs textured emitters
 
     SceneView& v = view_;
     v.shading_triangles = shading_triangles_.data();

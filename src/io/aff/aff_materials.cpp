@@ -8,6 +8,7 @@
 
 #include "io/aff/aff_parser.h"
 #include "io/path_utils.h"
+#include "io/phong_material.h"
 #include "io/texture_batch.h"
 
 namespace rf::io::aff {
@@ -18,23 +19,23 @@ namespace fs = std::filesystem;
 
 Vec3f clamp01(Vec3f c) { return {std::clamp(c.x, 0.0f, 1.0f), std::clamp(c.y, 0.0f, 1.0f), std::clamp(c.z, 0.0f, 1.0f)}; }
 
-// Phong-era values onto metallic-roughness (as the OBJ loader does for MTL):
-// diffuse is the base color; the highlight exponent gives the roughness;
-// a strong specular that dominates the diffuse is a mirror-like metal;
-// transmittance T > 0 is glass with that transmission and index.
+// Phong-era values onto the material model by the rules MTL follows
+// (io/phong_material.h): diffuse is the base colour; Ks = 0 leaves a pure
+// Lambertian, Ks > 0 a specular layer of that strength and width Shine; a
+// strong Ks that dominates the diffuse is a mirror-like metal (NFF's Ks is
+// also its ray-traced reflection); transmittance T > 0 is smooth glass with
+// that transmission and index (an index < 1 is not one: 1.5).
 void convert_definition(const MaterialDef& d, Material& m) {
     m.base_color = d.diffuse;
-    m.roughness = max_component(d.specular) < 0.01f
-                      ? 1.0f
-                      : std::clamp(std::sqrt(2.0f / (std::max(0.0f, d.shine) + 2.0f)), 0.0f, 1.0f);
     if (d.transmittance > 0.0f) {
         m.transmission = std::clamp(d.transmittance, 0.0f, 1.0f);
         m.base_color = Vec3f{1, 1, 1};
         m.roughness = 0.0f;
-        if (d.ior >= 1.01f) m.ior = d.ior;
-    } else if (max_component(d.specular) >= 0.5f && max_component(d.specular) >= max_component(d.diffuse)) {
-        m.metallic = 1.0f;
-        m.base_color = d.specular;
+        if (d.ior >= 1.0f) m.ior = d.ior;
+    } else if (io::phong_mirror(d.diffuse, d.specular)) {
+        io::set_phong_mirror(d.specular, d.shine, m);
+    } else {
+        io::set_phong_specular(d.specular, d.shine, m);
     }
 }
 
@@ -83,6 +84,7 @@ uint32_t AffParser::material_index(const std::string& texture_name) {
     Material m;
     if (current_def_ < 0) {
         m.name = "default";
+        m.specular = 0.0f;  // no f line yet: a Lambertian, as an f line with Ks = 0
     } else {
         m.name = "aff" + std::to_string(current_def_);
         convert_definition(def_list_[size_t(current_def_)], m);
