@@ -1,7 +1,7 @@
 # Renders one rayforge JSON scene with Blender's Cycles, for the reference
 # images of tests/data/cycles. Run by scripts/make-cycles-references.sh:
 #
-#   blender -b --factory-startup -noaudio -P scripts/cycles_reference.py -- SCENE.json OUT.exr SEED SPP
+#   blender -b --factory-startup -noaudio --python-exit-code 1 -P scripts/cycles_reference.py -- SCENE.json OUT.exr SEED SPP
 #
 # Reads the same JSON file rayforge reads (the subset the reference scenes
 # use: meshes with a material override, materials, camera, environment colour,
@@ -168,6 +168,9 @@ def import_mesh(path, material):
     if path.lower().endswith(".obj"):
         bpy.ops.wm.obj_import(filepath=path, forward_axis="Y", up_axis="Z")
     elif path.lower().endswith((".gltf", ".glb")):
+        import numpy  # Debian's glTF add-on (Blender 3.4) still uses np.bool, gone since numpy 1.24
+        if "bool" not in numpy.__dict__:
+            numpy.bool = bool
         bpy.ops.import_scene.gltf(filepath=path)
     else:
         raise SystemExit("%s: the references import only OBJ and glTF" % path)

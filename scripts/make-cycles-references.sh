@@ -24,7 +24,7 @@ for name in "${scenes[@]}"; do
     for seed in 1 2; do
         out="$dir/$name.cycles-$seed.exr"
         start=$(date +%s)
-        blender -b --factory-startup -noaudio -P scripts/cycles_reference.py -- \
+        blender -b --factory-startup -noaudio --python-exit-code 1 -P scripts/cycles_reference.py -- \
             "$dir/$name.json" "$out" "$seed" "$spp" >"/tmp/cycles-$name-$seed.log" 2>&1 ||
             { echo "make-cycles-references: $name seed $seed failed; see /tmp/cycles-$name-$seed.log" >&2; exit 1; }
         echo "$name seed $seed: $spp spp, $(( $(date +%s) - start )) s -> $out"

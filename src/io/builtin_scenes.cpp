@@ -174,6 +174,10 @@ Scene make_cornell() {
     scene.lights.push_back(point);
 
     scene.camera = Camera{.eye = {0, 1, 3.9f}, .target = {0, 1, 0}, .up = {0, 1, 0}, .vfov_degrees = 40.0f};
+    // The default look (README's first command): global illumination, soft
+    // shadows and caustics in a few seconds; options override it.
+    scene.render_settings.integrator = "path";
+    scene.render_settings.spp = 64;
     return scene;
 }
 
