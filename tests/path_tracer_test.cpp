@@ -125,7 +125,7 @@ TEST(PathTracer, RoughGlassAndMetalsConserveEnergyInAFurnace) {
             if (kind == 0) m.transmission = 1.0f;
             else m.metallic = 1.0f;
             TestScene t = furnace_sphere(m);
-            RenderOptions o = path_options(16, 16, 16);
+            RenderOptions o = path_options(32, 32, 32);
             o.max_depth = 32;
             Image image = t.render_with(looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), o);
             MeanEstimate e = mean_of(image, 0, everywhere);

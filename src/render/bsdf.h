@@ -225,6 +225,7 @@ public:
         float u_choice = fminf(fmaxf((u_lobe - cdf) / p[lobe], 0.0f), 0.99999994f);
 
         Vec3f i;
+        bool refracted = false;
         if (lobe == kDiffuse) {
             i = sample_cosine_hemisphere(u);
         } else if (lobe == kMetal) {
@@ -250,6 +251,7 @@ public:
                 }
             } else {
                 if (!refract_about(o, h, eta_, i)) return false;
+                refracted = true;
                 if (delta) {
                     float p_refract = p[kDielectric] * (1.0f - p_reflect);
                     float fresnel = dielectric_fresnel_exact(cos_oh, eta_);
@@ -259,6 +261,10 @@ public:
             }
         }
 
+        // A reflection that ends below the surface (or a refraction above it)
+        // is absorbed: pdf() there only holds the other side's lobes, so
+        // weighting it by eval / pdf would count that light twice.
+        if ((i.z < 0.0f) != refracted) return false;
         out.wi = frame_.to_world(i);
         Vec3f f = evaluate(wo, out.wi, out.pdf);
         if (!(out.pdf > 0.0f)) return false;
