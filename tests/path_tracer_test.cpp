@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <vector>
 
 #include "rayforge/core/error.h"
@@ -111,8 +112,13 @@ TEST(PathTracer, SmoothGlassSphereIsInvisibleInAFurnace) {
     }
 }
 
+// With the multiple-scattering compensation (bsdf.h, Turquin 2019) a white
+// rough conductor and rough clear glass lose no energy: the sphere renders
+// the environment's 1. Tolerance: 4 standard errors of the image's own
+// estimate plus 1% (the tables' interpolation error; paths cut at max_depth
+// inside the glass). Printed values are quoted in docs/rendering.md.
 TEST(PathTracer, RoughGlassAndMetalsConserveEnergyInAFurnace) {
-    for (float roughness : {0.2f, 0.6f}) {
+    for (float roughness : {0.1f, 0.25f, 0.5f, 0.75f, 1.0f}) {
         for (int kind = 0; kind < 2; ++kind) {
             Material m;
             m.base_color = Vec3f(1.0f);
@@ -120,16 +126,14 @@ TEST(PathTracer, RoughGlassAndMetalsConserveEnergyInAFurnace) {
             if (kind == 0) m.transmission = 1.0f;
             else m.metallic = 1.0f;
             TestScene t = furnace_sphere(m);
-            RenderOptions o = path_options(16, 16, 16);
+            RenderOptions o = path_options(32, 32, 32);
             o.max_depth = 32;
             Image image = t.render_with(looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), o);
             MeanEstimate e = mean_of(image, 0, everywhere);
-            EXPECT_LE(e.mean, 1.0 + 5.0 * e.standard_error + 1e-3) << "kind " << kind << " roughness " << roughness;
-            // Single-scattering microfacet models lose the energy of light that
-            // would scatter between microfacets: a few per cent for a rough
-            // conductor, more for rough glass, where light crosses two rough
-            // interfaces. The bounds catch a missing lobe, not that loss.
-            EXPECT_GT(e.mean, kind == 0 ? 0.6 : 0.75) << "kind " << kind << " roughness " << roughness;
+            std::printf("furnace %-9s roughness %.2f: %.4f +- %.4f\n", kind == 0 ? "glass" : "conductor", roughness,
+                        e.mean, e.standard_error);
+            EXPECT_NEAR(e.mean, 1.0, 4.0 * e.standard_error + 0.01)
+                << (kind == 0 ? "glass" : "conductor") << " roughness " << roughness;
         }
     }
 }

@@ -1,6 +1,7 @@
 // BSDF of the glTF 2.0 metallic-roughness material (glTF 2.0 specification,
-// Appendix B "BRDF implementation") with KHR_materials_transmission and
-// KHR_materials_ior, for the path tracer on both backends:
+// Appendix B "BRDF implementation") with KHR_materials_transmission,
+// KHR_materials_ior and KHR_materials_specular, for the path tracer on both
+// backends:
 //
 //   material   = mix(dielectric, metal, metallic)
 //   metal      = GGX reflection, Schlick Fresnel with F0 = base_color
@@ -18,28 +19,51 @@
 //               h is drawn from the visible normals (Heitz 2018) and
 //               reflection / refraction is chosen by that microfacet's Fresnel.
 //   diffuse     (1 - metallic)(1 - transmission) Lambert(base_color)
-//               * (1 - F_o(n.wo)) (1 - F_o(n.wi)).
+//               * (1 - s F_o(n.wo)) (1 - s F_o(n.wi)).
 // With roughness below kSmoothRoughness the metal and dielectric lobes are
 // delta lobes (mirror; smooth reflect / refract chosen by exact Fresnel).
 //
-// Energy: each microfacet lobe's VNDF-sampled weight is at most
-// F * G2 / G1(wo) <= F, and reflection + transmission share one microfacet
-// (F + (1 - F) = 1). The diffuse base only receives the light the interface
-// lets through on both crossings, (1 - F_o(n.wo))(1 - F_o(n.wi)), which is
-// also reciprocal (Kelemen & Szirmay-Kalos 2001 style coupling); light that
-// would re-reflect inside the layer is dropped, so albedo <= 1 holds with
-// margin (checked over a grid of materials in tests/bsdf_test.cpp).
+// Specular layer (KHR_materials_specular, s = specular, c = specular_color):
+// the opaque share's reflection is s F_o(wo.h) c and the diffuse base under it
+// receives (1 - s F_o(n.wo))(1 - s F_o(n.wi)); s = 0 leaves exactly Lambert
+// and no reflection lobe to sample. The clear (transmissive) share keeps the
+// exact Fresnel of its IOR: what glass does not reflect it transmits, so
+// scaling its reflection would either create light or make glass absorb, and
+// glass without a reflection is not a physical interface anyway.
+// F_R = (1 - transmission) s F_o c + transmission F(eta).
+//
+// Energy: each microfacet lobe's VNDF-sampled single-scattering weight is at
+// most F * G2 / G1(wo) <= F, and reflection + transmission share one
+// microfacet (F + (1 - F) = 1). The diffuse base only receives the light the
+// interface lets through on both crossings, which is also reciprocal
+// (Kelemen & Szirmay-Kalos 2001 style coupling); light that would re-reflect
+// inside the layer is dropped. Single scattering loses the light that
+// scatters between microfacets (a white rough conductor or rough glass
+// renders visibly dark in a white furnace), so the rough conductor and clear
+// dielectric lobes add it back (Turquin 2019, "Practical multiple scattering
+// compensation for microfacet models"):
+//   conductor  f_ms = f_ss (1 + F0 (1 - E(mu_o)) / E(mu_o)), E the albedo of
+//              the GGX lobe with F = 1;
+//   clear      reflection and transmission divided by E_glass(mu_o, eta),
+//              the albedo of the single-scattering rough dielectric.
+// E and E_glass are tables of this file's own single-scattering lobes
+// (microfacet_tables.h); the compensation changes eval and the sample
+// weights, not the pdf (sampling stays VNDF), and depends on wo only, so
+// those two lobes are not reciprocal. A white conductor and clear glass then
+// have albedo 1 up to the tables' error; everything else stays <= 1
+// (checked over a grid of materials in tests/bsdf_test.cpp).
+// BasicBsdf<false> is the uncompensated BSDF the tables integrate.
 //
 // Transmitted radiance is NOT scaled by 1 / eta^2: every ray that enters a
 // closed object also leaves it, so the two factors cancel along the path,
 // and without them every lobe's throughput stays <= 1. The consequence is
 // that the transmission lobe is not reciprocal (it is the adjoint/importance
-// form); the reflection part of every material is.
+// form); the single-scattering reflection part of every material is.
 //
 // Opaque parts have no inside: their Fresnel (F_o, and the opaque share of
 // F_R) always uses the entering relative IOR min(eta, 1/eta), so a back face
 // seen through a double-sided opaque surface does not show total internal
-// reflection. F_R = (1 - transmission) F_o + transmission F(eta).
+// reflection.
 #pragma once
 
 #include <cmath>
@@ -48,6 +72,7 @@
 #include "rayforge/math/vec.h"
 #include "render/material_eval.h"
 #include "render/microfacet.h"
+#include "render/microfacet_tables.h"
 #include "render/sampling.h"
 
 namespace rf {
@@ -67,13 +92,16 @@ struct BsdfSample {
     bool transmission = false; // wi on the other side of the geometric surface than wo
 };
 
-class Bsdf {
+// kMultipleScattering: with the energy compensation (the renderer's Bsdf);
+// without it, the single-scattering BSDF the albedo tables are made from.
+template <bool kMultipleScattering>
+class BasicBsdf {
 public:
     // m: material at the point. n: unit shading normal, ng: unit geometric
     // normal, both already flipped to wo's side. eta = IOR on wo's side / IOR
     // on the other side (1/ior entering the object, ior leaving it).
-    RF_HD static Bsdf make(const MaterialSample& m, Vec3f n, Vec3f ng, float eta) {
-        Bsdf b;
+    RF_HD static BasicBsdf make(const MaterialSample& m, Vec3f n, Vec3f ng, float eta) {
+        BasicBsdf b;
         b.frame_ = Frame::from_normal(n);
         b.ng_ = ng;
         // Energy conservation needs reflectances <= 1; glTF factors and
@@ -82,9 +110,12 @@ public:
         b.metal_weight_ = saturate(m.metallic);
         b.dielectric_weight_ = 1.0f - b.metal_weight_;
         b.transmission_ = saturate(m.transmission);
+        b.specular_ = saturate(m.specular);
+        b.specular_tint_ = min(max(m.specular_color, Vec3f(0.0f)), Vec3f(1.0f)) * b.specular_;
         b.eta_ = (eta > 0.0f && is_finite(eta)) ? eta : 1.0f;
         b.eta_opaque_ = b.eta_ > 1.0f ? 1.0f / b.eta_ : b.eta_;
-        b.alpha_ = ggx_alpha_from_roughness(saturate(m.roughness));
+        b.roughness_ = saturate(m.roughness);
+        b.alpha_ = ggx_alpha_from_roughness(b.roughness_);
         b.smooth_ = !(m.roughness >= kSmoothRoughness);
         // An index-matched interface does not deflect light: straight
         // transmission is a delta whatever the roughness (the rough
@@ -93,12 +124,13 @@ public:
         return b;
     }
     // The same, with the terms that depend only on wo (local direction, lobe
-    // probabilities, Fresnel at n.wo) computed once: a path vertex evaluates
-    // its BSDF for the light sample and again for the sampled direction.
-    RF_HD static Bsdf make(const MaterialSample& m, Vec3f n, Vec3f ng, float eta, Vec3f wo) {
-        Bsdf b = make(m, n, ng, eta);
+    // probabilities, Fresnel at n.wo, compensation factors) computed once: a
+    // path vertex evaluates its BSDF for the light sample and again for the
+    // sampled direction.
+    RF_HD static BasicBsdf make(const MaterialSample& m, Vec3f n, Vec3f ng, float eta, Vec3f wo) {
+        BasicBsdf b = make(m, n, ng, eta);
         b.cached_wo_ = wo;
-        b.cached_valid_ = b.compute_view_terms(wo, b.cached_o_, b.cached_p_, b.cached_fresnel_o_);
+        b.cached_valid_ = b.compute_view_terms(wo, b.cached_view_);
         b.cached_ = true;
         return b;
     }
@@ -121,9 +153,9 @@ public:
     // terms and the lobe probabilities, and light sampling needs both.
     RF_HD Vec3f evaluate(Vec3f wo, Vec3f wi, float& density) const {
         density = 0.0f;
-        Vec3f o;
-        float p[kLobeCount], fresnel_o;
-        if (!view_terms(wo, o, p, fresnel_o)) return Vec3f(0.0f);
+        ViewTerms v;
+        if (!view_terms(wo, v)) return Vec3f(0.0f);
+        const Vec3f o = v.o;
         Vec3f i = to_local(wi);
         float geometric_cos = dot(ng_, wi);
         Vec3f f(0.0f);
@@ -137,21 +169,22 @@ public:
                     float spec = d * ggx_g2(o, i, alpha_) / (4.0f * o.z);
                     // The visible-normal density D_v(h) / (4 o.h) of the reflected direction.
                     float reflect_pdf = ggx_g1(o, alpha_) * d / (4.0f * o.z);
-                    if (metal_weight_ > 0.0f) f += schlick_fresnel(base_, cos_oh) * (metal_weight_ * spec);
-                    density += p[kMetal] * reflect_pdf;
+                    if (metal_weight_ > 0.0f)
+                        f += schlick_fresnel(base_, cos_oh) * (Vec3f(1.0f) + base_ * v.metal_ms) * (metal_weight_ * spec);
+                    density += v.p[kMetal] * reflect_pdf;
                     // (An index-matched interface is a delta lobe: its tiny reflection is sampled there.)
                     if (!index_matched_) {
-                        if (dielectric_weight_ > 0.0f) f += Vec3f(dielectric_weight_ * reflect_fresnel(cos_oh) * spec);
-                        density += p[kDielectric] * reflect_probability(cos_oh) * reflect_pdf;
+                        if (dielectric_weight_ > 0.0f) f += reflect_color(cos_oh, v.clear_ms) * (dielectric_weight_ * spec);
+                        density += v.p[kDielectric] * reflect_probability(cos_oh) * reflect_pdf;
                     }
                 }
             }
             float diffuse = diffuse_weight();
             if (diffuse > 0.0f) {
-                float through = (1.0f - fresnel_o) * (1.0f - opaque_fresnel(i.z));
+                float through = (1.0f - v.coat_fresnel_o) * (1.0f - specular_ * opaque_fresnel(i.z));
                 f += base_ * (diffuse * through * kInvPi * i.z);
             }
-            density += p[kDiffuse] * i.z * kInvPi;
+            density += v.p[kDiffuse] * i.z * kInvPi;
         } else if (i.z < -kBsdfMinCos && geometric_cos < 0.0f && rough_transmission()) {
             Vec3f h;
             float jacobian;
@@ -162,8 +195,8 @@ public:
                 // D G2 |o.h| |i.h| / (o.z |i.z| (eta o.h + i.h)^2) times |i.z|;
                 // `jacobian` is |i.h| / (eta o.h + i.h)^2.
                 float t = d * ggx_g2(o, i, alpha_) * cos_oh * jacobian / o.z;
-                f += base_ * (dielectric_weight_ * transmission_ * (1.0f - fresnel) * t);
-                density += p[kDielectric] * (1.0f - reflect_probability(cos_oh)) * ggx_vndf_pdf(o, h, alpha_) *
+                f += base_ * (dielectric_weight_ * transmission_ * (1.0f - fresnel) * v.clear_ms * t);
+                density += v.p[kDielectric] * (1.0f - reflect_probability(cos_oh)) * ggx_vndf_pdf(o, h, alpha_) *
                            jacobian;
             }
         }
@@ -174,9 +207,10 @@ public:
     // u_lobe picks the lobe (and, rescaled, reflection vs refraction), u the
     // direction. False: absorbed or invalid (out is then unspecified).
     RF_HD bool sample(Vec3f wo, float u_lobe, Vec2f u, BsdfSample& out) const {
-        Vec3f o;
-        float p[kLobeCount], fresnel_o;
-        if (!view_terms(wo, o, p, fresnel_o)) return false;
+        ViewTerms v;
+        if (!view_terms(wo, v)) return false;
+        const Vec3f o = v.o;
+        const float* p = v.p;
 
         // Pick a lobe; u_lobe is rescaled to [0, 1) within the chosen interval.
         int lobe = -1;
@@ -191,6 +225,7 @@ public:
         float u_choice = fminf(fmaxf((u_lobe - cdf) / p[lobe], 0.0f), 0.99999994f);
 
         Vec3f i;
+        bool refracted = false;
         if (lobe == kDiffuse) {
             i = sample_cosine_hemisphere(u);
         } else if (lobe == kMetal) {
@@ -210,11 +245,13 @@ public:
             if (u_choice < p_reflect) {
                 i = reflect_about(o, h);
                 if (delta) {
-                    float weight = dielectric_weight_ * reflect_fresnel(cos_oh) / (p[kDielectric] * p_reflect);
-                    return finish_delta(i, Vec3f(weight), p[kDielectric] * p_reflect, out);
+                    // Delta lobes lose nothing between microfacets: no compensation.
+                    float p_delta = p[kDielectric] * p_reflect;
+                    return finish_delta(i, reflect_color(cos_oh, 1.0f) * (dielectric_weight_ / p_delta), p_delta, out);
                 }
             } else {
                 if (!refract_about(o, h, eta_, i)) return false;
+                refracted = true;
                 if (delta) {
                     float p_refract = p[kDielectric] * (1.0f - p_reflect);
                     float fresnel = dielectric_fresnel_exact(cos_oh, eta_);
@@ -224,6 +261,10 @@ public:
             }
         }
 
+        // A reflection that ends below the surface (or a refraction above it)
+        // is absorbed: pdf() there only holds the other side's lobes, so
+        // weighting it by eval / pdf would count that light twice.
+        if ((i.z < 0.0f) != refracted) return false;
         out.wi = frame_.to_world(i);
         Vec3f f = evaluate(wo, out.wi, out.pdf);
         if (!(out.pdf > 0.0f)) return false;
@@ -249,22 +290,35 @@ public:
 private:
     enum { kMetal = 0, kDielectric = 1, kDiffuse = 2, kLobeCount = 3 };
 
+    // Everything that depends on wo alone.
+    struct ViewTerms {
+        Vec3f o;                   // wo in the local frame
+        float p[kLobeCount];       // lobe selection probabilities
+        float coat_fresnel_o;      // s F_o(n.wo), the specular layer's share at n.wo
+        float metal_ms = 0.0f;     // (1 - E) / E of the conductor lobe (Turquin); 0: none
+        float clear_ms = 1.0f;     // 1 / E_glass of the clear dielectric; 1: none
+    };
+
     RF_HD Vec3f to_local(Vec3f w) const { return {dot(w, frame_.t), dot(w, frame_.b), dot(w, frame_.n)}; }
 
-    // wo in the local frame, the lobe probabilities and the opaque Fresnel at
-    // n.wo; false when wo grazes or is below the shading hemisphere.
-    RF_HD bool compute_view_terms(Vec3f wo, Vec3f& o, float p[kLobeCount], float& fresnel_o) const {
-        o = to_local(wo);
-        if (!(o.z > kBsdfMinCos)) return false;
-        if (!lobe_probabilities(o.z, p)) return false;
-        fresnel_o = opaque_fresnel(o.z);
-        return true;
+    // False when wo grazes or is below the shading hemisphere.
+    RF_HD bool compute_view_terms(Vec3f wo, ViewTerms& v) const {
+        v.o = to_local(wo);
+        if (!(v.o.z > kBsdfMinCos)) return false;
+        if constexpr (kMultipleScattering) {
+            // Delta lobes lose nothing between microfacets.
+            if (!smooth_ && metal_weight_ > 0.0f) {
+                float e = fmaxf(ggx_albedo(v.o.z, roughness_), 0.05f);
+                v.metal_ms = (1.0f - e) / e;
+            }
+            if (rough_transmission()) v.clear_ms = 1.0f / fmaxf(ggx_dielectric_albedo(v.o.z, roughness_, eta_), 0.05f);
+        }
+        v.coat_fresnel_o = specular_ * opaque_fresnel(v.o.z);
+        return lobe_probabilities(v);
     }
-    RF_HD bool view_terms(Vec3f wo, Vec3f& o, float p[kLobeCount], float& fresnel_o) const {
-        if (!(cached_ && wo == cached_wo_)) return compute_view_terms(wo, o, p, fresnel_o);
-        o = cached_o_;
-        for (int k = 0; k < kLobeCount; ++k) p[k] = cached_p_[k];
-        fresnel_o = cached_fresnel_o_;
+    RF_HD bool view_terms(Vec3f wo, ViewTerms& v) const {
+        if (!(cached_ && wo == cached_wo_)) return compute_view_terms(wo, v);
+        v = cached_view_;
         return cached_valid_;
     }
 
@@ -275,36 +329,50 @@ private:
 
     // Fresnel of the opaque parts, always as if entering the denser medium.
     RF_HD float opaque_fresnel(float cos_theta) const { return dielectric_fresnel_exact(cos_theta, eta_opaque_); }
-    // Reflectance of the dielectric interface: opaque share plus transmissive share.
-    RF_HD float reflect_fresnel(float cos_oh) const {
-        float opaque = transmission_ < 1.0f ? opaque_fresnel(cos_oh) : 0.0f;
-        float clear = transmission_ > 0.0f ? dielectric_fresnel_exact(cos_oh, eta_) : 0.0f;
-        return (1.0f - transmission_) * opaque + transmission_ * clear;
+    // Exact Fresnel of the clear share; 0 where there is none.
+    RF_HD float clear_fresnel(float cos_oh) const {
+        return transmission_ > 0.0f ? dielectric_fresnel_exact(cos_oh, eta_) : 0.0f;
+    }
+    // Reflectance of the dielectric interface: the specular layer of the
+    // opaque share plus the clear share (times its compensation clear_ms).
+    RF_HD Vec3f reflect_color(float cos_oh, float clear_ms) const {
+        Vec3f opaque = transmission_ < 1.0f ? specular_tint_ * ((1.0f - transmission_) * opaque_fresnel(cos_oh)) : Vec3f(0.0f);
+        return opaque + Vec3f(transmission_ * clear_fresnel(cos_oh) * clear_ms);
+    }
+    // Its channel mean without compensation, for sampling decisions.
+    RF_HD float reflect_estimate(float cos_oh) const {
+        float opaque = transmission_ < 1.0f ? (1.0f - transmission_) * opaque_fresnel(cos_oh) * mean(specular_tint_) : 0.0f;
+        return opaque + transmission_ * clear_fresnel(cos_oh);
     }
     // Within the dielectric lobe: P(reflect) = F_R / (F_R + t (1 - F)), which
     // is the exact Fresnel F for clear glass (t = 1).
     RF_HD float reflect_probability(float cos_oh) const {
-        float reflect = reflect_fresnel(cos_oh);
+        float reflect = reflect_estimate(cos_oh);
         float transmit = transmission_ > 0.0f ? transmission_ * (1.0f - dielectric_fresnel_exact(cos_oh, eta_)) : 0.0f;
         float total = reflect + transmit;
         return total > 0.0f ? reflect / total : 1.0f;
     }
+    RF_HD static float mean(Vec3f c) { return (c.x + c.y + c.z) * (1.0f / 3.0f); }
 
     // Lobe selection probabilities, proportional to each lobe's weight
-    // estimated from the Fresnel at n.wo. Every lobe that can contribute
-    // anywhere gets a nonzero share (otherwise the estimator is biased):
-    // Schlick's F is >= F0 but also rises above a black F0 off normal
-    // incidence, hence the floor on the metal estimate.
-    RF_HD bool lobe_probabilities(float cos_o, float p[kLobeCount]) const {
-        float mean_base = (base_.x + base_.y + base_.z) * (1.0f / 3.0f);
-        Vec3f metal_f = schlick_fresnel(base_, cos_o);
-        p[kMetal] = metal_weight_ * fmaxf((metal_f.x + metal_f.y + metal_f.z) * (1.0f / 3.0f), 0.02f);
-        float transmit = transmission_ * (1.0f - dielectric_fresnel_exact(cos_o, eta_)) * mean_base;
-        p[kDielectric] = dielectric_weight_ * (reflect_fresnel(cos_o) + transmit);
-        p[kDiffuse] = diffuse_weight() * (1.0f - opaque_fresnel(cos_o)) * mean_base;
-        float total = p[kMetal] + p[kDielectric] + p[kDiffuse];
+    // estimated from the Fresnel at n.wo (the compensation approximately:
+    // F0 taken as its mean). Every lobe that can contribute anywhere gets a
+    // nonzero share (otherwise the estimator is biased): Schlick's F is >= F0
+    // but also rises above a black F0 off normal incidence, hence the floor
+    // on the metal estimate. A lobe that contributes nothing (specular = 0
+    // and no transmission) gets none, so no sample is wasted on it.
+    RF_HD bool lobe_probabilities(ViewTerms& v) const {
+        float cos_o = v.o.z, mean_base = mean(base_);
+        float metal = mean(schlick_fresnel(base_, cos_o)) * (1.0f + mean_base * v.metal_ms);
+        v.p[kMetal] = metal_weight_ * fmaxf(metal, 0.02f);
+        float opaque = transmission_ < 1.0f ? (1.0f - transmission_) * opaque_fresnel(cos_o) * mean(specular_tint_) : 0.0f;
+        float fresnel = clear_fresnel(cos_o);
+        float clear = transmission_ * (fresnel + (1.0f - fresnel) * mean_base) * v.clear_ms;
+        v.p[kDielectric] = dielectric_weight_ * (opaque + clear);
+        v.p[kDiffuse] = diffuse_weight() * (1.0f - v.coat_fresnel_o) * mean_base;
+        float total = v.p[kMetal] + v.p[kDielectric] + v.p[kDiffuse];
         if (!(total > 0.0f) || !is_finite(total)) return false;
-        for (int k = 0; k < kLobeCount; ++k) p[k] /= total;
+        for (int k = 0; k < kLobeCount; ++k) v.p[k] /= total;
         return true;
     }
 
@@ -344,16 +412,21 @@ private:
     float metal_weight_ = 0.0f;
     float dielectric_weight_ = 1.0f;
     float transmission_ = 0.0f;
+    float specular_ = 1.0f;
+    Vec3f specular_tint_{1.0f};  // specular * specular_color
     float eta_ = 1.0f;
     float eta_opaque_ = 1.0f;
+    float roughness_ = 1.0f;
     float alpha_ = 1.0f;
     bool smooth_ = false;
     bool index_matched_ = false;
     // View terms for the wo given to make() (see there).
-    Vec3f cached_wo_, cached_o_;
-    float cached_p_[kLobeCount] = {0.0f, 0.0f, 0.0f};
-    float cached_fresnel_o_ = 0.0f;
+    Vec3f cached_wo_;
+    ViewTerms cached_view_{};
     bool cached_ = false, cached_valid_ = false;
 };
+
+using Bsdf = BasicBsdf<true>;
+using SingleScatteringBsdf = BasicBsdf<false>;
 
 }  // namespace rf
