@@ -21,7 +21,7 @@
 #     Glass BSDF (Multiscatter GGX, roughness r, IOR); emitter -> Emission
 #     (one-sided: masked by Geometry.Backfacing; plus a Diffuse BSDF when the
 #     emitter has a base colour); glTF base colour textures -> Diffuse BSDF fed
-#     by the same image (sRGB, linear interpolation); an OBJ without a material
+#     by the same image (sRGB, closest texel: see lambert_from_gltf); an OBJ without a material
 #     override keeps its MTL materials, mapped the same way (Lambert only).
 import json
 import math
@@ -155,7 +155,10 @@ def lambert_from_gltf(material):
     if len(images) != 1:
         raise SystemExit("glTF material %s: expected one base colour image" % material.name)
     image = images[0]
-    image.interpolation = "Linear"
+    # Cycles filters 8-bit sRGB texels before decoding them (in sRGB space),
+    # which darkens every edge between light and dark texels; rayforge decodes
+    # first. Nearest texels make the region means the same integral.
+    image.interpolation = "Closest"
     out = next(n for n in tree.nodes if n.type == "OUTPUT_MATERIAL")
     diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
     diffuse.inputs["Roughness"].default_value = 0.0

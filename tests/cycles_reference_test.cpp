@@ -109,11 +109,20 @@ void compare_with_cycles(const std::string& name, double allowance) {
     }
 }
 
+// Allowances (docs/rendering.md "Independent references"):
+// - rough microfacets: rayforge compensates multiple scattering by scaling the
+//   single-scattering lobe (Turquin 2019), Cycles' Multiscatter GGX follows
+//   the random walk (Heitz et al. 2016). Both render a white furnace as 1, but
+//   the compensated energy leaves in different directions, and for glass in a
+//   different reflection/transmission split: measured 0.4 % (conductor,
+//   roughness 0.7) and 3.8 % (glass, roughness 0.3 and 0.6) on region means.
+// - textures: rayforge filters with mip levels chosen by ray cones, the
+//   references take the nearest texel; measured 0.1 %.
 TEST(CyclesReference, DiffuseCornellBox) { compare_with_cycles("cornell", 0.0); }
 TEST(CyclesReference, OneAndTwoSidedEmitters) { compare_with_cycles("emitters", 0.0); }
-TEST(CyclesReference, SmoothAndRoughConductors) { compare_with_cycles("metals", 0.0); }
-TEST(CyclesReference, SmoothAndRoughGlass) { compare_with_cycles("glass", 0.0); }
-TEST(CyclesReference, TexturedGltf) { compare_with_cycles("textured", 0.0); }
+TEST(CyclesReference, SmoothAndRoughConductors) { compare_with_cycles("metals", 0.006); }
+TEST(CyclesReference, SmoothAndRoughGlass) { compare_with_cycles("glass", 0.045); }
+TEST(CyclesReference, TexturedGltf) { compare_with_cycles("textured", 0.002); }
 TEST(CyclesReference, EnvironmentLight) { compare_with_cycles("environment", 0.0); }
 
 }  // namespace

@@ -18,7 +18,7 @@ import zlib
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SIZE = 128  # image width = height
-SPP_CI = 64  # rayforge samples per seed in the CI test
+SPP_CI = 256  # rayforge samples per seed in the CI test
 
 
 class Mesh:
