@@ -60,22 +60,18 @@ static __device__ const uint16_t kGgxDielectricAlbedoDataDevice[kGgxDielectricAl
     RF_GGX_DIELECTRIC_ALBEDO_DATA};
 #endif
 
+// The host or the device copy of a table, whichever the code runs on.
+#if defined(__CUDA_ARCH__)
+#define RF_ALBEDO_TABLE(name) name##Device
+#else
+#define RF_ALBEDO_TABLE(name) name
+#endif
+
 // Stored entries, decoded to E.
-RF_HDI float ggx_albedo_entry(int index) {
-#if defined(__CUDA_ARCH__)
-    uint16_t v = kGgxAlbedoDataDevice[index];
-#else
-    uint16_t v = kGgxAlbedoData[index];
-#endif
-    return 1.0f - float(v) * (1.0f / kAlbedoEntryScale);
-}
+RF_HDI float decode_albedo_entry(uint16_t v) { return 1.0f - float(v) * (1.0f / kAlbedoEntryScale); }
+RF_HDI float ggx_albedo_entry(int index) { return decode_albedo_entry(RF_ALBEDO_TABLE(kGgxAlbedoData)[index]); }
 RF_HDI float ggx_dielectric_albedo_entry(int index) {
-#if defined(__CUDA_ARCH__)
-    uint16_t v = kGgxDielectricAlbedoDataDevice[index];
-#else
-    uint16_t v = kGgxDielectricAlbedoData[index];
-#endif
-    return 1.0f - float(v) * (1.0f / kAlbedoEntryScale);
+    return decode_albedo_entry(RF_ALBEDO_TABLE(kGgxDielectricAlbedoData)[index]);
 }
 
 // Continuous grid coordinate x in [0, n - 1] (clamped; NaN goes to 0) split

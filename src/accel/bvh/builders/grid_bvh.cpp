@@ -170,16 +170,7 @@ public:
         stages_.hierarchy_ms = ms_since(start);
         stages_.hierarchy_leaves = leaves_.size();
 
-        start = std::chrono::steady_clock::now();
-        finish_leaves();
-        stages_.leaf_finish_ms = ms_since(start);
-
-        start = std::chrono::steady_clock::now();
-        emit_canonical(bvh);
-        stages_.emission_ms = ms_since(start);
-        stages_.total_ms = ms_since(total_start);
-        frame_ = nullptr;
-        return bvh;
+        return finish_and_emit(std::move(bvh), total_start);
     }
 
     // Leaf finishing and emission of a hierarchy built elsewhere (the device).
@@ -200,6 +191,11 @@ public:
         leaf_refs_ = std::move(h.leaf_refs);
         stages_.references = refs_.size();
         stages_.hierarchy_leaves = leaves_.size();
+        return finish_and_emit(std::move(bvh), total_start);
+    }
+
+    // The stages both paths share: leaf finishing and canonical emission.
+    Bvh finish_and_emit(Bvh bvh, std::chrono::steady_clock::time_point total_start) {
         auto start = std::chrono::steady_clock::now();
         finish_leaves();
         stages_.leaf_finish_ms = ms_since(start);
