@@ -13,3 +13,17 @@ find_package(embree 3 QUIET)
 if(embree_FOUND)
   message(STATUS "rayforge: Embree ${embree_VERSION} found (benchmark peer)")
 endif()
+
+# The viewer's window (apps/viewer): GLFW 3.3, OpenGL and Dear ImGui 1.86
+# with its GLFW and OpenGL 3 backends (libimgui-dev). Optional: without
+# them `rayforge view` says how to install them.
+find_package(OpenGL QUIET)
+pkg_check_modules(GLFW3 QUIET IMPORTED_TARGET glfw3>=3.3)
+pkg_check_modules(IMGUI QUIET IMPORTED_TARGET imgui)
+if(OpenGL_FOUND AND GLFW3_FOUND AND IMGUI_FOUND)
+  set(RAYFORGE_HAS_VIEWER ON)
+  message(STATUS "rayforge: viewer ON (GLFW ${GLFW3_VERSION}, Dear ImGui ${IMGUI_VERSION})")
+else()
+  set(RAYFORGE_HAS_VIEWER OFF)
+  message(STATUS "rayforge: viewer OFF (needs libglfw3-dev, libimgui-dev and OpenGL; scripts/setup-deps.sh)")
+endif()

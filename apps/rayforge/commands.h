@@ -4,8 +4,11 @@
 
 #include <CLI/CLI.hpp>
 
+#include <chrono>
+
 #include "accel_options.h"
 #include "device_options.h"
+#include "render_setup.h"
 
 #include <string>
 #include <vector>
@@ -13,6 +16,9 @@
 namespace rf::cli {
 
 inline constexpr const char* kVersion = RAYFORGE_VERSION;  // project(VERSION) in CMakeLists.txt
+
+// When this process started (for the viewer's time to its first image).
+std::chrono::steady_clock::time_point launch_time();
 
 struct InfoArgs {
     std::string scene;  // a file or builtin:NAME (e.g. builtin:cornell); optional with --devices
@@ -22,56 +28,21 @@ struct InfoArgs {
 CLI::App* add_info_command(CLI::App& app, InfoArgs& args);
 int run_info(const InfoArgs& args);
 
-struct RenderArgs {
-    std::string scene;  // a file or builtin:NAME (e.g. builtin:cornell)
-    std::vector<std::string> outputs;  // one or more images; the format follows each extension
-    std::string resolution;   // "WxH"
-    int spp = 1;
-    std::string integrator;
-    std::string camera;       // "ex,ey,ez,tx,ty,tz,ux,uy,uz,fov"
-    int threads = 0;
-    int max_depth = 8;
-    int rr_depth = 3;
-    std::string light_sampling = "mis";
-    float clamp = 0.0f;
-    int reflection_depth = 1;
-    int refraction_depth = 2;
-    std::string shading = "lambert";
-    double time_budget_s = 0.0;
-    int save_every = 0;       // write the outputs every N passes (0 = only at the end)
-    float ao_radius = 0.0f;
-    int ao_samples = 16;
-    float exposure = 1.0f;
-    std::string tonemap = "clamp";
-    std::vector<std::string> aovs;    // albedo, normal, depth
-    unsigned seed = 0;
-    AccelArgs accel;
-    std::vector<std::string> lights;  // "x,y,z[,intensity]" point lights added to the scene
-    std::string environment;          // "r,g,b" constant environment radiance
-    std::string environment_map;      // an equirectangular image, or builtin:sky
-    float environment_strength = 1.0f;
-    bool no_headlight = false;
-    bool quiet = false;
-    std::string device = "cpu";       // cpu | cuda | cuda:N
-    std::string gpu_kernel;           // "" = rf::kDefaultGpuKernel
-    std::string build_on;             // --build-on device|host ("" = device), with --device cuda
-    bool wavefront = false;           // CPU path tracer: wavefront passes
-    bool sort_rays = false;           // CPU wavefront: sort rays before tracing
-    // Options whose presence overrides the scene file's render settings.
-    CLI::Option* resolution_opt = nullptr;
-    CLI::Option* spp_opt = nullptr;
-    CLI::Option* integrator_opt = nullptr;
-    CLI::Option* max_depth_opt = nullptr;
-    CLI::Option* ao_radius_opt = nullptr;
-    CLI::Option* environment_strength_opt = nullptr;
-    CLI::Option* rr_depth_opt = nullptr;
-    CLI::Option* light_sampling_opt = nullptr;
-    CLI::Option* reflection_depth_opt = nullptr;
-    CLI::Option* refraction_depth_opt = nullptr;
-    CLI::Option* shading_opt = nullptr;
-};
 CLI::App* add_render_command(CLI::App& app, RenderArgs& args);
 int run_render(const RenderArgs& args);
+
+// `rayforge view`: the render options plus the viewer's own.
+struct ViewArgs {
+    RenderArgs render;
+    std::string script;         // --script FILE: commands run unattended
+    std::string bookmarks;      // --bookmarks FILE (default: rayforge-bookmarks.json)
+    std::string window;         // --window WxH ("" = the image size)
+    std::string motion_scale = "auto";  // --motion-scale auto|N
+    std::string scenes_dir;     // --scenes-dir: the views.json folder
+    double script_timeout_s = 120.0;
+};
+CLI::App* add_view_command(CLI::App& app, ViewArgs& args);
+int run_view(const ViewArgs& args);
 
 struct BuildArgs {
     std::string scene;       // a file or builtin:NAME

@@ -2,11 +2,19 @@
 // (reported as one line "rayforge: error: <message>" on stderr), 2 a usage error.
 #include <CLI/CLI.hpp>
 
+#include <chrono>
 #include <exception>
 #include <iostream>
 #include <string>
 
 #include "commands.h"
+
+namespace rf::cli {
+namespace {
+const std::chrono::steady_clock::time_point kLaunched = std::chrono::steady_clock::now();
+}  // namespace
+std::chrono::steady_clock::time_point launch_time() { return kLaunched; }
+}  // namespace rf::cli
 
 namespace {
 
@@ -32,6 +40,8 @@ int main(int argc, char** argv) {
     CLI::App* build = rf::cli::add_build_command(app, build_args);
     rf::cli::BenchArgs bench_args;
     CLI::App* bench = rf::cli::add_bench_command(app, bench_args);
+    rf::cli::ViewArgs view_args;
+    CLI::App* view = rf::cli::add_view_command(app, view_args);
 
     try {
         app.parse(argc, argv);
@@ -50,6 +60,7 @@ int main(int argc, char** argv) {
         if (info->parsed()) return rf::cli::run_info(info_args);
         if (render->parsed()) return rf::cli::run_render(render_args);
         if (build->parsed()) return rf::cli::run_build(build_args);
+        if (view->parsed()) return rf::cli::run_view(view_args);
         if (bench->parsed()) {
             std::string command_line = "rayforge";
             for (int i = 1; i < argc; ++i) command_line += std::string(" ") + argv[i];

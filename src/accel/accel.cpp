@@ -76,7 +76,8 @@ constexpr size_t kMaxTriangles = 0x7FFFFFFF;
 
 }  // namespace
 
-std::unique_ptr<Accel> cpu::build_accel(const SceneGeometry& geometry, const BuildOptions& options) {
+std::unique_ptr<Accel> cpu::build_accel(const SceneGeometry& geometry, const BuildOptions& options,
+                                        const ProgressCallback& progress) {
     // Node indices are 32-bit and a BVH over n triangles may need 2n - 1 nodes.
     if (geometry.triangles.size() > kMaxTriangles) {
         throw Error("build_accel: " + std::to_string(geometry.triangles.size()) +
@@ -85,7 +86,10 @@ std::unique_ptr<Accel> cpu::build_accel(const SceneGeometry& geometry, const Bui
     switch (options.structure) {
         case Structure::Bvh: {
             const auto start = std::chrono::steady_clock::now();
-            Bvh bvh = build_bvh_on_cpu(geometry.triangles, options);  // on options.threads threads
+            // The tree is most of the work; the layout conversion is the rest.
+            ProgressMeter meter(progress, double(geometry.triangles.size()), 0.0, 0.9);
+            Bvh bvh = build_bvh_on_cpu(geometry.triangles, options, &meter);  // on options.threads threads
+            meter.finish();
             const double build_ms =
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
             std::string name = "bvh/" + to_string(options.builder) + (options.reinsertion.enabled ? "+opt" : "") +
@@ -115,9 +119,14 @@ Structure structure_of(GpuKernel kernel) {
     return Structure::Bvh;
 }
 
-std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options) {
+std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options,
+                                   const ProgressCallback& progress) {
     validate_build_options(options);
-    return options.device.is_cuda() ? cuda::build_accel(geometry, options) : cpu::build_accel(geometry, options);
+    if (progress) progress(0.0);
+    std::unique_ptr<Accel> accel = options.device.is_cuda() ? cuda::build_accel(geometry, options)
+                                                            : cpu::build_accel(geometry, options, progress);
+    if (progress) progress(1.0);
+    return accel;
 }
 
 Bvh build_bvh(std::span<const Triangle> triangles, const BuildOptions& options, BuildReport* report) {

@@ -1,6 +1,6 @@
 // The device seam: what each backend gives the engine. The public entry
 // points (rf::build_accel, rf::build_bvh, rf::make_renderer,
-// rf::list_cuda_devices, rf::require_device) pick the backend from an
+// rf::list_cuda_devices, rf::require_device, rf::register_gl_pixel_buffer) pick the backend from an
 // rf::Device and call these; nothing else in the library, the bench or the
 // apps names a backend. The CUDA functions are defined by src/backend/cuda,
 // or, in a build without it, by backend/cuda_unavailable.cpp, where each
@@ -14,6 +14,7 @@
 #include "rayforge/accel/build_report.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/backend/device.h"
+#include "rayforge/render/display.h"
 #include "rayforge/render/render.h"
 
 namespace rf {
@@ -24,7 +25,10 @@ inline constexpr const char* kCudaNotBuilt =
 
 namespace cpu {
 
-std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options);
+// `progress` sees the fraction of a BVH build (the top-down SAH builders
+// count references placed in leaves); other structures report nothing.
+std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options,
+                                   const ProgressCallback& progress = {});
 std::unique_ptr<Renderer> make_renderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
                                         const Camera& camera, const RenderOptions& options);
 
@@ -43,6 +47,8 @@ Bvh build_bvh(std::span<const Triangle> triangles, const BuildOptions& options, 
 // A renderer for an accel from cuda::build_accel.
 std::unique_ptr<Renderer> make_renderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
                                         const Camera& camera, const RenderOptions& options);
+// OpenGL buffer `gl_buffer` of the current context registered on device `index`.
+std::unique_ptr<GlPixelBuffer> register_gl_pixel_buffer(int index, unsigned int gl_buffer);
 
 }  // namespace cuda
 }  // namespace rf

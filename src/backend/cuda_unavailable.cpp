@@ -19,4 +19,8 @@ std::unique_ptr<Renderer> make_renderer(const Scene&, const SceneGeometry&, cons
     throw Error(to_string(options.device) + ": " + kCudaNotBuilt);
 }
 
+std::unique_ptr<GlPixelBuffer> register_gl_pixel_buffer(int index, unsigned int) {
+    throw Error("cuda:" + std::to_string(index) + ": " + kCudaNotBuilt);
+}
+
 }  // namespace rf::cuda

@@ -27,6 +27,7 @@
 #include "rayforge/core/error.h"
 #include "rayforge/io/image_io.h"
 #include "math/color.h"
+#include "render/tone_map.h"
 
 namespace rf {
 namespace {
@@ -69,29 +70,10 @@ std::vector<float> scaled_rgb(const Image& image, float exposure) {
     return rgb;
 }
 
-// Display value in [0, 1] -> 8-bit sRGB code.
-uint8_t encode_srgb8(float display) { return uint8_t(std::lround(linear_to_srgb(display) * 255.0f)); }
-
-// Narkowicz's fit; 2.51 / 2.43 > 1, so it reaches 1 at a finite input (about 7.24)
-// and the clamp makes it saturate there.
-float aces_narkowicz(float x) {
-    x = std::fmin(x, 100.0f);  // already 1 there; keeps x * x from overflowing to inf / inf
-    const float mapped = (x * (2.51f * x + 0.03f)) / (x * (2.43f * x + 0.59f) + 0.14f);
-    return std::clamp(mapped, 0.0f, 1.0f);
-}
-
-// NaN and negatives (from filtering or a broken sample) are black; +inf is
-// replaced by a huge finite value so the curves treat it as very bright.
-float sanitize(float v) {
-    if (!(v > 0.0f)) return 0.0f;  // also NaN
-    return std::fmin(v, 1e30f);
-}
-
 void write_png(const std::string& path, const Image& image, const ToneMapping& tone) {
     std::vector<uint8_t> bytes(image.pixels.size() * 3);
     for (size_t i = 0; i < image.pixels.size(); ++i) {
-        const Vec3f display = apply_tone_curve(image.pixels[i] * tone.exposure, tone.curve);
-        for (int k = 0; k < 3; ++k) bytes[3 * i + size_t(k)] = encode_srgb8(display[k]);
+        tone_map_pixel(image.pixels[i], tone, &bytes[3 * i]);
     }
     if (!stbi_write_png(path.c_str(), image.width, image.height, 3, bytes.data(), image.width * 3))
         throw file_error(path, 0, "cannot write PNG file");
@@ -204,21 +186,6 @@ std::string to_string(ToneCurve curve) {
         case ToneCurve::Aces: return "aces";
     }
     return "unknown";
-}
-
-Vec3f apply_tone_curve(Vec3f color, ToneCurve curve) {
-    const Vec3f c(sanitize(color.x), sanitize(color.y), sanitize(color.z));
-    switch (curve) {
-        case ToneCurve::Clamp: break;
-        case ToneCurve::Reinhard: {
-            const float l = luminance(c);
-            if (!(l > 0.0f)) return Vec3f(0.0f);  // pure black (a pure blue of tiny luminance still has l > 0)
-            const Vec3f scaled = c * (1.0f / (1.0f + l));  // = c * (l / (1 + l)) / l
-            return {std::fmin(scaled.x, 1.0f), std::fmin(scaled.y, 1.0f), std::fmin(scaled.z, 1.0f)};
-        }
-        case ToneCurve::Aces: return {aces_narkowicz(c.x), aces_narkowicz(c.y), aces_narkowicz(c.z)};
-    }
-    return {std::fmin(c.x, 1.0f), std::fmin(c.y, 1.0f), std::fmin(c.z, 1.0f)};
 }
 
 void write_image(const std::string& path, const Image& image, float exposure) {

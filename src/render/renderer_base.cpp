@@ -31,18 +31,23 @@ void RendererBase::restart() {
     last_ = {};
 }
 
-void RendererBase::render_pass(const ProgressCallback& progress) {
+bool RendererBase::render_pass(const ProgressCallback& progress, const std::atomic<bool>* cancel) {
     const Clock::time_point start = Clock::now();
     PassStats pass;
-    run_pass(progress, nullptr, pass);
+    if (!run_pass(progress, nullptr, cancel, pass)) {
+        reset_films();  // part of a pass was added: start over, as set_camera does
+        restart();
+        return false;
+    }
     pass.pass_ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
     finish_pass(pass);
+    return true;
 }
 
 void RendererBase::run_recorded_pass(std::vector<TracedRay>& log) {
     const Clock::time_point start = Clock::now();
     PassStats pass;
-    run_pass({}, &log, pass);
+    run_pass({}, &log, nullptr, pass);
     pass.pass_ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
     finish_pass(pass);
 }

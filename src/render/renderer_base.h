@@ -2,10 +2,11 @@
 // the options and camera with the integrator settings derived from them,
 // the host shading tables, the pass count and statistics, and the restarts
 // of set_camera, set_options and scene_changed. A backend supplies only its
-// films and its pass: backend/cpu/cpu_renderer.cpp (tiles and the CPU
-// wavefront) and backend/cuda/renderer.cu (kernels).
+// films, its pass and its display image: backend/cpu/cpu_renderer.cpp (tiles
+// and the CPU wavefront) and backend/cuda/renderer.cu (kernels).
 #pragma once
 
+#include <atomic>
 #include <memory>
 #include <vector>
 
@@ -17,7 +18,7 @@ namespace rf {
 
 class RendererBase : public Renderer {
 public:
-    void render_pass(const ProgressCallback& progress) final;
+    bool render_pass(const ProgressCallback& progress, const std::atomic<bool>* cancel) final;
     void render_pass_recorded(std::vector<TracedRay>& rays) override;  // throws unless a backend records
     [[nodiscard]] int passes() const final { return passes_; }
     [[nodiscard]] const RenderOptions& options() const final { return options_; }
@@ -42,7 +43,10 @@ protected:
 
     // Adds one sample per pixel (sample index passes()) to the films,
     // filling `stats` (rays, waves); `log`, when given, gets every query.
-    virtual void run_pass(const ProgressCallback& progress, std::vector<TracedRay>* log, PassStats& stats) = 0;
+    // Returns false when it saw `cancel` set and stopped early (the films
+    // then hold part of a pass; render_pass restarts them).
+    virtual bool run_pass(const ProgressCallback& progress, std::vector<TracedRay>* log,
+                          const std::atomic<bool>* cancel, PassStats& stats) = 0;
     // The per-pixel sums of a film (an empty image when it is off).
     [[nodiscard]] virtual Image film_sums(Film film) const = 0;
     // Films sized for options() and zeroed.

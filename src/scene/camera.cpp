@@ -1,6 +1,9 @@
 #include "rayforge/scene/camera.h"
 
 #include <cmath>
+#include <cstdio>
+#include <sstream>
+#include <vector>
 
 #include "rayforge/core/error.h"
 
@@ -28,6 +31,43 @@ CameraFrame CameraFrame::make(const Camera& camera, int width, int height) {
     f.focus_distance = camera.focus_distance > 0.0f ? camera.focus_distance : distance;
     if (f.aperture_radius < 0.0f) throw Error("camera: aperture radius must not be negative");
     return f;
+}
+
+std::string to_string(const Camera& c) {
+    const float values[10] = {c.eye.x, c.eye.y, c.eye.z, c.target.x, c.target.y, c.target.z,
+                              c.up.x,  c.up.y,  c.up.z,  c.vfov_degrees};
+    std::string text;
+    for (float v : values) {
+        char number[32];
+        std::snprintf(number, sizeof number, "%.9g", double(v));  // 9 digits: any float reads back exactly
+        text += (text.empty() ? "" : ",") + std::string(number);
+    }
+    return text;
+}
+
+Camera parse_camera(const std::string& text) {
+    std::vector<float> v;
+    std::stringstream ss(text);
+    std::string item;
+    const Error malformed("camera: expected ex,ey,ez,tx,ty,tz,ux,uy,uz,fov (ten numbers), got '" + text + "'");
+    while (std::getline(ss, item, ',')) {
+        try {
+            size_t used = 0;
+            const float value = std::stof(item, &used);
+            while (used < item.size() && item[used] == ' ') ++used;
+            if (used != item.size() || !std::isfinite(value)) throw malformed;
+            v.push_back(value);
+        } catch (const std::logic_error&) {  // std::stof: not a number, or out of range
+            throw malformed;
+        }
+    }
+    if (v.size() != 10 || (!text.empty() && text.back() == ',')) throw malformed;
+    Camera c;
+    c.eye = {v[0], v[1], v[2]};
+    c.target = {v[3], v[4], v[5]};
+    c.up = {v[6], v[7], v[8]};
+    c.vfov_degrees = v[9];
+    return c;
 }
 
 }  // namespace rf

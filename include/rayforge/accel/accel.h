@@ -12,6 +12,7 @@
 #include "rayforge/accel/build_report.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/backend/device.h"
+#include "rayforge/core/progress.h"
 #include "rayforge/math/ray.h"
 #include "rayforge/scene/scene_geometry.h"
 
@@ -170,9 +171,14 @@ public:
 // the result, on options.device: the CPU, or a CUDA device (where the
 // structure is built on the device when options.build_on_device is set and
 // the builder has a device version, and is traced by options.gpu_kernel;
-// batches of host rays are then copied there and back). Throws rf::Error for
-// invalid options or a device that cannot be used.
-std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options = {});
+// batches of host rays are then copied there and back). `progress` sees
+// the fraction done, 0 first and 1 last: in between, a CPU BVH from the
+// binned, sweep or SBVH builder reports the references placed in leaves
+// (up to 0.9, the layout conversion being the rest); other structures and
+// devices report only 0 and 1. It is called on the building thread. Throws
+// rf::Error for invalid options or a device that cannot be used.
+std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options = {},
+                                   const ProgressCallback& progress = {});
 
 // The canonical BVH of options.builder over `triangles` (the reinsertion
 // optimizer after it when asked), on options.device: a CUDA device runs the

@@ -4,6 +4,7 @@
 // pass, and a camera, options or scene that may change between passes).
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -12,8 +13,11 @@
 
 #include "rayforge/accel/accel.h"
 #include "rayforge/backend/device.h"
+#include "rayforge/core/progress.h"
+#include "rayforge/render/display.h"
 #include "rayforge/render/image.h"
 #include "rayforge/render/integrators.h"
+#include "rayforge/render/tone_mapping.h"
 #include "rayforge/scene/scene.h"
 #include "rayforge/scene/scene_geometry.h"
 
@@ -48,9 +52,6 @@ struct RenderOptions {
     float ao_radius = 0.0f;      // 0 = 10% of the scene diagonal
     int ao_samples = 16;         // rays per primary hit per sample
 };
-
-// Called from one thread at a time with the fraction done (0..1).
-using ProgressCallback = std::function<void(double fraction)>;
 
 // Counts of what a render traced, summed over passes.
 struct RenderStats {
@@ -100,8 +101,12 @@ public:
     virtual ~Renderer() = default;
 
     // Adds one sample per pixel (sample index = passes()); `progress` sees
-    // the fraction of this pass.
-    virtual void render_pass(const ProgressCallback& progress = {}) = 0;
+    // the fraction of this pass. When `cancel` is given and another thread
+    // sets it, the pass stops early (the CPU checks it between 16x16 tiles
+    // and wavefront chunks, a CUDA device before each pass's launches),
+    // accumulation restarts as after set_camera, and render_pass returns
+    // false; it returns true for a finished pass. The flag is only read.
+    virtual bool render_pass(const ProgressCallback& progress = {}, const std::atomic<bool>* cancel = nullptr) = 0;
     // render_pass that also returns every query the pass made (CPU only: a
     // CUDA renderer throws rf::Error).
     virtual void render_pass_recorded(std::vector<TracedRay>& rays) = 0;
@@ -120,6 +125,15 @@ public:
     [[nodiscard]] virtual Image albedo() const = 0;
     [[nodiscard]] virtual Image normal() const = 0;
     [[nodiscard]] virtual Image depth() const = 0;
+
+    // A display image on this renderer's device (empty until update_display).
+    [[nodiscard]] virtual std::unique_ptr<DisplayImage> make_display_image() const = 0;
+    // The mean of the passes so far, tone-mapped to 8-bit sRGB exactly as a
+    // PNG of image() written with `tone` (the device's sRGB encoding may
+    // differ from the host's by one code), into `display` (resized to the
+    // image; it must come from make_display_image of a renderer on the same
+    // device). Call it from the thread that runs the passes.
+    virtual void update_display(DisplayImage& display, const ToneMapping& tone) const = 0;
 
     // Each of these restarts accumulation (no passes, no stats, black films).
     // The camera moved:

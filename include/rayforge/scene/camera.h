@@ -1,6 +1,8 @@
 // Perspective camera with optional thin lens, and primary ray generation.
 #pragma once
 
+#include <string>
+
 #include "rayforge/math/ray.h"
 #include "rayforge/math/vec.h"
 
@@ -14,6 +16,14 @@ struct Camera {
     float aperture_radius = 0.0f;  // 0 = pinhole
     float focus_distance = 0.0f;   // 0 = distance from eye to target
 };
+
+// The camera's command-line form "ex,ey,ez,tx,ty,tz,ux,uy,uz,fov" (eye,
+// target, up, vertical field of view in degrees): to_string writes it with
+// enough digits to read back the same floats; parse_camera reads exactly
+// ten finite comma-separated numbers (spaces after a number allowed) and
+// throws rf::Error otherwise. Lens settings are not part of it.
+std::string to_string(const Camera& camera);
+Camera parse_camera(const std::string& text);
 
 // Precomputed camera frame; generate() is per-ray code shared by both backends.
 struct CameraFrame {

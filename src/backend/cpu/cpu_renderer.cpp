@@ -15,8 +15,10 @@
 #include "backend/backends.h"
 #include "backend/cpu/accel_tracer.h"
 #include "backend/cpu/cpu_wavefront.h"
+#include "backend/cpu/host_display_image.h"
 #include "backend/cpu/parallel.h"
 #include "core/assert.h"
+#include "rayforge/core/error.h"
 #include "render/counting_tracer.h"
 #include "render/pixel_sample.h"
 #include "render/renderer_base.h"
@@ -205,19 +207,32 @@ public:
         run_recorded_pass(rays);
     }
 
+    [[nodiscard]] std::unique_ptr<DisplayImage> make_display_image() const override {
+        return std::make_unique<HostDisplayImage>();
+    }
+
+    void update_display(DisplayImage& display, const ToneMapping& tone) const override {
+        auto* host = dynamic_cast<HostDisplayImage*>(&display);
+        if (!host) throw Error("update_display: the display image is not a CPU one (make it with this renderer)");
+        parallel::with_threads(options().threads, [&] { host->assign(image(), tone); });
+    }
+
 private:
-    void run_pass(const ProgressCallback& progress, std::vector<TracedRay>* log, PassStats& stats) override {
+    bool run_pass(const ProgressCallback& progress, std::vector<TracedRay>* log, const std::atomic<bool>* cancel,
+                  PassStats& stats) override {
         const RenderOptions& o = options();
         // A recorded pass is traced path by path, so its log keeps tile order
         // (the wavefront renders the same image).
-        parallel::with_threads(o.threads, [&] {
-            if (o.integrator == IntegratorKind::Path && o.wavefront && !log) wavefront_pass(progress, stats);
-            else tile_pass(progress, log, stats);
+        return parallel::with_threads(o.threads, [&] {
+            if (o.integrator == IntegratorKind::Path && o.wavefront && !log)
+                return wavefront_pass(progress, cancel, stats);
+            return tile_pass(progress, log, cancel, stats);
         });
     }
 
-    void tile_pass(const ProgressCallback& progress, std::vector<TracedRay>* log, PassStats& stats);
-    void wavefront_pass(const ProgressCallback& progress, PassStats& stats);
+    bool tile_pass(const ProgressCallback& progress, std::vector<TracedRay>* log, const std::atomic<bool>* cancel,
+                   PassStats& stats);
+    bool wavefront_pass(const ProgressCallback& progress, const std::atomic<bool>* cancel, PassStats& stats);
 
     [[nodiscard]] Films films() {
         if (albedo_.empty()) return {color_.data(), nullptr, nullptr, nullptr};
@@ -247,7 +262,8 @@ private:
     std::vector<Vec3f> color_, albedo_, normal_, depth_;
 };
 
-void CpuRenderer::tile_pass(const ProgressCallback& progress, std::vector<TracedRay>* log, PassStats& stats) {
+bool CpuRenderer::tile_pass(const ProgressCallback& progress, std::vector<TracedRay>* log,
+                            const std::atomic<bool>* cancel, PassStats& stats) {
     const IntegratorSettings& s = settings();
     const int tiles_x = (s.width + kTileSize - 1) / kTileSize;
     const int tile_count = tiles_x * ((s.height + kTileSize - 1) / kTileSize);
@@ -258,7 +274,12 @@ void CpuRenderer::tile_pass(const ProgressCallback& progress, std::vector<Traced
     int tiles_done = 0;
     std::mutex progress_mutex;
 
+    std::atomic<bool> cancelled{false};
     const auto render_tile = [&](int tile) {
+        if (cancel && cancel->load(std::memory_order_relaxed)) {
+            cancelled.store(true, std::memory_order_relaxed);
+            return;
+        }
         uint64_t closest = 0, shadow = 0;
         const AccelTracer inner{&accel(), log ? &tile_logs[size_t(tile)] : nullptr};
         const Tracer tracer{inner, &closest, &shadow};
@@ -280,14 +301,17 @@ void CpuRenderer::tile_pass(const ProgressCallback& progress, std::vector<Traced
     stats.shadow_rays = tally.shadow.load();
     if (log)
         for (const auto& tile : tile_logs) log->insert(log->end(), tile.begin(), tile.end());
+    return !cancelled.load();
 }
 
-void CpuRenderer::wavefront_pass(const ProgressCallback& progress, PassStats& stats) {
+bool CpuRenderer::wavefront_pass(const ProgressCallback& progress, const std::atomic<bool>* cancel,
+                                 PassStats& stats) {
     const IntegratorSettings& s = settings();
     const uint32_t pixels = uint32_t(s.width) * uint32_t(s.height);
     CpuWavefront wavefront(accel(), tables().view(), s, uint32_t(passes()), films(),
                            std::min(pixels, kWavefrontChunkPaths));
     for (uint32_t first = 0; first < pixels; first += kWavefrontChunkPaths) {
+        if (cancel && cancel->load(std::memory_order_relaxed)) return false;
         const uint32_t count = std::min(kWavefrontChunkPaths, pixels - first);
         wavefront.start_chunk(first);
         run_wavefront(wavefront, s, count, stats.waves);
@@ -296,6 +320,7 @@ void CpuRenderer::wavefront_pass(const ProgressCallback& progress, PassStats& st
     stats.closest_rays = wavefront.tally.closest.load();
     stats.shadow_rays = wavefront.tally.shadow.load();
     stats.sort_ms = wavefront.sort_ms;
+    return true;
 }
 
 }  // namespace

@@ -26,6 +26,7 @@
 #include "backend/cuda/cuda_accel.h"
 #include "backend/cuda/device_scene.h"
 #include "backend/cuda/device_tracer_impl.h"
+#include "backend/cuda/display_image.h"
 #include "backend/cuda/launch.h"
 #include "backend/cuda/pixel_kernels.h"
 #include "rayforge/core/error.h"
@@ -209,12 +210,29 @@ public:
         reset();
     }
 
+    [[nodiscard]] std::unique_ptr<DisplayImage> make_display_image() const override {
+        return std::make_unique<DeviceDisplayImage>(tracer_.device());
+    }
+
+    void update_display(DisplayImage& display, const ToneMapping& tone) const override {
+        auto* image = dynamic_cast<DeviceDisplayImage*>(&display);
+        if (!image || !(image->device() == device()))
+            throw Error("update_display: the display image is not one of " + to_string(device()) +
+                        " (make it with this renderer)");
+        const float scale = passes() > 0 ? 1.0f / float(passes()) : 0.0f;  // film_mean's scale
+        image->assign(color_.data(), scale, options().width, options().height, tone);
+    }
+
 private:
-    void run_pass(const ProgressCallback&, std::vector<TracedRay>*, PassStats& stats) override {
+    // One pass is a few launches: a cancel is seen before they start.
+    bool run_pass(const ProgressCallback&, std::vector<TracedRay>*, const std::atomic<bool>* cancel,
+                  PassStats& stats) override {
+        if (cancel && cancel->load(std::memory_order_relaxed)) return false;
         RF_CUDA_CHECK(cudaSetDevice(tracer_.device()));
         if (options().integrator == IntegratorKind::Path) path_pass(stats);
         else pixel_pass(stats);
         RF_CUDA_CHECK(cudaDeviceSynchronize());
+        return true;
     }
 
     void path_pass(PassStats& stats) {

@@ -16,8 +16,8 @@ namespace rf {
 
 namespace {
 
-Bvh run_builder(std::span<const Triangle> triangles, const BuildOptions& options) {
-    const BvhBuildConfig config = bvh_build_config(options);
+Bvh run_builder(std::span<const Triangle> triangles, const BuildOptions& options, ProgressMeter* progress) {
+    const BvhBuildConfig config = bvh_build_config(options, progress);
     switch (options.builder) {
         case Builder::BinnedSah: return build_binned_sah(triangles, config, options.binned);
         case Builder::SweepSah: return build_sweep_sah(triangles, config);
@@ -34,9 +34,9 @@ Bvh run_builder(std::span<const Triangle> triangles, const BuildOptions& options
 
 }  // namespace
 
-Bvh build_bvh_on_cpu(std::span<const Triangle> triangles, const BuildOptions& options) {
+Bvh build_bvh_on_cpu(std::span<const Triangle> triangles, const BuildOptions& options, ProgressMeter* progress) {
     return parallel::with_threads(options.threads, [&] {
-        Bvh bvh = run_builder(triangles, options);
+        Bvh bvh = run_builder(triangles, options, progress);
         if (options.reinsertion.enabled) optimize_reinsertion(bvh, triangles, options.sah, options.reinsertion);
         return bvh;
     });

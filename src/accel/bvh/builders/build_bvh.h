@@ -7,6 +7,7 @@
 
 #include <span>
 
+#include "core/progress_meter.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/accel/bvh/bvh.h"
 
@@ -17,6 +18,9 @@ namespace rf {
 // siblings adjacent, depth <= kBvhMaxDepth, leaves of at most max_leaf_size
 // references. Builders with spatial splits (SBVH, GridBvhSplit) may reference
 // a triangle from several leaves; all others reference each exactly once.
-Bvh build_bvh_on_cpu(std::span<const Triangle> triangles, const BuildOptions& options);
+// `progress`, when given, counts the references placed in leaves by the
+// builders that report it (binned, sweep, SBVH); others report nothing.
+Bvh build_bvh_on_cpu(std::span<const Triangle> triangles, const BuildOptions& options,
+                     ProgressMeter* progress = nullptr);
 
 }  // namespace rf

@@ -107,7 +107,7 @@ template <class Builder, class Task, class Carry = NoCarry>
 class TopDownSahBuilder {
 protected:
     explicit TopDownSahBuilder(const BvhBuildConfig& config)
-        : max_leaf_size_(static_cast<uint32_t>(config.max_leaf_size)), sah_(config.sah) {}
+        : max_leaf_size_(static_cast<uint32_t>(config.max_leaf_size)), sah_(config.sah), progress_(config.progress) {}
 
     // Builds the tree over `root`, whose leaves hold at most `max_refs`
     // references in all, and returns it in the canonical layout.
@@ -195,6 +195,7 @@ private:
         nodes_[node].first = builder().place_leaf(task);
         nodes_[node].count = count;
         subtree_size_[node] = 1;
+        if (progress_) progress_->add(count);
         if constexpr (!Builder::kLeavesInPlace) subtree_slots_[node] = count;
         if constexpr (std::is_same_v<Carry, NoCarry>) {
             return {};
@@ -272,6 +273,7 @@ private:
 
     uint32_t max_leaf_size_;
     SahCosts sah_;
+    ProgressMeter* progress_;
     std::unique_ptr<ScratchNode[]> nodes_;       // in allocation order
     std::unique_ptr<uint32_t[]> subtree_size_;   // per node: nodes in its subtree
     std::unique_ptr<uint32_t[]> subtree_slots_;  // per node: leaf slots in its subtree (renumbering only)

@@ -1,0 +1,453 @@
+#include "session.h"
+
+#include <algorithm>
+#include <new>
+#include <utility>
+
+#include "rayforge/core/error.h"
+#include "rayforge/io/scene_io.h"
+
+namespace rf::viewer {
+namespace {
+
+constexpr double kPreviewTargetMs = 30.0;  // a preview pass this long keeps motion above 30 frames per second
+constexpr size_t kDisplayImages = 3;       // the window's, the published one, and one to fill
+
+double ms_since(Clock::time_point start) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+}  // namespace
+
+struct Session::Target {
+    std::shared_ptr<const SceneData> scene;
+    std::shared_ptr<const Accel> accel;
+};
+
+// What the render thread holds. The renderer refers to the target's scene
+// and structure, so it is declared after them and destroyed first.
+struct Session::RenderState {
+    std::shared_ptr<const Target> target;
+    std::unique_ptr<Renderer> renderer;
+    ViewSettings settings;
+    uint64_t settings_version = 0;
+    uint64_t target_version = 0;
+    Camera camera;
+    uint64_t camera_version = 0;
+    Clock::time_point camera_time;
+    bool moving = false;          // the renderer is set up for previews
+    bool preview_done = false;    // this camera's preview is published
+    bool halted = false;          // a pass failed: wait for a change
+    int motion_divisor = 2;
+    double full_pass_ms = 0.0;
+    uint64_t sequence = 0;
+    std::vector<std::shared_ptr<DisplayImage>> pool;
+
+    [[nodiscard]] bool wants_pass() const {
+        if (!renderer || halted) return false;
+        return moving ? !preview_done : renderer->passes() < renderer->options().spp;
+    }
+    [[nodiscard]] RenderOptions film() const {
+        RenderOptions o = film_options(settings, moving, motion_divisor);
+        o.device = target->accel->device();  // until a rebuild on another device is ready
+        return o;
+    }
+    // A display image no frame holds (the pool's reference is its only one).
+    std::shared_ptr<DisplayImage> free_image() {
+        for (const auto& image : pool)
+            if (image.use_count() == 1) return image;
+        pool.push_back(std::shared_ptr<DisplayImage>(renderer->make_display_image()));
+        if (pool.size() > kDisplayImages) pool.erase(pool.begin());  // only when the window holds on to old frames
+        return pool.back();
+    }
+};
+
+Session::Session(SessionConfig config) : config_(std::move(config)), settings_(config_.settings) {
+    job_thread_ = std::thread([this] { job_loop(); });
+    render_thread_ = std::thread([this] { render_loop(); });
+}
+
+Session::~Session() {
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        stopping_ = true;
+        cancel_.store(true);
+    }
+    render_cv_.notify_all();
+    job_cv_.notify_all();
+    job_thread_.join();  // a build under way finishes first: builders cannot be interrupted
+    render_thread_.join();
+}
+
+void Session::set_wake(std::function<void()> wake) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    wake_ = std::move(wake);
+}
+
+void Session::wake() {
+    std::function<void()> wake;
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        wake = wake_;
+    }
+    if (wake) wake();
+}
+
+void Session::report_error(const std::string& message) {
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        status_.error = message;
+        ++status_.error_count;
+    }
+    wake();
+}
+
+// ---- requests from the window's thread
+
+void Session::load(const SceneSource& source) {
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        queued_load_ = source;
+        queued_build_.reset();  // the load builds with the latest settings
+    }
+    job_cv_.notify_one();
+}
+
+void Session::set_settings(const ViewSettings& settings) {
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        const unsigned effects = changes_between(settings_, settings);
+        if (effects == 0) return;
+        settings_ = settings;
+        ++settings_version_;
+        if (effects & unsigned(Effect::Rebuild)) {
+            if (!queued_load_) queued_build_ = settings.build;
+            job_cv_.notify_one();
+        }
+        const unsigned now = effects & (unsigned(Effect::Restart) | unsigned(Effect::Retone));
+        if (now) {
+            pending_effects_ |= now;
+            cancel_.store(true);
+        }
+    }
+    render_cv_.notify_one();
+}
+
+void Session::set_camera(const Camera& camera, uint64_t scene_id, bool moving, Clock::time_point asked) {
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (!shown_scene_ || shown_scene_->id != scene_id) return;  // meant for a scene being replaced
+        camera_ = camera;
+        moving_ = moving;
+        camera_time_ = asked;
+        ++camera_version_;
+        // A preview pass is short and shows motion: let it finish.
+        if (!pass_is_preview_.load()) cancel_.store(true);
+    }
+    render_cv_.notify_one();
+}
+
+std::future<Image> Session::film() {
+    std::future<Image> result;
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        film_requests_.emplace_back();
+        result = film_requests_.back().get_future();
+    }
+    render_cv_.notify_one();
+    return result;
+}
+
+std::shared_ptr<const Frame> Session::frame() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return frame_;
+}
+
+std::shared_ptr<const SceneData> Session::scene() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return shown_scene_;
+}
+
+ViewSettings Session::settings() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return settings_;
+}
+
+Versions Session::versions() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return {camera_version_, settings_version_, target_version_, status_.busy || queued_load_ || queued_build_};
+}
+
+SessionStatus Session::status() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return status_;
+}
+
+// ---- the job thread
+
+void Session::job_loop() {
+    for (;;) {
+        std::optional<SceneSource> load;
+        std::optional<BuildOptions> build;
+        std::shared_ptr<const SceneData> scene;
+        {
+            std::unique_lock<std::mutex> lock(mutex_);
+            job_cv_.wait(lock, [&] { return stopping_ || queued_load_ || queued_build_; });
+            if (stopping_) return;
+            if (queued_load_) load = std::exchange(queued_load_, std::nullopt);
+            else build = std::exchange(queued_build_, std::nullopt);
+            scene = shown_scene_;
+            status_.busy = true;
+            status_.job_progress = 0.0;
+        }
+        const Clock::time_point start = Clock::now();
+        try {
+            if (load) run_load(*load);
+            else if (scene) run_build(scene, *build);
+        } catch (const Error& e) {
+            report_error(e.what());
+        } catch (const std::bad_alloc&) {
+            report_error(load ? load->name + ": out of memory while loading" : "out of memory while building");
+        }
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            status_.busy = queued_load_ || queued_build_;
+            status_.job_seconds = ms_since(start) * 1e-3;
+        }
+        wake();
+    }
+}
+
+namespace {
+
+// Reports a job's name and progress into the status.
+class JobProgress {
+public:
+    JobProgress(std::mutex& mutex, SessionStatus& status, const std::function<void()>& wake, std::string job)
+        : mutex_(mutex), status_(status), wake_(wake), start_(Clock::now()) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        status_.job = std::move(job);
+        status_.job_progress = 0.0;
+        status_.job_seconds = 0.0;
+    }
+    void operator()(double fraction) {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            status_.job_progress = fraction;
+            status_.job_seconds = ms_since(start_) * 1e-3;
+        }
+        if (wake_) wake_();
+    }
+
+private:
+    std::mutex& mutex_;
+    SessionStatus& status_;
+    const std::function<void()>& wake_;
+    Clock::time_point start_;
+};
+
+std::string structure_name(const BuildOptions& o) {
+    if (o.structure != Structure::Bvh) return to_string(o.structure);
+    return "bvh/" + to_string(o.builder) + (o.reinsertion.enabled ? "+opt" : "") + "/" + to_string(o.layout);
+}
+
+}  // namespace
+
+void Session::run_load(const SceneSource& source) {
+    std::function<void()> wake;
+    bool first = false;
+    ViewSettings settings;
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        wake = wake_;
+        first = first_load_;
+        settings = settings_;
+    }
+    auto data = std::make_shared<SceneData>();
+    data->source = source;
+    {
+        JobProgress progress(mutex_, status_, wake, "loading " + source.name);
+        progress(0.0);
+        const Clock::time_point start = Clock::now();
+        data->scene = load_scene(source.path);
+        data->geometry = SceneGeometry::build(data->scene);
+        data->load_ms = ms_since(start);
+    }
+    if (data->geometry.size() == 0) throw Error(source.name + ": the scene has no triangles to show");
+    data->size = length(data->geometry.bounds.extent());
+    data->camera = source.views.empty() ? data->scene.camera_or_default() : source.views.front();
+    if (config_.prepare) {
+        const ViewSettings before = settings;
+        config_.prepare(*data, first, settings);
+        if (changes_between(before, settings) != 0) {
+            std::lock_guard<std::mutex> lock(mutex_);
+            settings_ = settings;
+            ++settings_version_;
+            pending_effects_ |= unsigned(Effect::Restart);
+        }
+    }
+    const BuildOptions build = settings.build;
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        data->id = next_scene_id_++;
+        first_load_ = false;
+    }
+    JobProgress progress(mutex_, status_, wake, "building " + structure_name(build) + " for " + source.name);
+    std::shared_ptr<const Accel> accel = build_accel(data->geometry, build, std::ref(progress));
+    hand_over(std::move(data), std::move(accel));
+}
+
+void Session::run_build(std::shared_ptr<const SceneData> data, const BuildOptions& options) {
+    std::function<void()> wake;
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        wake = wake_;
+    }
+    JobProgress progress(mutex_, status_, wake, "building " + structure_name(options));
+    std::shared_ptr<const Accel> accel = build_accel(data->geometry, options, std::ref(progress));
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        // A newer request makes this structure stale before it is shown.
+        if (queued_load_ || queued_build_ || shown_scene_ != data) return;
+    }
+    hand_over(std::move(data), std::move(accel));
+}
+
+void Session::hand_over(std::shared_ptr<const SceneData> data, std::shared_ptr<const Accel> accel) {
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        status_.accel = accel->stats();
+        status_.accel_device = accel->device();
+        if (shown_scene_ != data) {
+            shown_scene_ = data;
+            camera_ = data->camera;
+            moving_ = false;
+            camera_time_ = Clock::now();
+            ++camera_version_;
+            status_.scene_name = data->source.name;
+            status_.triangles = data->geometry.size();
+            status_.load_ms = data->load_ms;
+        }
+        new_target_ = std::make_shared<const Target>(Target{std::move(data), std::move(accel)});
+        ++target_version_;
+        cancel_.store(true);
+    }
+    render_cv_.notify_one();
+    wake();
+}
+
+// ---- the render thread
+
+void Session::render_loop() {
+    RenderState st;
+    for (;;) {
+        std::shared_ptr<const Target> target;
+        unsigned effects = 0;
+        bool camera_changed = false;
+        bool was_moving = st.moving;
+        std::vector<std::promise<Image>> films;
+        {
+            std::unique_lock<std::mutex> lock(mutex_);
+            render_cv_.wait(lock, [&] {
+                return stopping_ || new_target_ || pending_effects_ || camera_version_ != st.camera_version ||
+                       !film_requests_.empty() || st.wants_pass();
+            });
+            if (stopping_) break;
+            cancel_.store(false);
+            target = std::exchange(new_target_, nullptr);
+            if (target) st.target_version = target_version_;
+            effects = std::exchange(pending_effects_, 0u);
+            films = std::move(film_requests_);
+            film_requests_.clear();
+            st.settings = settings_;
+            st.settings_version = settings_version_;
+            if (camera_version_ != st.camera_version) {
+                camera_changed = true;
+                st.camera = camera_;
+                st.camera_version = camera_version_;
+                st.camera_time = camera_time_;
+                st.moving = moving_;
+                st.preview_done = false;
+            }
+        }
+        if (target || effects || camera_changed) st.halted = false;
+        if (st.moving && !was_moving)  // a motion starts: size its previews
+            st.motion_divisor = st.settings.motion_divisor > 0 ? st.settings.motion_divisor
+                                                               : auto_motion_divisor(st.full_pass_ms, kPreviewTargetMs);
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            status_.motion_divisor = st.motion_divisor;
+        }
+        try {
+            if (target) {
+                // The new renderer first: if it cannot be made, the old one keeps rendering.
+                std::shared_ptr<const Target> previous = st.target;
+                st.target = target;
+                std::unique_ptr<Renderer> renderer;
+                try {
+                    renderer = make_renderer(target->scene->scene, target->scene->geometry, *target->accel, st.camera,
+                                             st.film());
+                } catch (...) {
+                    st.target = previous;
+                    throw;
+                }
+                st.renderer = std::move(renderer);  // the old renderer goes before its target
+                st.pool.clear();
+                previous.reset();
+            } else if (st.renderer) {
+                if (camera_changed) st.renderer->set_camera(st.camera);
+                if ((effects & unsigned(Effect::Restart)) || st.moving != was_moving ||
+                    st.renderer->options().width != st.film().width || st.renderer->options().height != st.film().height)
+                    st.renderer->set_options(st.film());
+            }
+        } catch (const Error& e) {
+            report_error(e.what());
+        }
+        for (std::promise<Image>& film : films) film.set_value(st.renderer ? st.renderer->image() : Image{});
+
+        bool publish = st.renderer && (effects & unsigned(Effect::Retone)) && st.renderer->passes() > 0;
+        if (st.wants_pass()) {
+            pass_is_preview_.store(st.moving);
+            try {
+                if (!st.renderer->render_pass({}, &cancel_)) continue;  // something changed: start over
+            } catch (const Error& e) {
+                st.halted = true;
+                report_error(e.what());
+                continue;
+            }
+            const PassStats& pass = st.renderer->last_pass();
+            if (st.moving) st.preview_done = true;
+            else st.full_pass_ms = pass.pass_ms;
+            publish = true;
+        }
+        if (!publish) continue;
+        try {
+            std::shared_ptr<DisplayImage> image = st.free_image();
+            st.renderer->update_display(*image, st.settings.tone);
+            auto frame = std::make_shared<Frame>();
+            frame->image = image;
+            frame->sequence = ++st.sequence;
+            frame->scene_id = st.target->scene->id;
+            frame->passes = st.renderer->passes();
+            frame->target_passes = st.renderer->options().spp;
+            frame->preview = st.moving;
+            frame->pass_ms = st.renderer->last_pass().pass_ms;
+            frame->pass_rays = st.renderer->last_pass().closest_rays + st.renderer->last_pass().shadow_rays;
+            frame->camera_version = st.camera_version;
+            frame->camera_time = st.camera_time;
+            frame->settings_version = st.settings_version;
+            frame->target_version = st.target_version;
+            {
+                std::lock_guard<std::mutex> lock(mutex_);
+                frame_ = std::move(frame);
+                status_.full_pass_ms = st.full_pass_ms;
+            }
+            wake();
+        } catch (const Error& e) {
+            st.halted = true;
+            report_error(e.what());
+        }
+    }
+}
+
+}  // namespace rf::viewer

@@ -1,0 +1,298 @@
+#include "view_settings.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+
+#include "rayforge/core/error.h"
+
+namespace rf::viewer {
+namespace {
+
+using Getter = std::function<std::string(const ViewSettings&)>;
+using Setter = std::function<void(ViewSettings&, const std::string&)>;
+
+struct Setting {
+    SettingInfo info;
+    Getter get;
+    Setter set;
+};
+
+std::string number_text(double v) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%.9g", v);
+    return text;
+}
+
+double parse_number(const std::string& text) {
+    size_t used = 0;
+    double v = 0.0;
+    try {
+        v = std::stod(text, &used);
+    } catch (const std::exception&) {
+        used = 0;
+    }
+    if (used == 0 || used != text.size() || !std::isfinite(v)) throw Error("expected a number, got '" + text + "'");
+    return v;
+}
+
+int parse_int(const std::string& text, int lo, int hi) {
+    const double v = parse_number(text);
+    if (v != std::floor(v) || v < lo || v > hi)
+        throw Error("expected a whole number in " + std::to_string(lo) + ".." + std::to_string(hi) + ", got '" + text +
+                    "'");
+    return int(v);
+}
+
+float parse_float(const std::string& text, double lo, double hi) {
+    const double v = parse_number(text);
+    if (v < lo || v > hi) throw Error("expected a number in " + number_text(lo) + ".." + number_text(hi) + ", got '" + text + "'");
+    return float(v);
+}
+
+bool parse_bool(const std::string& text) {
+    if (text == "on" || text == "true" || text == "1" || text == "yes") return true;
+    if (text == "off" || text == "false" || text == "0" || text == "no") return false;
+    throw Error("expected on or off, got '" + text + "'");
+}
+
+std::string bool_text(bool b) { return b ? "on" : "off"; }
+
+// A setting over an int field.
+Setting int_setting(std::string key, std::string group, Effect effect, int lo, int hi, std::string help,
+                    std::function<int&(ViewSettings&)> field) {
+    return {{std::move(key), std::move(group), effect, {}, std::move(help)},
+            [field](const ViewSettings& s) { return std::to_string(field(const_cast<ViewSettings&>(s))); },
+            [field, lo, hi](ViewSettings& s, const std::string& v) { field(s) = parse_int(v, lo, hi); }};
+}
+
+Setting float_setting(std::string key, std::string group, Effect effect, double lo, double hi, std::string help,
+                      std::function<float&(ViewSettings&)> field) {
+    return {{std::move(key), std::move(group), effect, {}, std::move(help)},
+            [field](const ViewSettings& s) { return number_text(field(const_cast<ViewSettings&>(s))); },
+            [field, lo, hi](ViewSettings& s, const std::string& v) { field(s) = parse_float(v, lo, hi); }};
+}
+
+Setting bool_setting(std::string key, std::string group, Effect effect, std::string help,
+                     std::function<bool&(ViewSettings&)> field) {
+    return {{std::move(key), std::move(group), effect, {"on", "off"}, std::move(help)},
+            [field](const ViewSettings& s) { return bool_text(field(const_cast<ViewSettings&>(s))); },
+            [field](ViewSettings& s, const std::string& v) { field(s) = parse_bool(v); }};
+}
+
+// A setting over an enumeration with the engine's own parse / to_string.
+template <class Enum, class Parse, class Print>
+Setting enum_setting(std::string key, std::string group, Effect effect, std::vector<std::string> choices,
+                     std::string help, std::function<Enum&(ViewSettings&)> field, Parse parse, Print print) {
+    return {{std::move(key), std::move(group), effect, std::move(choices), std::move(help)},
+            [field, print](const ViewSettings& s) { return print(field(const_cast<ViewSettings&>(s))); },
+            [field, parse](ViewSettings& s, const std::string& v) { field(s) = parse(v); }};
+}
+
+std::vector<std::string> builder_names() {
+    return {"binned", "sweep", "sbvh", "lbvh30", "lbvh63", "hlbvh2", "gridbvh", "gridbvh-split", "ploc"};
+}
+
+std::vector<std::string> gpu_kernel_names() {
+    std::vector<std::string> names;
+    for (GpuKernel k : all_gpu_kernels()) names.push_back(to_string(k));
+    return names;
+}
+
+void set_device(ViewSettings& s, const std::string& value) {
+    const Device device = parse_device(value);
+    require_device(device);  // a clear error now rather than at the next build
+    s.build.device = device;
+    s.render.device = device;
+    if (device.is_cuda()) s.build.structure = structure_of(s.build.gpu_kernel);
+}
+
+void set_resolution(ViewSettings& s, const std::string& value) {
+    const size_t x = value.find_first_of("xX");
+    if (x == std::string::npos) throw Error("expected WxH, e.g. 640x360, got '" + value + "'");
+    s.render.width = parse_int(value.substr(0, x), 1, 16384);
+    s.render.height = parse_int(value.substr(x + 1), 1, 16384);
+}
+
+std::vector<Setting> make_settings() {
+    const Effect rebuild = Effect::Rebuild, restart = Effect::Restart, retone = Effect::Retone;
+    std::vector<Setting> t;
+    t.push_back(enum_setting<Structure>(
+        "accel", "structure", rebuild, {"bvh", "grid", "grid-proximity", "kdtree", "brute"}, "acceleration structure",
+        [](ViewSettings& s) -> Structure& { return s.build.structure; },
+        [](const std::string& v) { return parse_structure(v); }, [](Structure v) { return to_string(v); }));
+    t.push_back(enum_setting<Builder>(
+        "builder", "structure", rebuild, builder_names(), "BVH builder",
+        [](ViewSettings& s) -> Builder& { return s.build.builder; },
+        [](const std::string& v) { return parse_builder(v); }, [](Builder v) { return to_string(v); }));
+    t.push_back(enum_setting<Layout>(
+        "layout", "structure", rebuild, {"bvh2", "bvh4", "bvh8"}, "BVH layout traced on the CPU",
+        [](ViewSettings& s) -> Layout& { return s.build.layout; },
+        [](const std::string& v) { return parse_layout(v); }, [](Layout v) { return to_string(v); }));
+    t.push_back(bool_setting("optimize", "structure", rebuild, "reinsertion optimizer after the build",
+                             [](ViewSettings& s) -> bool& { return s.build.reinsertion.enabled; }));
+    t.push_back(int_setting("optimize-iterations", "structure", rebuild, 0, 1000, "reinsertion rounds (0 = until no gain)",
+                            [](ViewSettings& s) -> int& { return s.build.reinsertion.iterations; }));
+    t.push_back(int_setting("leaf-size", "structure", rebuild, 1, 64, "most triangles per BVH leaf",
+                            [](ViewSettings& s) -> int& { return s.build.max_leaf_size; }));
+    t.push_back(int_setting("bins", "structure", rebuild, 2, 256, "SAH bins per axis (binned builders)",
+                            [](ViewSettings& s) -> int& { return s.build.binned.bin_count; }));
+    t.push_back(float_setting("sbvh-alpha", "structure", rebuild, 0.0, 1.0, "SBVH spatial-split threshold",
+                              [](ViewSettings& s) -> float& { return s.build.sbvh.alpha; }));
+    t.push_back(int_setting("ploc-radius", "structure", rebuild, 1, 256, "PLOC search radius",
+                            [](ViewSettings& s) -> int& { return s.build.ploc.radius; }));
+    t.push_back(float_setting("split-budget", "structure", rebuild, 0.0, 4.0, "GridBvhSplit partial-triangle budget",
+                              [](ViewSettings& s) -> float& { return s.build.grid_bvh.split_budget; }));
+    t.push_back(int_setting("grid-res", "structure", rebuild, 0, 2048, "grid cells on the longest axis (0 = auto)",
+                            [](ViewSettings& s) -> int& { return s.build.grid.resolution; }));
+    t.push_back(enum_setting<KdTraversal>(
+        "kd-traversal", "structure", rebuild, {"stack", "short-stack", "restart", "pushdown"}, "kd-tree traversal",
+        [](ViewSettings& s) -> KdTraversal& { return s.build.kdtree.traversal; },
+        [](const std::string& v) { return parse_kd_traversal(v); }, [](KdTraversal v) { return to_string(v); }));
+    t.push_back({{"gpu-kernel", "structure", rebuild, gpu_kernel_names(), "GPU traversal kernel (CUDA device)"},
+                 [](const ViewSettings& s) { return to_string(s.build.gpu_kernel); },
+                 [](ViewSettings& s, const std::string& v) {
+                     s.build.gpu_kernel = parse_gpu_kernel(v);
+                     if (s.build.device.is_cuda()) s.build.structure = structure_of(s.build.gpu_kernel);
+                 }});
+
+    t.push_back(enum_setting<IntegratorKind>(
+        "integrator", "integrator", restart, {"whitted", "path", "ao", "normals"}, "integrator",
+        [](ViewSettings& s) -> IntegratorKind& { return s.render.integrator; },
+        [](const std::string& v) { return parse_integrator(v); }, [](IntegratorKind v) { return integrator_name(v); }));
+    t.push_back(int_setting("max-depth", "integrator", restart, 0, 1024, "path: bounces after the camera ray",
+                            [](ViewSettings& s) -> int& { return s.render.max_depth; }));
+    t.push_back(int_setting("rr-depth", "integrator", restart, 0, 1024, "path: Russian roulette from this bounce",
+                            [](ViewSettings& s) -> int& { return s.render.rr_depth; }));
+    t.push_back(enum_setting<LightSampling>(
+        "light-sampling", "integrator", restart, {"mis", "nee", "bsdf"}, "path: light sampling",
+        [](ViewSettings& s) -> LightSampling& { return s.render.light_sampling; },
+        [](const std::string& v) { return parse_light_sampling(v); }, [](LightSampling v) { return to_string(v); }));
+    t.push_back(float_setting("clamp", "integrator", restart, 0.0, 1e30, "path: sample clamp (0 = off)",
+                              [](ViewSettings& s) -> float& { return s.render.max_sample_value; }));
+    t.push_back(enum_setting<WhittedShading>(
+        "shading", "integrator", restart, {"lambert", "phong", "blinn"}, "whitted: highlights",
+        [](ViewSettings& s) -> WhittedShading& { return s.render.whitted_shading; },
+        [](const std::string& v) { return parse_whitted_shading(v); }, [](WhittedShading v) { return to_string(v); }));
+    t.push_back(int_setting("reflection-depth", "integrator", restart, 0, 30, "whitted: reflections per path",
+                            [](ViewSettings& s) -> int& { return s.render.reflection_depth; }));
+    t.push_back(int_setting("refraction-depth", "integrator", restart, 0, 30, "whitted: refractions per path",
+                            [](ViewSettings& s) -> int& { return s.render.refraction_depth; }));
+    t.push_back(float_setting("ao-radius", "integrator", restart, 0.0, 1e30, "ao: ray length (0 = 10% of the diagonal)",
+                              [](ViewSettings& s) -> float& { return s.render.ao_radius; }));
+    t.push_back(int_setting("ao-samples", "integrator", restart, 1, 65536, "ao: rays per sample",
+                            [](ViewSettings& s) -> int& { return s.render.ao_samples; }));
+    t.push_back(bool_setting("wavefront", "integrator", restart, "path on the CPU: wavefront passes",
+                             [](ViewSettings& s) -> bool& { return s.render.wavefront; }));
+    t.push_back({{"seed", "integrator", restart, {}, "random seed"},
+                 [](const ViewSettings& s) { return std::to_string(s.render.seed); },
+                 [](ViewSettings& s, const std::string& v) { s.render.seed = uint32_t(parse_int(v, 0, 2147483647)); }});
+
+    t.push_back({{"res", "image", restart, {}, "full resolution WxH"},
+                 [](const ViewSettings& s) {
+                     return std::to_string(s.render.width) + "x" + std::to_string(s.render.height);
+                 },
+                 set_resolution});
+    t.push_back(float_setting("scale", "image", restart, 0.05, 4.0, "resolution scale of the film",
+                              [](ViewSettings& s) -> float& { return s.resolution_scale; }));
+    t.push_back({{"motion-scale", "image", restart, {}, "divisor of each side while moving (auto or 1..8)"},
+                 [](const ViewSettings& s) {
+                     return s.motion_divisor == 0 ? std::string("auto") : std::to_string(s.motion_divisor);
+                 },
+                 [](ViewSettings& s, const std::string& v) { s.motion_divisor = v == "auto" ? 0 : parse_int(v, 1, 8); }});
+    t.push_back(int_setting("spp", "image", restart, 1, 1 << 20, "passes to accumulate, then stop",
+                            [](ViewSettings& s) -> int& { return s.render.spp; }));
+
+    t.push_back(enum_setting<ToneCurve>(
+        "tonemap", "display", retone, {"clamp", "reinhard", "aces"}, "tone curve",
+        [](ViewSettings& s) -> ToneCurve& { return s.tone.curve; },
+        [](const std::string& v) { return parse_tone_curve(v); }, [](ToneCurve v) { return to_string(v); }));
+    t.push_back(float_setting("exposure", "display", retone, 0.0, 1e6, "linear scale before the curve",
+                              [](ViewSettings& s) -> float& { return s.tone.exposure; }));
+
+    t.push_back({{"device", "device", rebuild, {}, "cpu, cuda or cuda:N"},
+                 [](const ViewSettings& s) { return to_string(s.build.device); }, set_device});
+    t.push_back({{"threads", "device", restart, {}, "worker threads (0 = all cores)"},
+                 [](const ViewSettings& s) { return std::to_string(s.render.threads); },
+                 [](ViewSettings& s, const std::string& v) {
+                     s.render.threads = parse_int(v, 0, 4096);
+                     s.build.threads = s.render.threads;
+                 }});
+    return t;
+}
+
+const std::vector<Setting>& settings_table() {
+    static const std::vector<Setting> table = make_settings();
+    return table;
+}
+
+const Setting& setting_or_throw(const std::string& key) {
+    for (const Setting& s : settings_table())
+        if (s.info.key == key) return s;
+    std::string known;
+    for (const Setting& s : settings_table()) known += (known.empty() ? "" : ", ") + s.info.key;
+    throw Error("unknown setting '" + key + "' (known: " + known + ")");
+}
+
+}  // namespace
+
+const std::vector<SettingInfo>& setting_infos() {
+    static const std::vector<SettingInfo> infos = [] {
+        std::vector<SettingInfo> v;
+        for (const Setting& s : settings_table()) v.push_back(s.info);
+        return v;
+    }();
+    return infos;
+}
+
+const SettingInfo* find_setting(const std::string& key) {
+    for (const SettingInfo& info : setting_infos())
+        if (info.key == key) return &info;
+    return nullptr;
+}
+
+std::string get_setting(const ViewSettings& settings, const std::string& key) {
+    return setting_or_throw(key).get(settings);
+}
+
+void set_setting(ViewSettings& settings, const std::string& key, const std::string& value) {
+    const Setting& setting = setting_or_throw(key);
+    ViewSettings changed = settings;
+    try {
+        setting.set(changed, value);
+        validate_build_options(changed.build);
+        validate_render_options(film_options(changed, false, 1));
+    } catch (const Error& e) {
+        throw Error("set " + key + " " + value + ": " + e.what());
+    }
+    settings = changed;
+}
+
+unsigned changes_between(const ViewSettings& from, const ViewSettings& to) {
+    unsigned effects = 0;
+    for (const Setting& s : settings_table())
+        if (s.get(from) != s.get(to)) effects |= unsigned(s.info.effect);
+    return effects;
+}
+
+RenderOptions film_options(const ViewSettings& settings, bool preview, int motion_divisor) {
+    RenderOptions o = settings.render;
+    const auto side = [&](int full) {
+        const int divisor = preview ? std::max(motion_divisor, 1) : 1;
+        const double scaled = double(full) * double(settings.resolution_scale) / double(divisor);
+        return std::max(1, int(std::lround(scaled)));
+    };
+    o.width = side(settings.render.width);
+    o.height = side(settings.render.height);
+    o.time_budget_s = 0.0;
+    if (preview) o.spp = 1;
+    return o;
+}
+
+int auto_motion_divisor(double full_pass_ms, double target_ms) {
+    if (!(full_pass_ms > 0.0) || !(target_ms > 0.0)) return 2;
+    return std::clamp(int(std::ceil(std::sqrt(full_pass_ms / target_ms))), 1, 8);
+}
+
+}  // namespace rf::viewer

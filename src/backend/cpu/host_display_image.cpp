@@ -1,0 +1,20 @@
+#include "backend/cpu/host_display_image.h"
+
+#include "backend/cpu/parallel.h"
+#include "render/tone_map.h"
+
+namespace rf::cpu {
+
+void HostDisplayImage::assign(const Image& mean, const ToneMapping& tone) {
+    width_ = mean.width;
+    height_ = mean.height;
+    pixels_.resize(size_t(width_) * size_t(height_) * 4);
+    parallel::for_range(0, height_, 16, [&](int y0, int y1) {
+        for (size_t i = size_t(y0) * size_t(width_); i < size_t(y1) * size_t(width_); ++i) {
+            tone_map_pixel(mean.pixels[i], tone, &pixels_[4 * i]);
+            pixels_[4 * i + 3] = 255;
+        }
+    });
+}
+
+}  // namespace rf::cpu
