@@ -252,5 +252,31 @@ TEST(BvhBuild, InvalidOptionsAndNamesThrow) {
     EXPECT_THROW((void)parse_builder(""), Error);
 }
 
+
+// build_accel reports 0 first and 1 last, never going back; the top-down
+// SAH builders report the references placed in leaves along the way, the
+// others only the ends (and the tree's end at 0.9).
+TEST(BvhBuild, BuildAccelReportsProgressFromZeroToOne) {
+    const SceneGeometry geometry = test::make_triangle_soup(20000, 7, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f);
+    for (Builder builder : {Builder::BinnedSah, Builder::SweepSah, Builder::Sbvh, Builder::Lbvh30, Builder::Ploc}) {
+        for (Structure structure : {Structure::Bvh, Structure::KdTree}) {
+            if (structure == Structure::KdTree && builder != Builder::BinnedSah) continue;
+            SCOPED_TRACE(to_string(builder) + " " + to_string(structure));
+            std::vector<double> seen;
+            const BuildOptions options{.structure = structure, .builder = builder, .threads = 2};
+            const auto accel = build_accel(geometry, options, [&](double f) { seen.push_back(f); });
+            ASSERT_GE(seen.size(), 2u);
+            EXPECT_EQ(seen.front(), 0.0);
+            EXPECT_EQ(seen.back(), 1.0);
+            EXPECT_TRUE(std::is_sorted(seen.begin(), seen.end()));
+            const bool counts_leaves = structure == Structure::Bvh &&
+                                       (builder == Builder::BinnedSah || builder == Builder::SweepSah || builder == Builder::Sbvh);
+            const auto between = std::count_if(seen.begin(), seen.end(), [](double f) { return f > 0.0 && f < 0.9; });
+            if (counts_leaves) EXPECT_GE(between, 10) << "leaves placed should move the bar";
+            else EXPECT_EQ(between, 0);
+        }
+    }
+}
+
 }  // namespace
 }  // namespace rf

@@ -85,5 +85,22 @@ TEST(Camera, DegenerateCamerasAreErrors) {
     EXPECT_THROW((void)CameraFrame::make(c, 10, 10), Error);
 }
 
+
+// The --camera form reads back the same floats and rejects anything but ten finite numbers.
+TEST(Camera, CommandLineFormRoundTripsAndRejectsMalformedText) {
+    Camera c = test_camera();
+    c.eye = {0.1f, -1e-7f, 123456.789f};
+    c.vfov_degrees = 33.3f;
+    const Camera back = parse_camera(to_string(c));
+    EXPECT_EQ(back.eye, c.eye);
+    EXPECT_EQ(back.target, c.target);
+    EXPECT_EQ(back.up, c.up);
+    EXPECT_EQ(back.vfov_degrees, c.vfov_degrees);
+    EXPECT_EQ(parse_camera("0, 1, 3.9, 0,1,0, 0,1,0, 40").eye, Vec3f(0, 1, 3.9f));
+    for (const char* bad : {"", "1,2,3", "1,2,3,4,5,6,7,8,9,10,11", "1,2,3,4,5,6,7,8,9,x", "1,2,3,4,5,6,7,8,9,nan",
+                            "1,2,3,4,5,6,7,8,9,1e39", "1,2,3,4,5,6,7,8,9,10,", ",1,2,3,4,5,6,7,8,9"})
+        EXPECT_THROW((void)parse_camera(bad), Error) << bad;
+}
+
 }  // namespace
 }  // namespace rf

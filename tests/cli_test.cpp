@@ -15,44 +15,16 @@
 
 #include "rayforge/backend/device.h"
 #include "rayforge/io/image_io.h"
+#include "cli_runner.h"
 #include "test_paths.h"
 
 namespace rf {
 namespace {
 
-struct CliResult {
-    int exit_code = -1;
-    std::string out;
-    std::string err;
-};
-
-std::string read_file(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
-}
-
-std::vector<std::string> lines_of(const std::string& text) {
-    std::vector<std::string> lines;
-    std::stringstream ss(text);
-    for (std::string line; std::getline(ss, line);) lines.push_back(line);
-    return lines;
-}
-
-// Runs `rayforge ARGS` with stdout and stderr captured to files.
-CliResult run_cli(const std::string& args) {
-    static int counter = 0;
-    std::string dir = test::temp_dir("cli_run_" + std::to_string(counter++));
-    std::string out = dir + "/out.txt", err = dir + "/err.txt";
-    std::string command = "'" + test::cli_path() + "' " + args + " >'" + out + "' 2>'" + err + "' </dev/null";
-    int status = std::system(command.c_str());
-    CliResult r;
-    r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    r.out = read_file(out);
-    r.err = read_file(err);
-    return r;
-}
+using test::CliResult;
+using test::lines_of;
+using test::read_file;
+using test::run_cli;
 
 void expect_one_error_line(const CliResult& r) {
     EXPECT_EQ(r.exit_code, 1) << r.err;

@@ -1,6 +1,7 @@
 // Writing and reading back rendered images: PNG (8-bit sRGB), EXR and PFM (float),
 // and the tone curves applied to PNG output (clamp, Reinhard, ACES).
 #include <gtest/gtest.h>
+#include <stb_image.h>
 
 #include <algorithm>
 #include <cmath>
@@ -13,6 +14,7 @@
 #include "rayforge/core/error.h"
 #include "rayforge/io/image_io.h"
 #include "math/color.h"
+#include "render/tone_map.h"
 #include "test_paths.h"
 
 namespace rf {
@@ -252,6 +254,50 @@ TEST(ToneMapping, HdrFormatsIgnoreTheCurveAndApplyOnlyExposure) {
         for (size_t i = 0; i < image.pixels.size(); ++i) EXPECT_EQ(back.pixels[i], image.pixels[i] * 2.0f) << ext << i;
     }
     EXPECT_THROW(write_image(dir + "/bad.exr", image, ToneMapping{-1.0f, ToneCurve::Reinhard}), Error);
+}
+
+
+// The host's table encoding is the exact encoding for every float it can see:
+// each step's threshold and 64 floats either side, and a dense sweep.
+TEST(ToneMapping, TableEncodingEqualsTheExactEncoding) {
+    const auto next = [](float f, int steps) {
+        for (int i = 0; i < std::abs(steps); ++i) f = std::nextafter(f, steps > 0 ? 2.0f : -1.0f);
+        return f;
+    };
+    for (int code = 1; code <= 255; ++code) {
+        const float threshold = srgb8_thresholds().at[code - 1];
+        EXPECT_EQ(encode_srgb8_exact(threshold), code);
+        EXPECT_EQ(encode_srgb8_exact(next(threshold, -1)), code - 1);
+        for (int d = -64; d <= 64; ++d) {
+            const float v = std::clamp(next(threshold, d), 0.0f, 1.0f);
+            ASSERT_EQ(encode_srgb8_table(v), encode_srgb8_exact(v)) << v;
+        }
+    }
+    for (uint32_t i = 0; i <= (1u << 20); ++i) {
+        const float v = float(i) / float(1u << 20);
+        ASSERT_EQ(encode_srgb8_table(v), encode_srgb8_exact(v)) << v;
+    }
+    EXPECT_EQ(encode_srgb8_table(0.0f), 0);
+    EXPECT_EQ(encode_srgb8_table(1.0f), 255);
+}
+
+// A PNG holds tone_map_srgb8 of each pixel, the bytes a display image shows.
+TEST(ToneMapping, PngBytesAreTheDisplayCodes) {
+    Image image = gradient_image(9, 4);
+    image.at(0, 0) = Vec3f(4.0f, -1.0f, std::nanf(""));
+    const std::string path = test::temp_dir("png_bytes") + "/a.png";
+    const ToneMapping tone{1.7f, ToneCurve::Reinhard};
+    write_image(path, image, tone);
+    int w = 0, h = 0, channels = 0;
+    unsigned char* bytes = stbi_load(path.c_str(), &w, &h, &channels, 3);
+    ASSERT_NE(bytes, nullptr);
+    ASSERT_EQ(w, 9);
+    for (size_t i = 0; i < image.pixels.size(); ++i) {
+        uint8_t expected[3];
+        tone_map_srgb8(image.pixels[i], tone, expected);
+        for (int k = 0; k < 3; ++k) EXPECT_EQ(bytes[3 * i + size_t(k)], expected[k]) << i;
+    }
+    stbi_image_free(bytes);
 }
 
 }  // namespace

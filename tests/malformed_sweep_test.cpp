@@ -5,8 +5,6 @@
 // a hang, a sanitizer report or a multi-line message fails the test.
 #include <gtest/gtest.h>
 
-#include <sys/wait.h>
-
 #include <cctype>
 #include <filesystem>
 #include <fstream>
@@ -16,19 +14,13 @@
 #include <string>
 #include <vector>
 
+#include "cli_runner.h"
 #include "test_paths.h"
 
 namespace fs = std::filesystem;
 
 namespace rf {
 namespace {
-
-std::string read_all(const fs::path& p) {
-    std::ifstream in(p, std::ios::binary);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
-}
 
 void write_all(const fs::path& p, const std::string& bytes) {
     std::ofstream out(p, std::ios::binary | std::ios::trunc);
@@ -40,16 +32,12 @@ struct Outcome {
     std::vector<std::string> error_lines;  // stderr lines other than warnings and notes
 };
 
-Outcome run_info(const fs::path& scene, const fs::path& scratch) {
-    const fs::path err = scratch / "stderr.txt";
+Outcome run_info(const fs::path& scene) {
     // `timeout` turns a hang into a failure instead of a stuck test run.
-    const std::string command = "timeout 20 '" + test::cli_path() + "' info '" + scene.string() +
-                                "' >/dev/null 2>'" + err.string() + "' </dev/null";
-    const int status = std::system(command.c_str());
+    const test::CliResult r = test::run_cli("info '" + scene.string() + "'", "timeout 20");
     Outcome o;
-    o.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    std::stringstream lines(read_all(err));
-    for (std::string line; std::getline(lines, line);)
+    o.exit_code = r.exit_code;
+    for (const std::string& line : test::lines_of(r.err))
         if (line.rfind("rayforge: warning: ", 0) != 0 && line.rfind("rayforge: note: ", 0) != 0)
             o.error_lines.push_back(line);
     return o;
@@ -97,7 +85,7 @@ TEST_P(MalformedSweep, TruncatedAndCorruptedFilesFailCleanly) {
         if (entry.is_regular_file()) fs::copy_file(entry.path(), scratch / entry.path().filename());
     const fs::path target = scratch / f.file;
     const fs::path scene = scratch / f.scene;
-    const std::string original = read_all(target);
+    const std::string original = test::read_file(target.string());
     ASSERT_FALSE(original.empty());
 
     std::mt19937 rng(12345u + uint32_t(original.size()));
@@ -107,7 +95,7 @@ TEST_P(MalformedSweep, TruncatedAndCorruptedFilesFailCleanly) {
     for (int i = 0; i < 12; ++i) cuts.push_back(offset(rng));
     for (size_t cut : cuts) {
         write_all(target, original.substr(0, cut));
-        expect_clean(run_info(scene, scratch), f.file + " cut at byte " + std::to_string(cut));
+        expect_clean(run_info(scene), f.file + " cut at byte " + std::to_string(cut));
     }
     // Corrupted counts: numbers made huge, zero or negative (text formats and
     // the JSON chunk of a GLB both carry their counts as decimal text).
@@ -119,7 +107,7 @@ TEST_P(MalformedSweep, TruncatedAndCorruptedFilesFailCleanly) {
             const size_t k = which(rng);
             const std::string replacement = replacements[i % 4];
             write_all(target, corrupt_number(original, k, replacement));
-            expect_clean(run_info(scene, scratch),
+            expect_clean(run_info(scene),
                          f.file + " with number #" + std::to_string(k) + " set to " + replacement);
         }
     }

@@ -5,6 +5,8 @@
 // progressive renderer's passes, budgets and AOVs.
 #include <gtest/gtest.h>
 
+#include <atomic>
+
 #include <cmath>
 #include <cstdio>
 #include <vector>
@@ -393,6 +395,66 @@ TEST(Renderer, SceneChangeRebuildsShadingTables) {
     render_progressive(*renderer);
     EXPECT_NE(renderer->image().pixels, grey.pixels);
     EXPECT_EQ(renderer->image().pixels, render(t.scene, t.geometry, *t.accel, camera, o).pixels);
+}
+
+// A pass stopped by its cancel flag adds nothing: accumulation restarts, and
+// the next passes draw what a fresh renderer draws.
+TEST(Renderer, CancelledPassRestartsAccumulation) {
+    TestScene t = furnace_sphere(lambert(0.7f));
+    const Camera camera = looking_at({0, 0, 3}, {0, 0, 0}, 30.0f);
+    for (bool wavefront : {false, true}) {
+        RenderOptions o = path_options(48, 40, 2);  // 9 tiles, one thread: the flag is seen between them
+        o.threads = 1;
+        o.wavefront = wavefront;
+        const auto renderer = make_renderer(t.scene, t.geometry, *t.accel, camera, o);
+        ASSERT_TRUE(renderer->render_pass());
+        std::atomic<bool> cancel{true};
+        EXPECT_FALSE(renderer->render_pass({}, &cancel));  // set before the pass: nothing runs
+        EXPECT_EQ(renderer->passes(), 0);
+        EXPECT_EQ(renderer->stats().samples, 0u);
+        if (!wavefront) {
+            cancel = false;
+            int calls = 0;
+            const bool finished = renderer->render_pass([&](double) { cancel = ++calls == 1; }, &cancel);
+            EXPECT_FALSE(finished);  // set after the first tile
+            EXPECT_LT(calls, 9);
+            EXPECT_EQ(renderer->passes(), 0);
+            for (const Vec3f& p : renderer->image().pixels) ASSERT_EQ(p, Vec3f(0.0f));
+        }
+        cancel = false;
+        EXPECT_TRUE(renderer->render_pass({}, &cancel));
+        EXPECT_TRUE(renderer->render_pass({}, &cancel));
+        EXPECT_EQ(renderer->image().pixels, render(t.scene, t.geometry, *t.accel, camera, o).pixels);
+    }
+}
+
+// The display image holds, for every curve and exposure, the 8-bit sRGB code
+// a PNG of image() holds, with opaque alpha.
+TEST(Renderer, DisplayImageIsTheToneMappedMean) {
+    TestScene t = furnace_sphere(lambert(0.7f));
+    const auto renderer =
+        make_renderer(t.scene, t.geometry, *t.accel, looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), path_options(12, 10, 2));
+    const auto display = renderer->make_display_image();
+    renderer->update_display(*display, {});
+    EXPECT_EQ(display->width(), 12);  // black before the first pass
+    for (size_t i = 0; i < 12 * 10; ++i) EXPECT_EQ(display->host_pixels()[4 * i], 0);
+    render_progressive(*renderer);
+    const Image mean = renderer->image();
+    for (ToneCurve curve : {ToneCurve::Clamp, ToneCurve::Reinhard, ToneCurve::Aces})
+        for (float exposure : {0.5f, 1.0f, 3.0f}) {
+            const ToneMapping tone{exposure, curve};
+            renderer->update_display(*display, tone);
+            ASSERT_EQ(display->device(), Device{});
+            ASSERT_EQ(display->device_pixels(), nullptr);
+            const std::vector<uint8_t> pixels = display->download();
+            ASSERT_EQ(pixels.size(), mean.pixels.size() * 4);
+            for (size_t i = 0; i < mean.pixels.size(); ++i) {
+                uint8_t expected[3];
+                tone_map_srgb8(mean.pixels[i], tone, expected);
+                for (int k = 0; k < 3; ++k) ASSERT_EQ(pixels[4 * i + size_t(k)], expected[k]) << "pixel " << i;
+                ASSERT_EQ(pixels[4 * i + 3], 255);
+            }
+        }
 }
 
 // A renderer lives on one device, and so must its structure.

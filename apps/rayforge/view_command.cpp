@@ -7,6 +7,7 @@
 
 #include "commands.h"
 #include "rayforge/core/error.h"
+#include "script.h"
 #include "viewer.h"
 
 namespace rf::cli {
@@ -94,6 +95,7 @@ int run_view(const ViewArgs& a) {
     config.settings.tone = tone_mapping(r);
     config.settings.motion_divisor = a.motion_scale == "auto" ? 0 : std::stoi(a.motion_scale);
     config.prepare = scene_preparation(a, device);
+    if (!a.script.empty()) (void)viewer::load_script(a.script);  // a typo fails before anything opens
     config.script = a.script;
     config.script_timeout_s = a.script_timeout_s;
     if (!a.bookmarks.empty()) config.bookmarks = a.bookmarks;

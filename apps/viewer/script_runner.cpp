@@ -120,11 +120,11 @@ bool ScriptRunner::poll(App& app, const ScriptCommand& c, Clock::time_point now)
             if (app.settings().render.spp < int(c.a))
                 throw Error("the image stops at " + std::to_string(app.settings().render.spp) +
                             " passes (set spp to more)");
-            return frame && !app.moving() && versions.shown_by(*frame) && !frame->preview &&
+            return frame && app.scene_adopted() && !app.moving() && versions.shown_by(*frame) && !frame->preview &&
                    frame->passes >= int(c.a);
         }
         case ScriptOp::WaitFrames: fail_on_error(); return app.stats().frames_shown >= frames_at_start_ + uint64_t(c.a);
-        case ScriptOp::WaitIdle: fail_on_error(); return !versions.jobs_pending;
+        case ScriptOp::WaitIdle: fail_on_error(); return !versions.jobs_pending && app.scene_adopted();
         case ScriptOp::Sleep: return seconds(started_at_, now) >= c.a;
         case ScriptOp::ExpectError: {
             if (versions.jobs_pending) return false;

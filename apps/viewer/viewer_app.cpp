@@ -138,6 +138,11 @@ void App::adopt_scene(const std::shared_ptr<const SceneData>& scene) {
     window_.set_title("rayforge view - " + scene->source.name);
 }
 
+bool App::scene_adopted() const {
+    const std::shared_ptr<const SceneData> scene = session_->scene();
+    return scene && scene->id == scene_id_;
+}
+
 void App::camera_moved() {
     if (!has_scene()) return;
     moving_ = true;

@@ -35,6 +35,8 @@ public:
     // ---- what input, the panel and scripts do
     [[nodiscard]] CameraController& controller() { return *controller_; }
     [[nodiscard]] bool has_scene() const { return controller_ != nullptr; }
+    // The window shows the session's newest scene (it adopts a new one at the start of a frame).
+    [[nodiscard]] bool scene_adopted() const;
     // The controller's camera changed by a motion (drag, wheel, walk):
     // previews until it rests for kRestSeconds.
     void camera_moved();

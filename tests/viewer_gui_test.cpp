@@ -1,0 +1,187 @@
+// `rayforge view` end to end, in a real window under Xvfb with Mesa's
+// software OpenGL, driven by scripts: the viewer shows what `rayforge
+// render` writes for the same arguments, switches structure and integrator
+// live, returns to the same image after orbit and reset, keeps its scene
+// when a malformed file is dropped on it, and fails a script with the
+// script's file and line. Skips with a message when no X server can be
+// started or the viewer was not built.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "cli_runner.h"
+#include "rayforge/io/image_io.h"
+#include "test_paths.h"
+
+namespace rf {
+namespace {
+
+// xvfb-run with a screen large enough for the window; -a finds a free display.
+const std::string kXvfb = "xvfb-run -a -s '-screen 0 1024x768x24'";
+
+std::string write_script(const std::string& dir, const std::string& name, const std::string& text) {
+    const std::string path = dir + "/" + name;
+    std::ofstream(path) << text;
+    return path;
+}
+
+// Why the viewer cannot run here ("" when it can), found once.
+const std::string& gui_unavailable() {
+    static const std::string why = [] {
+        if (std::system("command -v xvfb-run >/dev/null 2>&1") != 0) return std::string("xvfb-run is not installed");
+        const std::string dir = test::temp_dir("viewer_probe");
+        const std::string script = write_script(dir, "quit.txt", "quit\n");
+        const test::CliResult r = test::run_cli("view builtin:cornell --res 8x8 --spp 1 --script '" + script + "'", kXvfb);
+        if (r.exit_code == 0) return std::string();
+        return "the viewer cannot open a window here: " + (r.err.empty() ? std::string("exit ") + std::to_string(r.exit_code) : r.err);
+    }();
+    return why;
+}
+
+#define SKIP_WITHOUT_GUI()                                               \
+    do {                                                                 \
+        if (!gui_unavailable().empty()) GTEST_SKIP() << gui_unavailable(); \
+    } while (0)
+
+// Runs the viewer on `scene` with `options` and the script `text`.
+test::CliResult view(const std::string& dir, const std::string& scene, const std::string& options, const std::string& text) {
+    const std::string script = write_script(dir, "script.txt", text);
+    return test::run_cli("view " + scene + " " + options + " --script '" + script + "' --script-timeout 60", kXvfb);
+}
+
+// The largest difference of any channel (linear values after decoding).
+float max_difference(const Image& a, const Image& b) {
+    if (a.width != b.width || a.height != b.height) return INFINITY;
+    float worst = 0.0f;
+    for (size_t i = 0; i < a.pixels.size(); ++i)
+        for (int k = 0; k < 3; ++k) worst = std::max(worst, std::fabs(a.pixels[i][k] - b.pixels[i][k]));
+    return worst;
+}
+
+// The same image "within a tolerance": on the CPU the viewer's PNG holds the
+// very bytes `render` writes, so the tolerance is one 8-bit code at most.
+void expect_same_image(const std::string& a, const std::string& b) {
+    const Image x = read_image(a), y = read_image(b);
+    ASSERT_EQ(x.width, y.width) << a << " vs " << b;
+    EXPECT_LE(max_difference(x, y), 1.0f / 255.0f) << a << " vs " << b;
+}
+
+const char* kSmall = "--res 64x48 --spp 4";
+
+TEST(ViewerGui, DefaultSceneMatchesTheRenderCommand) {
+    SKIP_WITHOUT_GUI();
+    const std::string dir = test::temp_dir("viewer_default");
+    const test::CliResult v = view(dir, "builtin:cornell", kSmall,
+                                   "wait-passes 4\nscreenshot " + dir + "/v.png\nscreenshot " + dir + "/v.exr\n"
+                                   "screenshot-window " + dir + "/window.png\nprint-stats\nquit\n");
+    ASSERT_EQ(v.exit_code, 0) << v.err;
+    const test::CliResult r = test::run_cli("render builtin:cornell " + std::string(kSmall) + " -q -o " + dir +
+                                            "/r.png -o " + dir + "/r.exr");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    expect_same_image(dir + "/v.png", dir + "/r.png");
+    EXPECT_EQ(max_difference(read_image(dir + "/v.exr"), read_image(dir + "/r.exr")), 0.0f);
+    EXPECT_GT(read_image(dir + "/window.png").width, 64);  // the window, panel and all
+    const auto stats = nlohmann::json::parse(test::lines_of(v.out).back());
+    EXPECT_EQ(stats["passes"], 4);
+    EXPECT_EQ(stats["scene"], "builtin:cornell");
+    EXPECT_GT(stats["first_image_ms"].get<double>(), 0.0);
+}
+
+TEST(ViewerGui, SwitchingStructureAndIntegratorStillMatchesTheCli) {
+    SKIP_WITHOUT_GUI();
+    const std::string dir = test::temp_dir("viewer_switch");
+    const test::CliResult v =
+        view(dir, "builtin:cornell", kSmall,
+             "wait-passes 4\nset accel kdtree\nset integrator ao\nset ao-samples 4\nwait-passes 4\nscreenshot " + dir +
+                 "/a.png\nset accel grid-proximity\nset integrator whitted\nwait-passes 4\nscreenshot " + dir +
+                 "/b.png\nset accel bvh\nset builder sbvh\nset layout bvh4\nset integrator path\nset max-depth 3\n"
+                 "wait-passes 4\nscreenshot " + dir + "/c.png\nquit\n");
+    ASSERT_EQ(v.exit_code, 0) << v.err;
+    const std::pair<const char*, const char*> cases[] = {
+        {"a", "--accel kdtree --integrator ao --ao-samples 4"},
+        {"b", "--accel grid-proximity --integrator whitted"},
+        {"c", "--builder sbvh --layout bvh4 --integrator path --max-depth 3"},
+    };
+    for (const auto& [name, options] : cases) {
+        const std::string out = dir + "/" + name + "_cli.png";
+        const test::CliResult r = test::run_cli("render builtin:cornell " + std::string(kSmall) + " " + options + " -q -o " + out);
+        ASSERT_EQ(r.exit_code, 0) << r.err;
+        expect_same_image(dir + "/" + name + ".png", out);
+    }
+}
+
+TEST(ViewerGui, OrbitThenResetReturnsAndThePrintedCameraRendersTheSameView) {
+    SKIP_WITHOUT_GUI();
+    const std::string dir = test::temp_dir("viewer_orbit");
+    const test::CliResult v = view(dir, "builtin:cornell", kSmall,
+                                   "wait-passes 4\nscreenshot " + dir + "/a.png\norbit 40 15\nwalk forward 0.3\n"
+                                   "wait-passes 4\nscreenshot " + dir + "/b.png\nprint-camera\nprint-stats\nreset\n"
+                                   "wait-passes 4\nscreenshot " + dir + "/c.png\nquit\n");
+    ASSERT_EQ(v.exit_code, 0) << v.err;
+    expect_same_image(dir + "/a.png", dir + "/c.png");
+    EXPECT_GT(max_difference(read_image(dir + "/a.png"), read_image(dir + "/b.png")), 0.1f);
+    const std::vector<std::string> lines = test::lines_of(v.out);
+    ASSERT_EQ(lines.size(), 2u) << v.out;
+    const auto stats = nlohmann::json::parse(lines[1]);
+    EXPECT_GT(stats["frames_shown"].get<int>(), 8) << "previews while moving";
+    const test::CliResult r = test::run_cli("render builtin:cornell " + std::string(kSmall) + " --camera " + lines[0] +
+                                            " -q -o " + dir + "/b_cli.png");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    expect_same_image(dir + "/b.png", dir + "/b_cli.png");
+}
+
+TEST(ViewerGui, MalformedSceneDroppedInShowsAnErrorAndKeepsTheScene) {
+    SKIP_WITHOUT_GUI();
+    const std::string dir = test::temp_dir("viewer_drop");
+    std::ofstream(dir + "/bad.obj") << "v 0 0 0\nv 1 0 0\nf 1 2 9\n";
+    const test::CliResult v = view(dir, "builtin:cornell", kSmall,
+                                   "wait-passes 4\nscreenshot " + dir + "/a.png\ndrop " + dir + "/bad.obj\n"
+                                   "expect-error bad.obj\ndrop " + dir + "/missing.ply\nexpect-error missing.ply\n"
+                                   "wait-passes 4\nscreenshot " + dir + "/b.png\nquit\n");
+    ASSERT_EQ(v.exit_code, 0) << v.err;
+    expect_same_image(dir + "/a.png", dir + "/b.png");
+    EXPECT_NE(v.err.find("rayforge: viewer: "), std::string::npos) << v.err;
+    EXPECT_NE(v.err.find("bad.obj:3"), std::string::npos) << v.err;  // the loader's file:line
+}
+
+TEST(ViewerGui, BookmarksPersistAcrossRuns) {
+    SKIP_WITHOUT_GUI();
+    const std::string dir = test::temp_dir("viewer_bookmarks");
+    const std::string file = "--bookmarks " + dir + "/marks.json ";
+    test::CliResult v = view(dir, "builtin:cornell", file + kSmall,
+                             "wait-idle\norbit 25 5\nbookmark-save side\nreset\nwait-passes 4\nquit\n");
+    ASSERT_EQ(v.exit_code, 0) << v.err;
+    v = view(dir, "builtin:cornell", file + kSmall,
+             "wait-idle\nbookmark-load side\nwait-passes 4\nscreenshot " + dir + "/side.png\nprint-camera\nquit\n");
+    ASSERT_EQ(v.exit_code, 0) << v.err;
+    const test::CliResult r = test::run_cli("render builtin:cornell " + std::string(kSmall) + " --camera " +
+                                            test::lines_of(v.out).at(0) + " -q -o " + dir + "/side_cli.png");
+    expect_same_image(dir + "/side.png", dir + "/side_cli.png");
+}
+
+// Script failures: the command's file and line, exit status 1. A typo is
+// found before any window opens, so this part needs no display.
+TEST(ViewerGui, ScriptFailuresNameTheLineAndExitNonZero) {
+    const std::string dir = test::temp_dir("viewer_script_errors");
+    test::CliResult v = view(dir, "builtin:cornell", kSmall, "wait-passes 1\nfly to the moon\n");
+    EXPECT_EQ(v.exit_code, 1);
+    EXPECT_NE(v.err.find("script.txt:2: unknown command 'fly'"), std::string::npos) << v.err;
+    SKIP_WITHOUT_GUI();
+    v = view(dir, "builtin:cornell", kSmall, "wait-passes 2\nset spp 2\nwait-passes 5\nquit\n");
+    EXPECT_EQ(v.exit_code, 1);
+    EXPECT_NE(v.err.find("script.txt:3: wait-passes 5: the image stops at 2 passes"), std::string::npos) << v.err;
+    v = view(dir, "builtin:cornell", kSmall, "wait-passes 1\nexpect-error anything\nquit\n");
+    EXPECT_EQ(v.exit_code, 1);
+    EXPECT_NE(v.err.find("script.txt:2: expect-error anything: expected an error"), std::string::npos) << v.err;
+    v = view(dir, "builtin:cornell", kSmall, "set builder nonsense\n");
+    EXPECT_EQ(v.exit_code, 1);
+    EXPECT_NE(v.err.find("script.txt:1: set: set builder nonsense"), std::string::npos) << v.err;
+}
+
+}  // namespace
+}  // namespace rf
