@@ -14,6 +14,17 @@ double seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::d
 
 ScriptRunner::ScriptRunner(Script script, double timeout_s) : script_(std::move(script)), timeout_s_(timeout_s) {}
 
+bool ScriptRunner::wants_ticks() const {
+    return running_ && next_ < script_.commands.size() && script_.commands[next_].op == ScriptOp::Walk;
+}
+
+double ScriptRunner::seconds_to_deadline(Clock::time_point now) const {
+    if (!running_ || next_ >= script_.commands.size()) return 0.0;  // the next command starts at once
+    const ScriptCommand& c = script_.commands[next_];
+    const double waited = seconds(started_at_, now);
+    return (c.op == ScriptOp::Sleep ? std::min(c.a, timeout_s_) : timeout_s_) - waited;
+}
+
 void ScriptRunner::fail(const ScriptCommand& c, const std::string& why) {
     failure_ = script_.where(c) + ": " + c.text + ": " + why;
     std::fprintf(stderr, "rayforge: error: %s\n", failure_.c_str());
@@ -108,6 +119,7 @@ bool ScriptRunner::start(App& app, const ScriptCommand& c, Clock::time_point now
 
 bool ScriptRunner::poll(App& app, const ScriptCommand& c, Clock::time_point now) {
     const Versions versions = app.session().versions();
+    app.follow_errors();  // after reading the versions: an error of a finished job is in by now
     // An error while waiting for the renderer fails the wait (expect-error waits for it instead).
     const bool new_error = app.errors_seen() > errors_at_start_;
     const auto fail_on_error = [&] {

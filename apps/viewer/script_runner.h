@@ -22,6 +22,10 @@ public:
     [[nodiscard]] bool finished() const { return finished_; }
     [[nodiscard]] bool failed() const { return !failure_.empty(); }
     [[nodiscard]] const std::string& failure() const { return failure_; }
+    // The current command moves the camera every frame (walk).
+    [[nodiscard]] bool wants_ticks() const;
+    // Seconds until the current command's sleep ends or its wait times out.
+    [[nodiscard]] double seconds_to_deadline(Clock::time_point now) const;
 
 private:
     // Starts the current command; true when it is already done.

@@ -404,6 +404,7 @@ void Session::render_loop() {
             report_error(e.what());
         }
         for (std::promise<Image>& film : films) film.set_value(st.renderer ? st.renderer->image() : Image{});
+        if (!films.empty()) wake();
 
         bool publish = st.renderer && (effects & unsigned(Effect::Retone)) && st.renderer->passes() > 0;
         if (st.wants_pass()) {

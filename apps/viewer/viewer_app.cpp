@@ -54,15 +54,12 @@ App::~App() = default;
 int App::run() {
     last_tick_ = Clock::now();
     while (!quit_ && !window_.should_close()) {
-        const Clock::time_point before_wait = Clock::now();
-        const double since_tick = seconds_between(last_tick_, before_wait);
-        window_.wait_events(animating() ? std::max(0.0, kTickSeconds - since_tick) : kIdleWaitSeconds);
+        window_.wait_events(wait_budget(Clock::now()));
         const Clock::time_point now = Clock::now();
         last_tick_ = now;
         frame(now);
         // The window's own work, waits excluded: what a blocked window would show.
-        stats_.max_ui_frame_ms = std::max(stats_.max_ui_frame_ms,
-                                          std::chrono::duration<double, std::milli>(Clock::now() - now).count());
+        stats_.ui_frame_done(std::chrono::duration<double, std::milli>(Clock::now() - now).count());
     }
     // Screenshots asked for just before the end are still written.
     for (PendingShot& shot : shots_) shot.film.wait();
@@ -70,9 +67,16 @@ int App::run() {
     return exit_status_;
 }
 
-bool App::animating() const {
-    return moving_ || (script_ && !script_->finished()) || !shots_.empty() || !window_shots_.empty() ||
-           session_->status().busy || walking_;
+// How long the loop may wait for an event: a tick while something moves by
+// itself (a held walk key, a scripted walk), until the motion rests or a
+// script's sleep ends, and otherwise until the session or the user wakes it.
+double App::wait_budget(Clock::time_point now) const {
+    const double tick = std::max(0.0, kTickSeconds - seconds_between(last_tick_, now));
+    if (walking_ || (script_ && script_->wants_ticks())) return tick;
+    double wait = kIdleWaitSeconds;
+    if (moving_) wait = std::min(wait, std::max(tick, kRestSeconds - seconds_between(last_move_, now)));
+    if (script_ && !script_->finished()) wait = std::min(wait, std::max(0.0, script_->seconds_to_deadline(now)));
+    return wait;
 }
 
 void App::frame(Clock::time_point now) {
@@ -111,11 +115,7 @@ void App::frame(Clock::time_point now) {
 void App::follow_session(Clock::time_point now) {
     const std::shared_ptr<const SceneData> scene = session_->scene();
     if (scene && scene->id != scene_id_) adopt_scene(scene);
-    const SessionStatus status = session_->status();
-    if (status.error_count != session_errors_) {
-        session_errors_ = status.error_count;
-        show_message(status.error, true);
-    }
+    follow_errors();
     const std::shared_ptr<const Frame> latest = session_->frame();
     if (!latest || (shown_ && latest->sequence == shown_->sequence)) return;
     film_.show(*latest->image);
@@ -125,6 +125,13 @@ void App::follow_session(Clock::time_point now) {
         stats_.first_image_ms = std::chrono::duration<double, std::milli>(now - config_.launched).count();
     stats_.frame_shown(*latest, now, first_of_camera);
     shown_ = latest;
+}
+
+void App::follow_errors() {
+    const SessionStatus status = session_->status();
+    if (status.error_count == session_errors_) return;
+    session_errors_ = status.error_count;
+    show_message(status.error, true);
 }
 
 void App::adopt_scene(const std::shared_ptr<const SceneData>& scene) {

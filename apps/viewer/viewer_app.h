@@ -69,6 +69,10 @@ public:
     [[nodiscard]] ViewerStats& stats() { return stats_; }
     [[nodiscard]] std::shared_ptr<const Frame> shown_frame() const { return shown_; }
     [[nodiscard]] bool moving() const { return moving_; }
+    // Takes the session's newest error into the window's error line (each
+    // frame does; a script checking errors does it first, so an error that
+    // arrived since the frame began is seen).
+    void follow_errors();
     [[nodiscard]] const std::string& error_text() const { return error_text_; }
     [[nodiscard]] uint64_t errors_seen() const { return errors_seen_; }
     [[nodiscard]] std::string stats_json();
@@ -87,7 +91,7 @@ private:
     void draw_panel();                          // viewer_panel.cpp
     void draw_overlay(Clock::time_point now);   // viewer_panel.cpp
     void draw_messages(Clock::time_point now);  // viewer_panel.cpp
-    [[nodiscard]] bool animating() const;
+    [[nodiscard]] double wait_budget(Clock::time_point now) const;
     void apply_settings();
     void save_bookmarks_file();
 

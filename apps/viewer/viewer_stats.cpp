@@ -66,6 +66,7 @@ std::string ViewerStats::json(const SessionStatus& status, Clock::time_point now
         {"camera_latency_ms", camera_latency_ms},
         {"max_camera_latency_ms", max_camera_latency_ms},
         {"max_ui_frame_ms", max_ui_frame_ms},
+        {"ui_frame_ms", ui_frame_ms},
         {"first_image_ms", first_image_ms},
         {"frames_shown", frames_shown},
         {"resident_mib", double(resident_bytes()) / (1024.0 * 1024.0)},

@@ -5,6 +5,7 @@
 // without drawing (a blocked window).
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <deque>
 #include <string>
@@ -38,11 +39,16 @@ struct ViewerStats {
     double camera_latency_ms = 0.0;  // the last camera change to its first image
     double max_camera_latency_ms = 0.0;
     double max_ui_frame_ms = 0.0;    // since the last reset
+    double ui_frame_ms = 0.0;        // the window's work per frame, averaged over about 30 frames
     double first_image_ms = -1.0;    // launch to the first image
     uint64_t frames_shown = 0;
 
     // A new frame reached the screen at `now`.
     void frame_shown(const Frame& frame, Clock::time_point now, bool first_of_camera);
+    void ui_frame_done(double ms) {
+        max_ui_frame_ms = std::max(max_ui_frame_ms, ms);
+        ui_frame_ms += (ms - ui_frame_ms) / 30.0;
+    }
     void reset_maxima() {
         max_camera_latency_ms = 0.0;
         max_ui_frame_ms = 0.0;

@@ -214,7 +214,9 @@ public:
     void update_display(DisplayImage& display, const ToneMapping& tone) const override {
         auto* host = dynamic_cast<HostDisplayImage*>(&display);
         if (!host) throw Error("update_display: the display image is not a CPU one (make it with this renderer)");
-        parallel::with_threads(options().threads, [&] { host->assign(image(), tone); });
+        const float scale = passes() > 0 ? 1.0f / float(passes()) : 0.0f;  // image()'s scale
+        parallel::with_threads(options().threads,
+                               [&] { host->assign(color_, scale, options().width, options().height, tone); });
     }
 
 private:

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "rayforge/render/display.h"
@@ -21,8 +22,10 @@ public:
     [[nodiscard]] const void* device_pixels() const override { return nullptr; }
     [[nodiscard]] std::vector<uint8_t> download() const override { return pixels_; }
 
-    // Tone-maps `mean` (the passes' mean radiance) into this image, resized to it.
-    void assign(const Image& mean, const ToneMapping& tone);
+    // Tone-maps the mean sums[i] * scale (a width x height film of per-pixel
+    // sums over passes, scale = 1 / passes, as Renderer::image() computes it)
+    // into this image, resized to the film.
+    void assign(std::span<const Vec3f> sums, float scale, int width, int height, const ToneMapping& tone);
 
 private:
     int width_ = 0, height_ = 0;

@@ -25,6 +25,7 @@
 #pragma once
 
 #include <cmath>
+#include <new>
 
 #include "rayforge/render/integrators.h"
 #include "rayforge/scene/light.h"
@@ -183,9 +184,16 @@ RF_HD Vec3f whitted_radiance(const Tracer& tracer, const View& view, const Ray& 
         Vec3f weight;
         int reflections, refractions;
     };
-    WorkItem stack[kWhittedStackSize];
+    // Raw slots, made as items are pushed: default-constructing 64 rays per
+    // sample (their members have initialisers) cost more than most samples'
+    // whole stack traffic.
+    union Slot {
+        WorkItem item;
+        RF_HDI Slot() {}
+    };
+    Slot stack[kWhittedStackSize];
     int top = 0;
-    stack[top++] = {camera_ray, Vec3f(1.0f), 0, 0};
+    new (&stack[top++].item) WorkItem{camera_ray, Vec3f(1.0f), 0, 0};
     const float epsilon = view.ray_epsilon();
     const int max_reflections = settings.reflection_depth < kWhittedMaxDepth ? settings.reflection_depth : kWhittedMaxDepth;
     const int max_refractions = settings.refraction_depth < kWhittedMaxDepth ? settings.refraction_depth : kWhittedMaxDepth;
@@ -196,11 +204,11 @@ RF_HD Vec3f whitted_radiance(const Tracer& tracer, const View& view, const Ray& 
         Ray r;
         r.org = org;
         r.dir = dir;
-        stack[top++] = {r, weight, reflections, refractions};
+        new (&stack[top++].item) WorkItem{r, weight, reflections, refractions};
     };
 
     while (top > 0) {
-        WorkItem item = stack[--top];
+        const WorkItem item = stack[--top].item;
         SurfaceInteraction si;
         if (!trace_surface(tracer, view, item.ray, epsilon, si)) {
             radiance += item.weight * view.environment(normalize(item.ray.dir));
