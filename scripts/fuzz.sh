@@ -16,7 +16,7 @@ set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 BUILD="${FUZZ_BUILD_DIR:-$ROOT/build-fuzz}"
-ALL_TARGETS=(obj mtl ply gltf glb json_scene texture exr aff)
+ALL_TARGETS=(obj mtl ply gltf glb json_scene texture exr aff viewer_script bookmarks)
 
 seconds=60
 runs=""
@@ -38,6 +38,8 @@ dictionary_for() {
     gltf|glb) echo "$ROOT/fuzz/dictionaries/gltf.dict" ;;
     json_scene) echo "$ROOT/fuzz/dictionaries/json.dict" ;;
     aff) echo "$ROOT/fuzz/dictionaries/aff.dict" ;;
+    viewer_script) echo "$ROOT/fuzz/dictionaries/viewer_script.dict" ;;
+    bookmarks) echo "$ROOT/fuzz/dictionaries/json.dict" ;;
     *) echo "" ;;
   esac
 }

@@ -21,6 +21,9 @@ packages=(
   clang libclang-rt-14-dev       # libFuzzer targets and sanitizer runtimes (scripts/fuzz.sh)
   zlib1g-dev                     # tinyexr compiled into the fuzzers needs zlib.h
   python3-matplotlib             # charts of `rayforge bench --json` (scripts/plot-bench.py)
+  libglfw3-dev libgl-dev         # the viewer's window and OpenGL 3.3 context (`rayforge view`)
+  libimgui-dev                   # its controls panel (Dear ImGui 1.86 with the GLFW and OpenGL 3 backends)
+  xvfb xauth libgl1-mesa-dri     # headless viewer tests: a virtual X server and Mesa's software OpenGL
 )
 
 missing=()

@@ -169,9 +169,9 @@ TEST(Script, ParsesEveryCommand) {
         "camera 0,1,3.9,0,1,0,0,1,0,40\nreset\nbookmark-save my view\nbookmark-load my view\n"
         "set builder sbvh\nset res 320x200\nset device cpu\nload builtin:spheres\ndrop /tmp/a file.obj\n"
         "screenshot out dir/a.png\nscreenshot-window w.png\nexpect-error cannot read\nexpect-no-error\n"
-        "print-camera\nprint-stats\nquit\n";
+        "print-camera\nprint-stats\nreset-stats\nquit\n";
     const Script s = parse_script(text, "s.txt");
-    ASSERT_EQ(s.commands.size(), 27u);
+    ASSERT_EQ(s.commands.size(), 28u);
     EXPECT_EQ(s.commands[0].op, ScriptOp::WaitPasses);
     EXPECT_EQ(s.commands[0].a, 16.0);
     EXPECT_EQ(s.commands[0].line, 3);

@@ -67,42 +67,60 @@ void CameraController::set_walk_speed(float units_per_second) {
 
 Vec3f CameraController::world_up() const { return normalize(home_.up); }
 
-void CameraController::orbit(float yaw_degrees, float pitch_degrees) {
+bool CameraController::accept(const Camera& candidate) {
+    try {
+        (void)CameraFrame::make(candidate, 1, 1);
+    } catch (const Error&) {
+        return false;
+    }
+    camera_ = candidate;
+    return true;
+}
+
+bool CameraController::orbit(float yaw_degrees, float pitch_degrees) {
     const Vec3f up = world_up();
-    Vec3f offset = camera_.eye - camera_.target;
+    Camera c = camera_;
+    Vec3f offset = c.eye - c.target;
     offset = rotate(offset, up, radians(yaw_degrees));
     // The eye rises when the view direction (-offset) tilts down.
     offset = -tilt(-offset, up, -radians(pitch_degrees));
-    camera_.eye = camera_.target + offset;
-    camera_.up = up;
+    c.eye = c.target + offset;
+    c.up = up;
+    return accept(c);
 }
 
-void CameraController::look(float yaw_degrees, float pitch_degrees) {
+bool CameraController::look(float yaw_degrees, float pitch_degrees) {
     const Vec3f up = world_up();
-    Vec3f dir = camera_.target - camera_.eye;
+    Camera c = camera_;
+    Vec3f dir = c.target - c.eye;
     dir = rotate(dir, up, -radians(yaw_degrees));
     dir = tilt(dir, up, radians(pitch_degrees));
-    camera_.target = camera_.eye + dir;
-    camera_.up = up;
+    c.target = c.eye + dir;
+    c.up = up;
+    return accept(c);
 }
 
-void CameraController::pan(float dx_pixels, float dy_pixels, int viewport_height) {
+bool CameraController::pan(float dx_pixels, float dy_pixels, int viewport_height) {
     const CameraFrame frame = CameraFrame::make(camera_, 1, 1);
     const float distance = length(camera_.target - camera_.eye);
     const float per_pixel = 2.0f * distance * frame.tan_half_fov / float(std::max(viewport_height, 1));
     const Vec3f shift = frame.right * (-dx_pixels * per_pixel) + frame.up * (dy_pixels * per_pixel);
-    camera_.eye += shift;
-    camera_.target += shift;
+    Camera c = camera_;
+    c.eye += shift;
+    c.target += shift;
+    return accept(c);
 }
 
-void CameraController::dolly(float steps) {
+bool CameraController::dolly(float steps) {
     const Vec3f offset = camera_.eye - camera_.target;
     const float distance = length(offset);
     const float wanted = std::max(distance * std::pow(0.85f, steps), 1e-4f * scene_size_);
-    camera_.eye = camera_.target + offset * (wanted / distance);
+    Camera c = camera_;
+    c.eye = c.target + offset * (wanted / distance);
+    return accept(c);
 }
 
-void CameraController::walk(WalkDirection direction, float seconds, bool fast) {
+bool CameraController::walk(WalkDirection direction, float seconds, bool fast) {
     const CameraFrame frame = CameraFrame::make(camera_, 1, 1);
     const float step = walk_speed_ * (fast ? 4.0f : 1.0f) * seconds;
     Vec3f along{0.0f};
@@ -114,12 +132,17 @@ void CameraController::walk(WalkDirection direction, float seconds, bool fast) {
         case WalkDirection::Up: along = world_up(); break;
         case WalkDirection::Down: along = -world_up(); break;
     }
-    camera_.eye += along * step;
-    camera_.target += along * step;
+    Camera c = camera_;
+    c.eye += along * step;
+    c.target += along * step;
+    return accept(c);
 }
 
-void CameraController::set_fov(float degrees) {
-    if (std::isfinite(degrees)) camera_.vfov_degrees = std::clamp(degrees, 5.0f, 150.0f);
+bool CameraController::set_fov(float degrees) {
+    if (!std::isfinite(degrees)) return false;
+    Camera c = camera_;
+    c.vfov_degrees = std::clamp(degrees, 5.0f, 150.0f);
+    return accept(c);
 }
 
 }  // namespace rf::viewer

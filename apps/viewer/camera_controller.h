@@ -27,18 +27,20 @@ public:
     void set_home(const Camera& home);
     void reset() { camera_ = home_; }
 
+    // Each motion returns false, leaving the camera as it was, when it would
+    // make a camera that cannot render (huge steps overflowing to infinity).
     // Degrees; positive yaw moves the eye to its right, positive pitch up.
-    void orbit(float yaw_degrees, float pitch_degrees);
+    bool orbit(float yaw_degrees, float pitch_degrees);
     // Degrees; positive yaw turns the view right, positive pitch up.
-    void look(float yaw_degrees, float pitch_degrees);
+    bool look(float yaw_degrees, float pitch_degrees);
     // Pixels of an image `viewport_height` pixels tall: the point under the
     // cursor follows it (positive dx moves the view content right).
-    void pan(float dx_pixels, float dy_pixels, int viewport_height);
+    bool pan(float dx_pixels, float dy_pixels, int viewport_height);
     // Wheel steps; each positive step takes the eye 15% closer to the target.
-    void dolly(float steps);
+    bool dolly(float steps);
     // `seconds` of walking in `direction`, four times faster when `fast`.
-    void walk(WalkDirection direction, float seconds, bool fast);
-    void set_fov(float degrees);  // clamped to [5, 150]
+    bool walk(WalkDirection direction, float seconds, bool fast);
+    bool set_fov(float degrees);  // clamped to [5, 150]
 
     // Scene-size units per second of walking (`fast` not applied).
     [[nodiscard]] float walk_speed() const { return walk_speed_; }
@@ -46,6 +48,7 @@ public:
 
 private:
     [[nodiscard]] Vec3f world_up() const;
+    bool accept(const Camera& candidate);
     Camera home_, camera_;
     float scene_size_;
     float walk_speed_;

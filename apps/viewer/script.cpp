@@ -54,6 +54,7 @@ constexpr Grammar kGrammar[] = {
     {"expect-no-error", ScriptOp::ExpectNoError, Args::None},
     {"print-camera", ScriptOp::PrintCamera, Args::None},
     {"print-stats", ScriptOp::PrintStats, Args::None},
+    {"reset-stats", ScriptOp::ResetStats, Args::None},
     {"quit", ScriptOp::Quit, Args::None},
 };
 

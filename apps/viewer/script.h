@@ -26,6 +26,7 @@
 //   expect-no-error
 //   print-camera             the camera as a --camera string, on stdout
 //   print-stats              the statistics as one JSON line, on stdout
+//   reset-stats              start the maxima (latency, window frame time) and rates afresh
 //   quit
 #pragma once
 
@@ -37,7 +38,7 @@ namespace rf::viewer {
 enum class ScriptOp {
     WaitPasses, WaitFrames, WaitIdle, Sleep, Orbit, Look, Pan, Dolly, Walk, Fov, Camera, Reset,
     BookmarkSave, BookmarkLoad, Set, Load, Drop, Screenshot, ScreenshotWindow, ExpectError, ExpectNoError,
-    PrintCamera, PrintStats, Quit,
+    PrintCamera, PrintStats, ResetStats, Quit,
 };
 
 struct ScriptCommand {

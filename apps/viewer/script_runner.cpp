@@ -67,6 +67,10 @@ bool ScriptRunner::start(App& app, const ScriptCommand& c, Clock::time_point now
     const auto need_scene = [&] {
         if (!app.has_scene()) throw Error("no scene is shown yet (wait-idle or wait-passes first)");
     };
+    const auto moved = [&](bool accepted) {
+        if (!accepted) throw Error("the camera would not render after this motion (it overflows); unchanged");
+        app.camera_moved();
+    };
     switch (c.op) {
         case ScriptOp::WaitPasses:
         case ScriptOp::WaitFrames:
@@ -74,16 +78,19 @@ bool ScriptRunner::start(App& app, const ScriptCommand& c, Clock::time_point now
         case ScriptOp::Sleep:
         case ScriptOp::ExpectError:
         case ScriptOp::ExpectNoError: return poll(app, c, now);
-        case ScriptOp::Orbit: need_scene(); app.controller().orbit(float(c.a), float(c.b)); app.camera_moved(); return true;
-        case ScriptOp::Look: need_scene(); app.controller().look(float(c.a), float(c.b)); app.camera_moved(); return true;
+        case ScriptOp::Orbit: need_scene(); moved(app.controller().orbit(float(c.a), float(c.b))); return true;
+        case ScriptOp::Look: need_scene(); moved(app.controller().look(float(c.a), float(c.b))); return true;
         case ScriptOp::Pan:
             need_scene();
-            app.controller().pan(float(c.a), float(c.b), app.settings().render.height);
-            app.camera_moved();
+            moved(app.controller().pan(float(c.a), float(c.b), app.settings().render.height));
             return true;
-        case ScriptOp::Dolly: need_scene(); app.controller().dolly(float(c.a)); app.camera_moved(); return true;
+        case ScriptOp::Dolly: need_scene(); moved(app.controller().dolly(float(c.a))); return true;
         case ScriptOp::Walk: need_scene(); return poll(app, c, now);
-        case ScriptOp::Fov: need_scene(); app.controller().set_fov(float(c.a)); app.camera_placed(); return true;
+        case ScriptOp::Fov:
+            need_scene();
+            if (!app.controller().set_fov(float(c.a))) throw Error("the camera would not render");
+            app.camera_placed();
+            return true;
         case ScriptOp::Camera: need_scene(); app.controller().set(parse_camera(c.rest)); app.camera_placed(); return true;
         case ScriptOp::Reset: need_scene(); app.reset_camera(); return true;
         case ScriptOp::BookmarkSave: app.save_bookmark(c.rest); return true;
@@ -112,6 +119,7 @@ bool ScriptRunner::start(App& app, const ScriptCommand& c, Clock::time_point now
             std::printf("%s\n", app.stats_json().c_str());
             std::fflush(stdout);
             return true;
+        case ScriptOp::ResetStats: app.stats().reset(); return true;
         case ScriptOp::Quit: app.quit(0); finished_ = true; return true;
     }
     return true;
@@ -155,7 +163,8 @@ bool ScriptRunner::poll(App& app, const ScriptCommand& c, Clock::time_point now)
             const double step = std::min(seconds(last_step_, now), c.a - walked_s_);
             last_step_ = now;
             if (step > 0.0) {
-                app.controller().walk(parse_walk_direction(c.word), float(step), c.fast);
+                if (!app.controller().walk(parse_walk_direction(c.word), float(step), c.fast))
+                    throw Error("the camera would not render after this walk (it overflows)");
                 walked_s_ += step;
             }
             app.camera_moved();

@@ -80,7 +80,12 @@ void App::handle_input(Clock::time_point now) {
             std::vector<std::string> names;
             for (const Bookmark& b : scene_views_) names.push_back(b.name);
             for (const Bookmark& b : bookmarks_.all()) names.push_back(b.name);
-            if (size_t(digit) <= names.size()) load_bookmark(names[size_t(digit - 1)]);
+            if (size_t(digit) > names.size()) continue;
+            try {
+                load_bookmark(names[size_t(digit - 1)]);
+            } catch (const Error& e) {
+                show_message(e.what(), true);
+            }
         }
         if (pressed(GLFW_KEY_F1)) panel_visible_ = !panel_visible_;
         if (pressed(GLFW_KEY_F12)) screenshot_now();

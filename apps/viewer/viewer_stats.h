@@ -49,9 +49,13 @@ struct ViewerStats {
         max_ui_frame_ms = std::max(max_ui_frame_ms, ms);
         ui_frame_ms += (ms - ui_frame_ms) / 30.0;
     }
-    void reset_maxima() {
+    // The maxima and the rates start afresh (script: reset-stats).
+    void reset() {
         max_camera_latency_ms = 0.0;
         max_ui_frame_ms = 0.0;
+        still_frames.clear();
+        moving_frames.clear();
+        ui_frames.clear();
     }
     // One JSON object on one line, with the session's status.
     [[nodiscard]] std::string json(const SessionStatus& status, Clock::time_point now) const;

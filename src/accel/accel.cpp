@@ -1,5 +1,5 @@
-// build_accel: option checking and dispatch; the batched queries every Accel
-// inherits.
+// build_accel and build_bvh: dispatch by device; the batched queries every
+// Accel inherits. (The options, their checks and names: build_options.cpp.)
 #include "backend/cpu/ray_batches.h"
 #include "rayforge/accel/accel.h"
 #include "backend/cpu/parallel.h"
@@ -17,58 +17,6 @@
 #include "rayforge/core/error.h"
 
 namespace rf {
-
-void validate_build_options(const BuildOptions& options) {
-    if (options.binned.bin_count < 2 || options.binned.bin_count > 256) {
-        throw Error("build options: binned.bin_count must be in [2, 256], got " +
-                    std::to_string(options.binned.bin_count));
-    }
-    if (options.max_leaf_size < 1 || options.max_leaf_size > 64) {
-        throw Error("build options: max_leaf_size must be in [1, 64], got " +
-                    std::to_string(options.max_leaf_size));
-    }
-    if (!(options.sah.traversal > 0.0f) || !std::isfinite(options.sah.traversal)) {
-        throw Error("build options: sah.traversal must be a positive number, got " +
-                    std::to_string(options.sah.traversal));
-    }
-    if (!(options.sah.intersection > 0.0f) || !std::isfinite(options.sah.intersection)) {
-        throw Error("build options: sah.intersection must be a positive number, got " +
-                    std::to_string(options.sah.intersection));
-    }
-    if (options.reinsertion.iterations < 0 || options.reinsertion.iterations > 1000) {
-        throw Error("build options: reinsertion.iterations must be in [0, 1000], got " +
-                    std::to_string(options.reinsertion.iterations));
-    }
-    if (!(options.sbvh.alpha >= 0.0f && options.sbvh.alpha <= 1.0f)) {
-        throw Error("build options: sbvh.alpha must be in [0, 1], got " + std::to_string(options.sbvh.alpha));
-    }
-    if (options.ploc.radius < 1 || options.ploc.radius > 256) {
-        throw Error("build options: ploc.radius must be in [1, 256], got " + std::to_string(options.ploc.radius));
-    }
-    if (!(options.grid_bvh.split_budget >= 0.0f && options.grid_bvh.split_budget <= 4.0f)) {
-        throw Error("build options: grid_bvh.split_budget must be in [0, 4], got " +
-                    std::to_string(options.grid_bvh.split_budget));
-    }
-    if (options.grid.resolution < 0 || options.grid.resolution > 2048) {
-        throw Error("build options: grid.resolution must be in [0, 2048] (0 = automatic), got " +
-                    std::to_string(options.grid.resolution));
-    }
-    if (!(options.kdtree.empty_bonus >= 0.0f && options.kdtree.empty_bonus < 1.0f)) {
-        throw Error("build options: kdtree.empty_bonus must be in [0, 1), got " +
-                    std::to_string(options.kdtree.empty_bonus));
-    }
-    if (options.kdtree.short_stack_size < 1 || options.kdtree.short_stack_size > 64) {
-        throw Error("build options: kdtree.short_stack_size must be in [1, 64], got " +
-                    std::to_string(options.kdtree.short_stack_size));
-    }
-    if (options.threads < 0) {
-        throw Error("build options: threads must be >= 0 (0 = all cores), got " + std::to_string(options.threads));
-    }
-    if (options.device.is_cuda() && structure_of(options.gpu_kernel) != options.structure) {
-        throw Error("build options: the GPU kernel " + to_string(options.gpu_kernel) + " traverses a " +
-                    to_string(structure_of(options.gpu_kernel)) + ", not a " + to_string(options.structure));
-    }
-}
 
 namespace {
 
@@ -104,19 +52,6 @@ std::unique_ptr<Accel> cpu::build_accel(const SceneGeometry& geometry, const Bui
         case Structure::BruteForce: return std::make_unique<BruteForceAccel>(geometry);
     }
     throw Error("build options: unknown structure");
-}
-
-Structure structure_of(GpuKernel kernel) {
-    switch (kernel) {
-        case GpuKernel::KdShortStack:
-        case GpuKernel::KdRestart: return Structure::KdTree;
-        case GpuKernel::Grid: return Structure::Grid;
-        case GpuKernel::ProximityGrid: return Structure::ProximityGrid;
-        case GpuKernel::Bvh2:
-        case GpuKernel::AilaLaine:
-        case GpuKernel::Cwbvh: break;
-    }
-    return Structure::Bvh;
 }
 
 std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options,
@@ -157,54 +92,6 @@ BuildReport Accel::build_report() const {
     report.device = device();
     return report;
 }
-
-namespace {
-
-template <typename Enum, size_t N>
-Enum parse_name(const std::string& name, const std::pair<const char*, Enum> (&names)[N], const char* what) {
-    for (const auto& [text, value] : names)
-        if (name == text) return value;
-    std::string known;
-    for (const auto& [text, value] : names) known += (known.empty() ? "" : ", ") + std::string(text);
-    throw Error("unknown " + std::string(what) + " '" + name + "' (expected one of: " + known + ")");
-}
-
-template <typename Enum, size_t N>
-std::string name_of(Enum value, const std::pair<const char*, Enum> (&names)[N]) {
-    for (const auto& [text, v] : names)
-        if (v == value) return text;
-    return "?";
-}
-
-constexpr std::pair<const char*, Structure> kStructureNames[] = {
-    {"bvh", Structure::Bvh},      {"grid", Structure::Grid},         {"grid-proximity", Structure::ProximityGrid},
-    {"kdtree", Structure::KdTree}, {"brute", Structure::BruteForce},
-};
-// "lbvh" (an alias of lbvh30) comes after lbvh30 so that to_string gives "lbvh30".
-constexpr std::pair<const char*, Builder> kBuilderNames[] = {
-    {"binned", Builder::BinnedSah}, {"sweep", Builder::SweepSah},   {"sbvh", Builder::Sbvh},
-    {"lbvh30", Builder::Lbvh30},    {"lbvh63", Builder::Lbvh63},    {"lbvh", Builder::Lbvh30},
-    {"hlbvh2", Builder::Hlbvh2},    {"gridbvh", Builder::GridBvh},  {"gridbvh-split", Builder::GridBvhSplit},
-    {"ploc", Builder::Ploc},
-};
-constexpr std::pair<const char*, Layout> kLayoutNames[] = {
-    {"bvh2", Layout::Bvh2}, {"bvh4", Layout::Bvh4}, {"bvh8", Layout::Bvh8}};
-constexpr std::pair<const char*, KdTraversal> kKdTraversalNames[] = {
-    {"stack", KdTraversal::Stack}, {"short-stack", KdTraversal::ShortStack},
-    {"restart", KdTraversal::Restart}, {"pushdown", KdTraversal::Pushdown}};
-
-}  // namespace
-
-Structure parse_structure(const std::string& name) { return parse_name(name, kStructureNames, "acceleration structure"); }
-Builder parse_builder(const std::string& name) { return parse_name(name, kBuilderNames, "BVH builder"); }
-Layout parse_layout(const std::string& name) { return parse_name(name, kLayoutNames, "BVH layout"); }
-KdTraversal parse_kd_traversal(const std::string& name) {
-    return parse_name(name, kKdTraversalNames, "kd-tree traversal");
-}
-std::string to_string(Structure structure) { return name_of(structure, kStructureNames); }
-std::string to_string(Builder builder) { return name_of(builder, kBuilderNames); }
-std::string to_string(Layout layout) { return name_of(layout, kLayoutNames); }
-std::string to_string(KdTraversal traversal) { return name_of(traversal, kKdTraversalNames); }
 
 void Accel::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
     check_batch_sizes("Accel::intersect", rays.size(), hits.size());
