@@ -258,7 +258,8 @@ TEST(ToneMapping, HdrFormatsIgnoreTheCurveAndApplyOnlyExposure) {
 
 
 // The host's table encoding is the exact encoding for every float it can see:
-// each step's threshold and 64 floats either side, and a dense sweep.
+// each step's threshold and 64 floats either side, each bucket's ends, and a
+// dense sweep.
 TEST(ToneMapping, TableEncodingEqualsTheExactEncoding) {
     const auto next = [](float f, int steps) {
         for (int i = 0; i < std::abs(steps); ++i) f = std::nextafter(f, steps > 0 ? 2.0f : -1.0f);
@@ -273,6 +274,15 @@ TEST(ToneMapping, TableEncodingEqualsTheExactEncoding) {
             ASSERT_EQ(encode_srgb8_table(v), encode_srgb8_exact(v)) << v;
         }
     }
+    // Each bucket of the table's first and last float.
+    for (uint32_t bucket = 0; bucket < std::size(srgb8_thresholds().first_code); ++bucket)
+        for (uint32_t bits : {bucket << Srgb8Thresholds::kBucketShift,
+                              (bucket << Srgb8Thresholds::kBucketShift) | ((1u << Srgb8Thresholds::kBucketShift) - 1u)}) {
+            float v;
+            std::memcpy(&v, &bits, sizeof v);
+            if (v > 1.0f) continue;
+            ASSERT_EQ(encode_srgb8_table(v), encode_srgb8_exact(v)) << v;
+        }
     for (uint32_t i = 0; i <= (1u << 20); ++i) {
         const float v = float(i) / float(1u << 20);
         ASSERT_EQ(encode_srgb8_table(v), encode_srgb8_exact(v)) << v;

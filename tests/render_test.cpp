@@ -315,5 +315,14 @@ TEST(Render, InvalidOptionsAndIntegratorNamesAreErrors) {
     EXPECT_THROW((void)parse_whitted_shading("gouraud"), Error);
 }
 
+
+// A GL pixel buffer is registered with a CUDA device: the CPU device, and a
+// CUDA device this process cannot use, are one-line errors.
+TEST(Render, GlPixelBufferNeedsAUsableCudaDevice) {
+    EXPECT_THROW((void)register_gl_pixel_buffer(Device{}, 1u), Error);
+    if (list_cuda_devices().devices.empty())
+        EXPECT_THROW((void)register_gl_pixel_buffer(parse_device("cuda:0"), 1u), Error);
+}
+
 }  // namespace
 }  // namespace rf

@@ -49,7 +49,11 @@ App::App(const ViewerConfig& config, GlWindow& window)
     session_->load(first);
 }
 
-App::~App() = default;
+App::~App() {
+    // The session joins its threads; a build under way cannot be interrupted.
+    if (session_ && session_->status().busy)
+        std::fprintf(stderr, "rayforge: viewer: waiting for \"%s\" to finish\n", session_->status().job.c_str());
+}
 
 int App::run() {
     last_tick_ = Clock::now();

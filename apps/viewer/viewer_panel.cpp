@@ -16,7 +16,7 @@
 namespace rf::viewer {
 namespace {
 
-constexpr float kPanelWidth = 330.0f;
+constexpr float kPanelWidth = 340.0f;
 
 std::string format(const char* fmt, double value) {
     char text[64];
@@ -50,13 +50,15 @@ bool relevant(const std::string& key, const ViewSettings& s) {
 }  // namespace
 
 void App::draw_panel() {
+    const ImGuiIO& io = ImGui::GetIO();
     ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_FirstUseEver);
-    ImGui::SetNextWindowSize(ImVec2(kPanelWidth, 0), ImGuiCond_FirstUseEver);
+    ImGui::SetNextWindowSize(ImVec2(kPanelWidth, std::max(200.0f, io.DisplaySize.y - 16.0f)), ImGuiCond_FirstUseEver);
     ImGui::SetNextWindowBgAlpha(0.85f);
     if (!ImGui::Begin("rayforge (F1 hides)", &panel_visible_)) {
         ImGui::End();
         return;
     }
+    ImGui::PushItemWidth(170.0f);  // leaves room for the longest setting names
     const SessionStatus status = session_->status();
     // A setting widget: combo for named values, checkbox for on/off, text for the rest.
     const auto setting_widget = [&](const SettingInfo& info) {
@@ -180,6 +182,7 @@ void App::draw_panel() {
     ImGui::SameLine();
     if (ImGui::Button("Window shot")) screenshot_window("rayforge-window-" + timestamp() + ".png");
     if (!error_text_.empty()) ImGui::TextColored(ImVec4(1, 0.45f, 0.4f, 1), "last error: %s", error_text_.c_str());
+    ImGui::PopItemWidth();
     ImGui::End();
 }
 

@@ -1,5 +1,8 @@
 #include "render/tone_map.h"
 
+#include <cstdlib>
+#include <iterator>
+
 namespace rf {
 namespace {
 
@@ -24,6 +27,19 @@ float first_display_with_code(uint32_t code) {
 Srgb8Thresholds make_thresholds() {
     Srgb8Thresholds t{};
     for (uint32_t code = 1; code <= 255; ++code) t.at[code - 1] = first_display_with_code(code);
+    uint32_t code = 0;  // thresholds at or below the bucket's first value
+    for (uint32_t bucket = 0; bucket < std::size(t.first_code); ++bucket) {
+        float first;
+        const uint32_t bits = bucket << Srgb8Thresholds::kBucketShift;
+        __builtin_memcpy(&first, &bits, sizeof first);
+        while (code < 255 && t.at[code] <= first) ++code;
+        t.first_code[bucket] = uint8_t(code);
+        // The lookup adds at most one step within a bucket: two would be a bug here.
+        float last;
+        const uint32_t last_bits = bits | ((1u << Srgb8Thresholds::kBucketShift) - 1u);
+        __builtin_memcpy(&last, &last_bits, sizeof last);
+        if (code + 1 < 255 && t.at[code + 1] <= last) std::abort();
+    }
     return t;
 }
 

@@ -3,8 +3,9 @@
 // then the 8-bit sRGB code. On the host the sRGB code is read from a table
 // of the 255 display values where the code steps up, found once by
 // bisection on the exact encoding, so it equals lround(linear_to_srgb(d) *
-// 255) for every float d (a test compares them) at a fraction of the cost
-// of powf; the device computes the encoding directly.
+// 255) for every float d (a test compares them) with one bucket lookup and
+// one comparison instead of powf (several times cheaper; docs/viewer.md has
+// the measurement); the device computes the encoding directly.
 #pragma once
 
 #include <cmath>
@@ -52,19 +53,25 @@ RF_HDI uint8_t encode_srgb8_exact(float display) {
 }
 
 #if !defined(__CUDA_ARCH__)
-// thresholds[k - 1] = the smallest display value whose code is >= k.
+// at[k - 1] = the smallest display value whose code is >= k; first_code[b] =
+// the code of the smallest float whose bits >> 16 are b. The codes step up
+// at most once within such a bucket (checked when the table is made), so a
+// bucket and one comparison give the code.
 struct Srgb8Thresholds {
+    static constexpr uint32_t kBucketShift = 16;
     float at[255];
+    uint8_t first_code[(0x3f800000u >> kBucketShift) + 1];  // up to 1.0f
 };
 const Srgb8Thresholds& srgb8_thresholds();  // tone_map.cpp
 
 inline uint8_t encode_srgb8_table(float display) {
-    const float* t = srgb8_thresholds().at;
-    // Branch-free binary search over 255 steps (the code = thresholds <= display).
-    uint32_t code = 0;
-    for (uint32_t step = 128; step > 0; step >>= 1)
-        if (code + step <= 255 && t[code + step - 1] <= display) code += step;
-    return uint8_t(code);
+    if (!(display > 0.0f)) return 0;
+    if (display >= 1.0f) return 255;
+    const Srgb8Thresholds& t = srgb8_thresholds();
+    uint32_t bits;
+    __builtin_memcpy(&bits, &display, sizeof bits);
+    const uint32_t code = t.first_code[bits >> Srgb8Thresholds::kBucketShift];
+    return uint8_t(code + (code < 255 && display >= t.at[code] ? 1u : 0u));
 }
 #endif
 
