@@ -1,5 +1,9 @@
 #include "session.h"
 
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <new>
 #include <utility>
@@ -12,6 +16,18 @@ namespace {
 
 constexpr double kPreviewTargetMs = 30.0;  // a preview pass this long keeps motion above 30 frames per second
 constexpr size_t kDisplayImages = 3;       // the window's, the published one, and one to fill
+constexpr int kEngineNice = 5;             // CFS weight 335 against the window's 1024
+
+// The engine's threads yield to the window's: a nice value above the
+// window thread's, so on a machine whose cores the renderer and a build
+// fill, the window still gets the CPU it needs for each frame when it needs
+// it. TBB's workers are started by these threads and inherit it. (Linux
+// gives each thread its own nice value; elsewhere this does nothing.)
+void yield_to_the_window() {
+#if defined(__linux__)
+    (void)setpriority(PRIO_PROCESS, pid_t(syscall(SYS_gettid)), kEngineNice);
+#endif
+}
 
 double ms_since(Clock::time_point start) {
     return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
@@ -186,6 +202,7 @@ SessionStatus Session::status() const {
 // ---- the job thread
 
 void Session::job_loop() {
+    if (config_.yield_to_window) yield_to_the_window();
     for (;;) {
         std::optional<SceneSource> load;
         std::optional<BuildOptions> build;
@@ -339,6 +356,7 @@ void Session::hand_over(std::shared_ptr<const SceneData> data, std::shared_ptr<c
 // ---- the render thread
 
 void Session::render_loop() {
+    if (config_.yield_to_window) yield_to_the_window();
     RenderState st;
     for (;;) {
         std::shared_ptr<const Target> target;

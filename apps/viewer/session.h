@@ -109,6 +109,10 @@ struct SessionConfig {
     // whose file may also set `settings` (its render settings: size,
     // integrator, depths). May throw rf::Error, which fails the load.
     std::function<void(SceneData& data, bool first, ViewSettings& settings)> prepare;
+    // Run the session's threads (and the TBB workers they start) at a lower
+    // priority than the caller's, so a window stays responsive while they
+    // fill the cores.
+    bool yield_to_window = false;
 };
 
 class Session {

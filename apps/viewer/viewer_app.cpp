@@ -44,7 +44,7 @@ App::App(const ViewerConfig& config, GlWindow& window)
     }
     if (!catalog_.problem.empty()) show_message(catalog_.problem, true);
     const SceneSource first = catalog_.resolve(config.scene);  // a name that names nothing fails the start
-    session_ = std::make_unique<Session>(SessionConfig{settings_, config.prepare});
+    session_ = std::make_unique<Session>(SessionConfig{settings_, config.prepare, true});
     session_->set_wake([] { GlWindow::wake(); });
     session_->load(first);
 }
