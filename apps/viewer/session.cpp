@@ -63,9 +63,11 @@ struct Session::RenderState {
         if (!renderer || halted) return false;
         return moving ? !preview_done : renderer->passes() < renderer->options().spp;
     }
-    [[nodiscard]] RenderOptions film() const {
+    // The film's options for rendering `on`: its structure's device (the
+    // settings may already name another, whose structure is being built).
+    [[nodiscard]] RenderOptions film(const Target& on) const {
         RenderOptions o = film_options(settings, moving, motion_divisor);
-        o.device = target->accel->device();  // until a rebuild on another device is ready
+        o.device = on.accel->device();
         return o;
     }
     // A display image no frame holds (the pool's reference is its only one).
@@ -355,117 +357,132 @@ void Session::hand_over(std::shared_ptr<const SceneData> data, std::shared_ptr<c
 
 // ---- the render thread
 
+// What the render thread took from the requests at the top of a round.
+struct Session::RenderRequests {
+    std::shared_ptr<const Target> target;  // a new scene or structure
+    unsigned effects = 0;                  // Restart | Retone
+    bool camera_changed = false;
+    bool was_moving = false;
+    std::vector<std::promise<Image>> films;
+};
+
 void Session::render_loop() {
     if (config_.yield_to_window) yield_to_the_window();
     RenderState st;
-    for (;;) {
-        std::shared_ptr<const Target> target;
-        unsigned effects = 0;
-        bool camera_changed = false;
-        bool was_moving = st.moving;
-        std::vector<std::promise<Image>> films;
-        {
-            std::unique_lock<std::mutex> lock(mutex_);
-            render_cv_.wait(lock, [&] {
-                return stopping_ || new_target_ || pending_effects_ || camera_version_ != st.camera_version ||
-                       !film_requests_.empty() || st.wants_pass();
-            });
-            if (stopping_) break;
-            cancel_.store(false);
-            target = std::exchange(new_target_, nullptr);
-            if (target) st.target_version = target_version_;
-            effects = std::exchange(pending_effects_, 0u);
-            films = std::move(film_requests_);
-            film_requests_.clear();
-            st.settings = settings_;
-            st.settings_version = settings_version_;
-            if (camera_version_ != st.camera_version) {
-                camera_changed = true;
-                st.camera = camera_;
-                st.camera_version = camera_version_;
-                st.camera_time = camera_time_;
-                st.moving = moving_;
-                st.preview_done = false;
-            }
-        }
-        if (target || effects || camera_changed) st.halted = false;
-        if (st.moving && !was_moving)  // a motion starts: size its previews
-            st.motion_divisor = st.settings.motion_divisor > 0 ? st.settings.motion_divisor
-                                                               : auto_motion_divisor(st.full_pass_ms, kPreviewTargetMs);
-        {
-            std::lock_guard<std::mutex> lock(mutex_);
-            status_.motion_divisor = st.motion_divisor;
-        }
-        try {
-            if (target) {
-                // The new renderer first: if it cannot be made, the old one keeps rendering.
-                std::shared_ptr<const Target> previous = st.target;
-                st.target = target;
-                std::unique_ptr<Renderer> renderer;
-                try {
-                    renderer = make_renderer(target->scene->scene, target->scene->geometry, *target->accel, st.camera,
-                                             st.film());
-                } catch (...) {
-                    st.target = previous;
-                    throw;
-                }
-                st.renderer = std::move(renderer);  // the old renderer goes before its target
-                st.pool.clear();
-                previous.reset();
-            } else if (st.renderer) {
-                if (camera_changed) st.renderer->set_camera(st.camera);
-                if ((effects & unsigned(Effect::Restart)) || st.moving != was_moving ||
-                    st.renderer->options().width != st.film().width || st.renderer->options().height != st.film().height)
-                    st.renderer->set_options(st.film());
-            }
-        } catch (const Error& e) {
-            report_error(e.what());
-        }
-        for (std::promise<Image>& film : films) film.set_value(st.renderer ? st.renderer->image() : Image{});
-        if (!films.empty()) wake();
-
-        bool publish = st.renderer && (effects & unsigned(Effect::Retone)) && st.renderer->passes() > 0;
+    RenderRequests r;
+    while (take_requests(st, r)) {
+        apply_requests(st, r);
+        for (std::promise<Image>& film : r.films) film.set_value(st.renderer ? st.renderer->image() : Image{});
+        if (!r.films.empty()) wake();
+        bool publish = st.renderer && (r.effects & unsigned(Effect::Retone)) && st.renderer->passes() > 0;
         if (st.wants_pass()) {
-            pass_is_preview_.store(st.moving);
-            try {
-                if (!st.renderer->render_pass({}, &cancel_)) continue;  // something changed: start over
-            } catch (const Error& e) {
-                st.halted = true;
-                report_error(e.what());
-                continue;
-            }
-            const PassStats& pass = st.renderer->last_pass();
-            if (st.moving) st.preview_done = true;
-            else st.full_pass_ms = pass.pass_ms;
+            if (!run_pass(st)) continue;  // cancelled (something changed) or failed
             publish = true;
         }
-        if (!publish) continue;
-        try {
-            std::shared_ptr<DisplayImage> image = st.free_image();
-            st.renderer->update_display(*image, st.settings.tone);
-            auto frame = std::make_shared<Frame>();
-            frame->image = image;
-            frame->sequence = ++st.sequence;
-            frame->scene_id = st.target->scene->id;
-            frame->passes = st.renderer->passes();
-            frame->target_passes = st.renderer->options().spp;
-            frame->preview = st.moving;
-            frame->pass_ms = st.renderer->last_pass().pass_ms;
-            frame->pass_rays = st.renderer->last_pass().closest_rays + st.renderer->last_pass().shadow_rays;
-            frame->camera_version = st.camera_version;
-            frame->camera_time = st.camera_time;
-            frame->settings_version = st.settings_version;
-            frame->target_version = st.target_version;
-            {
-                std::lock_guard<std::mutex> lock(mutex_);
-                frame_ = std::move(frame);
-                status_.full_pass_ms = st.full_pass_ms;
-            }
-            wake();
-        } catch (const Error& e) {
-            st.halted = true;
-            report_error(e.what());
+        if (publish) publish_frame(st);
+    }
+}
+
+// Waits until there is something to do; false when the session stops.
+bool Session::take_requests(RenderState& st, RenderRequests& r) {
+    r = RenderRequests{};
+    r.was_moving = st.moving;
+    std::unique_lock<std::mutex> lock(mutex_);
+    render_cv_.wait(lock, [&] {
+        return stopping_ || new_target_ || pending_effects_ || camera_version_ != st.camera_version ||
+               !film_requests_.empty() || st.wants_pass();
+    });
+    if (stopping_) return false;
+    cancel_.store(false);
+    r.target = std::exchange(new_target_, nullptr);
+    if (r.target) st.target_version = target_version_;
+    r.effects = std::exchange(pending_effects_, 0u);
+    r.films = std::exchange(film_requests_, {});
+    st.settings = settings_;
+    st.settings_version = settings_version_;
+    if (camera_version_ != st.camera_version) {
+        r.camera_changed = true;
+        st.camera = camera_;
+        st.camera_version = camera_version_;
+        st.camera_time = camera_time_;
+        st.moving = moving_;
+        st.preview_done = false;
+    }
+    if (r.target || r.effects || r.camera_changed) st.halted = false;
+    if (st.moving && !r.was_moving)  // a motion starts: size its previews
+        st.motion_divisor = st.settings.motion_divisor > 0 ? st.settings.motion_divisor
+                                                           : auto_motion_divisor(st.full_pass_ms, kPreviewTargetMs);
+    status_.motion_divisor = st.motion_divisor;
+    return true;
+}
+
+// A new target gets a new renderer (if that fails, the old one keeps
+// rendering); otherwise the camera and the film's options are brought up to date.
+void Session::apply_requests(RenderState& st, const RenderRequests& r) {
+    try {
+        if (r.target) {
+            std::unique_ptr<Renderer> renderer = make_renderer(r.target->scene->scene, r.target->scene->geometry,
+                                                               *r.target->accel, st.camera, st.film(*r.target));
+            st.renderer = std::move(renderer);  // the old renderer goes before its target
+            st.target = r.target;
+            st.pool.clear();
+            return;
         }
+        if (!st.renderer) return;
+        if (r.camera_changed) st.renderer->set_camera(st.camera);
+        const RenderOptions film = st.film(*st.target);
+        if ((r.effects & unsigned(Effect::Restart)) || st.moving != r.was_moving ||
+            st.renderer->options().width != film.width || st.renderer->options().height != film.height)
+            st.renderer->set_options(film);
+    } catch (const Error& e) {
+        report_error(e.what());
+    }
+}
+
+// One pass; false when it was cancelled or failed (a failure halts passes
+// until the next change).
+bool Session::run_pass(RenderState& st) {
+    pass_is_preview_.store(st.moving);
+    try {
+        if (!st.renderer->render_pass({}, &cancel_)) return false;
+    } catch (const Error& e) {
+        st.halted = true;
+        report_error(e.what());
+        return false;
+    }
+    if (st.moving) st.preview_done = true;
+    else st.full_pass_ms = st.renderer->last_pass().pass_ms;
+    return true;
+}
+
+// The renderer's image into a free display image, published as the newest Frame.
+void Session::publish_frame(RenderState& st) {
+    try {
+        std::shared_ptr<DisplayImage> image = st.free_image();
+        st.renderer->update_display(*image, st.settings.tone);
+        const PassStats& pass = st.renderer->last_pass();
+        auto frame = std::make_shared<Frame>();
+        frame->image = image;
+        frame->sequence = ++st.sequence;
+        frame->scene_id = st.target->scene->id;
+        frame->passes = st.renderer->passes();
+        frame->target_passes = st.renderer->options().spp;
+        frame->preview = st.moving;
+        frame->pass_ms = pass.pass_ms;
+        frame->pass_rays = pass.closest_rays + pass.shadow_rays;
+        frame->camera_version = st.camera_version;
+        frame->camera_time = st.camera_time;
+        frame->settings_version = st.settings_version;
+        frame->target_version = st.target_version;
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            frame_ = std::move(frame);
+            status_.full_pass_ms = st.full_pass_ms;
+        }
+        wake();
+    } catch (const Error& e) {
+        st.halted = true;
+        report_error(e.what());
     }
 }
 

@@ -149,9 +149,14 @@ public:
 private:
     struct Target;  // a scene with its structure, ready to render
     struct RenderState;
+    struct RenderRequests;
 
     void job_loop();
     void render_loop();
+    bool take_requests(RenderState& st, RenderRequests& r);
+    void apply_requests(RenderState& st, const RenderRequests& r);
+    bool run_pass(RenderState& st);
+    void publish_frame(RenderState& st);
     void run_load(const SceneSource& source);
     void run_build(std::shared_ptr<const SceneData> data, const BuildOptions& options);
     void hand_over(std::shared_ptr<const SceneData> data, std::shared_ptr<const Accel> accel);

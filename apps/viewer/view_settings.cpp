@@ -115,9 +115,10 @@ void set_resolution(ViewSettings& s, const std::string& value) {
     s.render.height = parse_int(value.substr(x + 1), 1, 16384);
 }
 
-std::vector<Setting> make_settings() {
-    const Effect rebuild = Effect::Rebuild, restart = Effect::Restart, retone = Effect::Retone;
-    std::vector<Setting> t;
+constexpr Effect rebuild = Effect::Rebuild, restart = Effect::Restart, retone = Effect::Retone;
+
+// The structure's settings: any of them changed builds a new structure.
+void add_structure_settings(std::vector<Setting>& t) {
     t.push_back(enum_setting<Structure>(
         "accel", "structure", rebuild, {"bvh", "grid", "grid-proximity", "kdtree", "brute"}, "acceleration structure",
         [](ViewSettings& s) -> Structure& { return s.build.structure; },
@@ -156,7 +157,10 @@ std::vector<Setting> make_settings() {
                      s.build.gpu_kernel = parse_gpu_kernel(v);
                      if (s.build.device.is_cuda()) s.build.structure = structure_of(s.build.gpu_kernel);
                  }});
+}
 
+// The integrators' settings: a change restarts the accumulation.
+void add_integrator_settings(std::vector<Setting>& t) {
     t.push_back(enum_setting<IntegratorKind>(
         "integrator", "integrator", restart, {"whitted", "path", "ao", "normals"}, "integrator",
         [](ViewSettings& s) -> IntegratorKind& { return s.render.integrator; },
@@ -188,7 +192,10 @@ std::vector<Setting> make_settings() {
     t.push_back({{"seed", "integrator", restart, {}, "random seed"},
                  [](const ViewSettings& s) { return std::to_string(s.render.seed); },
                  [](ViewSettings& s, const std::string& v) { s.render.seed = uint32_t(parse_int(v, 0, 2147483647)); }});
+}
 
+// The film's size and passes, the display's tone mapping, the device.
+void add_image_display_and_device_settings(std::vector<Setting>& t) {
     t.push_back({{"res", "image", restart, {}, "full resolution WxH"},
                  [](const ViewSettings& s) {
                      return std::to_string(s.render.width) + "x" + std::to_string(s.render.height);
@@ -219,7 +226,14 @@ std::vector<Setting> make_settings() {
                      s.render.threads = parse_int(v, 0, 4096);
                      s.build.threads = s.render.threads;
                  }});
-    return t;
+}
+
+std::vector<Setting> make_settings() {
+    std::vector<Setting> table;
+    add_structure_settings(table);
+    add_integrator_settings(table);
+    add_image_display_and_device_settings(table);
+    return table;
 }
 
 const std::vector<Setting>& settings_table() {

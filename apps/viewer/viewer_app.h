@@ -88,7 +88,13 @@ private:
     void end_motion(Clock::time_point now);
     void finish_screenshots();
     void handle_input(Clock::time_point now);   // viewer_input.cpp
-    void draw_panel();                          // viewer_panel.cpp
+    void draw_panel();                          // viewer_panel.cpp, with the sections below
+    void draw_scene_section(const SessionStatus& status);
+    void draw_camera_section();
+    void draw_bookmarks_section();
+    void draw_structure_section(const SessionStatus& status);
+    void setting_widget(const SettingInfo& info);
+    void setting_group(const char* group);
     void draw_overlay(Clock::time_point now);   // viewer_panel.cpp
     void draw_messages(Clock::time_point now);  // viewer_panel.cpp
     [[nodiscard]] double wait_budget(Clock::time_point now) const;

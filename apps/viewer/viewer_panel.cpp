@@ -49,6 +49,119 @@ bool relevant(const std::string& key, const ViewSettings& s) {
 
 }  // namespace
 
+// A setting's widget: a combo for named values (devices: the ones present),
+// a checkbox for on/off, a text field (applied on Enter) for the rest.
+void App::setting_widget(const SettingInfo& info) {
+    const std::string value = get_setting(settings_, info.key);
+    const auto apply = [&](const std::string& v) {
+        try {
+            set(info.key, v);
+        } catch (const Error& e) {
+            show_message(e.what(), true);
+        }
+    };
+    const auto combo = [&](const std::vector<std::string>& choices) {
+        if (!ImGui::BeginCombo(info.key.c_str(), value.c_str())) return;
+        for (const std::string& choice : choices)
+            if (ImGui::Selectable(choice.c_str(), choice == value)) apply(choice);
+        ImGui::EndCombo();
+    };
+    ImGui::PushID(info.key.c_str());
+    if (info.choices == std::vector<std::string>{"on", "off"}) {
+        bool on = value == "on";
+        if (ImGui::Checkbox(info.key.c_str(), &on)) apply(on ? "on" : "off");
+    } else if (!info.choices.empty()) {
+        combo(info.choices);
+    } else if (info.key == "device") {
+        combo(devices_);
+    } else {
+        std::string edited = value;
+        if (ImGui::InputText(info.key.c_str(), &edited, ImGuiInputTextFlags_EnterReturnsTrue)) apply(edited);
+    }
+    if (ImGui::IsItemHovered()) ImGui::SetTooltip("%s", info.help.c_str());
+    ImGui::PopID();
+}
+
+void App::setting_group(const char* group) {
+    for (const SettingInfo& info : setting_infos())
+        if (info.group == group && relevant(info.key, settings_)) setting_widget(info);
+}
+
+void App::draw_scene_section(const SessionStatus& status) {
+    ImGui::Text("%s: %zu triangles, loaded in %.0f ms",
+                status.scene_name.empty() ? "(loading)" : status.scene_name.c_str(), status.triangles, status.load_ms);
+    if (ImGui::BeginCombo("switch to", "...")) {
+        for (const std::string& name : catalog_.shared_names)
+            if (ImGui::Selectable(name.c_str())) drop(name);
+        if (!catalog_.shared_names.empty()) ImGui::Separator();
+        for (const std::string& name : catalog_.builtin_names)
+            if (ImGui::Selectable(name.c_str())) drop(name);
+        ImGui::EndCombo();
+    }
+    ImGui::InputText("##path", &path_input_);
+    ImGui::SameLine();
+    if (ImGui::Button("Open") && !path_input_.empty()) drop(path_input_);
+    ImGui::TextDisabled("or drop a scene file onto the window");
+}
+
+void App::draw_camera_section() {
+    float fov = controller_->camera().vfov_degrees;
+    if (ImGui::SliderFloat("fov", &fov, 5.0f, 150.0f, "%.1f deg")) {
+        controller_->set_fov(fov);
+        camera_placed();
+    }
+    float speed = controller_->walk_speed();
+    if (ImGui::DragFloat("walk speed", &speed, speed * 0.01f + 1e-6f, 0.0f, 0.0f, "%.3g /s"))
+        controller_->set_walk_speed(speed);
+    if (ImGui::Button("Reset (R)")) reset_camera();
+    ImGui::SameLine();
+    if (ImGui::Button("Copy --camera (C)")) {
+        const std::string text = to_string(controller_->camera());
+        ImGui::SetClipboardText(text.c_str());
+        std::printf("--camera %s\n", text.c_str());
+        std::fflush(stdout);
+    }
+    std::string text = to_string(controller_->camera());
+    ImGui::InputText("--camera", &text, ImGuiInputTextFlags_ReadOnly);
+}
+
+void App::draw_bookmarks_section() {
+    int index = 1;
+    const auto row = [&](const Bookmark& b, bool removable) {
+        ImGui::PushID(index);
+        if (ImGui::Button(index <= 9 ? std::to_string(index).c_str() : "go")) {
+            try {
+                load_bookmark(b.name);
+            } catch (const Error& e) {
+                show_message(e.what(), true);
+            }
+        }
+        ImGui::SameLine();
+        ImGui::TextUnformatted(b.name.c_str());
+        if (removable) {
+            ImGui::SameLine();
+            if (ImGui::SmallButton("x")) remove_bookmark(b.name);
+        }
+        ImGui::PopID();
+        ++index;
+    };
+    for (const Bookmark& b : scene_views_) row(b, false);
+    const std::vector<Bookmark> saved = bookmarks_.all();  // a copy: a button may remove one
+    for (const Bookmark& b : saved) row(b, true);
+    ImGui::InputText("##name", &bookmark_input_);
+    ImGui::SameLine();
+    if (ImGui::Button("Save (B)"))
+        save_bookmark(bookmark_input_.empty() ? "bookmark " + std::to_string(saved.size() + 1) : bookmark_input_);
+    ImGui::TextDisabled("file: %s", config_.bookmarks.c_str());
+}
+
+void App::draw_structure_section(const SessionStatus& status) {
+    setting_group("structure");
+    if (!status.busy) return;
+    ImGui::ProgressBar(float(status.job_progress), ImVec2(-1, 0), format("%.1f s", status.job_seconds).c_str());
+    ImGui::TextWrapped("%s (the current structure renders until it is ready)", status.job.c_str());
+}
+
 void App::draw_panel() {
     const ImGuiIO& io = ImGui::GetIO();
     ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_FirstUseEver);
@@ -60,120 +173,14 @@ void App::draw_panel() {
     }
     ImGui::PushItemWidth(170.0f);  // leaves room for the longest setting names
     const SessionStatus status = session_->status();
-    // A setting widget: combo for named values, checkbox for on/off, text for the rest.
-    const auto setting_widget = [&](const SettingInfo& info) {
-        const std::string value = get_setting(settings_, info.key);
-        const auto apply = [&](const std::string& v) {
-            try {
-                set(info.key, v);
-            } catch (const Error& e) {
-                show_message(e.what(), true);
-            }
-        };
-        ImGui::PushID(info.key.c_str());
-        if (info.choices == std::vector<std::string>{"on", "off"}) {
-            bool on = value == "on";
-            if (ImGui::Checkbox(info.key.c_str(), &on)) apply(on ? "on" : "off");
-        } else if (!info.choices.empty()) {
-            if (ImGui::BeginCombo(info.key.c_str(), value.c_str())) {
-                for (const std::string& choice : info.choices)
-                    if (ImGui::Selectable(choice.c_str(), choice == value)) apply(choice);
-                ImGui::EndCombo();
-            }
-        } else if (info.key == "device") {
-            if (ImGui::BeginCombo(info.key.c_str(), value.c_str())) {
-                for (const std::string& device : devices_)
-                    if (ImGui::Selectable(device.c_str(), device == value)) apply(device);
-                ImGui::EndCombo();
-            }
-        } else {
-            std::string edited = value;
-            if (ImGui::InputText(info.key.c_str(), &edited, ImGuiInputTextFlags_EnterReturnsTrue)) apply(edited);
-        }
-        if (ImGui::IsItemHovered()) ImGui::SetTooltip("%s", info.help.c_str());
-        ImGui::PopID();
-    };
-    const auto setting_group = [&](const char* group) {
-        for (const SettingInfo& info : setting_infos())
-            if (info.group == group && relevant(info.key, settings_)) setting_widget(info);
-    };
-
-    if (ImGui::CollapsingHeader("Scene", ImGuiTreeNodeFlags_DefaultOpen)) {
-        ImGui::Text("%s: %zu triangles, loaded in %.0f ms", status.scene_name.empty() ? "(loading)" : status.scene_name.c_str(),
-                    status.triangles, status.load_ms);
-        if (ImGui::BeginCombo("switch to", "...")) {
-            for (const std::string& name : catalog_.shared_names)
-                if (ImGui::Selectable(name.c_str())) drop(name);
-            if (!catalog_.shared_names.empty()) ImGui::Separator();
-            for (const std::string& name : catalog_.builtin_names)
-                if (ImGui::Selectable(name.c_str())) drop(name);
-            ImGui::EndCombo();
-        }
-        ImGui::InputText("##path", &path_input_);
-        ImGui::SameLine();
-        if (ImGui::Button("Open") && !path_input_.empty()) drop(path_input_);
-        ImGui::TextDisabled("or drop a scene file onto the window");
-    }
-    if (has_scene() && ImGui::CollapsingHeader("Camera", ImGuiTreeNodeFlags_DefaultOpen)) {
-        float fov = controller_->camera().vfov_degrees;
-        if (ImGui::SliderFloat("fov", &fov, 5.0f, 150.0f, "%.1f deg")) {
-            controller_->set_fov(fov);
-            camera_placed();
-        }
-        float speed = controller_->walk_speed();
-        if (ImGui::DragFloat("walk speed", &speed, speed * 0.01f + 1e-6f, 0.0f, 0.0f, "%.3g /s"))
-            controller_->set_walk_speed(speed);
-        if (ImGui::Button("Reset (R)")) reset_camera();
-        ImGui::SameLine();
-        if (ImGui::Button("Copy --camera (C)")) {
-            const std::string text = to_string(controller_->camera());
-            ImGui::SetClipboardText(text.c_str());
-            std::printf("--camera %s\n", text.c_str());
-            std::fflush(stdout);
-        }
-        std::string text = to_string(controller_->camera());
-        ImGui::InputText("--camera", &text, ImGuiInputTextFlags_ReadOnly);
-    }
-    if (has_scene() && ImGui::CollapsingHeader("Bookmarks")) {
-        int index = 1;
-        const auto row = [&](const Bookmark& b, bool removable) {
-            ImGui::PushID(index);
-            if (ImGui::Button(index <= 9 ? std::to_string(index).c_str() : "go")) {
-                try {
-                    load_bookmark(b.name);
-                } catch (const Error& e) {
-                    show_message(e.what(), true);
-                }
-            }
-            ImGui::SameLine();
-            ImGui::TextUnformatted(b.name.c_str());
-            if (removable) {
-                ImGui::SameLine();
-                if (ImGui::SmallButton("x")) remove_bookmark(b.name);
-            }
-            ImGui::PopID();
-            ++index;
-        };
-        for (const Bookmark& b : scene_views_) row(b, false);
-        const std::vector<Bookmark> saved = bookmarks_.all();
-        for (const Bookmark& b : saved) row(b, true);
-        ImGui::InputText("##name", &bookmark_input_);
-        ImGui::SameLine();
-        if (ImGui::Button("Save (B)"))
-            save_bookmark(bookmark_input_.empty() ? "bookmark " + std::to_string(saved.size() + 1) : bookmark_input_);
-        ImGui::TextDisabled("file: %s", config_.bookmarks.c_str());
-    }
-    if (ImGui::CollapsingHeader("Structure", ImGuiTreeNodeFlags_DefaultOpen)) {
-        setting_group("structure");
-        if (status.busy) {
-            ImGui::ProgressBar(float(status.job_progress), ImVec2(-1, 0),
-                               format("%.1f s", status.job_seconds).c_str());
-            ImGui::TextWrapped("%s (the current structure renders until it is ready)", status.job.c_str());
-        }
-    }
-    if (ImGui::CollapsingHeader("Integrator", ImGuiTreeNodeFlags_DefaultOpen)) setting_group("integrator");
+    const ImGuiTreeNodeFlags open = ImGuiTreeNodeFlags_DefaultOpen;
+    if (ImGui::CollapsingHeader("Scene", open)) draw_scene_section(status);
+    if (has_scene() && ImGui::CollapsingHeader("Camera", open)) draw_camera_section();
+    if (has_scene() && ImGui::CollapsingHeader("Bookmarks")) draw_bookmarks_section();
+    if (ImGui::CollapsingHeader("Structure", open)) draw_structure_section(status);
+    if (ImGui::CollapsingHeader("Integrator", open)) setting_group("integrator");
     if (ImGui::CollapsingHeader("Image")) setting_group("image");
-    if (ImGui::CollapsingHeader("Display", ImGuiTreeNodeFlags_DefaultOpen)) setting_group("display");
+    if (ImGui::CollapsingHeader("Display", open)) setting_group("display");
     if (ImGui::CollapsingHeader("Device")) {
         setting_group("device");
         ImGui::TextDisabled("%u hardware threads; film: %s", std::thread::hardware_concurrency(), film_.path().c_str());
