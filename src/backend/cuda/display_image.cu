@@ -34,8 +34,18 @@ public:
                         std::to_string(gl_buffer) + " with CUDA (" + cudaGetErrorString(status) +
                         "); the OpenGL context must run on this NVIDIA GPU");
         }
+        // Its own non-blocking stream: the copy must not wait for the
+        // renderer's next pass queued on the default stream by another thread.
+        const cudaError_t made = cudaStreamCreateWithFlags(&stream_, cudaStreamNonBlocking);
+        if (made != cudaSuccess) {
+            cudaGraphicsUnregisterResource(resource_);
+            RF_CUDA_CHECK(made);
+        }
     }
-    ~CudaGlPixelBuffer() override { cudaGraphicsUnregisterResource(resource_); }
+    ~CudaGlPixelBuffer() override {
+        cudaGraphicsUnregisterResource(resource_);
+        cudaStreamDestroy(stream_);
+    }
     CudaGlPixelBuffer(const CudaGlPixelBuffer&) = delete;
     CudaGlPixelBuffer& operator=(const CudaGlPixelBuffer&) = delete;
 
@@ -47,14 +57,16 @@ public:
                         to_string(image.device()));
         RF_CUDA_CHECK(cudaSetDevice(device_index_));
         const size_t bytes = size_t(image.width()) * size_t(image.height()) * 4;
-        RF_CUDA_CHECK(cudaGraphicsMapResources(1, &resource_, nullptr));
+        RF_CUDA_CHECK(cudaGraphicsMapResources(1, &resource_, stream_));
         void* mapped = nullptr;
         size_t mapped_bytes = 0;
         const cudaError_t pointer = cudaGraphicsResourceGetMappedPointer(&mapped, &mapped_bytes, resource_);
         const bool fits = pointer == cudaSuccess && mapped_bytes >= bytes;
         const cudaError_t copy =
-            fits ? cudaMemcpy(mapped, image.device_pixels(), bytes, cudaMemcpyDeviceToDevice) : cudaSuccess;
-        RF_CUDA_CHECK(cudaGraphicsUnmapResources(1, &resource_, nullptr));
+            fits ? cudaMemcpyAsync(mapped, image.device_pixels(), bytes, cudaMemcpyDeviceToDevice, stream_)
+                 : cudaSuccess;
+        RF_CUDA_CHECK(cudaGraphicsUnmapResources(1, &resource_, stream_));  // after the copy, in stream order
+        RF_CUDA_CHECK(cudaStreamSynchronize(stream_));
         RF_CUDA_CHECK(pointer);
         if (!fits)
             throw Error("GL pixel buffer: " + std::to_string(mapped_bytes) + " bytes cannot hold a " +
@@ -65,6 +77,7 @@ public:
 private:
     int device_index_;
     cudaGraphicsResource_t resource_ = nullptr;
+    cudaStream_t stream_ = nullptr;
 };
 
 }  // namespace
