@@ -6,6 +6,7 @@
 // script's file and line. Skips with a message when no X server can be
 // started or the viewer was not built.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdlib>
@@ -27,7 +28,14 @@ namespace {
 // can neither attribute nor suppress by name. ASan's other checks stay on
 // here, and the viewer's own code (session, settings, scripts) is
 // leak-checked by the window-less tests.
-const std::string kXvfb = "env ASAN_OPTIONS=\"${ASAN_OPTIONS:-}:detect_leaks=0\" xvfb-run -a -s '-screen 0 1024x768x24'";
+// Parallel test processes start from display numbers of their own (-n), so
+// two xvfb-run -a do not race for the same free number.
+std::string xvfb() {
+    static int launches = 0;
+    const int first_display = 100 + int(getpid() % 400) * 16 + (launches++ % 16);
+    return "env ASAN_OPTIONS=\"${ASAN_OPTIONS:-}:detect_leaks=0\" xvfb-run -a -n " + std::to_string(first_display) +
+           " -s '-screen 0 1024x768x24'";
+}
 
 std::string write_script(const std::string& dir, const std::string& name, const std::string& text) {
     const std::string path = dir + "/" + name;
@@ -41,7 +49,7 @@ const std::string& gui_unavailable() {
         if (std::system("command -v xvfb-run >/dev/null 2>&1") != 0) return std::string("xvfb-run is not installed");
         const std::string dir = test::temp_dir("viewer_probe");
         const std::string script = write_script(dir, "quit.txt", "quit\n");
-        const test::CliResult r = test::run_cli("view builtin:cornell --res 8x8 --spp 1 --script '" + script + "'", kXvfb);
+        const test::CliResult r = test::run_cli("view builtin:cornell --res 8x8 --spp 1 --script '" + script + "'", xvfb());
         if (r.exit_code == 0) return std::string();
         return "the viewer cannot open a window here: " + (r.err.empty() ? std::string("exit ") + std::to_string(r.exit_code) : r.err);
     }();
@@ -56,7 +64,7 @@ const std::string& gui_unavailable() {
 // Runs the viewer on `scene` with `options` and the script `text`.
 test::CliResult view(const std::string& dir, const std::string& scene, const std::string& options, const std::string& text) {
     const std::string script = write_script(dir, "script.txt", text);
-    return test::run_cli("view " + scene + " " + options + " --script '" + script + "' --script-timeout 60", kXvfb);
+    return test::run_cli("view " + scene + " " + options + " --script '" + script + "' --script-timeout 60", xvfb());
 }
 
 // The largest difference of any channel (linear values after decoding).

@@ -333,9 +333,12 @@ void Session::run_build(std::shared_ptr<const SceneData> data, const BuildOption
 }
 
 void Session::hand_over(std::shared_ptr<const SceneData> data, std::shared_ptr<const Accel> accel) {
+    // Outside the lock: a structure may compute its statistics (a kd-tree's
+    // SAH cost walks the tree), and the window reads the status every frame.
+    const AccelStats stats = accel->stats();
     {
         std::lock_guard<std::mutex> lock(mutex_);
-        status_.accel = accel->stats();
+        status_.accel = stats;
         status_.accel_device = accel->device();
         if (shown_scene_ != data) {
             shown_scene_ = data;

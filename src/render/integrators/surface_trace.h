@@ -158,11 +158,7 @@ RF_HD bool trace_surface(const Tracer& tracer, const View& view, Ray ray, float 
 // through with probability 1 - alpha).
 template <class Tracer, class View>
 RF_HD bool unoccluded(const Tracer& tracer, const View& view, Ray ray, float epsilon, RandomStream& rng) {
-    // Nothing at all in the way answers most shadow rays, and an any-hit
-    // query finds that faster than walking from hit to hit (no numbers are
-    // drawn either way, so the walk below sees the same stream).
-    if (!tracer.occluded(ray)) return true;
-    if (!view.has_transparent_materials()) return false;
+    if (!view.has_transparent_materials()) return !tracer.occluded(ray);
     for (int skip = 0; skip <= kMaxAlphaSkips; ++skip) {
         Hit hit = tracer.intersect(ray);
         if (!hit.found()) return true;
