@@ -14,8 +14,12 @@ struct CliResult {
     std::string err;
 };
 
-// Runs `[wrapper] rayforge ARGS` with stdin from /dev/null.
+// Runs `[wrapper] rayforge ARGS` with stdin from /dev/null; the exit code is
+// the wrapper's when there is one (e.g. 124 from `timeout`).
 CliResult run_cli(const std::string& args, const std::string& wrapper = "");
+// The same, but the exit code is rayforge's own, whatever the wrapper's
+// (xvfb-run may fail while cleaning up after a successful run).
+CliResult run_cli_inside(const std::string& wrapper, const std::string& args);
 
 std::string read_file(const std::string& path);
 std::vector<std::string> lines_of(const std::string& text);

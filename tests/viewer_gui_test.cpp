@@ -49,7 +49,7 @@ const std::string& gui_unavailable() {
         if (std::system("command -v xvfb-run >/dev/null 2>&1") != 0) return std::string("xvfb-run is not installed");
         const std::string dir = test::temp_dir("viewer_probe");
         const std::string script = write_script(dir, "quit.txt", "quit\n");
-        const test::CliResult r = test::run_cli("view builtin:cornell --res 8x8 --spp 1 --script '" + script + "'", xvfb());
+        const test::CliResult r = test::run_cli_inside(xvfb(), "view builtin:cornell --res 8x8 --spp 1 --script '" + script + "'");
         if (r.exit_code == 0) return std::string();
         return "the viewer cannot open a window here: " + (r.err.empty() ? std::string("exit ") + std::to_string(r.exit_code) : r.err);
     }();
@@ -64,7 +64,7 @@ const std::string& gui_unavailable() {
 // Runs the viewer on `scene` with `options` and the script `text`.
 test::CliResult view(const std::string& dir, const std::string& scene, const std::string& options, const std::string& text) {
     const std::string script = write_script(dir, "script.txt", text);
-    return test::run_cli("view " + scene + " " + options + " --script '" + script + "' --script-timeout 60", xvfb());
+    return test::run_cli_inside(xvfb(), "view " + scene + " " + options + " --script '" + script + "' --script-timeout 60");
 }
 
 // The largest difference of any channel (linear values after decoding).
@@ -181,7 +181,8 @@ TEST(ViewerGui, BookmarksPersistAcrossRuns) {
 // found before any window opens, so this part needs no display.
 TEST(ViewerGui, ScriptFailuresNameTheLineAndExitNonZero) {
     const std::string dir = test::temp_dir("viewer_script_errors");
-    test::CliResult v = view(dir, "builtin:cornell", kSmall, "wait-passes 1\nfly to the moon\n");
+    const std::string typo = write_script(dir, "script.txt", "wait-passes 1\nfly to the moon\n");
+    test::CliResult v = test::run_cli("view builtin:cornell " + std::string(kSmall) + " --script '" + typo + "'");
     EXPECT_EQ(v.exit_code, 1);
     EXPECT_NE(v.err.find("script.txt:2: unknown command 'fly'"), std::string::npos) << v.err;
     SKIP_WITHOUT_GUI();
