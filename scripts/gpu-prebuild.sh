@@ -4,8 +4,9 @@
 # FMA, which every H100/H200 host has; not -march=native: the device
 # machine's CPU may differ; and not baseline x86-64, whose host code would
 # take the non-FMA branch of src/trace/triangle_intersect.h while the device
-# takes the FMA one, breaking the bit-exact comparisons) and no Embree (the
-# device runs use --embree none), and stages them with the shared libraries
+# takes the FMA one, breaking the bit-exact comparisons), no Embree (the
+# device runs use --embree none) and no viewer window (the device machine has
+# no display; the display kernel is in the gpu tests), and stages them with the shared libraries
 # they need into .gpu-prebuilt/ (git-ignored, about 40 MB: it fits the
 # device call's carry limit). A cold build on the device takes longer than
 # one 10-minute call (renderer.cu alone compiles for well over 5 minutes).
@@ -25,7 +26,7 @@ start=$(date +%s)
 sources=$(cd "$ROOT" && find src include apps bench tests cmake CMakeLists.txt -type f | LC_ALL=C sort | xargs sha1sum |
   sha1sum | cut -d' ' -f1)
 cmake -S "$ROOT" -B "$build" -DCMAKE_BUILD_TYPE=Release -DRAYFORGE_NATIVE=OFF -DRAYFORGE_MARCH=x86-64-v3 -DRAYFORGE_BUILD_BENCHMARKS=OFF \
-  -DCMAKE_CUDA_ARCHITECTURES=90 -DCMAKE_DISABLE_FIND_PACKAGE_embree=TRUE > /dev/null
+  -DCMAKE_CUDA_ARCHITECTURES=90 -DCMAKE_DISABLE_FIND_PACKAGE_embree=TRUE -DRAYFORGE_ENABLE_VIEWER=OFF > /dev/null
 cmake --build "$build" -j "$jobs" --target rayforge_cli rayforge_gpu_tests
 rf="$build/bin/rayforge"
 gpu_tests=$(find "$build" -name rayforge_gpu_tests -type f | head -1)

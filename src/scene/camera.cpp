@@ -40,7 +40,8 @@ std::string to_string(const Camera& c) {
     for (float v : values) {
         char number[32];
         std::snprintf(number, sizeof number, "%.9g", double(v));  // 9 digits: any float reads back exactly
-        text += (text.empty() ? "" : ",") + std::string(number);
+        if (!text.empty()) text += ',';
+        text += number;
     }
     return text;
 }
