@@ -23,7 +23,8 @@ packages=(
   python3-matplotlib             # charts of `rayforge bench --json` (scripts/plot-bench.py)
   libglfw3-dev libgl-dev         # the viewer's window and OpenGL 3.3 context (`rayforge view`)
   libimgui-dev                   # its controls panel (Dear ImGui 1.86 with the GLFW and OpenGL 3 backends)
-  xvfb xauth libgl1-mesa-dri     # headless viewer tests: a virtual X server and Mesa's software OpenGL
+  xvfb xauth libgl1-mesa-dri     # headless viewer tests: a virtual X server and Mesa's software OpenGL,
+  xdotool                        #   and real mouse and key events sent to the window
 )
 
 missing=()

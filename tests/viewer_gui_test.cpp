@@ -17,6 +17,7 @@
 
 #include "cli_runner.h"
 #include "rayforge/io/image_io.h"
+#include "rayforge/scene/camera.h"
 #include "test_paths.h"
 
 namespace rf {
@@ -195,6 +196,49 @@ TEST(ViewerGui, ScriptFailuresNameTheLineAndExitNonZero) {
     v = view(dir, "builtin:cornell", kSmall, "set builder nonsense\n");
     EXPECT_EQ(v.exit_code, 1);
     EXPECT_NE(v.err.find("script.txt:1: set: set builder nonsense"), std::string::npos) << v.err;
+}
+
+
+// Real input: a left drag orbits (the target stays, the eye keeps its
+// distance), W walks (eye and target move together along the view), R
+// resets. xdotool sends the events to the window; the script prints the
+// camera between them, and the driver waits for each line before acting.
+TEST(ViewerGui, MouseDragOrbitsKeysWalkAndRResets) {
+    SKIP_WITHOUT_GUI();
+    if (std::system("command -v xdotool >/dev/null 2>&1") != 0) GTEST_SKIP() << "xdotool is not installed";
+    const std::string dir = test::temp_dir("viewer_input");
+    const std::string script = write_script(dir, "script.txt",
+                                            "wait-passes 2\nprint-camera\nsleep 3\nprint-camera\nsleep 3\n"
+                                            "print-camera\nsleep 3\nprint-camera\nquit\n");
+    const std::string out = dir + "/out.txt";
+    // Waits until the viewer has printed N lines (at most 60 s).
+    const std::string wait_lines = "wait_lines() { i=0; while [ \"$(wc -l < '" + out +
+                                   "' 2>/dev/null || echo 0)\" -lt \"$1\" ] && [ $i -lt 600 ]; do sleep 0.1; "
+                                   "i=$((i+1)); done; }\n";
+    std::ofstream(dir + "/drive.sh")
+        << wait_lines << "'" << test::cli_path() << "' view builtin:cornell " << kSmall
+        << " --window 640x480 --bookmarks '" << dir << "/marks.json' --script '" << script << "' >'" << out
+        << "' 2>'" << dir << "/err.txt' &\npid=$!\nwait_lines 1\n"
+        << "win=$(xdotool search --sync --name 'rayforge view' | head -1)\n"
+        << "xdotool mousemove --window $win 400 240 mousedown 1 mousemove --window $win 420 244 sleep 0.05 "
+           "mousemove --window $win 460 250 sleep 0.05 mousemove --window $win 500 260 mouseup 1\n"
+        << "wait_lines 2\nxdotool key --window $win w w w\nwait_lines 3\nxdotool key --window $win r\n"
+        << "wait $pid\necho $? > '" << dir << "/code.txt'\n";
+    (void)std::system((xvfb() + " sh '" + dir + "/drive.sh' >/dev/null 2>&1").c_str());
+    ASSERT_EQ(test::read_file(dir + "/code.txt"), "0\n") << test::read_file(dir + "/err.txt");
+    const std::vector<std::string> lines = test::lines_of(test::read_file(out));
+    ASSERT_EQ(lines.size(), 4u) << test::read_file(out);
+    const Camera start = parse_camera(lines[0]), orbited = parse_camera(lines[1]), walked = parse_camera(lines[2]);
+    const Camera reset = parse_camera(lines[3]);
+    EXPECT_EQ(orbited.target, start.target);
+    EXPECT_GT(length(orbited.eye - start.eye), 0.1f);
+    EXPECT_NEAR(length(orbited.eye - orbited.target), length(start.eye - start.target), 1e-4f);
+    const Vec3f step = walked.eye - orbited.eye;
+    EXPECT_GT(length(step), 0.0f);
+    EXPECT_NEAR(length(walked.target - orbited.target - step), 0.0f, 1e-5f);                           // together
+    EXPECT_GT(dot(normalize(step), normalize(orbited.target - orbited.eye)), 0.999f);                 // forward
+    EXPECT_EQ(reset.eye, start.eye);
+    EXPECT_EQ(reset.target, start.target);
 }
 
 }  // namespace
