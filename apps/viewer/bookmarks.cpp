@@ -5,9 +5,9 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
-#include <sstream>
 
 #include "rayforge/core/error.h"
+#include "text.h"
 
 namespace rf::viewer {
 namespace {
@@ -106,12 +106,7 @@ Bookmarks Bookmarks::parse(const std::string& text, const std::string& path) {
 }
 
 Bookmarks Bookmarks::load(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw Error(path + ": cannot open the bookmarks file");
-    std::stringstream text;
-    text << in.rdbuf();
-    if (in.bad()) throw Error(path + ": cannot read the bookmarks file");
-    return parse(text.str(), path);
+    return parse(read_text_file(path, "the bookmarks file"), path);
 }
 
 std::string Bookmarks::to_json() const {

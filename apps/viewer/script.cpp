@@ -1,12 +1,12 @@
 #include "script.h"
 
 #include <cmath>
-#include <fstream>
 #include <sstream>
 
 #include "rayforge/core/error.h"
 #include "rayforge/scene/camera.h"
 #include "camera_controller.h"
+#include "text.h"
 #include "view_settings.h"
 
 namespace rf::viewer {
@@ -68,19 +68,6 @@ std::string trim(const std::string& s) {
     return s.substr(first, s.find_last_not_of(" \t\r") - first + 1);
 }
 
-double number(const std::string& word, const char* what) {
-    size_t used = 0;
-    double v = 0.0;
-    try {
-        v = std::stod(word, &used);
-    } catch (const std::exception&) {
-        used = 0;
-    }
-    if (used == 0 || used != word.size() || !std::isfinite(v))
-        throw Error(std::string("expected ") + what + ", got '" + word + "'");
-    return v;
-}
-
 std::vector<std::string> words_of(const std::string& s) {
     std::istringstream in(s);
     std::vector<std::string> words;
@@ -112,29 +99,29 @@ void read_arguments(const Grammar& g, const std::string& after, ScriptCommand& c
         case Args::None: expect_words(words, 0, usage.c_str()); break;
         case Args::Count:
             expect_words(words, 1, usage.c_str());
-            c.a = number(words[0], "a count");
+            c.a = parse_number(words[0], "a count");
             if (c.a < 0 || c.a > kMaxCount || c.a != std::floor(c.a))
                 throw Error("expected a whole number in 0.." + std::to_string(int(kMaxCount)) + ", got '" + words[0] + "'");
             break;
         case Args::Seconds:
             expect_words(words, 1, usage.c_str());
-            c.a = number(words[0], "seconds");
+            c.a = parse_number(words[0], "seconds");
             if (c.a < 0 || c.a > kMaxSeconds) throw Error("seconds must be in 0..3600, got '" + words[0] + "'");
             break;
         case Args::TwoNumbers:
             expect_words(words, 2, usage.c_str());
-            c.a = number(words[0], "a number");
-            c.b = number(words[1], "a number");
+            c.a = parse_number(words[0]);
+            c.b = parse_number(words[1]);
             break;
         case Args::OneNumber:
             expect_words(words, 1, usage.c_str());
-            c.a = number(words[0], "a number");
+            c.a = parse_number(words[0]);
             break;
         case Args::Walk:
             if (words.size() != 2 && !(words.size() == 3 && words[2] == "fast")) throw Error("usage: " + usage);
             (void)parse_walk_direction(words[0]);
             c.word = words[0];
-            c.a = number(words[1], "seconds");
+            c.a = parse_number(words[1], "seconds");
             if (c.a < 0 || c.a > kMaxSeconds) throw Error("seconds must be in 0..3600, got '" + words[1] + "'");
             c.fast = words.size() == 3;
             break;
@@ -199,13 +186,6 @@ Script parse_script(const std::string& text, const std::string& path) {
     return script;
 }
 
-Script load_script(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw Error(path + ": cannot open the script");
-    std::stringstream text;
-    text << in.rdbuf();
-    if (in.bad()) throw Error(path + ": cannot read the script");
-    return parse_script(text.str(), path);
-}
+Script load_script(const std::string& path) { return parse_script(read_text_file(path, "the script"), path); }
 
 }  // namespace rf::viewer

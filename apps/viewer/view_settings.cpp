@@ -6,6 +6,7 @@
 #include <functional>
 
 #include "rayforge/core/error.h"
+#include "text.h"
 
 namespace rf::viewer {
 namespace {
@@ -18,24 +19,6 @@ struct Setting {
     Getter get;
     Setter set;
 };
-
-std::string number_text(double v) {
-    char text[32];
-    std::snprintf(text, sizeof text, "%.9g", v);
-    return text;
-}
-
-double parse_number(const std::string& text) {
-    size_t used = 0;
-    double v = 0.0;
-    try {
-        v = std::stod(text, &used);
-    } catch (const std::exception&) {
-        used = 0;
-    }
-    if (used == 0 || used != text.size() || !std::isfinite(v)) throw Error("expected a number, got '" + text + "'");
-    return v;
-}
 
 int parse_int(const std::string& text, int lo, int hi) {
     const double v = parse_number(text);
