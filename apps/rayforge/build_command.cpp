@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "commands.h"
+#include "elapsed.h"
 #include "device_build_report.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/backend/device.h"
@@ -23,10 +24,6 @@ namespace rf::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double ms_since(Clock::time_point start) {
-    return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
 
 double median(std::vector<double> values) {
     std::sort(values.begin(), values.end());

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "commands.h"
+#include "elapsed.h"
 #include "render_setup.h"
 #include "device_build_report.h"
 #include "progress_bar.h"
@@ -27,10 +28,6 @@ namespace rf::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double ms_since(Clock::time_point start) {
-    return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
 
 // "out.png" + "albedo" -> "out.albedo.exr" (".pfm" when the main output is a PFM).
 std::string aov_path(const std::string& output, const std::string& aov) {

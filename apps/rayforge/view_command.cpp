@@ -95,8 +95,7 @@ int run_view(const ViewArgs& a) {
     config.settings.tone = tone_mapping(r);
     config.settings.motion_divisor = a.motion_scale == "auto" ? 0 : std::stoi(a.motion_scale);
     config.prepare = scene_preparation(a, device);
-    if (!a.script.empty()) (void)viewer::load_script(a.script);  // a typo fails before anything opens
-    config.script = a.script;
+    if (!a.script.empty()) config.script = viewer::load_script(a.script);  // a typo fails before anything opens
     config.script_timeout_s = a.script_timeout_s;
     if (!a.bookmarks.empty()) config.bookmarks = a.bookmarks;
     if (!a.window.empty()) parse_resolution(a.window, config.window_width, config.window_height);

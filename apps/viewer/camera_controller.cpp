@@ -47,18 +47,13 @@ WalkDirection parse_walk_direction(const std::string& name) {
 CameraController::CameraController(const Camera& home, float scene_size)
     : scene_size_(scene_size > 0.0f && std::isfinite(scene_size) ? scene_size : 1.0f),
       walk_speed_(0.2f * scene_size_) {
-    set_home(home);
-    camera_ = home_;
+    set(home);
+    home_ = home;
 }
 
 void CameraController::set(const Camera& camera) {
     (void)CameraFrame::make(camera, 1, 1);  // throws for a camera that cannot render
     camera_ = camera;
-}
-
-void CameraController::set_home(const Camera& home) {
-    (void)CameraFrame::make(home, 1, 1);
-    home_ = home;
 }
 
 void CameraController::set_walk_speed(float units_per_second) {

@@ -17,14 +17,12 @@ WalkDirection parse_walk_direction(const std::string& name);
 
 class CameraController {
 public:
-    // `home` is where R returns; `scene_size` (the bounds' diagonal) sets
+    // `home` is where R returns (rf::Error when it cannot render); `scene_size` (the bounds' diagonal) sets
     // the walking speed and the closest the eye may come to the target.
     CameraController(const Camera& home, float scene_size);
 
     [[nodiscard]] const Camera& camera() const { return camera_; }
-    [[nodiscard]] const Camera& home() const { return home_; }
     void set(const Camera& camera);  // throws rf::Error for a camera that cannot render (CameraFrame::make)
-    void set_home(const Camera& home);
     void reset() { camera_ = home_; }
 
     // Each motion returns false, leaving the camera as it was, when it would

@@ -8,6 +8,7 @@
 #include <new>
 #include <utility>
 
+#include "elapsed.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
 
@@ -27,10 +28,6 @@ void yield_to_the_window() {
 #if defined(__linux__)
     (void)setpriority(PRIO_PROCESS, pid_t(syscall(SYS_gettid)), kEngineNice);
 #endif
-}
-
-double ms_since(Clock::time_point start) {
-    return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
 }  // namespace
@@ -339,7 +336,6 @@ void Session::hand_over(std::shared_ptr<const SceneData> data, std::shared_ptr<c
     {
         std::lock_guard<std::mutex> lock(mutex_);
         status_.accel = stats;
-        status_.accel_device = accel->device();
         if (shown_scene_ != data) {
             shown_scene_ = data;
             camera_ = data->camera;
@@ -467,7 +463,6 @@ void Session::publish_frame(RenderState& st) {
         auto frame = std::make_shared<Frame>();
         frame->image = image;
         frame->sequence = ++st.sequence;
-        frame->scene_id = st.target->scene->id;
         frame->passes = st.renderer->passes();
         frame->target_passes = st.renderer->options().spp;
         frame->preview = st.moving;

@@ -60,7 +60,6 @@ struct SceneData {
 struct Frame {
     std::shared_ptr<const DisplayImage> image;
     uint64_t sequence = 0;        // increases with every frame
-    uint64_t scene_id = 0;
     int passes = 0;               // accumulated in this image
     int target_passes = 0;        // where accumulation stops
     bool preview = false;         // reduced resolution while the camera moves
@@ -94,7 +93,6 @@ struct SessionStatus {
     double job_seconds = 0.0;
     // The structure rendering now.
     AccelStats accel;
-    Device accel_device;
     // The last error (a failed load, build or setting), and how many so far.
     std::string error;
     uint64_t error_count = 0;

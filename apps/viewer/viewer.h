@@ -6,6 +6,9 @@
 #include <functional>
 #include <string>
 
+#include <optional>
+
+#include "script.h"
 #include "session.h"
 #include "view_settings.h"
 
@@ -17,7 +20,7 @@ struct ViewerConfig {
     ViewSettings settings;       // from the render options on the command line
     // Lights, the start camera and the first scene's settings (SessionConfig::prepare).
     std::function<void(SceneData& data, bool first, ViewSettings& settings)> prepare;
-    std::string script;          // --script FILE: run it, then exit with its verdict
+    std::optional<Script> script;  // --script FILE, parsed: run it, then exit with its verdict
     std::string bookmarks = "rayforge-bookmarks.json";
     int window_width = 0, window_height = 0;  // 0 = the image size
     double script_timeout_s = 120.0;          // the longest any script wait may take
@@ -26,7 +29,7 @@ struct ViewerConfig {
 
 // Runs the viewer until its window closes (or the script ends): 0 on
 // success, 1 when a script command failed. Throws rf::Error when it cannot
-// start (no display, no OpenGL 3.3, a malformed script, a build without
+// start (no display, no OpenGL 3.3, a build without
 // the viewer).
 int run_viewer(const ViewerConfig& config);
 

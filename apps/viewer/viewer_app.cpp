@@ -33,7 +33,7 @@ std::vector<std::string> usable_devices() {
 App::App(const ViewerConfig& config, GlWindow& window)
     : config_(config), window_(window), catalog_(SceneCatalog::discover(config.scenes_dir)),
       settings_(config.settings), devices_(usable_devices()) {
-    if (!config.script.empty()) script_ = std::make_unique<ScriptRunner>(load_script(config.script), config.script_timeout_s);
+    if (config.script) script_ = std::make_unique<ScriptRunner>(*config.script, config.script_timeout_s);
     std::error_code ec;
     if (!config.bookmarks.empty() && std::filesystem::exists(config.bookmarks, ec)) {
         try {

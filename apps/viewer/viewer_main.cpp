@@ -1,5 +1,5 @@
-// run_viewer with the window: the script is read first (a typo fails before
-// a window opens), then the window, then the loop.
+// run_viewer with the window: the window, then the loop. (The script was
+// parsed by the caller, so a typo fails before a window opens.)
 #include <algorithm>
 
 #include "viewer.h"
@@ -10,7 +10,6 @@ namespace rf::viewer {
 bool viewer_built() { return true; }
 
 int run_viewer(const ViewerConfig& config) {
-    if (!config.script.empty()) (void)load_script(config.script);
     int width = config.window_width, height = config.window_height;
     if (width <= 0 || height <= 0) {
         // The image's size, enlarged by a whole factor while it is small, so the panel fits beside the picture.

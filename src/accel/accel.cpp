@@ -35,8 +35,9 @@ std::unique_ptr<Accel> cpu::build_accel(const SceneGeometry& geometry, const Bui
         case Structure::Bvh: {
             const auto start = std::chrono::steady_clock::now();
             // The tree is most of the work; the layout conversion is the rest.
+            // Nobody asked: the builder's leaves count nothing.
             ProgressMeter meter(progress, double(geometry.triangles.size()), 0.0, 0.9);
-            Bvh bvh = build_bvh_on_cpu(geometry.triangles, options, &meter);  // on options.threads threads
+            Bvh bvh = build_bvh_on_cpu(geometry.triangles, options, progress ? &meter : nullptr);  // on options.threads threads
             meter.finish();
             const double build_ms =
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();

@@ -64,7 +64,6 @@ void validate_build_options(const BuildOptions& options) {
     }
 }
 
-
 Structure structure_of(GpuKernel kernel) {
     switch (kernel) {
         case GpuKernel::KdShortStack:
@@ -77,7 +76,6 @@ Structure structure_of(GpuKernel kernel) {
     }
     return Structure::Bvh;
 }
-
 
 namespace {
 

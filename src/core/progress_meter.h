@@ -1,5 +1,5 @@
-// Progress of work counted in units from many threads (references placed in
-// leaves, tiles rendered), forwarded to an rf::ProgressCallback as a
+// Progress of work counted in units from many threads (the references a
+// builder places in leaves), forwarded to an rf::ProgressCallback as a
 // fraction mapped into [from, to] of the caller's whole, in steps of at
 // least 1% so a callback is not flooded. The fraction never exceeds `to`,
 // even when more units arrive than expected (spatial splits add references).

@@ -1,6 +1,7 @@
 // What every BVH builder reads of rf::BuildOptions: the leaf size and the
-// SAH's costs (and where to count its progress). build_bvh (the one dispatch) fills it; a builder's own
-// options group (BinnedSahOptions, PlocOptions, ...) comes alongside.
+// SAH's costs, and where to count its progress. build_bvh (the one
+// dispatch) fills it; a builder's own options group (BinnedSahOptions,
+// PlocOptions, ...) comes alongside.
 #pragma once
 
 #include "core/progress_meter.h"
