@@ -95,6 +95,12 @@ RF_HDI SurfaceHit shading_surface(const ShadingTriangle& t, const Ray& ray, cons
     return s;
 }
 
+// The record of one world-space triangle `tri` of `mesh` (vertex indices
+// `idx`, normals taken to world space by `normal_matrix`), without the
+// tangent frame (which needs the whole scene: build_shading_triangles).
+ShadingTriangle make_shading_triangle(const Mesh& mesh, const Affine3f& normal_matrix, const Triangle& tri,
+                                      const uint32_t idx[3], uint32_t material);
+
 // One record per triangle of `geometry`, built in parallel; respects the
 // memory budget (throws rf::Error when it would exceed it).
 std::vector<ShadingTriangle> build_shading_triangles(const Scene& scene, const SceneGeometry& geometry);

@@ -56,10 +56,13 @@ RF_HDI float texture_lod_base(float uv_density_log2, float cone_width, float cos
     return uv_density_log2 + log2f(fabsf(cone_width) / fmaxf(fabsf(cos_incidence), 1e-2f));
 }
 
-// The level of detail (log2 footprint in level-0 texels) of one texture.
+// The level of detail (log2 footprint in level-0 texels) of a texture whose
+// level 0 is width x height texels (in memory or paged: ooc/paged_texture.h).
+RF_HDI float texture_level(int width, int height, float lod_base) {
+    return lod_base + 0.5f * log2f(float(width) * float(height));
+}
 RF_HDI float texture_level(const MipTextureView& t, float lod_base) {
-    const TextureView& base = t.base();
-    return lod_base + 0.5f * log2f(float(base.width) * float(base.height));
+    return texture_level(t.base().width, t.base().height, lod_base);
 }
 
 }  // namespace rf

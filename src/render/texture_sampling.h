@@ -100,9 +100,18 @@ RF_HDI Vec4f fetch_texel(const TextureView& t, int x, int y) {
     return {c[0], c[1], c[2], c[3]};
 }
 
-// Bilinearly filtered linear RGBA at uv; white for an invalid view.
-RF_HDI Vec4f sample_texture(const TextureView& t, Vec2f uv) {
-    if (!t.valid()) return {1.0f, 1.0f, 1.0f, 1.0f};
+// The four texels a bilinear lookup reads (wrapped into the texture) and the
+// weights between them. Split from the fetches so that a texture held
+// elsewhere (paged: ooc/paged_texture.h) filters with the same arithmetic.
+struct BilinearTaps {
+    int x0 = 0, x1 = 0;  // columns
+    int y0 = 0, y1 = 0;  // rows
+    float wx = 0.0f, wy = 0.0f;  // weights of x1 and y1
+};
+
+// Where a bilinear lookup at uv reads in a width x height texture: between
+// the centres of the texels around uv.
+RF_HDI BilinearTaps bilinear_taps(int width, int height, TextureWrap wrap_s, TextureWrap wrap_t, Vec2f uv) {
     // Non-finite uv (degenerate meshes) would make the integer conversion undefined.
     // (|x| <= FLT_MAX is false for NaN and infinities, on host and device alike.)
     float u = fabsf(uv.x) <= 3.402823466e+38f ? uv.x : 0.0f;
@@ -111,20 +120,37 @@ RF_HDI Vec4f sample_texture(const TextureView& t, Vec2f uv) {
     // repeat modes are periodic so shifting by whole periods is harmless.
     u = fminf(fmaxf(u, -1.0e6f), 1.0e6f);
     v = fminf(fmaxf(v, -1.0e6f), 1.0e6f);
-    float px = u * float(t.width) - 0.5f;
-    float py = v * float(t.height) - 0.5f;
+    float px = u * float(width) - 0.5f;
+    float py = v * float(height) - 0.5f;
     float fx0 = floorf(px), fy0 = floorf(py);
-    float wx = px - fx0, wy = py - fy0;
-    int x0 = int(fx0), y0 = int(fy0);
-    int xa = wrap_texel(x0, t.width, t.wrap_s), xb = wrap_texel(x0 + 1, t.width, t.wrap_s);
-    int ya = wrap_texel(y0, t.height, t.wrap_t), yb = wrap_texel(y0 + 1, t.height, t.wrap_t);
-    Vec4f c00 = fetch_texel(t, xa, ya), c10 = fetch_texel(t, xb, ya);
-    Vec4f c01 = fetch_texel(t, xa, yb), c11 = fetch_texel(t, xb, yb);
+    BilinearTaps taps;
+    taps.wx = px - fx0;
+    taps.wy = py - fy0;
+    int x = int(fx0), y = int(fy0);
+    taps.x0 = wrap_texel(x, width, wrap_s);
+    taps.x1 = wrap_texel(x + 1, width, wrap_s);
+    taps.y0 = wrap_texel(y, height, wrap_t);
+    taps.y1 = wrap_texel(y + 1, height, wrap_t);
+    return taps;
+}
+
+// The texels (x0, y0), (x1, y0), (x0, y1), (x1, y1) blended by the taps' weights.
+RF_HDI Vec4f bilinear_blend(const BilinearTaps& taps, Vec4f c00, Vec4f c10, Vec4f c01, Vec4f c11) {
+    float wx = taps.wx, wy = taps.wy;
     float w00 = (1 - wx) * (1 - wy), w10 = wx * (1 - wy), w01 = (1 - wx) * wy, w11 = wx * wy;
     return {c00.x * w00 + c10.x * w10 + c01.x * w01 + c11.x * w11,
             c00.y * w00 + c10.y * w10 + c01.y * w01 + c11.y * w11,
             c00.z * w00 + c10.z * w10 + c01.z * w01 + c11.z * w11,
             c00.w * w00 + c10.w * w10 + c01.w * w01 + c11.w * w11};
+}
+
+// Bilinearly filtered linear RGBA at uv; white for an invalid view.
+RF_HDI Vec4f sample_texture(const TextureView& t, Vec2f uv) {
+    if (!t.valid()) return {1.0f, 1.0f, 1.0f, 1.0f};
+    BilinearTaps taps = bilinear_taps(t.width, t.height, t.wrap_s, t.wrap_t, uv);
+    Vec4f c00 = fetch_texel(t, taps.x0, taps.y0), c10 = fetch_texel(t, taps.x1, taps.y0);
+    Vec4f c01 = fetch_texel(t, taps.x0, taps.y1), c11 = fetch_texel(t, taps.x1, taps.y1);
+    return bilinear_blend(taps, c00, c10, c01, c11);
 }
 
 // Level 0 plus at most 15 coarser levels: enough for a 32768-texel side.
@@ -151,22 +177,33 @@ RF_HDI Vec4f blend_texels(Vec4f a, Vec4f b, float t) {
             a.w + (b.w - a.w) * t};
 }
 
-// Trilinear lookup: `lod` is log2 of the footprint in level-0 texels. lod <= 0
-// (or NaN) is bilinear on level 0; otherwise the two levels around lod are
-// blended, and lods past the last level use the last level alone.
-RF_HDI Vec4f sample_texture(const MipTextureView& t, Vec2f uv, float lod) {
-    if (t.level_count <= 1 || !(lod > 0.0f)) return sample_texture(t.levels[0], uv);
-    float last = float(t.level_count - 1);
-    if (lod >= last) return sample_texture(t.levels[t.level_count - 1], uv);
+// The levels a trilinear lookup at `lod` reads: `level` alone when blend is
+// 0, else `level` and `level` + 1 blended by `blend`. lod <= 0 (or NaN) is
+// level 0; lods past the last level are the last level.
+struct MipBlend {
+    int level = 0;
+    float blend = 0.0f;
+};
+RF_HDI MipBlend mip_blend(int level_count, float lod) {
+    if (level_count <= 1 || !(lod > 0.0f)) return {0, 0.0f};
+    float last = float(level_count - 1);
+    if (lod >= last) return {level_count - 1, 0.0f};
     float fine = floorf(lod);
-    float blend = lod - fine;
     // 0 <= fine < level_count - 1 here; the clamp spells that out for the
     // compiler's bounds analysis.
     int level = int(fine);
     level = level < 0 ? 0 : (level > kMaxMipLevels - 2 ? kMaxMipLevels - 2 : level);
-    Vec4f a = sample_texture(t.levels[level], uv);
-    if (blend <= 0.0f) return a;
-    return blend_texels(a, sample_texture(t.levels[level + 1], uv), blend);
+    return {level, lod - fine};
+}
+
+// Trilinear lookup: `lod` is log2 of the footprint in level-0 texels. lod <= 0
+// (or NaN) is bilinear on level 0; otherwise the two levels around lod are
+// blended, and lods past the last level use the last level alone.
+RF_HDI Vec4f sample_texture(const MipTextureView& t, Vec2f uv, float lod) {
+    MipBlend m = mip_blend(t.level_count, lod);
+    Vec4f a = sample_texture(t.levels[m.level], uv);
+    if (m.blend <= 0.0f) return a;
+    return blend_texels(a, sample_texture(t.levels[m.level + 1], uv), m.blend);
 }
 
 }  // namespace rf

@@ -15,7 +15,7 @@
 #include "backend/backends.h"
 #include "backend/cpu/accel_tracer.h"
 #include "backend/cpu/cpu_wavefront.h"
-#include "backend/cpu/host_display_image.h"
+#include "backend/cpu/host_film_renderer.h"
 #include "backend/cpu/parallel.h"
 #include "core/assert.h"
 #include "rayforge/core/error.h"
@@ -56,167 +56,19 @@ void sort_queue_by_key(std::span<uint32_t> queue, std::span<uint32_t> keys) {
 namespace cpu {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-using Tracer = CountingTracer<AccelTracer, uint64_t>;
-
 constexpr int kTileSize = 16;
-constexpr size_t kStageGrain = 256;  // paths per task in the per-path stages
 
-// Query counts of one pass, added to from many tasks.
-struct RayTally {
-    std::atomic<uint64_t> closest{0}, shadow{0};
-};
-
-// body(tracer, i) for i in [0, n) in parallel, with a counting tracer per task.
-template <class Body>
-void for_each_counted(const Accel& accel, size_t n, RayTally& tally, Body&& body) {
-    parallel::for_range(size_t(0), n, kStageGrain, [&](size_t lo, size_t hi) {
-        uint64_t closest = 0, shadow = 0;
-        const AccelTracer inner{&accel, nullptr};
-        const Tracer tracer{inner, &closest, &shadow};
-        for (size_t i = lo; i < hi; ++i) body(tracer, uint32_t(i));
-        tally.closest += closest;
-        tally.shadow += shadow;
-    });
-}
-
-// The CPU side of run_wavefront: one chunk's queues in host vectors, each
-// stage a parallel loop over its items (compaction serial, in queue order).
-class CpuWavefront {
-public:
-    CpuWavefront(const Accel& accel, const SceneView& view, const IntegratorSettings& settings, uint32_t sample,
-                 const Films& films, size_t capacity)
-        : accel_(accel), view_(view), settings_(settings), sample_(sample), films_(films) {
-        paths_.resize(capacity);
-        if (settings.aovs) aovs_.resize(capacity);
-        for (auto* v : {&active_, &next_active_, &keys_, &shadow_slots_}) v->resize(capacity);
-        rays_.resize(capacity);
-        hits_.resize(capacity);
-        found_.resize(capacity);
-        shadows_.resize(capacity);
-        for (auto* v : {&has_shadow_, &goes_on_, &blocked_}) v->resize(capacity);
-    }
-
-    void start_chunk(uint32_t first_pixel) { first_pixel_ = first_pixel; }
-
-    void generate(uint32_t count) {
-        const WavefrontQueues q = queues();
-        parallel::for_range(0u, count, uint32_t(kStageGrain), [&](uint32_t lo, uint32_t hi) {
-            for (uint32_t i = lo; i < hi; ++i) wavefront_generate(settings_, sample_, first_pixel_, q, i);
-        });
-    }
-    void sort(uint32_t active) {
-        const Clock::time_point start = Clock::now();
-        const WavefrontQueues q = queues();
-        parallel::for_range(0u, active, uint32_t(kStageGrain), [&](uint32_t lo, uint32_t hi) {
-            for (uint32_t k = lo; k < hi; ++k) wavefront_sort_key(settings_, q, k);
-        });
-        sort_queue_by_key(std::span<uint32_t>(active_.data(), active), std::span<uint32_t>(keys_.data(), active));
-        sort_ms += std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-    }
-    // First hits in one batch query, then each path past its cut-outs.
-    void extend(uint32_t active) {
-        for (uint32_t k = 0; k < active; ++k) rays_[k] = paths_[active_[k]].ray;
-        accel_.intersect(std::span<const Ray>(rays_.data(), active), std::span<Hit>(hits_.data(), active));
-        tally.closest += active;
-        const WavefrontQueues q = queues();
-        for_each_counted(accel_, active, tally, [&](const Tracer& tracer, uint32_t k) {
-            wavefront_complete_extension(tracer, view_, q, k, hits_[k]);
-        });
-    }
-    void shade(uint32_t active) {
-        const WavefrontQueues q = queues();
-        parallel::for_range(0u, active, uint32_t(kStageGrain), [&](uint32_t lo, uint32_t hi) {
-            for (uint32_t k = lo; k < hi; ++k) wavefront_shade(view_, settings_.path, q, k);
-        });
-    }
-    WaveSizes compact(uint32_t active) {
-        WaveSizes sizes;
-        for (uint32_t k = 0; k < active; ++k) {
-            if (goes_on_[k]) next_active_[sizes.active++] = active_[k];
-            if (has_shadow_[k]) shadow_slots_[sizes.shadows++] = k;
-        }
-        return sizes;
-    }
-    // Opaque scenes answer with one batch any-hit query; with cut-outs or
-    // blended surfaces each shadow ray walks from hit to hit.
-    void connect(uint32_t shadows) {
-        const WavefrontQueues q = queues();
-        if (view_.has_transparent_materials()) {
-            for_each_counted(accel_, shadows, tally, [&](const Tracer& tracer, uint32_t j) {
-                wavefront_connect(tracer, view_, q, j);
-            });
-            return;
-        }
-        for (uint32_t j = 0; j < shadows; ++j) rays_[j] = wavefront_shadow_ray(q, j);
-        accel_.occluded(std::span<const Ray>(rays_.data(), shadows), std::span<uint8_t>(blocked_.data(), shadows));
-        tally.shadow += shadows;
-        parallel::for_range(0u, shadows, uint32_t(kStageGrain), [&](uint32_t lo, uint32_t hi) {
-            for (uint32_t j = lo; j < hi; ++j) {
-                const ShadowConnection& s = shadows_[shadow_slots_[j]];
-                if (!blocked_[j]) paths_[s.path].radiance += s.contribution;
-            }
-        });
-    }
-    void swap_queues() { std::swap(active_, next_active_); }
-    void accumulate(uint32_t count) {
-        const WavefrontQueues q = queues();
-        parallel::for_range(0u, count, uint32_t(kStageGrain), [&](uint32_t lo, uint32_t hi) {
-            for (uint32_t i = lo; i < hi; ++i) wavefront_accumulate(q, i, settings_.clamp, films_);
-        });
-    }
-
-    RayTally tally;
-    double sort_ms = 0.0;
-
-private:
-    [[nodiscard]] WavefrontQueues queues() {
-        return {paths_.data(),   aovs_.empty() ? nullptr : aovs_.data(),
-                active_.data(),  next_active_.data(),
-                keys_.data(),    found_.data(),
-                shadows_.data(), has_shadow_.data(),
-                goes_on_.data(), shadow_slots_.data()};
-    }
-
-    const Accel& accel_;
-    const SceneView& view_;
-    const IntegratorSettings& settings_;
-    uint32_t sample_;
-    Films films_;
-    uint32_t first_pixel_ = 0;
-    std::vector<PathState> paths_;
-    std::vector<FirstHitAovs> aovs_;
-    std::vector<uint32_t> active_, next_active_, keys_, shadow_slots_;
-    std::vector<Ray> rays_;
-    std::vector<Hit> hits_;
-    std::vector<PathHit> found_;
-    std::vector<ShadowConnection> shadows_;
-    std::vector<uint8_t> has_shadow_, goes_on_, blocked_;
-};
-
-class CpuRenderer final : public RendererBase {
+class CpuRenderer final : public HostFilmRenderer {
 public:
     CpuRenderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel, const Camera& camera,
                 const RenderOptions& options)
-        : RendererBase(scene, geometry, accel, camera, options) {
+        : HostFilmRenderer(scene, geometry, accel, camera, options) {
         reset();
     }
 
     void render_pass_recorded(std::vector<TracedRay>& rays) override {
         rays.clear();
         run_recorded_pass(rays);
-    }
-
-    [[nodiscard]] std::unique_ptr<DisplayImage> make_display_image() const override {
-        return std::make_unique<HostDisplayImage>();
-    }
-
-    void update_display(DisplayImage& display, const ToneMapping& tone) const override {
-        auto* host = dynamic_cast<HostDisplayImage*>(&display);
-        if (!host) throw Error("update_display: the display image is not a CPU one (make it with this renderer)");
-        const float scale = passes() > 0 ? 1.0f / float(passes()) : 0.0f;  // image()'s scale
-        parallel::with_threads(options().threads,
-                               [&] { host->assign(color_, scale, options().width, options().height, tone); });
     }
 
 private:
@@ -235,33 +87,6 @@ private:
     bool tile_pass(const ProgressCallback& progress, std::vector<TracedRay>* log, const std::atomic<bool>* cancel,
                    PassStats& stats);
     bool wavefront_pass(const ProgressCallback& progress, const std::atomic<bool>* cancel, PassStats& stats);
-
-    [[nodiscard]] Films films() {
-        if (albedo_.empty()) return {color_.data(), nullptr, nullptr, nullptr};
-        return {color_.data(), albedo_.data(), normal_.data(), depth_.data()};
-    }
-
-    [[nodiscard]] Image film_sums(Film film) const override {
-        const std::vector<Vec3f>& sums = film == Film::Color    ? color_
-                                         : film == Film::Albedo ? albedo_
-                                         : film == Film::Normal ? normal_
-                                                                : depth_;
-        if (sums.empty()) return {};
-        Image image(options().width, options().height);
-        image.pixels = sums;
-        return image;
-    }
-
-    void reset_films() override {
-        const size_t pixels = size_t(options().width) * size_t(options().height);
-        const auto film = [&](bool wanted) { return std::vector<Vec3f>(wanted ? pixels : 0, Vec3f(0.0f)); };
-        color_ = film(true);
-        albedo_ = film(options().aovs);
-        normal_ = film(options().aovs);
-        depth_ = film(options().aovs);
-    }
-
-    std::vector<Vec3f> color_, albedo_, normal_, depth_;
 };
 
 bool CpuRenderer::tile_pass(const ProgressCallback& progress, std::vector<TracedRay>* log,
@@ -284,7 +109,7 @@ bool CpuRenderer::tile_pass(const ProgressCallback& progress, std::vector<Traced
         }
         uint64_t closest = 0, shadow = 0;
         const AccelTracer inner{&accel(), log ? &tile_logs[size_t(tile)] : nullptr};
-        const Tracer tracer{inner, &closest, &shadow};
+        const CountedTracer tracer{inner, &closest, &shadow};
         const int x0 = (tile % tiles_x) * kTileSize, y0 = (tile / tiles_x) * kTileSize;
         const int x1 = std::min(x0 + kTileSize, s.width), y1 = std::min(y0 + kTileSize, s.height);
         for (int y = y0; y < y1; ++y)
@@ -310,8 +135,9 @@ bool CpuRenderer::wavefront_pass(const ProgressCallback& progress, const std::at
                                  PassStats& stats) {
     const IntegratorSettings& s = settings();
     const uint32_t pixels = uint32_t(s.width) * uint32_t(s.height);
-    CpuWavefront wavefront(accel(), tables().view(), s, uint32_t(passes()), films(),
-                           std::min(pixels, kWavefrontChunkPaths));
+    AccelQueries queries(accel());
+    CpuWavefront<SceneView> wavefront(accel(), queries, tables().view(), s, uint32_t(passes()), films(),
+                                      std::min(pixels, kWavefrontChunkPaths));
     for (uint32_t first = 0; first < pixels; first += kWavefrontChunkPaths) {
         if (cancel && cancel->load(std::memory_order_relaxed)) return false;
         const uint32_t count = std::min(kWavefrontChunkPaths, pixels - first);

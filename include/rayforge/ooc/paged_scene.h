@@ -1,0 +1,138 @@
+// Paged scenes: scenes far larger than memory, traced and rendered from a
+// budgeted page cache (Garanzha 2014, ch. 6, "OOC-IRT"; docs/paged-scenes.md).
+// A paged scene file (.rfpack) is written once, by converting a scene
+// (convert_to_paged) or by generating one (generate_paged_scene); opening it
+// reads only the always-resident levels (page bounds, the top grid, the
+// middle BVHs, materials and lights). Geometry pages, surface attributes and
+// texture tiles are then read on demand by three page managers, each
+// bounded by its budget.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "rayforge/accel/accel.h"
+#include "rayforge/core/progress.h"
+#include "rayforge/math/box.h"
+#include "rayforge/render/render.h"
+#include "rayforge/scene/camera.h"
+#include "rayforge/scene/scene.h"
+
+namespace rf {
+
+// ---- Writing -------------------------------------------------------------
+
+struct PagedWriteOptions {
+    bool zstd = false;                   // compress each page (libzstd), kept raw where that is not smaller
+    int zstd_level = 3;                  // 1..19
+    bool compact_attributes = false;     // 32-byte shading records (half-float uvs, no normal-map tangents) instead of 64
+    uint32_t attribute_page_bytes = 4096;  // a power of two, 1 KB .. 1 MB
+    uint32_t quads_per_page = 4096;        // 64 .. 4096 (the seed's NP = 4K)
+    int grid_resolution = 32;              // top-grid cells on the longest axis, 1 .. 256 (the seed's 32^3)
+    int threads = 0;                       // 0 = all cores
+};
+
+struct PagedWriteReport {
+    uint64_t triangles = 0, quads = 0, paired_triangles = 0;
+    uint32_t geometry_pages = 0, attribute_pages = 0, texture_pages = 0, middle_nodes = 0;
+    uint64_t file_bytes = 0, geometry_bytes = 0, attribute_bytes = 0, texture_bytes = 0, resident_bytes = 0;
+    double max_quantisation_error = 0.0;  // largest |decoded - input| vertex coordinate, world units
+    std::vector<std::string> notes;       // what the paged form leaves out (opaque cut-outs, ...)
+};
+
+// Writes `scene` (finalize()d) as a paged scene file, instance by instance.
+PagedWriteReport convert_to_paged(const Scene& scene, const std::string& path, const PagedWriteOptions& options = {},
+                                  const ProgressCallback& progress = {});
+
+struct GenerateOptions {
+    std::string name = "terrain-statues";  // generated_scene_names()
+    uint64_t triangles = 4'000'000;
+    uint64_t seed = 1;
+    std::string statue_dir;               // a folder with stanford-bunny/ and stanford-dragon/; else procedural statues
+    uint64_t max_object_triangles = 2'000'000;
+};
+std::vector<std::string> generated_scene_names();
+// A procedural scene of unique geometry, written straight into a paged
+// file (out of core: one object at a time), or into an OBJ file when `path`
+// ends in .obj. Deterministic from options.seed.
+PagedWriteReport generate_paged_scene(const GenerateOptions& options, const std::string& path,
+                                      const PagedWriteOptions& write = {}, const ProgressCallback& progress = {});
+// The same scene in memory (for small sizes: tests and in-core comparisons).
+Scene generate_scene(const GenerateOptions& options);
+
+// ---- Reading -------------------------------------------------------------
+
+struct PagedSceneOptions {
+    size_t memory_budget = size_t(1) << 30;  // the page caches together
+    // Per-manager budgets; 0 takes a share of memory_budget: geometry 70%,
+    // attributes 15%, textures 15% (without textures 80% and 20%).
+    size_t geometry_budget = 0;
+    size_t attribute_budget = 0;
+    size_t texture_budget = 0;
+    int threads = 0;  // 0 = all cores
+};
+
+// One page manager's state and counts since the last reset.
+struct PageCacheReport {
+    std::string name;                 // geometry, attributes, textures
+    uint32_t pages = 0, slots = 0, cached = 0;
+    size_t slot_bytes = 0, budget_bytes = 0, memory_bytes = 0;
+    uint64_t requests = 0, hits = 0, misses = 0, pages_read = 0, bytes_read = 0, evictions = 0, swaps = 0;
+    double io_ms = 0.0, manage_ms = 0.0;
+    [[nodiscard]] double hit_rate() const { return requests ? double(hits) / double(requests) : 1.0; }
+};
+
+struct PagedSceneInfo {
+    std::string path;
+    uint64_t triangles = 0, quads = 0, file_bytes = 0;
+    uint32_t geometry_pages = 0, attribute_pages = 0, texture_pages = 0;
+    uint32_t materials = 0, lights = 0, textures = 0, objects = 0;
+    int grid[3] = {1, 1, 1};
+    Box3f bounds;
+    size_t resident_bytes = 0;      // always in memory: the resident levels, tables, directory
+    bool compact_attributes = false;
+    uint32_t attribute_page_bytes = 0;
+};
+
+// What the query loops did since the last reset.
+struct PagedQueryStats {
+    uint64_t queries = 0, iterations = 0, ray_iterations = 0, shading_fetches = 0;
+    uint64_t cells = 0, middle_nodes = 0, pages_searched = 0, page_nodes = 0, quads_tested = 0;
+    double traversal_ms = 0.0, sort_ms = 0.0;
+};
+
+class PagedScene {
+public:
+    virtual ~PagedScene() = default;
+    [[nodiscard]] virtual const PagedSceneInfo& info() const = 0;
+    [[nodiscard]] virtual Camera camera() const = 0;  // the file's camera
+    // Ray queries through the geometry cache (batches run the re-entrant
+    // query loop; a single ray is a batch of one). Hit::prim identifies a
+    // paged triangle (page * 8192 + slot), not an input triangle.
+    [[nodiscard]] virtual const Accel& accel() const = 0;
+    [[nodiscard]] virtual std::vector<PageCacheReport> caches() const = 0;
+    [[nodiscard]] virtual PagedQueryStats query_stats() const = 0;
+    virtual void reset_stats() = 0;
+    // Empties the caches (a cold start).
+    virtual void clear_caches() = 0;
+    // The caches plus the resident levels: what this scene holds in memory.
+    [[nodiscard]] virtual size_t memory_bytes() const = 0;
+};
+
+// True when `path` starts like a paged scene file.
+bool is_paged_scene_file(const std::string& path);
+// Opens and checks a paged scene file; rf::Error for a missing, truncated or
+// corrupted file or budgets that hold no page.
+std::unique_ptr<PagedScene> open_paged_scene(const std::string& path, const PagedSceneOptions& options = {});
+
+// A progressive renderer (CPU) for a paged scene, with the same integrators
+// and options as make_renderer: the path tracer runs as a wavefront whose
+// extensions and shadow rays are batched query loops, the other integrators
+// run per pixel, replaying each pixel until all its queries are answered.
+// `scene` must outlive it.
+std::unique_ptr<Renderer> make_paged_renderer(PagedScene& scene, const Camera& camera, const RenderOptions& options);
+
+}  // namespace rf

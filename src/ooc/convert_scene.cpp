@@ -1,0 +1,83 @@
+#include "ooc/convert_scene.h"
+
+#include <map>
+
+#include "rayforge/core/error.h"
+
+namespace rf::pack {
+
+namespace {
+
+// Textures the materials use, written once each; returns scene index -> paged index.
+std::map<int32_t, int32_t> write_textures(const Scene& scene, PackWriter& writer) {
+    std::map<int32_t, int32_t> paged;
+    for (const Material& m : scene.materials)
+        for (int32_t id : {m.base_color_texture, m.metallic_roughness_texture, m.normal_texture, m.emission_texture})
+            if (id >= 0 && size_t(id) < scene.textures.size() && !paged.count(id))
+                paged[id] = int32_t(writer.add_texture(scene.textures[size_t(id)]));
+    return paged;
+}
+
+void write_materials(const Scene& scene, const std::map<int32_t, int32_t>& textures, PackWriter& writer,
+                     std::vector<std::string>& notes) {
+    const auto remap = [&](int32_t id) {
+        const auto it = textures.find(id);
+        return it == textures.end() ? kNoTexture : it->second;
+    };
+    bool made_opaque = false, normal_maps = false;
+    for (const Material& m : scene.materials) {
+        ShadingMaterial s = ShadingMaterial::from(m);
+        s.base_color_texture = remap(m.base_color_texture);
+        s.metallic_roughness_texture = remap(m.metallic_roughness_texture);
+        s.normal_texture = remap(m.normal_texture);
+        s.emission_texture = remap(m.emission_texture);
+        if (s.alpha_mode != AlphaMode::Opaque || s.alpha < 1.0f) made_opaque = true;
+        s.alpha_mode = AlphaMode::Opaque;
+        s.alpha = 1.0f;
+        normal_maps |= s.normal_texture != kNoTexture;
+        writer.add_material(s);
+    }
+    if (made_opaque) notes.push_back("cut-out and blended materials were made opaque (paged scenes trace opaque surfaces)");
+    if (normal_maps) notes.push_back("normal maps are stored but not applied (no tangent frames in paged records)");
+}
+
+}  // namespace
+
+ConvertResult convert_scene(const Scene& scene, const std::string& path, const PackWriterOptions& options,
+                            const ProgressCallback& progress) {
+    ConvertResult result;
+    PackWriter writer(path, options);
+    const std::map<int32_t, int32_t> textures = write_textures(scene, writer);
+    write_materials(scene, textures, writer, result.notes);
+    for (const Light& light : scene.lights) writer.add_light(light);
+    if (scene.camera) writer.set_camera(*scene.camera);
+    else writer.set_camera(scene.camera_or_default());
+    writer.set_environment(scene.environment);
+    if (scene.environment.texture >= 0)
+        result.notes.push_back("the environment map was replaced by its constant colour times strength");
+    if (progress) progress(0.0);
+    size_t done = 0;
+    const size_t total = std::max<size_t>(1, scene.triangle_count());
+    for (const Instance& instance : scene.instances) {
+        const Mesh& mesh = scene.meshes[instance.mesh];
+        std::vector<Vec3f> positions(mesh.positions.size());
+        for (size_t i = 0; i < positions.size(); ++i) positions[i] = instance.transform.transform_point(mesh.positions[i]);
+        const Affine3f normal_matrix = instance.transform.normal_matrix();
+        std::vector<ShadingTriangle> shading(mesh.triangle_count());
+        for (size_t t = 0; t < shading.size(); ++t) {
+            const uint32_t* idx = &mesh.indices[3 * t];
+            const Triangle tri{positions[idx[0]], positions[idx[1]], positions[idx[2]]};
+            const uint32_t material = t < mesh.material_ids.size() ? mesh.material_ids[t] : 0;
+            shading[t] = make_shading_triangle(mesh, normal_matrix, tri, idx, material);
+        }
+        writer.add_object({positions, mesh.indices, shading});
+        done += shading.size();
+        if (progress) progress(0.9 * double(done) / double(total));
+    }
+    result.summary = writer.finish([&](double f) {
+        if (progress) progress(0.9 + 0.1 * f);
+    });
+    return result;
+}
+
+}  // namespace rf::pack

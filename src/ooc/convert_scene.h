@@ -1,0 +1,24 @@
+// An in-memory scene written as a paged scene file, one instance at a time
+// (each instance is an object of its own: the paged file holds unique
+// geometry, §6.3.1 (h)). What the paged renderer cannot do is reported in
+// `notes`: cut-outs and blending become opaque, an environment map becomes
+// its constant colour, normal maps lose their tangent frames.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "ooc/pack_writer.h"
+#include "rayforge/scene/scene.h"
+
+namespace rf::pack {
+
+struct ConvertResult {
+    PackSummary summary;
+    std::vector<std::string> notes;
+};
+
+ConvertResult convert_scene(const Scene& scene, const std::string& path, const PackWriterOptions& options,
+                            const ProgressCallback& progress = {});
+
+}  // namespace rf::pack

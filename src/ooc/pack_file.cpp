@@ -1,0 +1,334 @@
+// Reading a paged scene file: everything always resident is read and checked
+// at open, so a page read later can only fail on its own bytes.
+#include "ooc/pack_file.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <zstd.h>
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+
+#include "rayforge/core/error.h"
+#include "rayforge/core/memory_budget.h"
+
+#if defined(__SSE4_2__)
+#include <nmmintrin.h>
+#endif
+
+namespace rf::pack {
+
+namespace {
+
+// The largest page the reader accepts (a geometry page is about 120 KB,
+// attribute and texture pages a few KB): a corrupted size cannot ask for gigabytes.
+constexpr uint32_t kMaxPageBytes = 16u << 20;
+
+uint32_t crc32c_table_step(uint32_t crc, const uint8_t* p, size_t n) {
+    static const auto table = [] {
+        std::array<uint32_t, 256> t{};
+        for (uint32_t i = 0; i < 256; ++i) {
+            uint32_t c = i;
+            for (int k = 0; k < 8; ++k) c = (c & 1) ? (c >> 1) ^ 0x82F63B78u : c >> 1;
+            t[i] = c;
+        }
+        return t;
+    }();
+    for (size_t i = 0; i < n; ++i) crc = table[(crc ^ p[i]) & 0xFFu] ^ (crc >> 8);
+    return crc;
+}
+
+// Reads exactly `bytes` at `offset`; false on a short read.
+bool read_at(int fd, void* out, size_t bytes, uint64_t offset) {
+    auto* p = static_cast<uint8_t*>(out);
+    while (bytes > 0) {
+        const ssize_t got = ::pread(fd, p, bytes, off_t(offset));
+        if (got < 0 && errno == EINTR) continue;
+        if (got <= 0) return false;
+        p += got;
+        bytes -= size_t(got);
+        offset += uint64_t(got);
+    }
+    return true;
+}
+
+bool finite_box(const Box3f& b) {
+    return std::isfinite(b.lo.x) && std::isfinite(b.lo.y) && std::isfinite(b.lo.z) && std::isfinite(b.hi.x) &&
+           std::isfinite(b.hi.y) && std::isfinite(b.hi.z) && b.lo.x <= b.hi.x && b.lo.y <= b.hi.y && b.lo.z <= b.hi.z;
+}
+
+bool finite_vec(Vec3f v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+size_t round16(size_t n) { return (n + 15) & ~size_t(15); }
+
+// The resident section's arrays, read in order with bounds checks.
+class SectionReader {
+public:
+    SectionReader(const std::vector<uint8_t>& bytes, const std::string& path, uint64_t base)
+        : bytes_(bytes), path_(path), base_(base) {}
+
+    template <class T>
+    void read_one(T& out, const char* what) {
+        check(sizeof(T), what);
+        std::memcpy(&out, bytes_.data() + at_, sizeof(T));
+        at_ = round16(at_ + sizeof(T));
+    }
+    template <class T>
+    void read_array(std::vector<T>& out, uint64_t count, const char* what) {
+        if (count > (bytes_.size() - std::min(at_, bytes_.size())) / sizeof(T) + 1)
+            throw file_byte_error(path_, base_ + at_, std::string(what) + ": count " + std::to_string(count) +
+                                                          " does not fit in the resident section");
+        check(size_t(count) * sizeof(T), what);
+        out.resize(size_t(count));
+        if (count) std::memcpy(out.data(), bytes_.data() + at_, size_t(count) * sizeof(T));
+        at_ = round16(at_ + size_t(count) * sizeof(T));
+    }
+
+private:
+    void check(size_t n, const char* what) const {
+        if (at_ > bytes_.size() || n > bytes_.size() - at_)
+            throw file_byte_error(path_, base_ + at_, std::string("resident section ends inside ") + what);
+    }
+    const std::vector<uint8_t>& bytes_;
+    const std::string& path_;
+    uint64_t base_;
+    size_t at_ = 0;
+};
+
+}  // namespace
+
+uint32_t crc32c(const void* data, size_t bytes, uint32_t seed) {
+    const auto* p = static_cast<const uint8_t*>(data);
+    uint32_t crc = ~seed;
+#if defined(__SSE4_2__)
+    uint64_t c = crc;
+    for (; bytes >= 8; bytes -= 8, p += 8) {
+        uint64_t word;
+        std::memcpy(&word, p, 8);
+        c = _mm_crc32_u64(c, word);
+    }
+    crc = uint32_t(c);
+#endif
+    crc = crc32c_table_step(crc, p, bytes);
+    return ~crc;
+}
+
+PackFile::PackFile(const std::string& path) : path_(path) {
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) throw file_error(path, 0, std::string("cannot open: ") + std::strerror(errno));
+    try {
+        open_checked();
+    } catch (...) {
+        ::close(fd_);
+        fd_ = -1;
+        throw;
+    }
+}
+
+PackFile::~PackFile() {
+    if (fd_ >= 0) ::close(fd_);
+}
+
+void PackFile::open_checked() {
+    struct stat st{};
+    if (::fstat(fd_, &st) != 0) throw file_error(path_, 0, std::string("cannot stat: ") + std::strerror(errno));
+    const uint64_t size = uint64_t(st.st_size);
+    if (size < sizeof(FileHeader) || !read_at(fd_, &header_, sizeof(header_), 0))
+        throw file_byte_error(path_, 0, "not a paged scene file (shorter than its header)");
+    if (std::memcmp(header_.magic, kMagic, sizeof(kMagic)) != 0)
+        throw file_byte_error(path_, 0, "not a paged scene file (bad magic)");
+    if (header_.version != kVersion)
+        throw file_byte_error(path_, 8, "unsupported paged scene version " + std::to_string(header_.version) +
+                                            " (this rayforge reads version " + std::to_string(kVersion) + ")");
+    if (header_.header_bytes != sizeof(FileHeader) ||
+        crc32c(&header_, offsetof(FileHeader, header_checksum)) != header_.header_checksum)
+        throw file_byte_error(path_, 0, "header checksum mismatch (corrupted file)");
+    if (header_.file_bytes != size)
+        throw file_byte_error(path_, size, "file is truncated or padded: " + std::to_string(size) +
+                                               " bytes, the header says " + std::to_string(header_.file_bytes));
+    read_directory(size);
+    read_resident(size);
+}
+
+void PackFile::read_directory(uint64_t size) {
+    const FileHeader& h = header_;
+    const uint64_t kinds = uint64_t(h.geometry_pages) + h.attribute_pages + h.texture_pages;
+    if (h.page_count != kinds) throw file_byte_error(path_, 0, "page counts disagree in the header");
+    if (h.directory_offset > size || h.page_count > (size - h.directory_offset) / sizeof(PageEntry))
+        throw file_byte_error(path_, h.directory_offset, "page directory lies outside the file");
+    budgeted_resize(directory_, size_t(h.page_count), "paged scene directory");
+    if (!read_at(fd_, directory_.data(), directory_.size() * sizeof(PageEntry), h.directory_offset))
+        throw file_byte_error(path_, h.directory_offset, "cannot read the page directory");
+    if (crc32c(directory_.data(), directory_.size() * sizeof(PageEntry)) != h.directory_checksum)
+        throw file_byte_error(path_, h.directory_offset, "page directory checksum mismatch (corrupted file)");
+    for (uint64_t i = 0; i < directory_.size(); ++i) {
+        const PageEntry& e = directory_[i];
+        const PageKind want = i < h.geometry_pages                      ? PageKind::Geometry
+                              : i < first_texture_page()                ? PageKind::Attributes
+                                                                        : PageKind::TextureTile;
+        const uint64_t at = h.directory_offset + i * sizeof(PageEntry);
+        if (e.kind != want || (e.codec != Codec::None && e.codec != Codec::Zstd))
+            throw file_byte_error(path_, at, "page " + std::to_string(i) + ": bad kind or codec");
+        if (e.offset > size || e.stored_bytes > size - e.offset || e.raw_bytes > kMaxPageBytes ||
+            e.stored_bytes == 0 || (e.codec == Codec::None && e.stored_bytes != e.raw_bytes))
+            throw file_byte_error(path_, at, "page " + std::to_string(i) + ": bad offset or size");
+    }
+}
+
+void PackFile::read_resident(uint64_t size) {
+    const FileHeader& h = header_;
+    if (h.resident_offset > size || h.resident_bytes > size - h.resident_offset || h.resident_bytes < sizeof(ResidentHeader))
+        throw file_byte_error(path_, h.resident_offset, "resident section lies outside the file");
+    std::vector<uint8_t> bytes;
+    budgeted_resize(bytes, size_t(h.resident_bytes), "paged scene resident section");
+    if (!read_at(fd_, bytes.data(), bytes.size(), h.resident_offset))
+        throw file_byte_error(path_, h.resident_offset, "cannot read the resident section");
+    if (crc32c(bytes.data(), bytes.size()) != h.resident_checksum)
+        throw file_byte_error(path_, h.resident_offset, "resident section checksum mismatch (corrupted file)");
+    SectionReader in(bytes, path_, h.resident_offset);
+    in.read_one(resident_, "the resident header");
+    const ResidentHeader& r = resident_;
+    for (int a = 0; a < 3; ++a)
+        if (r.grid_res[a] < 1 || r.grid_res[a] > kMaxGridResolution)
+            throw file_byte_error(path_, h.resident_offset, "bad top-grid resolution");
+    if (r.attribute_format != AttributeFormat::Full && r.attribute_format != AttributeFormat::Compact)
+        throw file_byte_error(path_, h.resident_offset, "bad attribute format");
+    if (r.attribute_page_bytes < 1024 || r.attribute_page_bytes > (1u << 20) ||
+        (r.attribute_page_bytes & (r.attribute_page_bytes - 1)) != 0)
+        throw file_byte_error(path_, h.resident_offset, "bad attribute page size");
+    if (h.geometry_pages > 0 && (!finite_box(r.bounds) || !finite_box(r.grid_bounds)))
+        throw file_byte_error(path_, h.resident_offset, "non-finite scene bounds");
+    const uint64_t cells = uint64_t(r.grid_res[0]) * uint64_t(r.grid_res[1]) * uint64_t(r.grid_res[2]);
+    in.read_array(pages_, h.geometry_pages, "page bounds");
+    in.read_array(cell_roots_, cells, "top-grid cells");
+    in.read_array(middle_nodes_, r.middle_node_count, "middle BVH nodes");
+    in.read_array(materials_, r.material_count, "materials");
+    in.read_array(lights_, r.light_count, "lights");
+    in.read_array(textures_, r.texture_count, "textures");
+    validate_resident();
+}
+
+void PackFile::validate_resident() const {
+    const uint64_t at = header_.resident_offset;
+    const uint32_t records_per_page = resident_.attribute_page_bytes / attribute_record_bytes(resident_.attribute_format);
+    for (size_t i = 0; i < pages_.size(); ++i) {
+        const PageInfo& p = pages_[i];
+        const uint64_t attribute_pages = (2ull * p.quad_count + records_per_page - 1) / records_per_page;
+        if (!finite_box(p.bounds) || !finite_vec(p.offset) || !finite_vec(p.scale) || p.quad_count == 0 ||
+            p.quad_count > kQuadsPerPage || uint64_t(p.first_attribute_page) + attribute_pages > header_.attribute_pages)
+            throw file_byte_error(path_, at, "page " + std::to_string(i) + ": bad bounds, size or attribute range");
+    }
+    const uint32_t n = uint32_t(middle_nodes_.size());
+    for (uint32_t root : cell_roots_)
+        if (root != kEmptyCell && root >= n) throw file_byte_error(path_, at, "a top-grid cell points past the middle BVHs");
+    for (uint32_t i = 0; i < n; ++i) {
+        const BvhNode& node = middle_nodes_[i];
+        const bool bad = node.is_leaf() ? (node.count != 1 || node.first >= pages_.size())
+                                        : (node.first <= i || node.first >= n - 1);
+        if (bad || !finite_box(node.bounds))
+            throw file_byte_error(path_, at, "middle BVH node " + std::to_string(i) + " is malformed");
+    }
+    const auto texture_ok = [&](int32_t id) { return id == -1 || (id >= 0 && uint32_t(id) < textures_.size()); };
+    for (const ShadingMaterial& m : materials_)
+        if (!texture_ok(m.base_color_texture) || !texture_ok(m.metallic_roughness_texture) ||
+            !texture_ok(m.normal_texture) || !texture_ok(m.emission_texture))
+            throw file_byte_error(path_, at, "a material names a texture the file does not have");
+    for (const TextureInfo& t : textures_) {
+        if (t.width == 0 || t.height == 0 || t.width > 65536 || t.height > 65536 || t.level_count == 0 ||
+            t.level_count > uint32_t(TextureInfo::kMaxLevels))
+            throw file_byte_error(path_, at, "a texture has bad dimensions");
+        for (uint32_t level = 0; level < t.level_count; ++level) {
+            const uint32_t w = std::max(1u, t.width >> level), h = std::max(1u, t.height >> level);
+            const uint64_t tiles = uint64_t((w + kTextureTileSide - 1) / kTextureTileSide) *
+                                   ((h + kTextureTileSide - 1) / kTextureTileSide);
+            if (uint64_t(t.first_tile[level]) + tiles > header_.texture_pages)
+                throw file_byte_error(path_, at, "a texture's tiles lie past the texture pages");
+        }
+    }
+}
+
+Camera PackFile::camera() const {
+    const float* c = resident_.camera;
+    Camera camera;
+    camera.eye = {c[0], c[1], c[2]};
+    camera.target = {c[3], c[4], c[5]};
+    camera.up = {c[6], c[7], c[8]};
+    camera.vfov_degrees = c[9];
+    camera.aperture_radius = resident_.camera_lens[0];
+    camera.focus_distance = resident_.camera_lens[1];
+    return camera;
+}
+
+Environment PackFile::environment() const {
+    const float* e = resident_.environment;
+    Environment env;
+    env.color = {e[0], e[1], e[2]};
+    env.strength = e[3];
+    env.rotation_radians = e[4];
+    return env;
+}
+
+size_t PackFile::read_page(uint64_t index, std::vector<uint8_t>& out, std::vector<uint8_t>& scratch) const {
+    if (index >= directory_.size()) throw Error(path_ + ": page " + std::to_string(index) + " does not exist");
+    out.resize(directory_[size_t(index)].raw_bytes);
+    return read_page(index, std::span<uint8_t>(out), scratch);
+}
+
+size_t PackFile::read_page(uint64_t index, std::span<uint8_t> out, std::vector<uint8_t>& scratch) const {
+    if (index >= directory_.size()) throw Error(path_ + ": page " + std::to_string(index) + " does not exist");
+    const PageEntry& e = directory_[size_t(index)];
+    if (out.size() < e.raw_bytes)
+        throw Error(path_ + ": page " + std::to_string(index) + " is larger than its cache slot");
+    uint8_t* stored = out.data();
+    if (e.codec != Codec::None) {
+        scratch.resize(e.stored_bytes);
+        stored = scratch.data();
+    }
+    if (!read_at(fd_, stored, e.stored_bytes, e.offset))
+        throw file_byte_error(path_, e.offset, "cannot read page " + std::to_string(index) + ": " +
+                                                   (errno ? std::strerror(errno) : "short read"));
+    if (crc32c(stored, e.stored_bytes) != e.checksum)
+        throw file_byte_error(path_, e.offset, "page " + std::to_string(index) + " checksum mismatch (corrupted file)");
+    if (e.codec == Codec::Zstd) {
+        const size_t got = ZSTD_decompress(out.data(), e.raw_bytes, stored, e.stored_bytes);
+        if (ZSTD_isError(got) || got != e.raw_bytes)
+            throw file_byte_error(path_, e.offset, "page " + std::to_string(index) + " does not decompress");
+    }
+    return e.stored_bytes;
+}
+
+size_t PackFile::resident_memory_bytes() const {
+    return directory_.capacity() * sizeof(PageEntry) + pages_.capacity() * sizeof(PageInfo) +
+           cell_roots_.capacity() * sizeof(uint32_t) + middle_nodes_.capacity() * sizeof(BvhNode) +
+           materials_.capacity() * sizeof(ShadingMaterial) + lights_.capacity() * sizeof(Light) +
+           textures_.capacity() * sizeof(TextureInfo);
+}
+
+GeometryPageView view_geometry_page(std::span<const uint8_t> bytes, const std::string& what) {
+    GeometryPageHeader h;
+    if (bytes.size() < sizeof(h)) throw Error(what + ": geometry page shorter than its header");
+    std::memcpy(&h, bytes.data(), sizeof(h));
+    const uint64_t need = sizeof(h) + uint64_t(h.node_count) * sizeof(PageNode) + uint64_t(h.quad_count) * sizeof(Quad);
+    if (h.quad_count == 0 || h.quad_count > kQuadsPerPage || h.node_count == 0 || h.node_count > 2 * kQuadsPerPage ||
+        need > bytes.size())
+        throw Error(what + ": geometry page sizes disagree with its bytes");
+    GeometryPageView v;
+    const auto* nodes = reinterpret_cast<const PageNode*>(bytes.data() + sizeof(h));
+    for (uint32_t i = 0; i < h.node_count; ++i) {
+        const PageNode& n = nodes[i];
+        const bool ok = n.is_leaf() ? n.count() >= 1 && n.count() <= kPageLeafQuads && n.first() + n.count() <= h.quad_count
+                                    : n.left() > i && n.left() + 1 < h.node_count;
+        if (!ok) throw Error(what + ": geometry page node " + std::to_string(i) + " is malformed");
+    }
+    v.nodes = reinterpret_cast<const PageNode*>(bytes.data() + sizeof(h));
+    v.quads = reinterpret_cast<const Quad*>(bytes.data() + sizeof(h) + size_t(h.node_count) * sizeof(PageNode));
+    v.node_count = h.node_count;
+    v.quad_count = h.quad_count;
+    return v;
+}
+
+}  // namespace rf::pack

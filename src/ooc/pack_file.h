@@ -1,0 +1,92 @@
+// Reading a paged scene file: the header, directory and resident section are
+// read and checked once at open; pages are read on demand (pread: safe from
+// many threads at once), checked against their checksum and decompressed.
+// Every failure is an rf::Error naming the file and the byte offset.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "ooc/pack_format.h"
+#include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/scene/camera.h"
+#include "rayforge/scene/light.h"
+#include "render/material_eval.h"
+
+namespace rf::pack {
+
+class PackFile {
+public:
+    // Opens and validates `path` (magic, version, sizes, checksums of the
+    // header, directory and resident section, every directory entry in the file).
+    explicit PackFile(const std::string& path);
+    ~PackFile();
+    PackFile(const PackFile&) = delete;
+    PackFile& operator=(const PackFile&) = delete;
+
+    [[nodiscard]] const std::string& path() const { return path_; }
+    [[nodiscard]] const FileHeader& header() const { return header_; }
+    [[nodiscard]] const ResidentHeader& resident() const { return resident_; }
+
+    [[nodiscard]] std::span<const PageEntry> directory() const { return directory_; }
+    [[nodiscard]] std::span<const PageInfo> pages() const { return pages_; }
+    [[nodiscard]] std::span<const uint32_t> cell_roots() const { return cell_roots_; }
+    [[nodiscard]] std::span<const BvhNode> middle_nodes() const { return middle_nodes_; }
+    [[nodiscard]] std::span<const ShadingMaterial> materials() const { return materials_; }
+    [[nodiscard]] std::span<const Light> lights() const { return lights_; }
+    [[nodiscard]] std::span<const TextureInfo> textures() const { return textures_; }
+
+    // Directory index of the first page of each kind.
+    [[nodiscard]] uint64_t first_attribute_page() const { return header_.geometry_pages; }
+    [[nodiscard]] uint64_t first_texture_page() const {
+        return uint64_t(header_.geometry_pages) + header_.attribute_pages;
+    }
+    [[nodiscard]] bool has_camera() const { return resident_.has_camera != 0; }
+    [[nodiscard]] Camera camera() const;
+    [[nodiscard]] Environment environment() const;
+
+    // Reads directory page `index` into `out` (resized to its raw size),
+    // verifying its checksum and decompressing it; `scratch` holds the
+    // stored bytes of a compressed page (pass one per thread to avoid
+    // reallocations). Thread-safe. Returns the bytes read from the file.
+    size_t read_page(uint64_t index, std::vector<uint8_t>& out, std::vector<uint8_t>& scratch) const;
+    // The same into a caller's buffer of at least raw_bytes (a cache slot).
+    size_t read_page(uint64_t index, std::span<uint8_t> out, std::vector<uint8_t>& scratch) const;
+
+    // Bytes of the resident section held in memory.
+    [[nodiscard]] size_t resident_memory_bytes() const;
+
+private:
+    void open_checked();
+    void read_directory(uint64_t size);
+    void read_resident(uint64_t size);
+    void validate_resident() const;
+
+    std::string path_;
+    int fd_ = -1;
+    FileHeader header_{};
+    ResidentHeader resident_{};
+    std::vector<PageEntry> directory_;
+    std::vector<PageInfo> pages_;
+    std::vector<uint32_t> cell_roots_;
+    std::vector<BvhNode> middle_nodes_;
+    std::vector<ShadingMaterial> materials_;
+    std::vector<Light> lights_;
+    std::vector<TextureInfo> textures_;
+};
+
+// A geometry page's parts, viewed in its raw bytes.
+struct GeometryPageView {
+    const PageNode* nodes = nullptr;
+    const Quad* quads = nullptr;
+    uint32_t node_count = 0;
+    uint32_t quad_count = 0;
+};
+// Views `bytes` as a geometry page; rf::Error (naming `what`) when its sizes
+// disagree or a node points outside the page or backwards (so traversal of
+// a checked page always ends).
+GeometryPageView view_geometry_page(std::span<const uint8_t> bytes, const std::string& what);
+
+}  // namespace rf::pack

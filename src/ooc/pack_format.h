@@ -1,0 +1,187 @@
+// The paged scene file (.rfpack), after the dissertation's out-of-core
+// ray tracer (Garanzha 2014, ch. 6, §6.3; docs/paged-scenes.md has the
+// byte layout). A scene is cut into pages that are read on demand:
+//   - geometry pages: up to kQuadsPerPage quads (triangle pairs) with 16-bit
+//     page-local quantised vertices and the page's own BVH (leaves of at most
+//     kPageLeafQuads quads), the quantisation folded into the page's decode
+//     transform (§6.3.2);
+//   - attribute pages: the shading record of every triangle, in the quads'
+//     Morton order (§6.4), in pages of `attribute_page_bytes`;
+//   - texture pages: 32x32-texel tiles of every mip level (§6.5).
+// What is always resident (the "resident section"): per geometry page its
+// world bounds and decode transform, the top grid of kGridResolution^3 cells
+// and per cell a BVH over the page bounds clipped to the cell (§6.3.1 (e)-(g)),
+// the materials, lights, camera and texture descriptions.
+//
+// Every page carries a checksum of its stored bytes; the header, the page
+// directory and the resident section carry their own. All integers are
+// little-endian, the file's structs are plain data written as they lie in
+// memory (static_asserts below pin their sizes).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "rayforge/core/host_device.h"
+#include "rayforge/math/box.h"
+#include "rayforge/math/vec.h"
+
+namespace rf::pack {
+
+inline constexpr char kMagic[8] = {'R', 'F', 'P', 'A', 'C', 'K', '\r', '\n'};
+inline constexpr uint32_t kVersion = 1;
+
+// The seed's parameters (§6.3, §6.7.1).
+inline constexpr uint32_t kQuadsPerPage = 4096;      // NP
+inline constexpr uint32_t kBranchQuads = 65536;      // NB, the SAH-branch limit
+inline constexpr uint32_t kPageLeafQuads = 15;       // bottom-BVH leaves
+inline constexpr uint32_t kTrianglesPerPageSlot = 2 * kQuadsPerPage;  // Hit::prim = page * this + 2 * quad + half
+inline constexpr int kDefaultGridResolution = 32;    // the top grid, cells per axis
+inline constexpr int kMaxGridResolution = 256;
+inline constexpr uint32_t kTextureTileSide = 32;     // texels; an RGBA8 tile is 4 KB
+inline constexpr uint32_t kDefaultAttributePageBytes = 4096;
+inline constexpr int16_t kQuantMax = 32767;          // quantised coordinates lie in [-kQuantMax, kQuantMax]
+
+enum class PageKind : uint8_t { Geometry = 0, Attributes = 1, TextureTile = 2 };
+enum class Codec : uint8_t { None = 0, Zstd = 1 };
+enum class AttributeFormat : uint8_t {
+    Full = 0,     // 64-byte rf::ShadingTriangle records, exact
+    Compact = 1,  // 32-byte CompactShading records (half-float uvs)
+};
+
+// At offset 0. header_checksum covers the bytes before it.
+struct FileHeader {
+    char magic[8];
+    uint32_t version = kVersion;
+    uint32_t header_bytes = sizeof(FileHeader);
+    uint64_t resident_offset = 0;
+    uint64_t resident_bytes = 0;
+    uint64_t directory_offset = 0;
+    uint64_t page_count = 0;          // directory entries: geometry, then attribute, then texture pages
+    uint64_t triangle_count = 0;      // input triangles (degenerate ones included)
+    uint64_t quad_count = 0;
+    uint64_t file_bytes = 0;          // the whole file, to tell a truncated one
+    uint32_t geometry_pages = 0;
+    uint32_t attribute_pages = 0;
+    uint32_t texture_pages = 0;
+    uint32_t resident_checksum = 0;
+    uint32_t directory_checksum = 0;
+    uint32_t reserved[7] = {};
+    uint32_t header_checksum = 0;
+};
+static_assert(sizeof(FileHeader) == 128);
+
+// One per page, in the directory.
+struct PageEntry {
+    uint64_t offset = 0;        // in the file
+    uint32_t stored_bytes = 0;  // as stored (compressed or not)
+    uint32_t raw_bytes = 0;     // after decompression
+    uint32_t checksum = 0;      // of the stored bytes
+    PageKind kind = PageKind::Geometry;
+    Codec codec = Codec::None;
+    uint16_t reserved = 0;
+};
+static_assert(sizeof(PageEntry) == 24);
+
+// A bottom-BVH node of a geometry page: a box in the page's quantised
+// coordinates (conservative: lo rounded down, hi up) and either the first of
+// two adjacent children or a leaf's quads.
+struct PageNode {
+    int16_t lo[3];
+    int16_t hi[3];
+    uint32_t payload;  // inner: index of the left child (the right one follows); leaf: kLeafBit | count << 16 | first
+    static constexpr uint32_t kLeafBit = 0x80000000u;
+    [[nodiscard]] RF_HDI bool is_leaf() const { return (payload & kLeafBit) != 0; }
+    [[nodiscard]] RF_HDI uint32_t first() const { return payload & 0xFFFFu; }
+    [[nodiscard]] RF_HDI uint32_t count() const { return (payload >> 16) & 0x7FFFu; }
+    [[nodiscard]] RF_HDI uint32_t left() const { return payload; }
+};
+static_assert(sizeof(PageNode) == 16);
+
+// Four quantised vertices. The quad is the triangles (v0, v1, v2) and
+// (v0, v2, v3); an unpaired triangle repeats v0 as v3 (its second half is
+// degenerate and never hit).
+struct Quad {
+    int16_t v[4][3];
+};
+static_assert(sizeof(Quad) == 24);
+
+// A geometry page as read (raw bytes): this header, node_count PageNodes
+// (node 0 the root), then quad_count Quads.
+struct GeometryPageHeader {
+    uint32_t quad_count = 0;
+    uint32_t node_count = 0;
+};
+static_assert(sizeof(GeometryPageHeader) == 8);
+
+// Always resident, one per geometry page: world = offset + scale * quantised.
+struct PageInfo {
+    Box3f bounds;                    // world space, of the decoded quads
+    Vec3f offset;
+    Vec3f scale;
+    uint32_t quad_count = 0;
+    uint32_t first_attribute_page = 0;  // attribute pages of this page's triangles start here
+    uint32_t object = 0;                // the input object it came from
+    uint32_t reserved = 0;
+};
+static_assert(sizeof(PageInfo) == 64);
+
+// A 32-byte shading record (AttributeFormat::Compact): oct-encoded normals
+// as in rf::ShadingTriangle, uvs as IEEE half floats.
+struct CompactShading {
+    uint32_t geometric_normal = 0;
+    uint32_t material_flags = 0;  // material in the low 24 bits, ShadingTriangle flags in the high 8
+    uint32_t normals[3] = {0, 0, 0};
+    uint16_t uv[3][2] = {};
+};
+static_assert(sizeof(CompactShading) == 32);
+
+// A texture: its levels, each cut into kTextureTileSide^2 RGBA8 tiles
+// (row-major within the level); one tile per texture page.
+struct TextureInfo {
+    static constexpr int kMaxLevels = 16;
+    uint32_t width = 0, height = 0;  // level 0
+    uint32_t level_count = 0;
+    uint8_t encoding = 0;            // rf::TextureEncoding (8-bit ones; float textures are stored as linear 8-bit)
+    uint8_t wrap_s = 0, wrap_t = 0;  // rf::TextureWrap
+    uint8_t channels = 4;            // of the source; tiles always hold 4
+    uint32_t first_tile[kMaxLevels] = {};  // texture-page index (within the texture pages) of each level's tile (0, 0)
+};
+static_assert(sizeof(TextureInfo) == 80);
+
+// The resident section starts with this; the arrays follow in this order,
+// each at an offset rounded up to 16 bytes:
+//   PageInfo[geometry_pages]
+//   uint32_t cell_root[grid_cells]   (index into the middle nodes, or kEmptyCell)
+//   BvhNode middle_nodes[middle_node_count]   (leaves of one page each: first = page)
+//   ShadingMaterial materials[material_count]
+//   Light lights[light_count]
+//   TextureInfo textures[texture_count]
+struct ResidentHeader {
+    Box3f bounds;                      // the scene's
+    Box3f grid_bounds;                 // the top grid's (bounds, slightly padded)
+    int32_t grid_res[3] = {1, 1, 1};
+    uint32_t middle_node_count = 0;
+    uint32_t material_count = 0;
+    uint32_t light_count = 0;
+    uint32_t texture_count = 0;
+    uint32_t attribute_page_bytes = kDefaultAttributePageBytes;
+    AttributeFormat attribute_format = AttributeFormat::Full;
+    uint8_t has_camera = 0;
+    uint8_t reserved8[2] = {};
+    uint32_t object_count = 0;
+    float camera[10] = {};             // eye, target, up, vfov (when has_camera)
+    float camera_lens[2] = {};         // aperture radius, focus distance
+    float environment[6] = {};         // colour rgb, strength, rotation, (unused)
+    uint32_t reserved[8] = {};
+};
+static_assert(sizeof(ResidentHeader) == 192);
+inline constexpr uint32_t kEmptyCell = 0xFFFFFFFFu;
+
+// Bytes of one attribute record.
+[[nodiscard]] RF_HDI uint32_t attribute_record_bytes(AttributeFormat f) { return f == AttributeFormat::Full ? 64u : 32u; }
+
+// Checksum of page and section bytes: CRC-32C (Castagnoli), table-driven.
+uint32_t crc32c(const void* data, size_t bytes, uint32_t seed = 0);
+
+}  // namespace rf::pack

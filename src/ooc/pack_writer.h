@@ -1,0 +1,94 @@
+// Writing a paged scene file (pack_format.h), object by object, out of core
+// as the dissertation's preprocessor does (§6.3.1 (h)): each object's pages
+// are built and written when it is added, then its memory is freed; only
+// the per-page bounds stay until finish() builds the top grid and the middle
+// BVHs over them. So the writer's memory is bounded by its largest object
+// (about kWriterBytesPerTriangle per triangle) plus 64 bytes per page.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+
+#include "ooc/pack_format.h"
+#include "rayforge/core/progress.h"
+#include "rayforge/scene/camera.h"
+#include "rayforge/scene/light.h"
+#include "rayforge/scene/texture.h"
+#include "render/material_eval.h"
+#include "render/shading_triangles.h"
+
+namespace rf::pack {
+
+// Peak working memory of add_object per input triangle (positions,
+// records, quads, sort keys, page buffers), for budgets.
+inline constexpr size_t kWriterBytesPerTriangle = 400;
+
+struct PackWriterOptions {
+    Codec codec = Codec::None;
+    int zstd_level = 3;
+    AttributeFormat attribute_format = AttributeFormat::Full;
+    uint32_t attribute_page_bytes = kDefaultAttributePageBytes;  // a power of two, 1 KB .. 1 MB
+    uint32_t quads_per_page = kQuadsPerPage;                     // 64 .. kQuadsPerPage
+    int grid_resolution = kDefaultGridResolution;                // 1 .. kMaxGridResolution
+    int threads = 0;                                             // 0 = all cores
+};
+
+// One object: world-space positions, 3 indices per triangle, and each
+// triangle's shading record (its material included) in the same order.
+struct ObjectInput {
+    std::span<const Vec3f> positions;
+    std::span<const uint32_t> indices;
+    std::span<const ShadingTriangle> shading;
+};
+
+struct PackSummary {
+    uint64_t triangles = 0;
+    uint64_t quads = 0;
+    uint64_t paired_triangles = 0;   // triangles that found a partner
+    uint32_t geometry_pages = 0;
+    uint32_t attribute_pages = 0;
+    uint32_t texture_pages = 0;
+    uint32_t middle_nodes = 0;
+    uint64_t file_bytes = 0;
+    uint64_t geometry_bytes = 0;     // stored bytes of the geometry pages
+    uint64_t attribute_bytes = 0;
+    uint64_t texture_bytes = 0;
+    uint64_t resident_bytes = 0;
+    double max_quantisation_error = 0.0;  // world units, over all vertices
+};
+
+class PackWriter {
+public:
+    // Creates (truncates) `path`; rf::Error when it cannot be written or an option is out of range.
+    PackWriter(const std::string& path, const PackWriterOptions& options = {});
+    ~PackWriter();
+    PackWriter(const PackWriter&) = delete;
+    PackWriter& operator=(const PackWriter&) = delete;
+
+    // Materials and textures first (ids in order from 0); a material's
+    // texture ids refer to add_texture's results.
+    uint32_t add_material(const ShadingMaterial& material);
+    // Cuts `texture` and its mip levels into tiles and writes them.
+    uint32_t add_texture(const Texture& texture);
+    void add_light(const Light& light);
+    void set_camera(const Camera& camera);
+    void set_environment(const Environment& environment);
+
+    // Pairs, partitions, quantises and writes one object (rf::Error on
+    // non-finite coordinates or out-of-range indices or materials).
+    void add_object(const ObjectInput& object);
+
+    // Builds the top grid and middle BVHs, writes the resident section, the
+    // directory and the header. Nothing may be added after it.
+    PackSummary finish(const ProgressCallback& progress = {});
+
+    [[nodiscard]] const PackSummary& summary() const;
+
+private:
+    struct State;
+    std::unique_ptr<State> state_;
+};
+
+}  // namespace rf::pack

@@ -1,0 +1,197 @@
+#include "ooc/paged_engine.h"
+
+#include <algorithm>
+#include <chrono>
+
+#include "backend/cpu/cpu_wavefront.h"
+#include "backend/cpu/parallel.h"
+#include "ooc/attribute_records.h"
+#include "rayforge/core/error.h"
+#include "render/ray_sort_key.h"
+
+namespace rf::pack {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr uint32_t kRayGrain = 256;  // rays per task: a coherent block of the sorted batch
+
+double ms_since(Clock::time_point start) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+// The largest raw page of a kind: the size of its cache slots.
+size_t largest_page(const PackFile& file, uint64_t first, uint64_t count) {
+    uint32_t largest = 1;
+    for (uint64_t i = first; i < first + count; ++i) largest = std::max(largest, file.directory()[i].raw_bytes);
+    return largest;
+}
+
+}  // namespace
+
+PagedEngine::PagedEngine(std::shared_ptr<const PackFile> file, const EngineBudgets& budgets, int threads)
+    : file_(std::move(file)), threads_(threads) {
+    const FileHeader& h = file_->header();
+    geometry_ = std::make_unique<PageCache>(*file_, 0, h.geometry_pages, largest_page(*file_, 0, h.geometry_pages),
+                                            budgets.geometry, "geometry");
+    attributes_ = std::make_unique<PageCache>(*file_, file_->first_attribute_page(), h.attribute_pages,
+                                              file_->resident().attribute_page_bytes, budgets.attributes, "attributes");
+}
+
+PagedSceneView PagedEngine::view() {
+    const PackFile& f = *file_;
+    const ResidentHeader& r = f.resident();
+    PagedSceneView v;
+    v.pages = f.pages().data();
+    v.cell_roots = f.cell_roots().data();
+    v.middle_nodes = f.middle_nodes().data();
+    v.geometry = geometry_->view();
+    v.grid_bounds = r.grid_bounds;
+    for (int a = 0; a < 3; ++a) v.res[a] = r.grid_res[a];
+    v.cell_size = (r.grid_bounds.hi - r.grid_bounds.lo) / Vec3f(float(v.res[0]), float(v.res[1]), float(v.res[2]));
+    v.page_count = uint32_t(f.pages().size());
+    return v;
+}
+
+void PagedEngine::reset_stats() {
+    stats_ = {};
+    geometry_->reset_stats();
+    attributes_->reset_stats();
+}
+
+size_t PagedEngine::memory_bytes() const {
+    return file_->resident_memory_bytes() + geometry_->memory_bytes() + attributes_->memory_bytes();
+}
+
+template <bool kAnyHit>
+void PagedEngine::run_queries(std::span<const Ray> rays, std::span<PagedRayState> states) {
+    const uint32_t n = uint32_t(rays.size());
+    const PagedSceneView v = view();
+    Clock::time_point start = Clock::now();
+    // Coherent order: by the rays' keys over the scene's bounds.
+    order_.resize(n);
+    keys_.resize(n);
+    const Box3f bounds = file_->resident().bounds;
+    parallel::for_range(0u, n, 4096u, [&](uint32_t lo, uint32_t hi) {
+        for (uint32_t i = lo; i < hi; ++i) {
+            order_[i] = i;
+            keys_[i] = ray_sort_key(rays[i], bounds);
+        }
+    });
+    sort_queue_by_key(order_, keys_);
+    stats_.sort_ms += ms_since(start);
+
+    geometry_->clear_was_read();
+    pending_ = order_;
+    std::vector<uint8_t> again(n);
+    // WasRead survives eviction, so a page is loaded at most once per loop:
+    // more iterations than pages would mean a bug, not a slow scene.
+    const uint64_t iteration_limit = uint64_t(file_->header().geometry_pages) + 2;
+    for (uint64_t iteration = 0; !pending_.empty(); ++iteration) {
+        if (iteration > iteration_limit)
+            throw Error(file_->path() + ": paged query loop did not converge (a page manager bug)");
+        start = Clock::now();
+        const uint32_t count = uint32_t(pending_.size());
+        struct Totals {
+            uint64_t cells = 0, middle = 0, pages = 0, nodes = 0, quads = 0;
+        };
+        std::mutex totals_mutex;
+        Totals totals;
+        parallel::for_range(0u, count, kRayGrain, [&](uint32_t lo, uint32_t hi) {
+            PagedCounters c;
+            for (uint32_t k = lo; k < hi; ++k) {
+                const uint32_t i = pending_[k];
+                again[k] = paged_iteration<kAnyHit>(v, rays[i], states[i], c) ? 1 : 0;
+            }
+            std::lock_guard<std::mutex> lock(totals_mutex);
+            totals.cells += c.cells;
+            totals.middle += c.middle;
+            totals.pages += c.pages;
+            totals.nodes += c.nodes;
+            totals.quads += c.quads;
+        });
+        stats_.cells += totals.cells;
+        stats_.middle += totals.middle;
+        stats_.pages += totals.pages;
+        stats_.nodes += totals.nodes;
+        stats_.quads += totals.quads;
+        ++stats_.iterations;
+        stats_.ray_iterations += count;
+        uint32_t kept = 0;
+        for (uint32_t k = 0; k < count; ++k)
+            if (again[k]) pending_[kept++] = pending_[k];
+        pending_.resize(kept);
+        stats_.traversal_ms += ms_since(start);
+        geometry_->mark_cached_as_read();
+        // Also counts the uses of cached pages when nothing is missing.
+        const size_t loaded = geometry_->swap_requested_pages();
+        if (pending_.empty()) break;
+        if (loaded == 0)
+            throw Error(file_->path() + ": paged query loop made no progress (page manager loaded nothing)");
+    }
+    stats_.queries += n;
+}
+
+void PagedEngine::intersect(std::span<const Ray> rays, std::span<Hit> hits) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    parallel::with_threads(threads_, [&] {
+        states_.assign(rays.size(), PagedRayState{});
+        run_queries<false>(rays, states_);
+        for (size_t i = 0; i < rays.size(); ++i) hits[i] = states_[i].hit.found() ? states_[i].hit : Hit{};
+    });
+}
+
+void PagedEngine::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    parallel::with_threads(threads_, [&] {
+        states_.assign(rays.size(), PagedRayState{});
+        run_queries<true>(rays, states_);
+        for (size_t i = 0; i < rays.size(); ++i) occluded[i] = states_[i].occluded ? 1 : 0;
+    });
+}
+
+void PagedEngine::fetch_shading(std::span<const Hit> hits, std::span<ShadingTriangle> records) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const ResidentHeader& r = file_->resident();
+    const AttributeFormat format = r.attribute_format;
+    const uint32_t record_bytes = attribute_record_bytes(format);
+    const uint32_t per_page = r.attribute_page_bytes / record_bytes;
+    const std::span<const PageInfo> pages = file_->pages();
+    // Attribute page and offset of hit i.
+    const auto locate = [&](const Hit& hit, uint32_t& page, uint32_t& offset) {
+        const uint32_t record = record_of(hit.prim);
+        page = pages[page_of(hit.prim)].first_attribute_page + record / per_page;
+        offset = (record % per_page) * record_bytes;
+    };
+    parallel::with_threads(threads_, [&] {
+        pending_.clear();
+        for (uint32_t i = 0; i < hits.size(); ++i) {
+            if (hits[i].found()) pending_.push_back(i);
+            else records[i] = ShadingTriangle{};
+        }
+        stats_.shading_fetches += pending_.size();
+        std::vector<uint8_t> again(pending_.size());
+        PageTableView table = attributes_->view();
+        while (!pending_.empty()) {
+            parallel::for_range(size_t(0), pending_.size(), size_t(kRayGrain), [&](size_t lo, size_t hi) {
+                for (size_t k = lo; k < hi; ++k) {
+                    const uint32_t i = pending_[k];
+                    uint32_t page, offset;
+                    locate(hits[i], page, offset);
+                    table.request(page);
+                    const uint8_t* bytes = table.cached(page);
+                    again[k] = bytes == nullptr;
+                    if (bytes) records[i] = decode_attribute_record(bytes + offset, format);
+                }
+            });
+            uint32_t kept = 0;
+            for (size_t k = 0; k < pending_.size(); ++k)
+                if (again[k]) pending_[kept++] = pending_[k];
+            pending_.resize(kept);
+            if (attributes_->swap_requested_pages() == 0 && !pending_.empty())
+                throw Error(file_->path() + ": attribute loop made no progress (page manager loaded nothing)");
+        }
+    });
+}
+
+}  // namespace rf::pack

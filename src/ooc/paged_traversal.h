@@ -1,0 +1,262 @@
+// Ray queries on a paged scene (Garanzha 2014, §6.3.3, Fig. 6.4), one
+// iteration of one ray, written once for both backends. The query loop
+// around it (paged_accel.cpp on the CPU) runs iterations over all pending
+// rays, then lets the geometry page manager load what they asked for,
+// until no ray asks for anything.
+//
+// In an iteration a ray walks the top grid with a 3D-DDA from its restart
+// cell, never past its nearest hit so far; in each cell it walks the cell's
+// middle BVH, and for every page whose clipped box it meets:
+//   - WasRead (searched by every ray in an earlier iteration): skipped;
+//   - cached: its use is marked, the ray goes into the page's quantised
+//     space (t is unchanged by the affine map) and through its bottom BVH;
+//   - missing: the first such page of this iteration is requested and its
+//     cell becomes the restart cell; later missing pages wait. The walk
+//     goes on, testing every cached page further along (speculative
+//     testing: a hit there shortens the ray, so farther pages may never be
+//     needed).
+// Any-hit rays (shadows) stop at their first hit among cached pages.
+// A ray is finished when an iteration requested nothing.
+//
+// Robustness: the grid's cells hold every page within a small margin of
+// them (top_grid.cpp); plane distances are recomputed from the planes, as
+// in trace/grid_traversal.h; box tests are the BVH's (Ize 2013).
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+
+#include "core/assert.h"
+#include "ooc/pack_format.h"
+#include "ooc/page_table.h"
+#include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/core/host_device.h"
+#include "rayforge/math/ray.h"
+#include "trace/bvh_traversal.h"
+#include "trace/triangle_intersect.h"
+
+namespace rf::pack {
+
+// The resident levels and the geometry pages as the per-ray code sees them.
+struct PagedSceneView {
+    const PageInfo* pages = nullptr;
+    const uint32_t* cell_roots = nullptr;
+    const BvhNode* middle_nodes = nullptr;
+    PageTableView geometry;
+    Box3f grid_bounds;
+    Vec3f cell_size;
+    int res[3] = {1, 1, 1};
+    uint32_t page_count = 0;
+};
+
+inline constexpr uint32_t kRayFinished = 0xFFFFFFFFu;
+inline constexpr uint32_t kRayNotStarted = 0xFFFFFFFEu;
+
+// What a ray keeps between iterations (the seed's restart record).
+struct PagedRayState {
+    Hit hit;                          // nearest so far; hit.t starts at ray.tmax
+    uint32_t restart = kRayNotStarted; // cell to resume in, or kRayNotStarted / kRayFinished
+    uint32_t occluded = 0;            // any-hit queries: found something
+};
+
+struct PagedCounters {
+    uint32_t cells = 0;       // top-grid cells visited
+    uint32_t middle = 0;      // middle-BVH nodes visited
+    uint32_t pages = 0;       // cached pages searched
+    uint32_t nodes = 0;       // bottom-BVH nodes visited
+    uint32_t quads = 0;       // quads tested
+};
+
+namespace detail {
+
+// The last pages a ray searched in this iteration: a page spanning several
+// cells is searched once.
+struct PageMailbox {
+    static constexpr int kSize = 4;
+    uint32_t ids[kSize] = {kInvalidId, kInvalidId, kInvalidId, kInvalidId};
+    int next = 0;
+    RF_HDI bool seen(uint32_t page) const {
+        for (int i = 0; i < kSize; ++i)
+            if (ids[i] == page) return true;
+        return false;
+    }
+    RF_HDI void add(uint32_t page) {
+        ids[next] = page;
+        next = (next + 1) & (kSize - 1);
+    }
+};
+
+RF_HDI Triangle quad_half(const Quad& q, int half) {
+    const int c = half == 0 ? 1 : 2, d = half == 0 ? 2 : 3;
+    return {Vec3f(float(q.v[0][0]), float(q.v[0][1]), float(q.v[0][2])),
+            Vec3f(float(q.v[c][0]), float(q.v[c][1]), float(q.v[c][2])),
+            Vec3f(float(q.v[d][0]), float(q.v[d][1]), float(q.v[d][2]))};
+}
+
+// Searches one cached page; true when `hit` got closer (or, any-hit, when anything was hit).
+template <bool kAnyHit>
+RF_HDI bool search_page(const uint8_t* bytes, const PageInfo& info, uint32_t page, const Ray& world, Hit& hit,
+                        PagedCounters& counters) {
+    GeometryPageHeader header;
+    memcpy(&header, bytes, sizeof(header));
+    const auto* nodes = reinterpret_cast<const PageNode*>(bytes + sizeof(header));
+    const auto* quads = reinterpret_cast<const Quad*>(bytes + sizeof(header) + header.node_count * sizeof(PageNode));
+    Ray local;
+    local.org = (world.org - info.offset) / info.scale;
+    local.dir = world.dir / info.scale;
+    const rf::detail::SlabRay slab = rf::detail::SlabRay::make(local);
+    const WatertightRay wt = WatertightRay::make(local);
+    bool found = false;
+    uint32_t stack[kBvhMaxDepth];
+    int top = 0;
+    uint32_t node = 0;
+    for (;;) {
+        const PageNode& n = nodes[node];
+        ++counters.nodes;
+        const Box3f box{Vec3f(float(n.lo[0]), float(n.lo[1]), float(n.lo[2])),
+                        Vec3f(float(n.hi[0]), float(n.hi[1]), float(n.hi[2]))};
+        float entry;
+        if (rf::detail::slab_test(slab, box, world.tmin, hit.t, entry)) {
+            if (!n.is_leaf()) {
+                if (top < kBvhMaxDepth) stack[top++] = n.left() + 1;
+                node = n.left();
+                continue;
+            }
+            for (uint32_t q = n.first(); q < n.first() + n.count(); ++q) {
+                ++counters.quads;
+                for (int half = 0; half < 2; ++half) {
+                    TriangleHit th;
+                    if (!intersect_triangle(wt, quad_half(quads[q], half), world.tmin, hit.t, th)) continue;
+                    hit.t = th.t;
+                    hit.u = th.u;
+                    hit.v = th.v;
+                    hit.prim = page * kTrianglesPerPageSlot + 2 * q + uint32_t(half);
+                    found = true;
+                    if (kAnyHit) return true;
+                }
+            }
+        }
+        if (top == 0) return found;
+        node = stack[--top];
+    }
+}
+
+// The 3D-DDA over the top grid's cells (per-axis cell sizes).
+struct GridWalk {
+    int cell[3];
+    int step[3];
+    float next[3];  // distance to the next boundary plane per axis
+
+    RF_HDI float plane(const PagedSceneView& v, int axis, int i) const {
+        return v.grid_bounds.lo[axis] + float(i) * v.cell_size[axis];
+    }
+    RF_HDI void init(const PagedSceneView& v, const Ray& ray, const int start[3]) {
+        for (int a = 0; a < 3; ++a) {
+            cell[a] = start[a];
+            step[a] = ray.dir[a] > 0.0f ? 1 : (ray.dir[a] < 0.0f ? -1 : 0);
+            next[a] = step[a] == 0 ? kInfinity : (plane(v, a, cell[a] + (step[a] > 0)) - ray.org[a]) / ray.dir[a];
+        }
+    }
+    RF_HDI float exit() const { return fminf(next[0], fminf(next[1], next[2])); }
+    // Steps into the next cell; false when the ray leaves the grid.
+    RF_HDI bool advance(const PagedSceneView& v, const Ray& ray) {
+        const int a = (next[0] <= next[1] && next[0] <= next[2]) ? 0 : (next[1] <= next[2] ? 1 : 2);
+        cell[a] += step[a];
+        if (cell[a] < 0 || cell[a] >= v.res[a]) return false;
+        next[a] = (plane(v, a, cell[a] + (step[a] > 0)) - ray.org[a]) / ray.dir[a];
+        return true;
+    }
+    [[nodiscard]] RF_HDI uint32_t index(const PagedSceneView& v) const {
+        return uint32_t((cell[2] * v.res[1] + cell[1]) * v.res[0] + cell[0]);
+    }
+};
+
+// The first cell of a fresh ray; false when it misses the grid.
+RF_HDI bool start_cell(const PagedSceneView& v, const Ray& ray, float tmax, int out[3]) {
+    const rf::detail::SlabRay slab = rf::detail::SlabRay::make(ray);
+    float entry;
+    if (!rf::detail::slab_test(slab, v.grid_bounds, ray.tmin, tmax, entry)) return false;
+    const Vec3f p = ray.org + ray.dir * entry;
+    for (int a = 0; a < 3; ++a) {
+        const int c = int(floorf((p[a] - v.grid_bounds.lo[a]) / v.cell_size[a]));
+        out[a] = c < 0 ? 0 : (c >= v.res[a] ? v.res[a] - 1 : c);
+    }
+    return true;
+}
+
+}  // namespace detail
+
+// One iteration of one ray (see above). Returns true when the ray asked for
+// a page and must run again after the page manager's swap.
+template <bool kAnyHit>
+RF_HD bool paged_iteration(const PagedSceneView& v, const Ray& ray, PagedRayState& state, PagedCounters& counters) {
+    using namespace detail;
+    if (state.restart == kRayFinished) return false;
+    int start[3];
+    if (state.restart == kRayNotStarted) {
+        state.hit.t = ray.tmax;
+        if (v.page_count == 0 || !start_cell(v, ray, ray.tmax, start)) {
+            state.restart = kRayFinished;
+            return false;
+        }
+    } else {
+        const uint32_t c = state.restart;
+        start[0] = int(c % uint32_t(v.res[0]));
+        start[1] = int((c / uint32_t(v.res[0])) % uint32_t(v.res[1]));
+        start[2] = int(c / (uint32_t(v.res[0]) * uint32_t(v.res[1])));
+    }
+    GridWalk walk;
+    walk.init(v, ray, start);
+    const rf::detail::SlabRay slab = rf::detail::SlabRay::make(ray);
+    PageMailbox mailbox;
+    bool requested = false;
+    for (;;) {
+        ++counters.cells;
+        const uint32_t root = v.cell_roots[walk.index(v)];
+        if (root != kEmptyCell) {
+            uint32_t stack[kBvhMaxDepth];
+            int top = 0;
+            uint32_t node = root;
+            for (;;) {
+                const BvhNode& n = v.middle_nodes[node];
+                ++counters.middle;
+                float entry;
+                if (rf::detail::slab_test(slab, n.bounds, ray.tmin, state.hit.t, entry)) {
+                    if (!n.is_leaf()) {
+                        if (top < kBvhMaxDepth) stack[top++] = n.first + 1;
+                        node = n.first;
+                        continue;
+                    }
+                    const uint32_t page = n.first;
+                    const uint32_t d = v.geometry.descriptor(page);
+                    if (!(d & kWasRead) && !mailbox.seen(page)) {
+                        if (!(d & kOutOfCore)) {
+                            v.geometry.request(page);  // a use, for the LFU counts
+                            mailbox.add(page);
+                            ++counters.pages;
+                            const uint8_t* bytes = v.geometry.slots + uint64_t(d & kSlotMask) * v.geometry.slot_bytes;
+                            if (search_page<kAnyHit>(bytes, v.pages[page], page, ray, state.hit, counters) && kAnyHit) {
+                                state.occluded = 1;
+                                state.restart = kRayFinished;
+                                return false;
+                            }
+                        } else if (!requested) {
+                            v.geometry.request(page);
+                            requested = true;
+                            state.restart = walk.index(v);
+                        }
+                    }
+                }
+                if (top == 0) break;
+                node = stack[--top];
+            }
+        }
+        // A hit before this cell's far side cannot be beaten further on.
+        if (state.hit.t <= walk.exit() || walk.exit() > ray.tmax) break;
+        if (!walk.advance(v, ray)) break;
+    }
+    if (!requested) state.restart = kRayFinished;
+    return requested;
+}
+
+}  // namespace rf::pack

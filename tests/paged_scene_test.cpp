@@ -1,0 +1,253 @@
+// Paged scenes (issue 20): the file round trip, the out-of-core traversal
+// against brute force over the same quantised pages, paged against in-core
+// hits, eviction under tiny budgets, corrupted and truncated files.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <random>
+
+#include "accel_test_rays.h"
+#include "ooc/convert_scene.h"
+#include "ooc/pack_file.h"
+#include "ooc/paged_engine.h"
+#include "ooc/paged_traversal.h"
+#include "rayforge/accel/accel.h"
+#include "rayforge/core/error.h"
+#include "rayforge/io/scene_io.h"
+#include "test_paths.h"
+
+namespace rf {
+namespace {
+
+using namespace rf::pack;
+
+// A scene of instanced spheres over a ground plane, paged.
+struct PagedFixture {
+    Scene scene;
+    SceneGeometry geometry;
+    std::string path;
+    ConvertResult converted;
+};
+
+const PagedFixture& fixture(AttributeFormat format = AttributeFormat::Full) {
+    static std::map<int, std::unique_ptr<PagedFixture>> cache;
+    auto& slot = cache[int(format)];
+    if (!slot) {
+        slot = std::make_unique<PagedFixture>();
+        slot->scene = make_builtin_scene("spheres");
+        slot->scene.finalize();
+        slot->geometry = SceneGeometry::build(slot->scene);
+        slot->path = test::temp_dir("paged_fixture_" + std::to_string(int(format))) + "/spheres.rfpack";
+        PackWriterOptions options;
+        options.attribute_format = format;
+        options.quads_per_page = 512;  // many pages from a small scene
+        options.codec = format == AttributeFormat::Compact ? Codec::Zstd : Codec::None;
+        slot->converted = convert_scene(slot->scene, slot->path, options);
+    }
+    return *slot;
+}
+
+// Closest hit over every quad of every page, each in its own quantised space.
+Hit brute_force(const PackFile& file, const std::vector<std::vector<uint8_t>>& pages, const Ray& world) {
+    Hit best;
+    best.t = world.tmax;
+    for (uint32_t p = 0; p < pages.size(); ++p) {
+        const GeometryPageView g = view_geometry_page(pages[p], "page");
+        const PageInfo& info = file.pages()[p];
+        Ray local;
+        local.org = (world.org - info.offset) / info.scale;
+        local.dir = world.dir / info.scale;
+        const WatertightRay wt = WatertightRay::make(local);
+        for (uint32_t q = 0; q < g.quad_count; ++q)
+            for (int half = 0; half < 2; ++half) {
+                TriangleHit th;
+                if (intersect_triangle(wt, pack::detail::quad_half(g.quads[q], half), world.tmin, best.t, th)) {
+                    best.t = th.t;
+                    best.u = th.u;
+                    best.v = th.v;
+                    best.prim = p * kTrianglesPerPageSlot + 2 * q + uint32_t(half);
+                }
+            }
+    }
+    if (!best.found()) best = Hit{};
+    return best;
+}
+
+std::vector<std::vector<uint8_t>> read_all_geometry(const PackFile& file) {
+    std::vector<std::vector<uint8_t>> pages(file.header().geometry_pages);
+    std::vector<uint8_t> scratch;
+    for (uint32_t p = 0; p < pages.size(); ++p) file.read_page(p, pages[p], scratch);
+    return pages;
+}
+
+TEST(PagedScene, RoundTripKeepsCountsAndBoundsQuantisation) {
+    const PagedFixture& f = fixture();
+    const PackFile file(f.path);
+    EXPECT_EQ(file.header().triangle_count, f.geometry.size());
+    EXPECT_EQ(file.header().geometry_pages, f.converted.summary.geometry_pages);
+    EXPECT_GT(file.header().geometry_pages, 10u);
+    // Most triangles find a partner on closed, indexed meshes.
+    EXPECT_GT(double(f.converted.summary.paired_triangles), 0.9 * double(f.geometry.size()));
+    // Quantisation error at most half a step of the largest page's 16-bit grid.
+    double largest_step = 0.0;
+    for (const PageInfo& p : file.pages()) largest_step = std::max({largest_step, double(p.scale.x), double(p.scale.y), double(p.scale.z)});
+    EXPECT_LE(f.converted.summary.max_quantisation_error, 0.5 * largest_step * 1.001);
+    EXPECT_GT(f.converted.summary.max_quantisation_error, 0.0);
+    // Every page's bounds hold its decoded quads, and the BVH boxes hold their quads.
+    const auto pages = read_all_geometry(file);
+    for (uint32_t p = 0; p < pages.size(); ++p) {
+        const GeometryPageView g = view_geometry_page(pages[p], "page");
+        const PageInfo& info = file.pages()[p];
+        for (uint32_t q = 0; q < g.quad_count; ++q)
+            for (const auto& v : g.quads[q].v) {
+                const Vec3f w = info.offset + info.scale * Vec3f(float(v[0]), float(v[1]), float(v[2]));
+                for (int a = 0; a < 3; ++a) {
+                    ASSERT_GE(w[a], info.bounds.lo[a]);
+                    ASSERT_LE(w[a], info.bounds.hi[a]);
+                }
+            }
+        for (uint32_t n = 0; n < g.node_count; ++n) {
+            if (!g.nodes[n].is_leaf()) continue;
+            for (uint32_t q = g.nodes[n].first(); q < g.nodes[n].first() + g.nodes[n].count(); ++q)
+                for (const auto& v : g.quads[q].v)
+                    for (int a = 0; a < 3; ++a) {
+                        ASSERT_GE(v[a], g.nodes[n].lo[a]);
+                        ASSERT_LE(v[a], g.nodes[n].hi[a]);
+                    }
+        }
+    }
+}
+
+// The traversal (top grid, middle BVHs, page BVHs, restarts) finds exactly
+// what brute force over the same pages finds, with a roomy cache and with a
+// cache of one geometry page (every page evicted and reloaded in turn).
+TEST(PagedScene, HitsEqualBruteForceOverTheSamePagesUnderAnyBudget) {
+    const PagedFixture& f = fixture();
+    auto file = std::make_shared<const PackFile>(f.path);
+    const auto pages = read_all_geometry(*file);
+    const std::vector<Ray> rays = test::make_rays(f.geometry, 3000, 7);
+    std::vector<Hit> expected(rays.size());
+    for (size_t i = 0; i < rays.size(); ++i) expected[i] = brute_force(*file, pages, rays[i]);
+
+    size_t slot = 0;
+    for (const auto& p : pages) slot = std::max(slot, p.size());
+    const auto slots = [&](size_t k) {
+        return pages.size() * PageCache::kTableBytesPerPage + k * (slot + PageCache::kBookkeepingBytesPerSlot);
+    };
+    for (size_t geometry_budget : {size_t(64) << 20, slots(1), slots(3), slots(pages.size() / 4)}) {
+        PagedEngine engine(file, {geometry_budget, size_t(1) << 20}, 0);
+        std::vector<Hit> hits(rays.size());
+        engine.intersect(rays, hits);
+        std::vector<uint8_t> blocked(rays.size());
+        engine.occluded(rays, blocked);
+        size_t found = 0;
+        for (size_t i = 0; i < rays.size(); ++i) {
+            ASSERT_EQ(hits[i].found(), expected[i].found()) << "ray " << i << " budget " << geometry_budget;
+            ASSERT_EQ(bool(blocked[i]), expected[i].found()) << "ray " << i;
+            if (!expected[i].found()) continue;
+            ++found;
+            ASSERT_EQ(hits[i].t, expected[i].t) << "ray " << i;
+        }
+        EXPECT_GT(found, rays.size() / 3);
+        EXPECT_LE(engine.geometry_cache().memory_bytes(), geometry_budget);
+    }
+}
+
+// Paged hits are the in-core hits up to quantisation: the same surfaces at
+// (nearly) the same distances and with the same shading records.
+TEST(PagedScene, PagedHitsMatchInCoreHitsWithinQuantisation) {
+    for (AttributeFormat format : {AttributeFormat::Full, AttributeFormat::Compact}) {
+        const PagedFixture& f = fixture(format);
+        auto file = std::make_shared<const PackFile>(f.path);
+        PagedEngine engine(file, {size_t(1) << 20, size_t(1) << 16}, 0);
+        const auto accel = build_accel(f.geometry);
+        const std::vector<ShadingTriangle> in_core = build_shading_triangles(f.scene, f.geometry);
+        std::vector<Ray> rays = test::make_rays(f.geometry, 4000, 11);
+        std::vector<Hit> paged(rays.size()), exact(rays.size());
+        engine.intersect(rays, paged);
+        accel->intersect(rays, exact);
+        std::vector<ShadingTriangle> records(rays.size());
+        engine.fetch_shading(paged, records);
+        const float tolerance = 4.0f * float(f.converted.summary.max_quantisation_error);
+        size_t agree = 0, both = 0, same_record = 0;
+        for (size_t i = 0; i < rays.size(); ++i) {
+            if (paged[i].found() != exact[i].found()) continue;
+            ++agree;
+            if (!exact[i].found()) continue;
+            const Vec3f a = rays[i].org + rays[i].dir * paged[i].t, b = rays[i].org + rays[i].dir * exact[i].t;
+            if (length(a - b) > tolerance * 50.0f) continue;  // a different surface behind an edge
+            ++both;
+            const ShadingTriangle& want = in_core[exact[i].prim];
+            const ShadingTriangle& got = records[i];
+            // The same surface: its material, and a normal within a neighbouring triangle's
+            // (a ray within a quantisation step of an edge may take the triangle across it).
+            if (got.material == want.material && dot(got.geometric_normal, want.geometric_normal) > 0.95f) ++same_record;
+        }
+        // Silhouette rays may go either way by a quantisation step; nearly all agree.
+        EXPECT_GT(double(agree), 0.995 * double(rays.size())) << "format " << int(format);
+        EXPECT_GT(double(same_record), 0.995 * double(both)) << "format " << int(format);
+    }
+}
+
+std::vector<uint8_t> file_bytes(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), {}};
+}
+
+void write_bytes(const std::string& path, const std::vector<uint8_t>& bytes) {
+    std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+}
+
+std::string open_error(const std::string& path) {
+    try {
+        PackFile file(path);
+        return "";
+    } catch (const Error& e) {
+        return e.what();
+    }
+}
+
+TEST(PagedScene, TruncatedAndCorruptedFilesGiveOneLineErrors) {
+    const PagedFixture& f = fixture();
+    const std::string dir = test::temp_dir("paged_corrupt");
+    const std::vector<uint8_t> good = file_bytes(f.path);
+
+    std::vector<uint8_t> truncated(good.begin(), good.begin() + long(good.size() / 2));
+    write_bytes(dir + "/truncated.rfpack", truncated);
+    EXPECT_NE(open_error(dir + "/truncated.rfpack").find("truncated"), std::string::npos);
+
+    write_bytes(dir + "/tiny.rfpack", std::vector<uint8_t>(good.begin(), good.begin() + 40));
+    EXPECT_NE(open_error(dir + "/tiny.rfpack").find("shorter than its header"), std::string::npos);
+
+    std::vector<uint8_t> bad_magic = good;
+    bad_magic[0] = 'X';
+    write_bytes(dir + "/magic.rfpack", bad_magic);
+    EXPECT_NE(open_error(dir + "/magic.rfpack").find("bad magic"), std::string::npos);
+
+    const PackFile file(f.path);
+    std::vector<uint8_t> bad_resident = good;
+    bad_resident[file.header().resident_offset + 50] ^= 0x40;
+    write_bytes(dir + "/resident.rfpack", bad_resident);
+    EXPECT_NE(open_error(dir + "/resident.rfpack").find("checksum"), std::string::npos);
+
+    // A flipped byte inside a page: the file opens, the page read fails.
+    std::vector<uint8_t> bad_page = good;
+    bad_page[file.directory()[3].offset + 100] ^= 0x01;
+    write_bytes(dir + "/page.rfpack", bad_page);
+    const PackFile opened(dir + "/page.rfpack");
+    std::vector<uint8_t> out, scratch;
+    EXPECT_NO_THROW(opened.read_page(2, out, scratch));
+    try {
+        opened.read_page(3, out, scratch);
+        FAIL() << "a corrupted page was read";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("page 3 checksum mismatch"), std::string::npos) << e.what();
+    }
+}
+
+}  // namespace
+}  // namespace rf
