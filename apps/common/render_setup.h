@@ -7,6 +7,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "paged_options.h"
+
 #include <string>
 #include <vector>
 
@@ -54,6 +56,7 @@ struct RenderArgs {
     std::string build_on;             // --build-on device|host ("" = device), with --device cuda
     bool wavefront = false;           // CPU path tracer: wavefront passes
     bool sort_rays = false;           // CPU wavefront: sort rays before tracing
+    PagedReadArgs paged;              // paged scenes: the page caches' budgets
     // Options whose presence overrides the scene file's render settings.
     CLI::Option* resolution_opt = nullptr;
     CLI::Option* spp_opt = nullptr;

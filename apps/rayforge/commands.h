@@ -8,6 +8,7 @@
 
 #include "accel_options.h"
 #include "device_options.h"
+#include "paged_options.h"
 #include "render_setup.h"
 
 #include <string>
@@ -30,6 +31,30 @@ int run_info(const InfoArgs& args);
 
 CLI::App* add_render_command(CLI::App& app, RenderArgs& args);
 int run_render(const RenderArgs& args);
+
+// Paged scenes (paged_commands.cpp): convert, generate, and the paged forms of render and info.
+struct ConvertArgs {
+    std::string scene, output;
+    PagedWriteArgs write;
+    int threads = 0;
+    bool quiet = false;
+};
+CLI::App* add_convert_command(CLI::App& app, ConvertArgs& args);
+int run_convert(const ConvertArgs& args);
+
+struct GenerateArgs {
+    std::string name, output, statues;
+    std::string triangles = "4M";
+    uint64_t seed = 1;
+    std::string max_object = "2M";
+    PagedWriteArgs write;
+    int threads = 0;
+    bool quiet = false;
+};
+CLI::App* add_generate_command(CLI::App& app, GenerateArgs& args);
+int run_generate(const GenerateArgs& args);
+int run_paged_render(const RenderArgs& args);
+int run_paged_info(const std::string& path, bool verbose);
 
 // `rayforge view`: the render options plus the viewer's own.
 struct ViewArgs {

@@ -7,6 +7,7 @@
 #include "commands.h"
 #include "rayforge/backend/device.h"
 #include "rayforge/io/scene_io.h"
+#include "rayforge/ooc/paged_scene.h"
 #include "rayforge/scene/scene_geometry.h"
 
 namespace rf::cli {
@@ -66,6 +67,7 @@ int run_info(const InfoArgs& args) {
         if (args.scene.empty()) return 0;
         std::printf("\n");
     }
+    if (is_paged_scene_file(args.scene)) return run_paged_info(args.scene, args.verbose);
     const auto start = std::chrono::steady_clock::now();
     Scene scene = load_scene(args.scene);
     const double load_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();

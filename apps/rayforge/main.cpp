@@ -42,6 +42,10 @@ int main(int argc, char** argv) {
     CLI::App* bench = rf::cli::add_bench_command(app, bench_args);
     rf::cli::ViewArgs view_args;
     CLI::App* view = rf::cli::add_view_command(app, view_args);
+    rf::cli::ConvertArgs convert_args;
+    CLI::App* convert = rf::cli::add_convert_command(app, convert_args);
+    rf::cli::GenerateArgs generate_args;
+    CLI::App* generate = rf::cli::add_generate_command(app, generate_args);
 
     try {
         app.parse(argc, argv);
@@ -61,6 +65,8 @@ int main(int argc, char** argv) {
         if (render->parsed()) return rf::cli::run_render(render_args);
         if (build->parsed()) return rf::cli::run_build(build_args);
         if (view->parsed()) return rf::cli::run_view(view_args);
+        if (convert->parsed()) return rf::cli::run_convert(convert_args);
+        if (generate->parsed()) return rf::cli::run_generate(generate_args);
         if (bench->parsed()) {
             std::string command_line = "rayforge";
             for (int i = 1; i < argc; ++i) command_line += std::string(" ") + argv[i];

@@ -34,7 +34,7 @@ void ProgressBar::update(double fraction) {
         int step = int(std::floor(fraction * 4.0));
         if (step <= last_step_) return;
         last_step_ = step;
-        std::fprintf(stream_, "%s: %d%%\n", label_.c_str(), step * 25);
+        std::fprintf(stream_, "%s: %d%%%s%s\n", label_.c_str(), step * 25, note_.empty() ? "" : " ", note_.c_str());
         std::fflush(stream_);
         shown_ = true;
     }
@@ -50,8 +50,8 @@ void ProgressBar::draw(double fraction, double elapsed_s) {
         eta = remaining >= 60 ? std::to_string(remaining / 60) + "m" + std::to_string(remaining % 60) + "s"
                               : std::to_string(remaining) + "s";
     }
-    std::fprintf(stream_, "\r%s [%s] %3d%% ETA %-8s", label_.c_str(), bar.c_str(), int(fraction * 100.0),
-                 eta.c_str());
+    std::fprintf(stream_, "\r%s [%s] %3d%% ETA %-8s%s\033[K", label_.c_str(), bar.c_str(), int(fraction * 100.0),
+                 eta.c_str(), note_.c_str());
     std::fflush(stream_);
     shown_ = true;
 }

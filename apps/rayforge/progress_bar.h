@@ -21,12 +21,15 @@ public:
     void update(double fraction);
     // Ends the bar's line (terminal) once the work is done.
     void finish();
+    // Text shown after the percentage from the next update on (e.g. cache statistics).
+    void set_note(std::string note) { note_ = std::move(note); }
 
 private:
     using Clock = std::chrono::steady_clock;
     void draw(double fraction, double elapsed_s);
 
     std::string label_;
+    std::string note_;
     std::FILE* stream_;
     bool is_tty_;
     Clock::time_point start_;

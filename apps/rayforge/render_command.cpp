@@ -21,6 +21,7 @@
 #include "rayforge/core/error.h"
 #include "rayforge/io/image_io.h"
 #include "rayforge/io/scene_io.h"
+#include "rayforge/ooc/paged_scene.h"
 #include "rayforge/render/render.h"
 #include "rayforge/scene/scene_geometry.h"
 
@@ -71,7 +72,9 @@ void render_and_write(const RenderArgs& a, Renderer& renderer, const ToneMapping
 
 // The scene, the outputs and the progressive loop.
 void add_output_options(CLI::App* cmd, RenderArgs& a) {
-    cmd->add_option("scene", a.scene, "Scene file (.obj, .gltf, .glb, .ply, .aff, .json) or builtin:NAME")->required();
+    cmd->add_option("scene", a.scene,
+                    "Scene file (.obj, .gltf, .glb, .ply, .aff, .json, .rfpack) or builtin:NAME")
+        ->required();
     cmd->add_option("-o,--output", a.outputs,
                     "Output image; the format follows the extension: .png (tone-mapped 8-bit sRGB), .exr or "
                     ".pfm (linear float). Repeatable, e.g. -o out.png -o out.exr")
@@ -99,11 +102,13 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
     add_accel_options(cmd, a.accel);
     add_light_options(cmd, a);
     add_device_options(cmd, a);
+    add_paged_read_options(cmd, a.paged);
     cmd->add_flag("-q,--quiet", a.quiet, "No progress bar");
     return cmd;
 }
 
 int run_render(const RenderArgs& a) {
+    if (is_paged_scene_file(a.scene)) return run_paged_render(a);
     const Device device = parse_device(a.device);
     require_usable(device, "--device " + a.device);  // before the scene loads: fail fast
     const BuildOptions build = structure_options(a, device);

@@ -17,6 +17,7 @@
 #include "rayforge/render/image.h"
 #include "rayforge/render/integrators.h"
 #include "rayforge/render/render.h"
+#include "rayforge/ooc/paged_scene.h"
 #include "rayforge/scene/camera.h"
 #include "rayforge/scene/scene.h"
 #include "rayforge/scene/scene_geometry.h"

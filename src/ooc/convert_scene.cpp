@@ -68,7 +68,7 @@ ConvertResult convert_scene(const Scene& scene, const std::string& path, const P
             const uint32_t* idx = &mesh.indices[3 * t];
             const Triangle tri{positions[idx[0]], positions[idx[1]], positions[idx[2]]};
             const uint32_t material = t < mesh.material_ids.size() ? mesh.material_ids[t] : 0;
-            shading[t] = make_shading_triangle(mesh, normal_matrix, tri, idx, material);
+            shading[t] = make_shading_triangle(mesh.normals, mesh.uvs, normal_matrix, tri, idx, material);
         }
         writer.add_object({positions, mesh.indices, shading});
         done += shading.size();

@@ -38,7 +38,6 @@ struct EngineStats {
     uint64_t shading_fetches = 0;
     double traversal_ms = 0.0;   // inside the iterations
     double sort_ms = 0.0;
-    PagedCounters counters;      // summed (saturating at 2^32 per field is avoided: 64-bit below)
     uint64_t cells = 0, middle = 0, pages = 0, nodes = 0, quads = 0;
 };
 

@@ -11,6 +11,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "rayforge/core/host_device.h"
@@ -95,11 +96,13 @@ RF_HDI SurfaceHit shading_surface(const ShadingTriangle& t, const Ray& ray, cons
     return s;
 }
 
-// The record of one world-space triangle `tri` of `mesh` (vertex indices
-// `idx`, normals taken to world space by `normal_matrix`), without the
-// tangent frame (which needs the whole scene: build_shading_triangles).
-ShadingTriangle make_shading_triangle(const Mesh& mesh, const Affine3f& normal_matrix, const Triangle& tri,
-                                      const uint32_t idx[3], uint32_t material);
+// The record of one world-space triangle `tri` of a mesh with vertex
+// `normals` and `uvs` (each empty or one per vertex; vertex indices `idx`,
+// normals taken to world space by `normal_matrix`), without the tangent
+// frame (which needs the whole scene: build_shading_triangles).
+ShadingTriangle make_shading_triangle(std::span<const Vec3f> normals, std::span<const Vec2f> uvs,
+                                      const Affine3f& normal_matrix, const Triangle& tri, const uint32_t idx[3],
+                                      uint32_t material);
 
 // One record per triangle of `geometry`, built in parallel; respects the
 // memory budget (throws rf::Error when it would exceed it).

@@ -1,0 +1,93 @@
+#include "paged_options.h"
+
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+
+#include "rayforge/core/error.h"
+
+namespace rf::cli {
+
+uint64_t parse_bytes(const std::string& text, const std::string& what) {
+    size_t used = 0;
+    double value = 0.0;
+    try {
+        value = std::stod(text, &used);
+    } catch (const std::exception&) {
+        used = 0;
+    }
+    std::string unit = text.substr(used);
+    if (!unit.empty() && (unit.back() == 'B' || unit.back() == 'b')) unit.pop_back();
+    if (!unit.empty() && unit.back() == 'i') unit.pop_back();
+    double scale = 1.0;
+    if (unit.size() == 1) {
+        const char u = char(std::toupper(unsigned(unit[0])));
+        scale = u == 'K' ? 1024.0 : u == 'M' ? 1048576.0 : u == 'G' ? 1073741824.0 : u == 'T' ? 1099511627776.0 : 0.0;
+    } else if (!unit.empty()) {
+        scale = 0.0;
+    }
+    const double bytes = value * scale;
+    if (used == 0 || scale == 0.0 || !std::isfinite(bytes) || bytes < 0.0 || bytes > 1e18)
+        throw Error(what + ": '" + text + "' is not a size (e.g. 512M, 2G, 65536)");
+    return uint64_t(std::llround(bytes));
+}
+
+std::string format_bytes(double bytes) {
+    const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+    int u = 0;
+    while (bytes >= 1024.0 && u < 4) {
+        bytes /= 1024.0;
+        ++u;
+    }
+    char text[32];
+    std::snprintf(text, sizeof(text), u == 0 ? "%.0f %s" : "%.2f %s", bytes, units[u]);
+    return text;
+}
+
+void add_paged_read_options(CLI::App* cmd, PagedReadArgs& a) {
+    cmd->add_option("--memory-budget", a.memory_budget,
+                    "Paged scenes: memory for the page caches together, e.g. 512M, 2G (default 1G); split "
+                    "geometry 70%, attributes 15%, textures 15% (80/20 without textures)");
+    cmd->add_option("--geometry-budget", a.geometry_budget, "Paged scenes: the geometry cache's budget (overrides its share)");
+    cmd->add_option("--attribute-budget", a.attribute_budget,
+                    "Paged scenes: the surface-attribute cache's budget (overrides its share)");
+    cmd->add_option("--texture-budget", a.texture_budget, "Paged scenes: the texture-tile cache's budget (overrides its share)");
+}
+
+PagedSceneOptions paged_scene_options(const PagedReadArgs& a, int threads) {
+    PagedSceneOptions o;
+    o.memory_budget = parse_bytes(a.memory_budget, "--memory-budget");
+    if (!a.geometry_budget.empty()) o.geometry_budget = parse_bytes(a.geometry_budget, "--geometry-budget");
+    if (!a.attribute_budget.empty()) o.attribute_budget = parse_bytes(a.attribute_budget, "--attribute-budget");
+    if (!a.texture_budget.empty()) o.texture_budget = parse_bytes(a.texture_budget, "--texture-budget");
+    o.threads = threads;
+    return o;
+}
+
+void add_paged_write_options(CLI::App* cmd, PagedWriteArgs& a) {
+    cmd->add_flag("--zstd", a.zstd, "Compress every page with zstd (kept raw where that is not smaller)");
+    cmd->add_option("--zstd-level", a.zstd_level, "zstd level, 1..19 (default 3)")->check(CLI::Range(1, 19));
+    cmd->add_flag("--compact-attributes", a.compact,
+                  "32-byte shading records (half-float uvs; no normal-map tangents, no uv-density mip selection) "
+                  "instead of 64");
+    cmd->add_option("--attribute-page", a.attribute_page,
+                    "Bytes per surface-attribute page, a power of two from 1K to 1M (default 4K)");
+    cmd->add_option("--page-quads", a.quads_per_page, "Quads per geometry page, 64..4096 (default 4096, the seed's 4K)")
+        ->check(CLI::Range(64, 4096));
+    cmd->add_option("--grid", a.grid, "Top-grid cells on the scene's longest axis, 1..256 (default 32)")
+        ->check(CLI::Range(1, 256));
+}
+
+PagedWriteOptions paged_write_options(const PagedWriteArgs& a, int threads) {
+    PagedWriteOptions o;
+    o.zstd = a.zstd;
+    o.zstd_level = a.zstd_level;
+    o.compact_attributes = a.compact;
+    o.attribute_page_bytes = uint32_t(parse_bytes(a.attribute_page, "--attribute-page"));
+    o.quads_per_page = a.quads_per_page;
+    o.grid_resolution = a.grid;
+    o.threads = threads;
+    return o;
+}
+
+}  // namespace rf::cli

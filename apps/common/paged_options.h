@@ -1,0 +1,38 @@
+// Command-line options of paged scenes (docs/paged-scenes.md): the page
+// caches' budgets for reading one (render, info, bench, view) and the
+// layout for writing one (convert, generate).
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <cstdint>
+#include <string>
+
+#include "rayforge/ooc/paged_scene.h"
+
+namespace rf::cli {
+
+struct PagedReadArgs {
+    std::string memory_budget = "1G";  // the caches together
+    std::string geometry_budget, attribute_budget, texture_budget;  // "" = a share of the total
+};
+void add_paged_read_options(CLI::App* cmd, PagedReadArgs& args);
+PagedSceneOptions paged_scene_options(const PagedReadArgs& args, int threads);
+
+struct PagedWriteArgs {
+    bool zstd = false;
+    int zstd_level = 3;
+    bool compact = false;
+    std::string attribute_page = "4K";
+    uint32_t quads_per_page = 4096;
+    int grid = 32;
+};
+void add_paged_write_options(CLI::App* cmd, PagedWriteArgs& args);
+PagedWriteOptions paged_write_options(const PagedWriteArgs& args, int threads);
+
+// "1.5G", "512M", "64K", "1000" (bytes; K/M/G/T are powers of 1024); rf::Error naming `what` when malformed.
+uint64_t parse_bytes(const std::string& text, const std::string& what);
+// "1.2 GiB", "340 MiB", ...
+std::string format_bytes(double bytes);
+
+}  // namespace rf::cli

@@ -1,0 +1,191 @@
+// The paged-scene verbs (docs/paged-scenes.md): `convert` writes a scene as
+// a paged file, `generate` writes a procedural one; `render` and `info` of a
+// paged file come here from their commands.
+#include <chrono>
+#include <cstdio>
+#include <string>
+
+#include "commands.h"
+#include "elapsed.h"
+#include "paged_options.h"
+#include "progress_bar.h"
+#include "rayforge/core/error.h"
+#include "rayforge/io/image_io.h"
+#include "rayforge/io/scene_io.h"
+#include "rayforge/ooc/paged_scene.h"
+
+namespace rf::cli {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+void print_write_report(const std::string& path, const PagedWriteReport& r, double ms) {
+    std::printf("%s: %llu triangles -> %llu quads (%.1f%% paired) in %u geometry, %u attribute, %u texture pages | "
+                "%s (geometry %s, attributes %s, textures %s, resident %s) | max quantisation error %.3g | %.1f s "
+                "(%.2f Mtriangles/s)\n",
+                path.c_str(), (unsigned long long)r.triangles, (unsigned long long)r.quads,
+                r.triangles ? 100.0 * double(r.paired_triangles) / double(r.triangles) : 0.0, r.geometry_pages,
+                r.attribute_pages, r.texture_pages, format_bytes(double(r.file_bytes)).c_str(),
+                format_bytes(double(r.geometry_bytes)).c_str(), format_bytes(double(r.attribute_bytes)).c_str(),
+                format_bytes(double(r.texture_bytes)).c_str(), format_bytes(double(r.resident_bytes)).c_str(),
+                r.max_quantisation_error, ms / 1e3, ms > 0.0 ? double(r.triangles) / (ms * 1e3) : 0.0);
+    for (const std::string& note : r.notes) std::printf("%s: note: %s\n", path.c_str(), note.c_str());
+}
+
+// "geometry 93.1% hit, 120 MiB read" for the progress bar and the summary.
+std::string cache_line(const PagedScene& scene) {
+    std::string line;
+    for (const PageCacheReport& c : scene.caches()) {
+        if (c.pages == 0) continue;
+        char part[128];
+        std::snprintf(part, sizeof(part), "%s%s %.1f%% hit, %s read", line.empty() ? "" : "; ", c.name.c_str(),
+                      100.0 * c.hit_rate(), format_bytes(double(c.bytes_read)).c_str());
+        line += part;
+    }
+    return line;
+}
+
+}  // namespace
+
+CLI::App* add_convert_command(CLI::App& app, ConvertArgs& a) {
+    CLI::App* cmd = app.add_subcommand("convert", "Write a scene as a paged scene file (.rfpack) for out-of-core rendering");
+    cmd->add_option("scene", a.scene, "Scene file (.obj, .gltf, .glb, .ply, .aff, .json) or builtin:NAME")->required();
+    cmd->add_option("-o,--output", a.output, "The paged scene file to write (.rfpack)")->required();
+    add_paged_write_options(cmd, a.write);
+    cmd->add_option("--threads", a.threads, "Threads (default: all cores)")->check(CLI::NonNegativeNumber);
+    cmd->add_flag("-q,--quiet", a.quiet, "No progress bar");
+    return cmd;
+}
+
+int run_convert(const ConvertArgs& a) {
+    const PagedWriteOptions options = paged_write_options(a.write, a.threads);
+    const Clock::time_point start = Clock::now();
+    const Scene scene = load_scene(a.scene);
+    PagedWriteReport report;
+    {
+        ProgressBar bar("convert");
+        ProgressCallback progress;
+        if (!a.quiet) progress = [&bar](double f) { bar.update(f); };
+        report = convert_to_paged(scene, a.output, options, progress);
+    }
+    print_write_report(a.output, report, ms_since(start));
+    return 0;
+}
+
+CLI::App* add_generate_command(CLI::App& app, GenerateArgs& a) {
+    std::string names;
+    for (const std::string& n : generated_scene_names()) names += (names.empty() ? "" : ", ") + n;
+    CLI::App* cmd = app.add_subcommand(
+        "generate", "Write a procedural scene of unique geometry (no downloads) as a paged file, or as .obj");
+    cmd->add_option("name", a.name, "Scene kind: " + names)->required()->check(CLI::IsMember(generated_scene_names()));
+    cmd->add_option("--triangles", a.triangles, "Triangles, e.g. 20M, 1.2G (K/M/G are powers of 1000 here; default 4M)");
+    cmd->add_option("-o,--output", a.output, "Output: .rfpack (paged, written out of core) or .obj")->required();
+    cmd->add_option("--seed", a.seed, "Seed: the same seed writes the same scene (default 1)");
+    cmd->add_option("--statues", a.statues,
+                    "Folder with stanford-bunny/ and stanford-dragon/ (e.g. ../shared/scenes); default: procedural "
+                    "statues only");
+    cmd->add_option("--max-object", a.max_object, "Largest object handed to the writer, in triangles (default 2M)");
+    add_paged_write_options(cmd, a.write);
+    cmd->add_option("--threads", a.threads, "Threads (default: all cores)")->check(CLI::NonNegativeNumber);
+    cmd->add_flag("-q,--quiet", a.quiet, "No progress bar");
+    return cmd;
+}
+
+namespace {
+// "20M" -> 20,000,000 (decimal units for counts).
+uint64_t parse_count(const std::string& text, const std::string& what) {
+    size_t used = 0;
+    double value = 0.0;
+    try {
+        value = std::stod(text, &used);
+    } catch (const std::exception&) {
+        used = 0;
+    }
+    const std::string unit = text.substr(used);
+    const double scale = unit.empty() ? 1.0 : unit == "K" || unit == "k" ? 1e3 : unit == "M" ? 1e6 : unit == "G" ? 1e9 : 0.0;
+    if (used == 0 || scale == 0.0 || !(value >= 0.0) || value * scale > 1e13)
+        throw Error(what + ": '" + text + "' is not a count (e.g. 500K, 20M, 1.2G)");
+    return uint64_t(value * scale + 0.5);
+}
+}  // namespace
+
+int run_generate(const GenerateArgs& a) {
+    GenerateOptions g;
+    g.name = a.name;
+    g.triangles = parse_count(a.triangles, "--triangles");
+    g.seed = a.seed;
+    g.statue_dir = a.statues;
+    g.max_object_triangles = parse_count(a.max_object, "--max-object");
+    const PagedWriteOptions options = paged_write_options(a.write, a.threads);
+    const Clock::time_point start = Clock::now();
+    PagedWriteReport report;
+    {
+        ProgressBar bar("generate");
+        ProgressCallback progress;
+        if (!a.quiet) progress = [&bar](double f) { bar.update(f); };
+        report = generate_paged_scene(g, a.output, options, progress);
+    }
+    print_write_report(a.output, report, ms_since(start));
+    return 0;
+}
+
+int run_paged_render(const RenderArgs& a) {
+    const Device device = parse_device(a.device);
+    if (device.is_cuda()) throw Error("paged scenes render on the CPU in this version (--device cpu)");
+    if (!a.lights.empty() || !a.environment.empty() || !a.environment_map.empty())
+        throw Error("--light, --env and --env-map are not applied to paged scenes (their lights are in the file)");
+    const Clock::time_point start = Clock::now();
+    const std::unique_ptr<PagedScene> scene = open_paged_scene(a.scene, paged_scene_options(a.paged, a.threads));
+    const double open_ms = ms_since(start);
+    const RenderOptions options = render_options(a, RenderSettings{}, device);
+    const Camera camera = a.camera.empty() ? scene->camera() : parse_camera(a.camera);
+    const std::unique_ptr<Renderer> renderer = make_paged_renderer(*scene, camera, options);
+    {
+        ProgressBar bar("render");
+        ProgressCallback progress;
+        if (!a.quiet)
+            progress = [&](double f) {
+                bar.set_note("  " + cache_line(*scene));
+                bar.update(f);
+            };
+        render_progressive(*renderer, {}, progress);
+    }
+    const ToneMapping tone = tone_mapping(a);
+    for (const std::string& output : a.outputs) write_image(output, renderer->image(), tone);
+    const RenderStats rs = renderer->stats();
+    const double render_ms = rs.seconds * 1e3;
+    const PagedSceneInfo& info = scene->info();
+    const PagedQueryStats q = scene->query_stats();
+    std::printf("%s: %dx%d %s %d spp, %llu paged triangles | open %.1f ms | render %.1f ms (%.2f Mrays/s, %.1f ms/pass) "
+                "| %llu query iterations | memory %s of budget %s\n",
+                a.outputs.front().c_str(), options.width, options.height, integrator_name(options.integrator).c_str(),
+                renderer->passes(), (unsigned long long)info.triangles, open_ms, render_ms,
+                render_ms > 0.0 ? double(rs.rays()) / (render_ms * 1e3) : 0.0,
+                renderer->passes() ? render_ms / renderer->passes() : 0.0, (unsigned long long)q.iterations,
+                format_bytes(double(scene->memory_bytes())).c_str(), a.paged.memory_budget.c_str());
+    std::printf("%s: caches: %s\n", a.outputs.front().c_str(), cache_line(*scene).c_str());
+    return 0;
+}
+
+int run_paged_info(const std::string& path, bool verbose) {
+    PagedSceneOptions small;
+    small.memory_budget = size_t(64) << 20;
+    const std::unique_ptr<PagedScene> scene = open_paged_scene(path, small);
+    const PagedSceneInfo& i = scene->info();
+    const Vec3f lo = i.bounds.lo, hi = i.bounds.hi;
+    std::printf("%s: paged scene, %llu triangles in %llu quads, %u objects\n", path.c_str(),
+                (unsigned long long)i.triangles, (unsigned long long)i.quads, i.objects);
+    std::printf("  file %s: %u geometry pages, %u attribute pages (%s each, %s records), %u texture tiles\n",
+                format_bytes(double(i.file_bytes)).c_str(), i.geometry_pages, i.attribute_pages,
+                format_bytes(double(i.attribute_page_bytes)).c_str(), i.compact_attributes ? "32-byte" : "64-byte",
+                i.texture_pages);
+    std::printf("  always resident %s: top grid %dx%dx%d, %u materials, %u lights, %u textures\n",
+                format_bytes(double(i.resident_bytes)).c_str(), i.grid[0], i.grid[1], i.grid[2], i.materials, i.lights,
+                i.textures);
+    std::printf("  bounds (%g, %g, %g) - (%g, %g, %g)\n", lo.x, lo.y, lo.z, hi.x, hi.y, hi.z);
+    if (verbose) std::printf("  camera %s\n", to_string(scene->camera()).c_str());
+    return 0;
+}
+
+}  // namespace rf::cli

@@ -1,0 +1,184 @@
+// The public face of paged scenes (rayforge/ooc/paged_scene.h): an opened
+// file with its page managers and its query engine behind rf::Accel.
+#include "rayforge/ooc/paged_scene.h"
+
+#include <cstring>
+#include <fstream>
+
+#include "ooc/paged_scene_impl.h"
+#include "rayforge/core/error.h"
+
+namespace rf {
+
+namespace pack {
+
+namespace {
+
+PageCacheReport report(const std::string& name, const PageCacheStats& s, uint32_t pages, uint32_t slots,
+                       uint32_t cached, size_t slot_bytes, size_t budget, size_t memory) {
+    PageCacheReport r;
+    r.name = name;
+    r.pages = pages;
+    r.slots = slots;
+    r.cached = cached;
+    r.slot_bytes = slot_bytes;
+    r.budget_bytes = budget;
+    r.memory_bytes = memory;
+    r.requests = s.requests;
+    r.hits = s.hits;
+    r.misses = s.misses;
+    r.pages_read = s.pages_read;
+    r.bytes_read = s.bytes_read;
+    r.evictions = s.evictions;
+    r.swaps = s.swaps;
+    r.io_ms = s.io_ms;
+    r.manage_ms = s.manage_ms;
+    return r;
+}
+
+// The options' budgets, shares of the total where not given.
+struct Budgets {
+    size_t geometry, attributes, textures;
+};
+
+Budgets split_budget(const PagedSceneOptions& o, bool has_textures) {
+    const double total = double(o.memory_budget);
+    Budgets b;
+    b.geometry = o.geometry_budget ? o.geometry_budget : size_t(total * (has_textures ? 0.70 : 0.80));
+    b.attributes = o.attribute_budget ? o.attribute_budget : size_t(total * (has_textures ? 0.15 : 0.20));
+    b.textures = !has_textures ? 0 : (o.texture_budget ? o.texture_budget : size_t(total * 0.15));
+    return b;
+}
+
+}  // namespace
+
+PagedAccel::PagedAccel(PagedEngine& engine) : engine_(engine) {}
+
+Hit PagedAccel::intersect(const Ray& ray) const {
+    Hit hit;
+    engine_.intersect(std::span<const Ray>(&ray, 1), std::span<Hit>(&hit, 1));
+    return hit;
+}
+
+bool PagedAccel::occluded(const Ray& ray) const {
+    uint8_t blocked = 0;
+    engine_.occluded(std::span<const Ray>(&ray, 1), std::span<uint8_t>(&blocked, 1));
+    return blocked != 0;
+}
+
+void PagedAccel::intersect(std::span<const Ray> rays, std::span<Hit> hits) const { engine_.intersect(rays, hits); }
+
+void PagedAccel::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const {
+    engine_.occluded(rays, occluded);
+}
+
+AccelStats PagedAccel::stats() const {
+    const PackFile& f = engine_.file();
+    AccelStats s;
+    s.name = "paged/grid+bvh";
+    s.node_count = f.middle_nodes().size();
+    s.leaf_count = f.pages().size();
+    s.bytes = f.resident_memory_bytes();
+    s.sah_cost = s.quality_cost = std::nan("");
+    return s;
+}
+
+PagedSceneImpl::PagedSceneImpl(const std::string& path, const PagedSceneOptions& options)
+    : file_(std::make_shared<const PackFile>(path)) {
+    const Budgets budgets = split_budget(options, file_->header().texture_pages > 0);
+    engine_ = std::make_unique<PagedEngine>(file_, EngineBudgets{budgets.geometry, budgets.attributes}, options.threads);
+    textures_ = std::make_unique<TextureTileCache>(*file_, budgets.textures, "textures");
+    paged_textures_ = make_paged_textures(*file_, *textures_);
+    accel_ = std::make_unique<PagedAccel>(*engine_);
+    budgets_[0] = budgets.geometry;
+    budgets_[1] = budgets.attributes;
+    budgets_[2] = budgets.textures;
+    fill_info(path);
+}
+
+void PagedSceneImpl::fill_info(const std::string& path) {
+    const FileHeader& h = file_->header();
+    const ResidentHeader& r = file_->resident();
+    info_.path = path;
+    info_.triangles = h.triangle_count;
+    info_.quads = h.quad_count;
+    info_.file_bytes = h.file_bytes;
+    info_.geometry_pages = h.geometry_pages;
+    info_.attribute_pages = h.attribute_pages;
+    info_.texture_pages = h.texture_pages;
+    info_.materials = r.material_count;
+    info_.lights = r.light_count;
+    info_.textures = r.texture_count;
+    info_.objects = r.object_count;
+    for (int a = 0; a < 3; ++a) info_.grid[a] = r.grid_res[a];
+    info_.bounds = r.bounds;
+    info_.resident_bytes = file_->resident_memory_bytes();
+    info_.compact_attributes = r.attribute_format == AttributeFormat::Compact;
+    info_.attribute_page_bytes = r.attribute_page_bytes;
+}
+
+Camera PagedSceneImpl::camera() const {
+    if (file_->has_camera()) return file_->camera();
+    Scene empty;
+    return empty.camera_or_default();
+}
+
+std::vector<PageCacheReport> PagedSceneImpl::caches() const {
+    const PageCache& g = engine_->geometry_cache();
+    const PageCache& a = engine_->attribute_cache();
+    const TextureTileCache& t = *textures_;
+    return {report(g.name(), g.stats(), g.page_count(), g.slot_count(), g.cached_count(), g.slot_bytes(), budgets_[0],
+                   g.memory_bytes()),
+            report(a.name(), a.stats(), a.page_count(), a.slot_count(), a.cached_count(), a.slot_bytes(), budgets_[1],
+                   a.memory_bytes()),
+            report(t.name(), t.stats(), t.page_count(), t.slot_count(), t.cached_count(), TextureTileCache::kTileBytes,
+                   budgets_[2], t.memory_bytes())};
+}
+
+PagedQueryStats PagedSceneImpl::query_stats() const {
+    const EngineStats& e = engine_->stats();
+    PagedQueryStats q;
+    q.queries = e.queries;
+    q.iterations = e.iterations;
+    q.ray_iterations = e.ray_iterations;
+    q.shading_fetches = e.shading_fetches;
+    q.cells = e.cells;
+    q.middle_nodes = e.middle;
+    q.pages_searched = e.pages;
+    q.page_nodes = e.nodes;
+    q.quads_tested = e.quads;
+    q.traversal_ms = e.traversal_ms;
+    q.sort_ms = e.sort_ms;
+    return q;
+}
+
+void PagedSceneImpl::reset_stats() {
+    engine_->reset_stats();
+    textures_->reset_stats();
+}
+
+void PagedSceneImpl::clear_caches() {
+    engine_->geometry_cache().clear();
+    engine_->attribute_cache().clear();
+    textures_->clear();
+}
+
+size_t PagedSceneImpl::memory_bytes() const {
+    return engine_->memory_bytes() + textures_->memory_bytes();
+}
+
+}  // namespace pack
+
+bool is_paged_scene_file(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    char magic[sizeof(pack::kMagic)] = {};
+    return in.read(magic, sizeof(magic)) && std::memcmp(magic, pack::kMagic, sizeof(magic)) == 0;
+}
+
+std::unique_ptr<PagedScene> open_paged_scene(const std::string& path, const PagedSceneOptions& options) {
+    if (options.memory_budget == 0 && (!options.geometry_budget || !options.attribute_budget))
+        throw Error("paged scene: the memory budget must be positive");
+    return std::make_unique<pack::PagedSceneImpl>(path, options);
+}
+
+}  // namespace rf

@@ -1,0 +1,177 @@
+// Writing paged scenes through the public API: converting a scene in memory,
+// and generating a procedural one straight into a paged (or OBJ) file.
+#include <cstdio>
+#include <fstream>
+
+#include "ooc/convert_scene.h"
+#include "ooc/generate/massive_scene.h"
+#include "rayforge/core/error.h"
+#include "rayforge/ooc/paged_scene.h"
+
+namespace rf {
+
+namespace {
+
+pack::PackWriterOptions writer_options(const PagedWriteOptions& o) {
+    pack::PackWriterOptions w;
+    w.codec = o.zstd ? pack::Codec::Zstd : pack::Codec::None;
+    w.zstd_level = o.zstd_level;
+    w.attribute_format = o.compact_attributes ? pack::AttributeFormat::Compact : pack::AttributeFormat::Full;
+    w.attribute_page_bytes = o.attribute_page_bytes;
+    w.quads_per_page = o.quads_per_page;
+    w.grid_resolution = o.grid_resolution;
+    w.threads = o.threads;
+    return w;
+}
+
+PagedWriteReport to_report(const pack::PackSummary& s, std::vector<std::string> notes) {
+    PagedWriteReport r;
+    r.triangles = s.triangles;
+    r.quads = s.quads;
+    r.paired_triangles = s.paired_triangles;
+    r.geometry_pages = s.geometry_pages;
+    r.attribute_pages = s.attribute_pages;
+    r.texture_pages = s.texture_pages;
+    r.middle_nodes = s.middle_nodes;
+    r.file_bytes = s.file_bytes;
+    r.geometry_bytes = s.geometry_bytes;
+    r.attribute_bytes = s.attribute_bytes;
+    r.texture_bytes = s.texture_bytes;
+    r.resident_bytes = s.resident_bytes;
+    r.max_quantisation_error = s.max_quantisation_error;
+    r.notes = std::move(notes);
+    return r;
+}
+
+pack::GenerateOptions generator_options(const GenerateOptions& o) {
+    pack::GenerateOptions g;
+    g.name = o.name;
+    g.triangles = o.triangles;
+    g.seed = o.seed;
+    g.statue_dir = o.statue_dir;
+    g.max_object_triangles = o.max_object_triangles;
+    return g;
+}
+
+// Shading records of a generated object (already in world space).
+std::vector<ShadingTriangle> shading_of(const pack::GeneratedObject& object) {
+    std::vector<ShadingTriangle> shading(object.triangle_count());
+    const Affine3f identity = Affine3f::identity();
+    for (size_t t = 0; t < shading.size(); ++t) {
+        const uint32_t* idx = &object.indices[3 * t];
+        const Triangle tri{object.positions[idx[0]], object.positions[idx[1]], object.positions[idx[2]]};
+        shading[t] = make_shading_triangle(object.normals, object.uvs, identity, tri, idx, object.material_ids[t]);
+    }
+    return shading;
+}
+
+// The generated objects as an OBJ file (positions, normals, uvs, one group
+// per object, materials as usemtl names m0, m1, ...), streamed.
+class ObjSink {
+public:
+    explicit ObjSink(const std::string& path) : out_(path) {
+        if (!out_) throw file_error(path, 0, "cannot create");
+        out_ << "# rayforge generate\n";
+    }
+    void add(const pack::GeneratedObject& o) {
+        out_ << "o object" << objects_++ << '\n';
+        for (const Vec3f& p : o.positions) out_ << "v " << p.x << ' ' << p.y << ' ' << p.z << '\n';
+        for (const Vec3f& n : o.normals) out_ << "vn " << n.x << ' ' << n.y << ' ' << n.z << '\n';
+        for (const Vec2f& t : o.uvs) out_ << "vt " << t.x << ' ' << 1.0f - t.y << '\n';
+        uint32_t material = ~0u;
+        for (size_t t = 0; t < o.triangle_count(); ++t) {
+            if (o.material_ids[t] != material) {
+                material = o.material_ids[t];
+                out_ << "usemtl m" << material << '\n';
+            }
+            out_ << 'f';
+            for (int k = 0; k < 3; ++k) {
+                const uint64_t v = base_ + o.indices[3 * t + size_t(k)] + 1;
+                out_ << ' ' << v << '/' << v << '/' << v;
+            }
+            out_ << '\n';
+        }
+        base_ += o.positions.size();
+        triangles_ += o.triangle_count();
+        if (!out_) throw Error("generate: writing the OBJ file failed (disk full?)");
+    }
+    uint64_t bytes() { return uint64_t(out_.tellp()); }
+    [[nodiscard]] uint64_t triangles() const { return triangles_; }
+
+private:
+    std::ofstream out_;
+    uint64_t base_ = 0, objects_ = 0, triangles_ = 0;
+};
+
+bool ends_with(const std::string& s, const std::string& suffix) {
+    return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+}  // namespace
+
+PagedWriteReport convert_to_paged(const Scene& scene, const std::string& path, const PagedWriteOptions& options,
+                                  const ProgressCallback& progress) {
+    pack::ConvertResult r = pack::convert_scene(scene, path, writer_options(options), progress);
+    return to_report(r.summary, std::move(r.notes));
+}
+
+std::vector<std::string> generated_scene_names() { return pack::generator_names(); }
+
+PagedWriteReport generate_paged_scene(const GenerateOptions& options, const std::string& path,
+                                      const PagedWriteOptions& write, const ProgressCallback& progress) {
+    const pack::GenerateOptions g = generator_options(options);
+    const pack::GeneratedLook look = pack::generated_look(g);
+    if (ends_with(path, ".obj")) {
+        ObjSink obj(path);
+        pack::generate_scene(g, [&](const pack::GeneratedObject& o) { obj.add(o); }, progress);
+        PagedWriteReport r;
+        r.triangles = obj.triangles();
+        r.file_bytes = obj.bytes();
+        r.notes.push_back("OBJ output keeps geometry, normals, uvs and material names, not the materials themselves");
+        return r;
+    }
+    pack::PackWriter writer(path, writer_options(write));
+    for (const Texture& t : look.textures) writer.add_texture(t);
+    for (const Material& m : look.materials) writer.add_material(ShadingMaterial::from(m));
+    for (const Light& l : look.lights) writer.add_light(l);
+    writer.set_camera(look.camera);
+    writer.set_environment(look.environment);
+    const auto report = [&](double f) {
+        if (progress) progress(0.97 * f);
+    };
+    pack::generate_scene(g, [&](const pack::GeneratedObject& o) {
+        const std::vector<ShadingTriangle> shading = shading_of(o);
+        writer.add_object({o.positions, o.indices, shading});
+    }, report);
+    const pack::PackSummary summary = writer.finish([&](double f) {
+        if (progress) progress(0.97 + 0.03 * f);
+    });
+    return to_report(summary, {});
+}
+
+Scene generate_scene(const GenerateOptions& options) {
+    const pack::GenerateOptions g = generator_options(options);
+    pack::GeneratedLook look = pack::generated_look(g);
+    Scene scene;
+    scene.source = "generate:" + options.name;
+    scene.materials = std::move(look.materials);
+    scene.textures = std::move(look.textures);
+    scene.lights = std::move(look.lights);
+    scene.environment = look.environment;
+    scene.camera = look.camera;
+    pack::generate_scene(g, [&](const pack::GeneratedObject& o) {
+        Mesh mesh;
+        mesh.name = "object" + std::to_string(scene.meshes.size());
+        mesh.positions = o.positions;
+        mesh.normals = o.normals;
+        mesh.uvs = o.uvs;
+        mesh.indices = o.indices;
+        mesh.material_ids = o.material_ids;
+        scene.meshes.push_back(std::move(mesh));
+        scene.instances.push_back({uint32_t(scene.meshes.size() - 1), Affine3f::identity()});
+    });
+    scene.finalize();
+    return scene;
+}
+
+}  // namespace rf
