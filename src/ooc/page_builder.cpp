@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 
 #include "accel/bvh/builders/morton_code.h"
@@ -14,6 +15,7 @@ namespace rf::pack {
 namespace {
 
 constexpr int kBranchBins = 16;
+constexpr float kPageNodeCost = 2.0f;  // SAH traversal cost of a page node, relative to a quad test
 
 struct QuadBox {
     Box3f box;
@@ -131,6 +133,9 @@ std::vector<uint32_t> build_page_bvh(const std::vector<Quad>& quads, std::vector
     BuildOptions options;
     options.builder = Builder::BinnedSah;
     options.max_leaf_size = int(kPageLeafQuads);
+    // Leaves of several quads: 35 bytes a quad with the structure (31 at cost 4, the
+    // seed's 29; 47 at cost 1) for 2% slower tracing than cost 1 (docs/paged-scenes.md).
+    options.sah.traversal = kPageNodeCost;
     options.threads = 0;  // already inside the writer's parallel loop over pages
     Bvh bvh = build_bvh(boxes, options);
     nodes.resize(bvh.nodes.size());

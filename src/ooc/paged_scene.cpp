@@ -182,3 +182,37 @@ std::unique_ptr<PagedScene> open_paged_scene(const std::string& path, const Page
 }
 
 }  // namespace rf
+
+namespace rf {
+
+DecodedPagedGeometry decode_paged_geometry(const std::string& path) {
+    const pack::PackFile file(path);
+    DecodedPagedGeometry out;
+    SceneGeometry& g = out.geometry;
+    std::vector<uint8_t> bytes, scratch;
+    for (uint32_t p = 0; p < file.header().geometry_pages; ++p) {
+        file.read_page(p, bytes, scratch);
+        const pack::GeometryPageView page = pack::view_geometry_page(bytes, path);
+        const pack::PageInfo& info = file.pages()[p];
+        for (uint32_t q = 0; q < page.quad_count; ++q) {
+            const auto& v = page.quads[q].v;
+            for (int half = 0; half < 2; ++half) {
+                if (half == 1 && std::memcmp(v[3], v[0], sizeof(v[0])) == 0) continue;
+                const int c = half == 0 ? 1 : 2, d = half == 0 ? 2 : 3;
+                const auto decode = [&](const int16_t* q3) {
+                    return info.offset + info.scale * Vec3f(float(q3[0]), float(q3[1]), float(q3[2]));
+                };
+                g.triangles.push_back({decode(v[0]), decode(v[c]), decode(v[d])});
+                g.triangle_instance.push_back(0);
+                g.local_triangle.push_back(uint32_t(out.prims.size()));
+                g.material.push_back(0);
+                out.prims.push_back(p * pack::kTrianglesPerPageSlot + 2 * q + uint32_t(half));
+            }
+        }
+        g.bounds.extend(info.bounds);
+    }
+    g.normal_matrices.push_back(Affine3f::identity());
+    return out;
+}
+
+}  // namespace rf

@@ -135,4 +135,15 @@ std::unique_ptr<PagedScene> open_paged_scene(const std::string& path, const Page
 // `scene` must outlive it.
 std::unique_ptr<Renderer> make_paged_renderer(PagedScene& scene, const Camera& camera, const RenderOptions& options);
 
+// Every page of a paged file decoded into world-space triangles, in page
+// order (triangle i of the result is paged triangle
+// page * 8192 + slot, listed in `prims`): the same quantised geometry in
+// core, for comparisons (needs memory for the whole scene). Degenerate
+// halves of unpaired quads are left out.
+struct DecodedPagedGeometry {
+    SceneGeometry geometry;
+    std::vector<uint32_t> prims;  // paged primitive id of each triangle
+};
+DecodedPagedGeometry decode_paged_geometry(const std::string& path);
+
 }  // namespace rf
