@@ -1,7 +1,7 @@
 // The viewer's engine side without a window: the camera controller's
 // motions, bookmarks files, the script parser, the settings table, and the
-// session's threads (loads, rebuilds, restarts, previews, failed loads)
-// checked against renders made directly with the engine.
+// session's threads (loads, rebuilds, restarts, previews, failed loads,
+// paged scenes) checked against renders made directly with the engine.
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -12,11 +12,15 @@
 #include "bookmarks.h"
 #include "camera_controller.h"
 #include "rayforge/core/error.h"
+#include <nlohmann/json.hpp>
+
 #include "rayforge/io/scene_io.h"
+#include "rayforge/ooc/paged_scene.h"
 #include "script.h"
 #include "session.h"
 #include "test_paths.h"
 #include "view_settings.h"
+#include "viewer_stats.h"
 
 namespace rf::viewer {
 namespace {
@@ -316,15 +320,19 @@ std::shared_ptr<const Frame> settled_frame(Session& session, int passes) {
     return ok ? frame : nullptr;
 }
 
+// An image as a display image's bytes (8-bit sRGB RGBA, as PNG output).
+std::vector<uint8_t> display_bytes(const Image& image, const ToneMapping& tone) {
+    std::vector<uint8_t> bytes(image.pixels.size() * 4, 255);
+    for (size_t i = 0; i < image.pixels.size(); ++i) tone_map_srgb8(image.pixels[i], tone, &bytes[4 * i]);
+    return bytes;
+}
+
 // What the engine renders for these settings and camera, as display bytes.
 std::vector<uint8_t> reference(const SceneSource& source, const ViewSettings& s, const Camera& camera) {
     const Scene scene = load_scene(source.path);
     const SceneGeometry geometry = SceneGeometry::build(scene);
     const auto accel = build_accel(geometry, s.build);
-    const Image image = render(scene, geometry, *accel, camera, film_options(s, false, 1));
-    std::vector<uint8_t> bytes(image.pixels.size() * 4, 255);
-    for (size_t i = 0; i < image.pixels.size(); ++i) tone_map_srgb8(image.pixels[i], s.tone, &bytes[4 * i]);
-    return bytes;
+    return display_bytes(render(scene, geometry, *accel, camera, film_options(s, false, 1)), s.tone);
 }
 
 std::vector<uint8_t> pixels_of(const Frame& frame) { return frame.image->download(); }
@@ -468,6 +476,192 @@ TEST(Session, StopsCleanlyWhateverItIsDoing) {
         }
     }  // destroyed mid-load, mid-render and mid-rebuild
     SUCCEED();
+}
+
+// ---- paged scenes
+
+// Budgets far below the file (17 MiB), so pages are evicted and read again.
+PagedSceneOptions small_budget() {
+    PagedSceneOptions o;
+    o.memory_budget = size_t(4) << 20;
+    return o;
+}
+
+// builtin:spheres (220K triangles) as a paged file, written once.
+const std::string& paged_spheres_path() {
+    static const std::string path = [] {
+        const std::string file = test::temp_dir("viewer_paged") + "/spheres.rfpack";
+        Scene scene = make_builtin_scene("spheres");
+        scene.finalize();
+        (void)convert_to_paged(scene, file);
+        return file;
+    }();
+    return path;
+}
+
+SceneSource paged_spheres() { return {"spheres.rfpack", paged_spheres_path(), {}, {}}; }
+
+SessionConfig paged_config(const ViewSettings& s) {
+    SessionConfig config{s, {}};
+    config.paged = small_budget();
+    return config;
+}
+
+// What make_paged_renderer renders for these settings and camera, as display bytes.
+std::vector<uint8_t> paged_reference(const ViewSettings& s, const Camera& camera) {
+    const std::unique_ptr<PagedScene> scene = open_paged_scene(paged_spheres_path(), small_budget());
+    const std::unique_ptr<Renderer> renderer = make_paged_renderer(*scene, camera, film_options(s, false, 1));
+    render_progressive(*renderer);
+    return display_bytes(renderer->image(), s.tone);
+}
+
+TEST(SessionPaged, ShowsAPagedSceneAsThePagedRendererRendersIt) {
+    const ViewSettings s = small_settings();
+    Session session(paged_config(s));
+    session.load(paged_spheres());
+    const auto frame = settled_frame(session, 3);
+    ASSERT_TRUE(frame);
+    const auto scene = session.scene();
+    ASSERT_TRUE(scene && scene->paged);
+    EXPECT_EQ(scene->kind(), SceneKind::Paged);
+    EXPECT_EQ(scene->camera.eye, scene->paged->camera().eye);  // the file's camera
+    EXPECT_EQ(frame->image->width(), 40);
+    EXPECT_EQ(pixels_of(*frame), paged_reference(s, scene->camera));
+
+    const SessionStatus status = session.status();
+    EXPECT_EQ(status.error_count, 0u) << status.error;
+    EXPECT_EQ(status.triangles, scene->paged->info().triangles);
+    EXPECT_EQ(status.accel.name, "paged/grid+bvh");
+    ASSERT_EQ(status.paged.caches.size(), 3u);
+    EXPECT_EQ(status.paged.caches[0].name, "geometry");
+    EXPECT_EQ(status.paged.caches[1].name, "attributes");
+    EXPECT_EQ(status.paged.caches[2].name, "textures");
+    const PageCacheReport& geometry = status.paged.caches[0];
+    EXPECT_GT(geometry.slots, 0u);
+    EXPECT_LE(geometry.cached, geometry.slots);
+    EXPECT_GT(geometry.requests, 0u);  // the last pass's
+    EXPECT_LE(status.paged.budget_bytes, small_budget().memory_budget);
+    EXPECT_LE(status.paged.cache_bytes, status.paged.budget_bytes);
+    EXPECT_EQ(status.paged.resident_bytes, scene->paged->info().resident_bytes);
+
+    // print-stats carries the same figures.
+    const ViewerStats stats;
+    const auto json = nlohmann::json::parse(stats.json(status, Clock::now()));
+    EXPECT_EQ(json["structure"], "paged/grid+bvh");
+    EXPECT_EQ(json["paged"]["budget_bytes"], status.paged.budget_bytes);
+    EXPECT_EQ(json["paged"]["caches"]["geometry"]["slots"], geometry.slots);
+    EXPECT_EQ(json["paged"]["caches"]["geometry"]["bytes_read"], geometry.bytes_read);
+    EXPECT_DOUBLE_EQ(json["paged"]["caches"]["geometry"]["hit_rate"].get<double>(), geometry.hit_rate());
+    EXPECT_TRUE(json["paged"]["caches"].contains("textures"));
+}
+
+TEST(SessionPaged, CameraIntegratorAndExposureChangesWorkAsInCore) {
+    ViewSettings s = small_settings();
+    Session session(paged_config(s));
+    session.load(paged_spheres());
+    const auto first = settled_frame(session, 3);
+    ASSERT_TRUE(first);
+    const auto scene = session.scene();
+
+    Camera moved = scene->camera;
+    moved.eye = moved.eye + Vec3f(1.5f, 0.5f, -1.0f);
+    session.set_camera(moved, scene->id, false);
+    auto frame = settled_frame(session, 3);
+    ASSERT_TRUE(frame);
+    EXPECT_EQ(pixels_of(*frame), paged_reference(s, moved));
+    EXPECT_NE(pixels_of(*frame), pixels_of(*first));
+
+    set_setting(s, "integrator", "path", SceneKind::Paged);
+    set_setting(s, "max-depth", "2", SceneKind::Paged);
+    set_setting(s, "res", "32x24", SceneKind::Paged);
+    session.set_settings(s);
+    frame = settled_frame(session, 3);
+    ASSERT_TRUE(frame);
+    EXPECT_EQ(frame->image->width(), 32);
+    EXPECT_EQ(pixels_of(*frame), paged_reference(s, moved));
+
+    set_setting(s, "exposure", "0.5", SceneKind::Paged);
+    session.set_settings(s);
+    frame = settled_frame(session, 3);
+    ASSERT_TRUE(frame);
+    EXPECT_EQ(pixels_of(*frame), paged_reference(s, moved));
+
+    // A structure change that reaches the session anyway (the table refuses
+    // it) builds nothing and still settles on the same image.
+    s.build.builder = Builder::Sbvh;
+    session.set_settings(s);
+    frame = settled_frame(session, 3);
+    ASSERT_TRUE(frame);
+    EXPECT_EQ(pixels_of(*frame), paged_reference(s, moved));
+    EXPECT_EQ(session.status().accel.name, "paged/grid+bvh");
+    EXPECT_EQ(session.status().error_count, 0u) << session.status().error;
+}
+
+TEST(SessionPaged, StructureSettingsAndOtherDevicesAreRefused) {
+    ViewSettings s = small_settings();
+    const ViewSettings before = s;
+    for (const SettingInfo& info : setting_infos()) {
+        if (info.group != "structure") continue;
+        EXPECT_FALSE(applies_to(info, SceneKind::Paged)) << info.key;
+        EXPECT_TRUE(applies_to(info, SceneKind::InCore)) << info.key;
+        const std::string value = get_setting(s, info.key);
+        try {
+            set_setting(s, info.key, value, SceneKind::Paged);
+            ADD_FAILURE() << "accepted for a paged scene: " << info.key;
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find("do not apply to a paged scene"), std::string::npos) << e.what();
+        }
+    }
+    try {
+        set_setting(s, "builder", "sbvh", SceneKind::Paged);
+        ADD_FAILURE() << "accepted set builder sbvh";
+    } catch (const Error& e) {
+        EXPECT_EQ(std::string(e.what()),
+                  "set builder sbvh: structure settings do not apply to a paged scene (its structure is in the file)");
+    }
+    EXPECT_EQ(changes_between(before, s), 0u);
+    EXPECT_NO_THROW(set_setting(s, "device", "cpu", SceneKind::Paged));
+    EXPECT_NO_THROW(set_setting(s, "threads", "1", SceneKind::Paged));
+    EXPECT_NO_THROW(set_setting(s, "builder", "sbvh", SceneKind::InCore));
+
+    // A paged file asked for on a CUDA device fails its load with a clear error.
+    ViewSettings cuda = small_settings();
+    cuda.render.device = cuda.build.device = Device{Device::Kind::Cuda, 0};
+    Session session(paged_config(cuda));
+    session.load(paged_spheres());
+    ASSERT_TRUE(eventually([&] { return session.status().error_count == 1 && !session.versions().jobs_pending; }));
+    EXPECT_NE(session.status().error.find("paged scenes render on the CPU"), std::string::npos)
+        << session.status().error;
+    EXPECT_FALSE(session.scene());
+}
+
+TEST(SessionPaged, SwitchesBetweenInCoreAndPagedScenes) {
+    const ViewSettings s = small_settings();
+    Session session(paged_config(s));
+    session.load(builtin("cornell"));
+    ASSERT_TRUE(settled_frame(session, 3));
+
+    session.load(paged_spheres());
+    ASSERT_TRUE(eventually([&] { return session.scene()->paged != nullptr; }));
+    auto frame = settled_frame(session, 3);
+    ASSERT_TRUE(frame);
+    EXPECT_EQ(pixels_of(*frame), paged_reference(s, session.scene()->camera));
+    EXPECT_EQ(session.status().paged.caches.size(), 3u);
+
+    session.load(builtin("cornell"));
+    ASSERT_TRUE(eventually([&] { return session.scene()->source.name == "builtin:cornell"; }));
+    frame = settled_frame(session, 3);
+    ASSERT_TRUE(frame);
+    EXPECT_EQ(pixels_of(*frame), reference(builtin("cornell"), s, session.scene()->camera));
+    EXPECT_EQ(session.status().accel.name, "bvh/binned/bvh8");
+    EXPECT_TRUE(session.status().paged.caches.empty());
+
+    session.load(paged_spheres());  // and back, opened afresh
+    ASSERT_TRUE(eventually([&] { return session.scene()->paged != nullptr; }));
+    frame = settled_frame(session, 3);
+    ASSERT_TRUE(frame);
+    EXPECT_EQ(pixels_of(*frame), paged_reference(s, session.scene()->camera));
+    EXPECT_EQ(session.status().error_count, 0u) << session.status().error;
 }
 
 }  // namespace

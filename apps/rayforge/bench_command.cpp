@@ -2,6 +2,7 @@
 // (protocol: ../shared/docs/BENCHMARK-PROTOCOL.md, harness: bench/harness/).
 // Tables on stdout, progress on stderr, records in --json FILE. `--device
 // cuda` adds GPU rows (the same structures built and traced on the device).
+// `--paged FILES` runs the paged-scene tables instead (bench/harness/paged_bench.h).
 #include <iostream>
 #include <set>
 #include <sstream>
@@ -11,6 +12,7 @@
 #include "bench_report.h"
 #include "bench_runner.h"
 #include "commands.h"
+#include "paged_bench.h"
 #include "presets.h"
 #include "render_bench.h"
 #include "stage_breakdown.h"
@@ -161,6 +163,88 @@ int run_render_bench(const BenchArgs& a, const bench::BenchConfig& config) {
     return 0;
 }
 
+// "0.01", "1/100" -> 0.01; a fraction of the scene in (0, 1].
+double parse_budget(const std::string& text) {
+    try {
+        size_t used = 0;
+        const size_t slash = text.find('/');
+        double value = std::stod(text.substr(0, slash), &used);
+        if (used != (slash == std::string::npos ? text.size() : slash)) throw Error("");
+        if (slash != std::string::npos) {
+            const std::string denominator = text.substr(slash + 1);
+            value /= std::stod(denominator, &used);
+            if (used != denominator.size()) throw Error("");
+        }
+        if (!(value > 0.0 && value <= 1.0)) throw Error("");
+        return value;
+    } catch (const std::exception&) {
+        throw Error("--budgets: expected fractions of the scene in (0, 1] such as 0.1 or 1/200, got '" + text + "'");
+    }
+}
+
+// "x,y,z" -> a directional light travelling along it.
+Light parse_light_dir(const std::string& text) {
+    std::vector<float> values;
+    for (const std::string& part : split_list({text})) {
+        try {
+            size_t used = 0;
+            values.push_back(std::stof(part, &used));
+            if (used != part.size()) throw Error("");
+        } catch (const std::exception&) {
+            values.clear();
+            break;
+        }
+    }
+    const Vec3f dir = values.size() == 3 ? Vec3f{values[0], values[1], values[2]} : Vec3f(0.0f);
+    if (!(length(dir) > 0.0f) || !is_finite(dir))
+        throw Error("--light-dir: expected three numbers x,y,z, not all zero, got '" + text + "'");
+    Light light;
+    light.type = LightType::Directional;
+    light.direction = normalize(dir);
+    return light;
+}
+
+// `--paged`: the paged-scene tables (bench/harness/paged_bench.h), one file at a time.
+int run_paged_bench_command(const BenchArgs& a, const std::string& command_line) {
+    if (!a.scenes.empty() || !a.preset.empty() || !a.integrators.empty() || !a.ray_sets.empty() ||
+        !a.structures.empty() || !a.builders.empty() || !a.layouts.empty() || !a.devices.empty())
+        throw Error("--paged: not with --scene, --preset, --integrator, --rays, --structure, --builder, --layout or "
+                    "--device (the paged bench has its own workloads)");
+    bench::PagedBenchConfig config;
+    const std::vector<std::string> budgets = split_list(a.budgets);
+    if (!budgets.empty()) {
+        config.budgets.clear();
+        for (const std::string& b : budgets) config.budgets.push_back(parse_budget(b));
+    }
+    const std::vector<std::string> resolutions = split_list(a.resolutions);
+    if (!resolutions.empty()) {
+        const bench::Resolution res = parse_resolution_or_throw(resolutions.front());
+        config.width = res.width;
+        config.height = res.height;
+    }
+    config.repetitions = a.repetitions;
+    config.passes = a.passes;
+    config.threads = a.threads;
+    if (!a.light_dir.empty()) config.light = parse_light_dir(a.light_dir);
+    const std::vector<std::string> files = split_list(a.paged);
+    for (const std::string& file : files)
+        if (!is_paged_scene_file(file))
+            throw Error(file + ": not a paged scene file (rayforge convert or rayforge generate writes one)");
+    bench::print_paged_header(std::cout, config, command_line);
+    if (resolutions.size() > 1) std::cout << "note: --paged uses the first --res only\n";
+    std::vector<bench::PagedFileResult> results;
+    std::ostringstream sink;
+    for (const std::string& file : files) {
+        results.push_back(bench::run_paged_bench(file, config, a.quiet ? sink : std::cerr));
+        bench::print_paged_tables(std::cout, results.back(), config);
+    }
+    if (!a.json.empty()) {
+        bench::write_paged_json(a.json, results, config, command_line);
+        std::cout << "\nwrote the records of " << results.size() << " files to " << a.json << '\n';
+    }
+    return 0;
+}
+
 }  // namespace
 
 // Without --builder: the default BVH builder, and every "builder" of the
@@ -225,6 +309,21 @@ CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
                   "After the tables, time every builder stage by stage on each scene (dissertation tables 4.1 and "
                   "5.1: the CPU's gridbvh, gridbvh-split and hlbvh2; with --device cuda every device builder, the "
                   "device uniform grids and the device layout conversions), as the seed000 preset does");
+    cmd->add_option("--paged", a.paged,
+                    "Paged scene files (.rfpack), comma-separated: instead of the ray-set tables, trace each at every "
+                    "--budgets cache size (primary, shadow, 3 diffuse bounces, path tracing) against the same "
+                    "geometry in core (docs/cli.md, Paged scenes). Uses --res (first; default 1024x768), --reps, "
+                    "--passes, --threads, --json")
+        ->delimiter(',');
+    cmd->add_option("--budgets", a.budgets,
+                    "--paged: cache sizes as fractions of the scene, e.g. 0.1 or 1/200, comma-separated (default "
+                    "1,0.5,0.1,0.01,0.005)")
+        ->delimiter(',');
+    cmd->add_option("--passes", a.passes, "--paged: path-tracing passes per budget, the first one cold (default 4)")
+        ->check(CLI::Range(2, 10000));
+    cmd->add_option("--light-dir", a.light_dir,
+                    "--paged: the shadow set's light, a directional light travelling along x,y,z (default: the file's "
+                    "first light, when the API lists it)");
     cmd->add_flag("--list", a.list, "List scenes, structures, presets and the Embree peer, then exit");
     cmd->add_flag("-q,--quiet", a.quiet, "No progress lines on stderr");
     return cmd;
@@ -361,6 +460,8 @@ void run_stage_breakdowns(const BenchArgs& a, const DeviceSelection& devices, co
 }  // namespace
 
 int run_bench(const BenchArgs& a, const std::string& command_line) {
+    if (!a.paged.empty()) return run_paged_bench_command(a, command_line);
+    if (!a.budgets.empty() || !a.light_dir.empty()) throw Error("--budgets and --light-dir: need --paged");
     bench::BenchConfig config;
     config.scenes_dir = bench::find_scenes_dir(a.scenes_dir);
     if (a.list) {

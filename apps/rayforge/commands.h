@@ -106,6 +106,11 @@ struct BenchArgs {
     int spp = 0;                           // camera rays per pixel of the sets; 0 = 1 on the CPU, 4 on a GPU
     std::string build_on;                  // --build-on device|host ("" = device) for the GPU rows
     bool build_stages = false;             // the stage breakdown tables for every scene, not only seed000's
+    // --paged FILES: the paged-scene benchmark instead (bench/harness/paged_bench.h).
+    std::vector<std::string> paged;        // .rfpack files
+    std::vector<std::string> budgets;      // cache fractions of the scene, "0.01" or "1/100" ("" = the seed's five)
+    int passes = 4;                        // path-tracing passes per budget
+    std::string light_dir;                 // "x,y,z": a directional light for the shadow set
 };
 CLI::App* add_bench_command(CLI::App& app, BenchArgs& args);
 int run_bench(const BenchArgs& args, const std::string& command_line);

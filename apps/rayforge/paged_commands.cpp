@@ -165,12 +165,18 @@ int run_paged_render(const RenderArgs& a) {
                 renderer->passes() ? render_ms / renderer->passes() : 0.0, (unsigned long long)q.iterations,
                 format_bytes(double(scene->memory_bytes())).c_str(), a.paged.memory_budget.c_str());
     std::printf("%s: caches: %s\n", a.outputs.front().c_str(), cache_line(*scene).c_str());
+    const double per_ray = q.queries ? 1.0 / double(q.queries) : 0.0;
+    std::printf("%s: per query: %.2f iterations, %.1f cells, %.1f middle nodes, %.2f pages searched, %.1f page nodes, "
+                "%.1f quads tested | traversal %.1f ms, sort %.1f ms\n",
+                a.outputs.front().c_str(), double(q.ray_iterations) * per_ray, double(q.cells) * per_ray,
+                double(q.middle_nodes) * per_ray, double(q.pages_searched) * per_ray, double(q.page_nodes) * per_ray,
+                double(q.quads_tested) * per_ray, q.traversal_ms, q.sort_ms);
     return 0;
 }
 
 int run_paged_info(const std::string& path, bool verbose) {
     PagedSceneOptions small;
-    small.memory_budget = size_t(64) << 20;
+    small.memory_budget = size_t(1) << 30;  // the pools are never touched: only the tables become resident
     const std::unique_ptr<PagedScene> scene = open_paged_scene(path, small);
     const PagedSceneInfo& i = scene->info();
     const Vec3f lo = i.bounds.lo, hi = i.bounds.hi;

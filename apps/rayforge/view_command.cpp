@@ -1,12 +1,14 @@
 // `rayforge view SCENE [render options]`: the interactive viewer
 // (apps/viewer). The render options mean what they mean for `render`, so a
 // view and a render of the same arguments show the same image; --spp is
-// where accumulation stops (default 4096 passes).
+// where accumulation stops (default 4096 passes). A paged scene file
+// (.rfpack) opens with the page caches' budgets of --memory-budget etc.
 #include <cmath>
 #include <cstdio>
 
 #include "commands.h"
 #include "rayforge/core/error.h"
+#include "rayforge/ooc/paged_scene.h"
 #include "script.h"
 #include "viewer.h"
 
@@ -16,7 +18,9 @@ namespace {
 constexpr int kViewerPasses = 4096;
 
 // Lights and the start camera of every scene the viewer loads, and the
-// first scene's render settings under the command line's.
+// first scene's render settings under the command line's. A paged scene
+// has no render settings (its `scene` is empty, as `render` of one uses)
+// and its lights are in its file: nothing is added to it.
 auto scene_preparation(const ViewArgs& a, const Device& device) {
     return [&a, device](viewer::SceneData& data, bool first, viewer::ViewSettings& settings) {
         const RenderArgs& r = a.render;
@@ -26,8 +30,9 @@ auto scene_preparation(const ViewArgs& a, const Device& device) {
             settings.render = from_file;
             settings.render.spp = r.spp_opt->count() > 0 ? r.spp : kViewerPasses;
             if (!r.camera.empty()) data.camera = initial_camera(r, scene);
-            apply_light_options(r, scene, data.geometry);
         }
+        if (data.paged) return;
+        if (first) apply_light_options(r, scene, data.geometry);
         if (data.source.light && has_no_light(scene, data.geometry)) {  // the views.json light, as the bench uses
             Light light;
             light.position = *data.source.light;
@@ -39,13 +44,20 @@ auto scene_preparation(const ViewArgs& a, const Device& device) {
     };
 }
 
+// What `render` refuses for a paged scene file, refused before a window opens.
+void check_paged_start(const RenderArgs& r, const Device& device) {
+    if (device.is_cuda()) throw Error("paged scenes render on the CPU in this version (--device cpu)");
+    if (!r.lights.empty() || !r.environment.empty() || !r.environment_map.empty())
+        throw Error("--light, --env and --env-map are not applied to paged scenes (their lights are in the file)");
+}
+
 }  // namespace
 
 CLI::App* add_view_command(CLI::App& app, ViewArgs& a) {
     CLI::App* cmd = app.add_subcommand(
         "view", "Open a scene in an interactive window: progressive rendering, camera controls, live settings");
     cmd->add_option("scene", a.render.scene,
-                    "Scene file (.obj, .gltf, .glb, .ply, .aff, .json), builtin:NAME, or a name of "
+                    "Scene file (.obj, .gltf, .glb, .ply, .aff, .json, .rfpack), builtin:NAME, or a name of "
                     "../shared/scenes/views.json (e.g. sponza)")
         ->required();
     add_frame_options(cmd, a.render, "Passes to accumulate while the camera rests, then stop (default 4096)");
@@ -54,6 +66,7 @@ CLI::App* add_view_command(CLI::App& app, ViewArgs& a) {
     add_accel_options(cmd, a.render.accel);
     add_light_options(cmd, a.render);
     add_device_options(cmd, a.render);
+    add_paged_read_options(cmd, a.render.paged);
     const std::string group = "Viewer";
     cmd->add_option("--script", a.script,
                     "Run the commands of FILE (one per line, docs/viewer.md), then exit: 0 when all succeeded")
@@ -84,6 +97,7 @@ CLI::App* add_view_command(CLI::App& app, ViewArgs& a) {
 int run_view(const ViewArgs& a) {
     const RenderArgs& r = a.render;
     const Device device = parse_device(r.device);
+    if (is_paged_scene_file(r.scene)) check_paged_start(r, device);
     require_usable(device, "--device " + r.device);
     viewer::ViewerConfig config;
     config.launched = launch_time();
@@ -95,6 +109,7 @@ int run_view(const ViewArgs& a) {
     config.settings.tone = tone_mapping(r);
     config.settings.motion_divisor = a.motion_scale == "auto" ? 0 : std::stoi(a.motion_scale);
     config.prepare = scene_preparation(a, device);
+    config.paged = paged_scene_options(r.paged, r.threads);  // a malformed budget fails before the window opens
     if (!a.script.empty()) config.script = viewer::load_script(a.script);  // a typo fails before anything opens
     config.script_timeout_s = a.script_timeout_s;
     if (!a.bookmarks.empty()) config.bookmarks = a.bookmarks;

@@ -30,11 +30,48 @@ void yield_to_the_window() {
 #endif
 }
 
+// What one pass did to a cache: `after`'s state with the counts since `before`.
+PageCacheReport pass_counts(const PageCacheReport& after, const PageCacheReport& before) {
+    const auto since = [](auto a, auto b) { return a >= b ? a - b : a; };  // a reset in between: all of a
+    PageCacheReport r = after;
+    r.requests = since(after.requests, before.requests);
+    r.hits = since(after.hits, before.hits);
+    r.misses = since(after.misses, before.misses);
+    r.pages_read = since(after.pages_read, before.pages_read);
+    r.bytes_read = since(after.bytes_read, before.bytes_read);
+    r.evictions = since(after.evictions, before.evictions);
+    r.swaps = since(after.swaps, before.swaps);
+    r.io_ms = since(after.io_ms, before.io_ms);
+    r.manage_ms = since(after.manage_ms, before.manage_ms);
+    return r;
+}
+
+// A paged scene's caches now, with the counts since `before` (the caches
+// as they were when the pass began; empty: all counts so far).
+PagedStatus paged_status(const PagedScene& scene, const std::vector<PageCacheReport>& before) {
+    PagedStatus status;
+    status.caches = scene.caches();
+    for (size_t i = 0; i < status.caches.size(); ++i) {
+        PageCacheReport& c = status.caches[i];
+        if (i < before.size()) c = pass_counts(c, before[i]);
+        status.cache_bytes += c.memory_bytes;
+        status.budget_bytes += c.budget_bytes;
+    }
+    status.resident_bytes = scene.info().resident_bytes;
+    return status;
+}
+
 }  // namespace
 
 struct Session::Target {
     std::shared_ptr<const SceneData> scene;
-    std::shared_ptr<const Accel> accel;
+    std::shared_ptr<const Accel> accel;  // null for a paged scene, which traces through its own caches
+
+    // A renderer over the structure, or over the paged scene's caches.
+    [[nodiscard]] std::unique_ptr<Renderer> new_renderer(const Camera& camera, const RenderOptions& options) const {
+        if (scene->paged) return make_paged_renderer(*scene->paged, camera, options);
+        return make_renderer(scene->scene, scene->geometry, *accel, camera, options);
+    }
 };
 
 // What the render thread holds. The renderer refers to the target's scene
@@ -55,16 +92,19 @@ struct Session::RenderState {
     double full_pass_ms = 0.0;
     uint64_t sequence = 0;
     std::vector<std::shared_ptr<DisplayImage>> pool;
+    std::vector<PageCacheReport> caches_before;  // a paged target's caches when the pass began
+    PagedStatus paged;                           // and after its last pass (empty in core)
 
     [[nodiscard]] bool wants_pass() const {
         if (!renderer || halted) return false;
         return moving ? !preview_done : renderer->passes() < renderer->options().spp;
     }
     // The film's options for rendering `on`: its structure's device (the
-    // settings may already name another, whose structure is being built).
+    // settings may already name another, whose structure is being built); a
+    // paged scene's is the CPU.
     [[nodiscard]] RenderOptions film(const Target& on) const {
         RenderOptions o = film_options(settings, moving, motion_divisor);
-        o.device = on.accel->device();
+        o.device = on.accel ? on.accel->device() : Device{};
         return o;
     }
     // A display image no frame holds (the pool's reference is its only one).
@@ -135,11 +175,15 @@ void Session::set_settings(const ViewSettings& settings) {
         if (effects == 0) return;
         settings_ = settings;
         ++settings_version_;
+        unsigned now = effects & (unsigned(Effect::Restart) | unsigned(Effect::Retone));
         if (effects & unsigned(Effect::Rebuild)) {
             if (!queued_load_) queued_build_ = settings.build;
             job_cv_.notify_one();
+            // A paged scene has no structure to rebuild (the job thread skips
+            // it; the settings table refuses such changes for one): its frame
+            // only has to show the new settings.
+            if (shown_scene_ && shown_scene_->paged) now |= unsigned(Effect::Retone);
         }
-        const unsigned now = effects & (unsigned(Effect::Restart) | unsigned(Effect::Retone));
         if (now) {
             pending_effects_ |= now;
             cancel_.store(true);
@@ -219,7 +263,7 @@ void Session::job_loop() {
         const Clock::time_point start = Clock::now();
         try {
             if (load) run_load(*load);
-            else if (scene) run_build(scene, *build);
+            else if (scene && !scene->paged) run_build(scene, *build);
         } catch (const Error& e) {
             report_error(e.what());
         } catch (const std::bad_alloc&) {
@@ -285,13 +329,19 @@ void Session::run_load(const SceneSource& source) {
         JobProgress progress(mutex_, status_, wake, "loading " + source.name);
         progress(0.0);
         const Clock::time_point start = Clock::now();
-        data->scene = load_scene(source.path);
-        data->geometry = SceneGeometry::build(data->scene);
+        if (is_paged_scene_file(source.path)) {
+            open_paged(*data, settings);
+        } else {
+            data->scene = load_scene(source.path);
+            data->geometry = SceneGeometry::build(data->scene);
+        }
         data->load_ms = ms_since(start);
     }
-    if (data->geometry.size() == 0) throw Error(source.name + ": the scene has no triangles to show");
-    data->size = length(data->geometry.bounds.extent());
-    data->camera = source.views.empty() ? data->scene.camera_or_default() : source.views.front();
+    if (data->triangles() == 0) throw Error(source.name + ": the scene has no triangles to show");
+    const Box3f bounds = data->paged ? data->paged->info().bounds : data->geometry.bounds;
+    data->size = length(bounds.extent());
+    const Camera own = data->paged ? data->paged->camera() : data->scene.camera_or_default();
+    data->camera = source.views.empty() ? own : source.views.front();
     if (config_.prepare) {
         const ViewSettings before = settings;
         config_.prepare(*data, first, settings);
@@ -308,9 +358,23 @@ void Session::run_load(const SceneSource& source) {
         data->id = next_scene_id_++;
         first_load_ = false;
     }
+    if (data->paged) {  // its structure came with the file
+        hand_over(std::move(data), nullptr);
+        return;
+    }
     JobProgress progress(mutex_, status_, wake, "building " + structure_name(build) + " for " + source.name);
     std::shared_ptr<const Accel> accel = build_accel(data->geometry, build, std::ref(progress));
     hand_over(std::move(data), std::move(accel));
+}
+
+// Opens a paged scene file with the session's budgets. Its renderer runs on
+// the CPU only: another device fails the load (the shown scene stays).
+void Session::open_paged(SceneData& data, const ViewSettings& settings) const {
+    if (settings.render.device.is_cuda())
+        throw Error(data.source.name + ": paged scenes render on the CPU in this version (set device cpu first)");
+    PagedSceneOptions options = config_.paged;
+    options.threads = settings.render.threads;
+    data.paged = open_paged_scene(data.source.path, options);
 }
 
 void Session::run_build(std::shared_ptr<const SceneData> data, const BuildOptions& options) {
@@ -332,7 +396,7 @@ void Session::run_build(std::shared_ptr<const SceneData> data, const BuildOption
 void Session::hand_over(std::shared_ptr<const SceneData> data, std::shared_ptr<const Accel> accel) {
     // Outside the lock: a structure may compute its statistics (a kd-tree's
     // SAH cost walks the tree), and the window reads the status every frame.
-    const AccelStats stats = accel->stats();
+    const AccelStats stats = accel ? accel->stats() : data->paged->accel().stats();
     {
         std::lock_guard<std::mutex> lock(mutex_);
         status_.accel = stats;
@@ -343,7 +407,7 @@ void Session::hand_over(std::shared_ptr<const SceneData> data, std::shared_ptr<c
             camera_time_ = Clock::now();
             ++camera_version_;
             status_.scene_name = data->source.name;
-            status_.triangles = data->geometry.size();
+            status_.triangles = data->triangles();
             status_.load_ms = data->load_ms;
         }
         new_target_ = std::make_shared<const Target>(Target{std::move(data), std::move(accel)});
@@ -420,11 +484,13 @@ bool Session::take_requests(RenderState& st, RenderRequests& r) {
 void Session::apply_requests(RenderState& st, const RenderRequests& r) {
     try {
         if (r.target) {
-            std::unique_ptr<Renderer> renderer = make_renderer(r.target->scene->scene, r.target->scene->geometry,
-                                                               *r.target->accel, st.camera, st.film(*r.target));
+            std::unique_ptr<Renderer> renderer = r.target->new_renderer(st.camera, st.film(*r.target));
             st.renderer = std::move(renderer);  // the old renderer goes before its target
             st.target = r.target;
             st.pool.clear();
+            st.paged = r.target->scene->paged ? paged_status(*r.target->scene->paged, {}) : PagedStatus{};
+            std::lock_guard<std::mutex> lock(mutex_);
+            status_.paged = st.paged;
             return;
         }
         if (!st.renderer) return;
@@ -442,13 +508,16 @@ void Session::apply_requests(RenderState& st, const RenderRequests& r) {
 // until the next change).
 bool Session::run_pass(RenderState& st) {
     pass_is_preview_.store(st.moving);
+    PagedScene* paged = st.target->scene->paged.get();
     try {
+        if (paged) st.caches_before = paged->caches();
         if (!st.renderer->render_pass({}, &cancel_)) return false;
     } catch (const Error& e) {
         st.halted = true;
         report_error(e.what());
         return false;
     }
+    if (paged) st.paged = paged_status(*paged, st.caches_before);
     if (st.moving) st.preview_done = true;
     else st.full_pass_ms = st.renderer->last_pass().pass_ms;
     return true;
@@ -476,6 +545,7 @@ void Session::publish_frame(RenderState& st) {
             std::lock_guard<std::mutex> lock(mutex_);
             frame_ = std::move(frame);
             status_.full_pass_ms = st.full_pass_ms;
+            status_.paged = st.paged;
         }
         wake();
     } catch (const Error& e) {

@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "rayforge/accel/accel.h"
+#include "rayforge/ooc/paged_scene.h"
 #include "rayforge/render/display.h"
 #include "rayforge/render/render.h"
 #include "rayforge/scene/scene.h"
@@ -51,9 +52,16 @@ struct SceneData {
     SceneSource source;
     Scene scene;
     SceneGeometry geometry;
+    // A paged scene file (.rfpack) is opened, not loaded: its triangles stay
+    // in the file, `scene` and `geometry` stay empty, and its renderer reads
+    // pages through this scene's caches (which is why it is not const).
+    std::shared_ptr<PagedScene> paged;
     Camera camera;          // the start camera
     float size = 1.0f;      // the bounds' diagonal
-    double load_ms = 0.0;   // file to flat triangles
+    double load_ms = 0.0;   // file to flat triangles (a paged scene: opening it)
+
+    [[nodiscard]] SceneKind kind() const { return paged ? SceneKind::Paged : SceneKind::InCore; }
+    [[nodiscard]] size_t triangles() const { return paged ? size_t(paged->info().triangles) : geometry.size(); }
 };
 
 // One displayed image and what it shows.
@@ -81,6 +89,16 @@ struct Versions {
     }
 };
 
+// A paged scene's page caches (geometry, attributes, textures): their
+// state after the last pass, with the counts (requests, hits, bytes read,
+// evictions, ...) of that pass alone.
+struct PagedStatus {
+    std::vector<PageCacheReport> caches;  // empty for an in-core scene
+    size_t cache_bytes = 0;      // the caches' memory together
+    size_t budget_bytes = 0;     // their budgets together
+    size_t resident_bytes = 0;   // the always-resident levels (grid, middle BVHs, tables), outside the budget
+};
+
 struct SessionStatus {
     // The scene shown (empty before the first one is ready).
     std::string scene_name;
@@ -91,8 +109,9 @@ struct SessionStatus {
     std::string job;             // "loading sponza", "building bvh/sbvh/bvh8"
     double job_progress = 0.0;   // 0..1
     double job_seconds = 0.0;
-    // The structure rendering now.
+    // The structure rendering now (a paged scene's: the resident levels).
     AccelStats accel;
+    PagedStatus paged;
     // The last error (a failed load, build or setting), and how many so far.
     std::string error;
     uint64_t error_count = 0;
@@ -111,6 +130,9 @@ struct SessionConfig {
     // priority than the caller's, so a window stays responsive while they
     // fill the cores.
     bool yield_to_window = false;
+    // The page caches' budgets of every paged scene opened (the threads are
+    // the settings' when it opens).
+    PagedSceneOptions paged;
 };
 
 class Session {
@@ -156,6 +178,7 @@ private:
     bool run_pass(RenderState& st);
     void publish_frame(RenderState& st);
     void run_load(const SceneSource& source);
+    void open_paged(SceneData& data, const ViewSettings& settings) const;
     void run_build(std::shared_ptr<const SceneData> data, const BuildOptions& options);
     void hand_over(std::shared_ptr<const SceneData> data, std::shared_ptr<const Accel> accel);
     void report_error(const std::string& message);

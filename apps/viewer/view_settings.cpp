@@ -224,6 +224,15 @@ const std::vector<Setting>& settings_table() {
     return table;
 }
 
+// A paged scene's structure is in its file and its renderer runs on the
+// CPU: refuse what would not apply rather than accept and ignore it.
+void check_paged(const SettingInfo& info, const ViewSettings& changed) {
+    if (!applies_to(info, SceneKind::Paged))
+        throw Error("structure settings do not apply to a paged scene (its structure is in the file)");
+    if (changed.render.device.is_cuda())
+        throw Error("paged scenes render on the CPU in this version (device cpu)");
+}
+
 const Setting& setting_or_throw(const std::string& key) {
     for (const Setting& s : settings_table())
         if (s.info.key == key) return s;
@@ -249,15 +258,20 @@ const SettingInfo* find_setting(const std::string& key) {
     return nullptr;
 }
 
+bool applies_to(const SettingInfo& info, SceneKind scene) {
+    return scene == SceneKind::InCore || info.group != "structure";
+}
+
 std::string get_setting(const ViewSettings& settings, const std::string& key) {
     return setting_or_throw(key).get(settings);
 }
 
-void set_setting(ViewSettings& settings, const std::string& key, const std::string& value) {
+void set_setting(ViewSettings& settings, const std::string& key, const std::string& value, SceneKind scene) {
     const Setting& setting = setting_or_throw(key);
     ViewSettings changed = settings;
     try {
         setting.set(changed, value);
+        if (scene == SceneKind::Paged) check_paged(setting.info, changed);
         validate_build_options(changed.build);
         validate_render_options(film_options(changed, false, 1));
     } catch (const Error& e) {

@@ -34,18 +34,28 @@ struct SettingInfo {
     std::string help;
 };
 
+// What the settings are for. A paged scene (rf::open_paged_scene) brings
+// its structure in its file and renders on the CPU only, so the structure
+// settings and a CUDA device do not apply to it.
+enum class SceneKind : uint8_t { InCore, Paged };
+
 // Every setting, in panel order.
 const std::vector<SettingInfo>& setting_infos();
 // nullptr for an unknown key.
 const SettingInfo* find_setting(const std::string& key);
+// Whether a scene of this kind takes the setting at all (a paged scene
+// takes no structure setting).
+bool applies_to(const SettingInfo& info, SceneKind scene);
 
 // The value as set_setting reads it (numbers in the shortest form that
 // reads back the same).
 std::string get_setting(const ViewSettings& settings, const std::string& key);
 // Parses and applies `value`; the result is checked with the engine's own
-// option checks. Throws rf::Error naming the key for an unknown key or a
-// bad value, leaving `settings` unchanged.
-void set_setting(ViewSettings& settings, const std::string& key, const std::string& value);
+// option checks. Throws rf::Error naming the key for an unknown key, a bad
+// value, or a setting the shown scene's kind does not take (a structure
+// setting or a CUDA device for a paged scene), leaving `settings` unchanged.
+void set_setting(ViewSettings& settings, const std::string& key, const std::string& value,
+                 SceneKind scene = SceneKind::InCore);
 
 // What turning `from` into `to` costs: Effect bits, 0 when nothing changed.
 unsigned changes_between(const ViewSettings& from, const ViewSettings& to);

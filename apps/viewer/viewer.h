@@ -20,6 +20,7 @@ struct ViewerConfig {
     ViewSettings settings;       // from the render options on the command line
     // Lights, the start camera and the first scene's settings (SessionConfig::prepare).
     std::function<void(SceneData& data, bool first, ViewSettings& settings)> prepare;
+    PagedSceneOptions paged;     // the page caches' budgets of paged scenes (--memory-budget, ...)
     std::optional<Script> script;  // --script FILE, parsed: run it, then exit with its verdict
     std::string bookmarks = "rayforge-bookmarks.json";
     int window_width = 0, window_height = 0;  // 0 = the image size

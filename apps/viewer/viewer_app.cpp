@@ -22,6 +22,10 @@ double seconds_between(Clock::time_point a, Clock::time_point b) {
     return std::chrono::duration<double>(b - a).count();
 }
 
+SceneKind kind_of(const SceneSource& source) {
+    return is_paged_scene_file(source.path) ? SceneKind::Paged : SceneKind::InCore;
+}
+
 std::vector<std::string> usable_devices() {
     std::vector<std::string> devices{"cpu"};
     for (const DeviceInfo& d : list_cuda_devices().devices) devices.push_back("cuda:" + std::to_string(d.index));
@@ -44,8 +48,14 @@ App::App(const ViewerConfig& config, GlWindow& window)
     }
     if (!catalog_.problem.empty()) show_message(catalog_.problem, true);
     const SceneSource first = catalog_.resolve(config.scene);  // a name that names nothing fails the start
-    session_ = std::make_unique<Session>(SessionConfig{settings_, config.prepare, true});
+    SessionConfig session;
+    session.settings = settings_;
+    session.prepare = config.prepare;
+    session.yield_to_window = true;
+    session.paged = config.paged;
+    session_ = std::make_unique<Session>(std::move(session));
     session_->set_wake([] { GlWindow::wake(); });
+    loading_kind_ = kind_of(first);
     session_->load(first);
 }
 
@@ -117,6 +127,7 @@ void App::frame(Clock::time_point now) {
 
 // New frames, a new scene, new errors.
 void App::follow_session(Clock::time_point now) {
+    if (!session_->versions().jobs_pending) loading_kind_.reset();  // loaded or failed: the shown scene decides
     const std::shared_ptr<const SceneData> scene = session_->scene();
     if (scene && scene->id != scene_id_) adopt_scene(scene);
     follow_errors();
@@ -179,11 +190,21 @@ void App::reset_camera() {
 }
 
 void App::set(const std::string& key, const std::string& value) {
-    set_setting(settings_, key, value);
+    set_setting(settings_, key, value, scene_kind());
     session_->set_settings(settings_);
 }
 
-void App::load(const std::string& name_or_path) { session_->load(catalog_.resolve(name_or_path)); }
+SceneKind App::scene_kind() const {
+    if (loading_kind_) return *loading_kind_;
+    const std::shared_ptr<const SceneData> scene = session_->scene();
+    return scene ? scene->kind() : SceneKind::InCore;
+}
+
+void App::load(const std::string& name_or_path) {
+    const SceneSource source = catalog_.resolve(name_or_path);
+    loading_kind_ = kind_of(source);
+    session_->load(source);
+}
 
 void App::drop(const std::string& path) {
     try {

@@ -44,8 +44,13 @@ public:
     // resolution at once.
     void camera_placed();
     void reset_camera();
-    // Throws rf::Error for an unknown key or a bad value.
+    // Throws rf::Error for an unknown key, a bad value, or a setting the
+    // shown scene does not take (structure settings of a paged scene).
     void set(const std::string& key, const std::string& value);
+    // In core or paged: the scene a pending load was asked for, else the
+    // session's newest scene (before any, in core). Settings typed right
+    // after a load are checked for the scene they will apply to.
+    [[nodiscard]] SceneKind scene_kind() const;
     // A views.json name, a file or builtin:NAME; throws rf::Error when it names nothing.
     void load(const std::string& name_or_path);
     // As a file dropped onto the window: failures become the window's error line.
@@ -93,6 +98,7 @@ private:
     void draw_camera_section();
     void draw_bookmarks_section();
     void draw_structure_section(const SessionStatus& status);
+    void draw_paged_caches(const PagedStatus& paged);
     void setting_widget(const SettingInfo& info);
     void setting_group(const char* group);
     void draw_overlay(Clock::time_point now);   // viewer_panel.cpp
@@ -120,6 +126,7 @@ private:
     Clock::time_point last_move_;
     Clock::time_point last_tick_;
     uint64_t last_camera_version_shown_ = 0;
+    std::optional<SceneKind> loading_kind_;  // of the scene last asked for, while jobs are pending
 
     struct PendingShot {
         std::string path;

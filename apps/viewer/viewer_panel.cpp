@@ -26,8 +26,21 @@ std::string format(const char* fmt, double value) {
 
 std::string mib(size_t bytes) { return format("%.1f MiB", double(bytes) / (1024.0 * 1024.0)); }
 
+// "512 B", "3.5 KiB", "1.2 MiB", "2.0 GiB".
+std::string bytes_text(double bytes) {
+    const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+    int u = 0;
+    for (; bytes >= 1024.0 && u < 4; ++u) bytes /= 1024.0;
+    return format(u == 0 ? "%.0f " : "%.1f ", bytes) + units[u];
+}
+
 // Whether a setting means anything for the current structure and device.
-bool relevant(const std::string& key, const ViewSettings& s) {
+// A paged scene takes no structure setting, and its path tracer is always
+// a wavefront.
+bool relevant(const SettingInfo& info, const ViewSettings& s, SceneKind scene) {
+    if (!applies_to(info, scene)) return false;
+    const std::string& key = info.key;
+    if (scene == SceneKind::Paged && key == "wavefront") return false;
     const bool bvh = s.build.structure == Structure::Bvh;
     const Builder b = s.build.builder;
     if (key == "builder" || key == "layout" || key == "optimize" || key == "leaf-size") return bvh;
@@ -73,7 +86,7 @@ void App::setting_widget(const SettingInfo& info) {
     } else if (!info.choices.empty()) {
         combo(info.choices);
     } else if (info.key == "device") {
-        combo(devices_);
+        combo(scene_kind() == SceneKind::Paged ? std::vector<std::string>{"cpu"} : devices_);
     } else {
         std::string edited = value;
         if (ImGui::InputText(info.key.c_str(), &edited, ImGuiInputTextFlags_EnterReturnsTrue)) apply(edited);
@@ -83,13 +96,15 @@ void App::setting_widget(const SettingInfo& info) {
 }
 
 void App::setting_group(const char* group) {
+    const SceneKind scene = scene_kind();
     for (const SettingInfo& info : setting_infos())
-        if (info.group == group && relevant(info.key, settings_)) setting_widget(info);
+        if (info.group == group && relevant(info, settings_, scene)) setting_widget(info);
 }
 
 void App::draw_scene_section(const SessionStatus& status) {
-    ImGui::Text("%s: %zu triangles, loaded in %.0f ms",
-                status.scene_name.empty() ? "(loading)" : status.scene_name.c_str(), status.triangles, status.load_ms);
+    const bool paged = scene_kind() == SceneKind::Paged;
+    ImGui::Text("%s: %zu triangles, %s in %.0f ms", status.scene_name.empty() ? "(loading)" : status.scene_name.c_str(),
+                status.triangles, paged ? "paged, opened" : "loaded", status.load_ms);
     if (ImGui::BeginCombo("switch to", "...")) {
         for (const std::string& name : catalog_.shared_names)
             if (ImGui::Selectable(name.c_str())) drop(name);
@@ -156,6 +171,10 @@ void App::draw_bookmarks_section() {
 }
 
 void App::draw_structure_section(const SessionStatus& status) {
+    if (scene_kind() == SceneKind::Paged)
+        ImGui::TextWrapped("%s, from the paged file: top grid, middle BVHs, page BVHs. Structure settings do not "
+                           "apply; the page caches' budgets are set at start (--memory-budget).",
+                           status.accel.name.c_str());
     setting_group("structure");
     if (!status.busy) return;
     ImGui::ProgressBar(float(status.job_progress), ImVec2(-1, 0), format("%.1f s", status.job_seconds).c_str());
@@ -210,11 +229,34 @@ void App::draw_overlay(Clock::time_point now) {
                 status.motion_divisor);
     ImGui::Text("pass %d / %d  %.1f ms  %.1f Mrays/s", s.passes, s.target_passes, s.ms_per_pass, s.mrays_per_s);
     ImGui::Text("image %dx%d  camera -> image %.0f ms", s.width, s.height, s.camera_latency_ms);
-    ImGui::Text("%s: build %.1f ms, SAH %.2f", status.accel.name.c_str(), status.accel.build_ms, status.accel.sah_cost);
-    ImGui::Text("memory %s (structure %s)", mib(resident_bytes()).c_str(),
-                mib(status.accel.bytes + status.accel.device_bytes).c_str());
+    if (status.paged.caches.empty()) {
+        ImGui::Text("%s: build %.1f ms, SAH %.2f", status.accel.name.c_str(), status.accel.build_ms,
+                    status.accel.sah_cost);
+        ImGui::Text("memory %s (structure %s)", mib(resident_bytes()).c_str(),
+                    mib(status.accel.bytes + status.accel.device_bytes).c_str());
+    } else {
+        ImGui::Text("%s, page caches in the last pass:", status.accel.name.c_str());
+        draw_paged_caches(status.paged);
+    }
     if (status.busy) ImGui::Text("%s %.0f%%", status.job.c_str(), 100.0 * status.job_progress);
     ImGui::End();
+}
+
+// A paged scene's caches: the last pass's hit rate and reads, how full
+// each is, and the memory against the budget.
+void App::draw_paged_caches(const PagedStatus& paged) {
+    for (const PageCacheReport& c : paged.caches) {
+        if (c.pages == 0) {
+            ImGui::Text("%-10s none in the file", c.name.c_str());
+            continue;
+        }
+        ImGui::Text("%-10s %5.1f%% hit  %s read  %u/%u cached  %s of %s", c.name.c_str(), 100.0 * c.hit_rate(),
+                    bytes_text(double(c.bytes_read)).c_str(), c.cached, c.slots,
+                    bytes_text(double(c.memory_bytes)).c_str(), bytes_text(double(c.budget_bytes)).c_str());
+    }
+    ImGui::Text("memory %s (caches %s of %s budget, resident levels %s)", mib(resident_bytes()).c_str(),
+                bytes_text(double(paged.cache_bytes)).c_str(), bytes_text(double(paged.budget_bytes)).c_str(),
+                bytes_text(double(paged.resident_bytes)).c_str());
 }
 
 void App::draw_messages(Clock::time_point now) {

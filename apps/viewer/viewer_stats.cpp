@@ -17,6 +17,25 @@ size_t resident_bytes() {
     return resident_pages * size_t(sysconf(_SC_PAGESIZE));
 }
 
+namespace {
+
+// A paged scene's caches: per cache the last pass's counts and the cache's
+// state, and the memory against the budget.
+nlohmann::json paged_json(const PagedStatus& p) {
+    nlohmann::json caches = nlohmann::json::object();
+    for (const PageCacheReport& c : p.caches)
+        caches[c.name] = {{"hit_rate", c.hit_rate()},   {"requests", c.requests},     {"bytes_read", c.bytes_read},
+                          {"pages_read", c.pages_read}, {"evictions", c.evictions},   {"cached", c.cached},
+                          {"slots", c.slots},           {"pages", c.pages},           {"memory_bytes", c.memory_bytes},
+                          {"budget_bytes", c.budget_bytes}};
+    return {{"memory_bytes", p.cache_bytes},
+            {"budget_bytes", p.budget_bytes},
+            {"resident_bytes", p.resident_bytes},
+            {"caches", caches}};
+}
+
+}  // namespace
+
 void RateMeter::add(Clock::time_point t) {
     times_.push_back(t);
     while (!times_.empty() && std::chrono::duration<double>(t - times_.front()).count() > window_s_) times_.pop_front();
@@ -46,7 +65,7 @@ void ViewerStats::frame_shown(const Frame& frame, Clock::time_point now, bool fi
 
 std::string ViewerStats::json(const SessionStatus& status, Clock::time_point now) const {
     const auto finite = [](double v) { return std::isfinite(v) ? v : -1.0; };
-    const nlohmann::json j = {
+    nlohmann::json j = {
         {"scene", status.scene_name},
         {"triangles", status.triangles},
         {"structure", status.accel.name},
@@ -72,6 +91,7 @@ std::string ViewerStats::json(const SessionStatus& status, Clock::time_point now
         {"resident_mib", double(resident_bytes()) / (1024.0 * 1024.0)},
         {"errors", status.error_count},
     };
+    if (!status.paged.caches.empty()) j["paged"] = paged_json(status.paged);
     return j.dump();
 }
 

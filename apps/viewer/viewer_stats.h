@@ -1,8 +1,8 @@
 // What the statistics overlay shows and `print-stats` prints: frame rates
 // (still, at full resolution, and moving, in previews), pass times and ray
-// rates, the structure's build time and SAH cost, memory, the delay from a
-// camera change to its first image, and the longest the window went
-// without drawing (a blocked window).
+// rates, the structure's build time and SAH cost (a paged scene: its page
+// caches), memory, the delay from a camera change to its first image, and
+// the longest the window went without drawing (a blocked window).
 #pragma once
 
 #include <algorithm>
