@@ -451,11 +451,10 @@ void collect_counts(const PagedScene& scene, const std::vector<double>& run_ms, 
                     PagedRunFigures& out) {
     out.runs = int(run_ms.size());
     out.ms = median(run_ms);
-    double total_ms = 0.0;
-    for (double ms : run_ms) total_ms += ms;
     const double runs = std::max(1.0, double(run_ms.size()));
+    for (double ms : run_ms) out.mean_ms += ms / runs;
     const double rays = double(rays_per_run) * runs;
-    out.mrays_per_s = total_ms > 0.0 ? rays / (total_ms * 1e3) : 0.0;
+    out.mrays_per_s = out.ms > 0.0 ? double(rays_per_run) / (out.ms * 1e3) : 0.0;
     uint64_t bytes = 0;
     out.caches.clear();
     for (const PageCacheReport& c : scene.caches()) {
@@ -772,12 +771,12 @@ void print_paged_tables(std::ostream& out, const PagedFileResult& result, const 
     out << '\n';
     print_table_header(out);
     for (const PagedBenchRow& r : result.rows) print_row(out, r);
-    out << "ms, Mrays/s: warm (median run; path: median pass); cold: the first run from empty caches (path: the "
-           "first pass)\n"
+    out << "ms, Mrays/s: warm, the median run (path: the median pass, and all rays over the time of passes 2.."
+        << config.passes << "); cold: the first run from empty caches (path: the first pass)\n"
            "slower: in-core Mrays/s / paged (ray sets), ms per pass / the f = 1 run's (path); hit: each manager's hit "
            "rate, warm\n"
-           "B/ray: bytes read per ray, warm and cold; io, trav ms: reading pages and traversing, per warm run (path: "
-           "per pass); iter: query-loop iterations per batch (path: per pass)\n"
+           "B/ray: bytes read per ray, warm and cold; io, trav ms: reading pages and traversing, the mean per warm "
+           "run (path: per pass); iter: query-loop iterations per batch (path: per pass)\n"
            "hits: paged - in-core closest hits (shadow: occluded rays); agree: rays with the same answer and primitive "
            "as in core\n";
     out.flush();
@@ -792,7 +791,7 @@ Json run_json(const PagedRunFigures& r) {
                           {"requests", c.requests}, {"hits", c.hits}, {"hit_rate", c.hit_rate()},
                           {"pages_read", c.pages_read}, {"bytes_read", c.bytes_read}, {"evictions", c.evictions},
                           {"io_ms", c.io_ms}, {"manage_ms", c.manage_ms}});
-    return {{"runs", r.runs}, {"ms", r.ms}, {"mrays_per_s", r.mrays_per_s}, {"bytes_per_ray", r.bytes_per_ray},
+    return {{"runs", r.runs}, {"ms", r.ms}, {"mean_ms", r.mean_ms}, {"mrays_per_s", r.mrays_per_s}, {"bytes_per_ray", r.bytes_per_ray},
             {"io_ms", r.io_ms}, {"manage_ms", r.manage_ms}, {"traversal_ms", r.traversal_ms}, {"sort_ms", r.sort_ms},
             {"iterations_per_loop", r.iterations_per_loop}, {"iterations_per_ray", r.iterations_per_ray},
             {"caches", caches}};

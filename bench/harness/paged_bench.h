@@ -49,9 +49,10 @@ struct PagedCacheFigures {
 struct PagedRunFigures {
     int runs = 0;
     double ms = 0.0;             // median run (path: median pass)
-    double mrays_per_s = 0.0;
+    double mean_ms = 0.0;
+    double mrays_per_s = 0.0;    // rays / the median run (path: all rays / the passes' time)
     double bytes_per_ray = 0.0;  // all managers
-    double io_ms = 0.0, manage_ms = 0.0, traversal_ms = 0.0, sort_ms = 0.0;  // per run
+    double io_ms = 0.0, manage_ms = 0.0, traversal_ms = 0.0, sort_ms = 0.0;  // mean per run
     double iterations_per_loop = 0.0;  // query-loop iterations per batch call (path: per pass)
     double iterations_per_ray = 0.0;   // ray iterations / queries: how often a ray is resumed
     std::vector<PagedCacheFigures> caches;

@@ -27,6 +27,7 @@
 #include <cstring>
 
 #include "core/assert.h"
+#include "core/rounded_arithmetic.h"
 #include "ooc/pack_format.h"
 #include "ooc/page_table.h"
 #include "rayforge/accel/bvh/bvh.h"
@@ -147,8 +148,10 @@ struct GridWalk {
     int step[3];
     float next[3];  // distance to the next boundary plane per axis
 
+    // Rounded products and sums (core/rounded_arithmetic.h): no fused
+    // multiply-add on the device, so both backends walk the same cells.
     RF_HDI float plane(const PagedSceneView& v, int axis, int i) const {
-        return v.grid_bounds.lo[axis] + float(i) * v.cell_size[axis];
+        return add_rn(v.grid_bounds.lo[axis], mul_rn(float(i), v.cell_size[axis]));
     }
     RF_HDI void init(const PagedSceneView& v, const Ray& ray, const int start[3]) {
         for (int a = 0; a < 3; ++a) {
@@ -176,9 +179,9 @@ RF_HDI bool start_cell(const PagedSceneView& v, const Ray& ray, float tmax, int 
     const rf::detail::SlabRay slab = rf::detail::SlabRay::make(ray);
     float entry;
     if (!rf::detail::slab_test(slab, v.grid_bounds, ray.tmin, tmax, entry)) return false;
-    const Vec3f p = ray.org + ray.dir * entry;
     for (int a = 0; a < 3; ++a) {
-        const int c = int(floorf((p[a] - v.grid_bounds.lo[a]) / v.cell_size[a]));
+        const float p = add_rn(ray.org[a], mul_rn(ray.dir[a], entry));
+        const int c = int(floorf((p - v.grid_bounds.lo[a]) / v.cell_size[a]));
         out[a] = c < 0 ? 0 : (c >= v.res[a] ? v.res[a] - 1 : c);
     }
     return true;
