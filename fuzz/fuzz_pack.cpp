@@ -10,7 +10,8 @@
 // counts, offsets and sizes, bounds and decode transforms (NaN, inf,
 // degenerate), texture sizes, material texture ids. Bit 2 gives the page
 // managers two slots instead of one, bits 3-4 pick the integrator of the
-// final render.
+// final render (path, Whitted, AO, normals), bit 5 its camera (the file's,
+// else one framing the scene's bounds).
 //
 // What must succeed or throw rf::Error, in this order (a failure of one step
 // does not skip the next):
@@ -24,7 +25,9 @@
 //      of the hits (PagedEngine::fetch_shading); again from cold caches;
 //   4. every texture sampled at a few uvs on every level and at a few
 //      levels of detail;
-//   5. a 4x4 render of one pass with the file's camera.
+//   5. a 4x4 render of one pass (make_paged_renderer).
+// FUZZ_PACK_TRACE=1 in the environment prints each step's outcome (and the
+// rf::Error it threw) to stderr, for reading a reproducer.
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
@@ -56,6 +59,20 @@ using namespace rf::pack;
 constexpr uint8_t kFixChecksums = 1;
 constexpr uint8_t kFixFileSize = 2;
 constexpr uint8_t kTwoSlots = 4;
+constexpr uint8_t kFileCamera = 32;
+
+const bool g_trace = std::getenv("FUZZ_PACK_TRACE") != nullptr;
+
+// One step of the contract: success or rf::Error (anything else escapes to libFuzzer).
+template <class F>
+void step(const char* name, F&& run) {
+    try {
+        run();
+        if (g_trace) std::fprintf(stderr, "fuzz_pack: %s: ok\n", name);
+    } catch (const rf::Error& e) {
+        if (g_trace) std::fprintf(stderr, "fuzz_pack: %s: rf::Error: %s\n", name, e.what());
+    }
+}
 
 // No budget derived from the file goes past this (the fuzz budget is 256 MB).
 constexpr size_t kMaxManagerBudget = size_t(64) << 20;
@@ -109,7 +126,7 @@ volatile uint32_t g_sink = 0;
 void read_every_page(const PackFile& file) {
     std::vector<uint8_t> bytes, scratch;
     for (uint64_t i = 0; i < file.directory().size(); ++i) {
-        rf::fuzz::expect_success_or_rf_error([&] {
+        step("read_page", [&] {
             file.read_page(i, bytes, scratch);
             if (i >= file.header().geometry_pages) return;
             const GeometryPageView v = view_geometry_page(bytes, "page " + std::to_string(i));
@@ -193,13 +210,18 @@ void trace(PagedScene& scene, PagedSceneImpl& impl) {
         scene.accel().intersect(rays, hits);
         scene.accel().occluded(rays, occluded);
         impl.engine().fetch_shading(hits, records);
-        for (size_t i = 0; i < hits.size(); ++i)
+        uint32_t found = 0, blocked = 0;
+        for (size_t i = 0; i < hits.size(); ++i) {
             if (hits[i].found()) g_sink = g_sink + records[i].material + uint32_t(records[i].flags);
+            found += hits[i].found() ? 1 : 0;
+            blocked += occluded[i];
+        }
+        if (g_trace) std::fprintf(stderr, "fuzz_pack: %zu rays: %u hits, %u occluded\n", rays.size(), found, blocked);
         scene.clear_caches();  // the second round from cold caches
     }
     const Hit one = scene.accel().intersect(rays.front());
-    const bool blocked = scene.accel().occluded(rays.back());
-    g_sink = g_sink + one.prim + uint32_t(blocked);
+    const bool any = scene.accel().occluded(rays.back());
+    g_sink = g_sink + one.prim + uint32_t(any);
     (void)scene.caches();
     (void)scene.query_stats();
     (void)scene.memory_bytes();
@@ -217,9 +239,21 @@ void sample_textures(const PagedSceneImpl& impl) {
             for (float lod : lods) sum += sample_texture_at(t, uv, lod).w;
     }
     g_sink = g_sink + uint32_t(sum != sum);
+    if (g_trace) std::fprintf(stderr, "fuzz_pack: %zu textures sampled\n", impl.textures().size());
 }
 
-// Step 5: a 4x4 render, one pass, with the file's camera.
+// A camera looking at the middle of `bounds` from the +z side, close enough
+// that a 4x4 image sees the scene (the file's camera may frame it loosely).
+Camera camera_on(const Box3f& bounds) {
+    Camera c;
+    const Vec3f centre = (bounds.lo + bounds.hi) * 0.5f;
+    const Vec3f extent = bounds.hi - bounds.lo;
+    c.target = centre;
+    c.eye = centre + Vec3f(0.05f * extent.x, 0.1f * extent.y, 0.5f * extent.z + 1.2f * std::max(extent.x, extent.y));
+    return c;
+}
+
+// Step 5: a 4x4 render, one pass, with the file's camera or one on the scene's bounds.
 void render(PagedScene& scene, uint8_t mode) {
     RenderOptions options;
     options.width = 4;
@@ -231,7 +265,8 @@ void render(PagedScene& scene, uint8_t mode) {
     const IntegratorKind kinds[] = {IntegratorKind::Path, IntegratorKind::Whitted, IntegratorKind::AmbientOcclusion,
                                     IntegratorKind::Normals};
     options.integrator = kinds[(mode >> 3) & 3];
-    const std::unique_ptr<Renderer> renderer = make_paged_renderer(scene, scene.camera(), options);
+    const Camera camera = (mode & kFileCamera) ? scene.camera() : camera_on(scene.info().bounds);
+    const std::unique_ptr<Renderer> renderer = make_paged_renderer(scene, camera, options);
     renderer->render_pass();
     g_sink = g_sink + uint32_t(renderer->image().pixels.size());
 }
@@ -247,7 +282,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     const std::string path = rf::fuzz::write_scratch("in.rfpack", bytes.data(), bytes.size());
 
     std::unique_ptr<PackFile> file;
-    rf::fuzz::expect_success_or_rf_error([&] {
+    step("PackFile", [&] {
         file = std::make_unique<PackFile>(path);
         (void)file->camera();
         (void)file->environment();
@@ -255,15 +290,15 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         read_every_page(*file);
     });
     if (!file) return 0;  // open_paged_scene opens the same way; nothing further can open
-    rf::fuzz::expect_success_or_rf_error([&] { (void)decode_paged_geometry(path); });
+    step("decode_paged_geometry", [&] { (void)decode_paged_geometry(path); });
 
     std::unique_ptr<PagedScene> scene;
-    rf::fuzz::expect_success_or_rf_error([&] { scene = open_paged_scene(path, scene_options(file.get(), mode)); });
+    step("open_paged_scene", [&] { scene = open_paged_scene(path, scene_options(file.get(), mode)); });
     if (!scene) return 0;
     auto& impl = dynamic_cast<PagedSceneImpl&>(*scene);
     (void)scene->info();
-    rf::fuzz::expect_success_or_rf_error([&] { trace(*scene, impl); });
-    rf::fuzz::expect_success_or_rf_error([&] { sample_textures(impl); });
-    rf::fuzz::expect_success_or_rf_error([&] { render(*scene, mode); });
+    step("trace", [&] { trace(*scene, impl); });
+    step("sample_textures", [&] { sample_textures(impl); });
+    step("render", [&] { render(*scene, mode); });
     return 0;
 }

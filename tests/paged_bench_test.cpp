@@ -99,7 +99,10 @@ TEST(PagedBench, CliPrintsTheTable) {
     const test::CliResult run =
         test::run_cli("bench --paged " + path + " --res 32x24 --budgets 1,0.1 --passes 2 -q");
     ASSERT_EQ(run.exit_code, 0) << run.err;
-    EXPECT_NE(run.out.find("shadow set: none"), std::string::npos);
+    // builtin:spheres has a light: the shadow set aims at it.
+    EXPECT_NE(run.out.find("shadow set: "), std::string::npos);
+    EXPECT_EQ(run.out.find("shadow set: none"), std::string::npos);
+    EXPECT_NE(run.out.find("shadow "), std::string::npos);
     EXPECT_NE(run.out.find("machine: "), std::string::npos);
     EXPECT_NE(run.out.find("command: rayforge bench --paged"), std::string::npos);
     EXPECT_NE(run.out.find("workload"), std::string::npos);

@@ -330,10 +330,12 @@ std::unique_ptr<PagedScene> open_probe(const std::string& path, int threads) {
     return nullptr;
 }
 
-// The file's first light. PagedScene does not list a file's lights yet
-// (PagedSceneInfo::lights only counts them), so until it does the shadow
-// set is lit by PagedBenchConfig::light (--light-dir) or left out.
-std::optional<Light> file_light(const PagedScene&) { return std::nullopt; }
+// The file's first light: the shadow set aims at it (or at --light-dir).
+std::optional<Light> file_light(const PagedScene& scene) {
+    const std::vector<Light> lights = scene.lights();
+    if (lights.empty()) return std::nullopt;
+    return lights.front();
+}
 
 // What the probe opens learn about a file.
 struct FileProbe {
@@ -758,9 +760,7 @@ void print_paged_header(std::ostream& out, const PagedBenchConfig& config, const
 void print_paged_tables(std::ostream& out, const PagedFileResult& result, const PagedBenchConfig& config) {
     const PagedFileSummary& s = result.summary;
     out << '\n' << info_line(s);
-    const std::string no_light = s.info.lights == 0 ? "none (no light in the file)"
-                                 : "none (the file has " + std::to_string(s.info.lights) +
-                                       " lights, which rf::PagedScene does not list yet: give --light-dir)";
+    const std::string no_light = "none (no light in the file: give --light-dir)";
     out << "camera " << to_string(s.camera) << "; shadow set: " << (s.light.empty() ? no_light : s.light)
         << "\nin core: bvh/binned/bvh8 over the decoded pages (" << thousands(s.in_core_triangles)
         << " triangles, built in " << format("%.0f", s.in_core_build_ms) << " ms)\n";

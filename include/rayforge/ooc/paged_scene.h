@@ -19,6 +19,7 @@
 #include "rayforge/math/box.h"
 #include "rayforge/render/render.h"
 #include "rayforge/scene/camera.h"
+#include "rayforge/scene/light.h"
 #include "rayforge/scene/scene.h"
 
 namespace rf {
@@ -109,6 +110,7 @@ public:
     virtual ~PagedScene() = default;
     [[nodiscard]] virtual const PagedSceneInfo& info() const = 0;
     [[nodiscard]] virtual Camera camera() const = 0;  // the file's camera
+    [[nodiscard]] virtual std::vector<Light> lights() const = 0;  // the file's lights
     // Ray queries through the geometry cache (batches run the re-entrant
     // query loop; a single ray is a batch of one). Hit::prim identifies a
     // paged triangle (page * 8192 + slot), not an input triangle.
