@@ -25,7 +25,9 @@
 //      of the hits (PagedEngine::fetch_shading); again from cold caches;
 //   4. every texture sampled at a few uvs on every level and at a few
 //      levels of detail;
-//   5. a 4x4 render of one pass (make_paged_renderer).
+//   5. a 4x4 render of one pass (make_paged_renderer);
+//   6. rays with NaN and infinite components and from very far away (last,
+//      so that a reproducer of an earlier step does not stop here first).
 // FUZZ_PACK_TRACE=1 in the environment prints each step's outcome (and the
 // rf::Error it threw) to stderr, for reading a reproducer.
 #include <algorithm>
@@ -179,6 +181,23 @@ std::vector<Ray> test_rays(const Box3f& bounds) {
     return rays;
 }
 
+// Rays with NaN and infinite components, as a camera read from the file can
+// make them, and rays from very far away.
+std::vector<Ray> extreme_rays() {
+    const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+    const Ray rays[] = {
+        {{nan, 0, 5}, 0.0f, {0, 0, -1}, kInfinity},
+        {{0, 0, 5}, 0.0f, {0.1f, nan, -1}, kInfinity},
+        {{inf, 0.2f, 0.1f}, 0.0f, {-1, 0, 0}, kInfinity},
+        {{0, 0, 5}, nan, {0, 0, -1}, nan},
+        {{nan, nan, nan}, 0.0f, {nan, nan, nan}, kInfinity},
+        {{0, 0, 5}, 0.0f, {0, 0, -1}, inf},
+        {{-1e30f, 0.5f, 0.25f}, 0.0f, {1, 0, 0}, kInfinity},
+        {{3e37f, -2e37f, 1e37f}, 0.0f, {-0.8f, 0.53f, -0.27f}, kInfinity},
+    };
+    return {std::begin(rays), std::end(rays)};
+}
+
 // The budget that gives a manager of `pages` pages of `slot_bytes` exactly `slots` slots.
 size_t cache_budget(uint64_t pages, size_t slot_bytes, uint32_t slots) {
     const uint64_t b = pages * PageCache::kTableBytesPerPage + uint64_t(slots) * (slot_bytes + PageCache::kBookkeepingBytesPerSlot);
@@ -200,9 +219,8 @@ PagedSceneOptions scene_options(const PackFile* file, uint8_t mode) {
     return o;
 }
 
-// Step 3: the batch of rays, closest and any hit, then the hits' shading records.
-void trace(PagedScene& scene, PagedSceneImpl& impl) {
-    const std::vector<Ray> rays = test_rays(impl.file().resident().bounds);
+// Steps 3 and 6: a batch of rays, closest and any hit, then the hits' shading records.
+void trace(PagedScene& scene, PagedSceneImpl& impl, const std::vector<Ray>& rays) {
     std::vector<Hit> hits(rays.size());
     std::vector<uint8_t> occluded(rays.size());
     std::vector<ShadingTriangle> records(rays.size());
@@ -297,8 +315,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     if (!scene) return 0;
     auto& impl = dynamic_cast<PagedSceneImpl&>(*scene);
     (void)scene->info();
-    step("trace", [&] { trace(*scene, impl); });
+    step("trace", [&] { trace(*scene, impl, test_rays(impl.file().resident().bounds)); });
     step("sample_textures", [&] { sample_textures(impl); });
     step("render", [&] { render(*scene, mode); });
+    step("trace extreme rays", [&] { trace(*scene, impl, extreme_rays()); });
     return 0;
 }

@@ -52,6 +52,9 @@ void add_paged_read_options(CLI::App* cmd, PagedReadArgs& a) {
     cmd->add_option("--attribute-budget", a.attribute_budget,
                     "Paged scenes: the surface-attribute cache's budget (overrides its share)");
     cmd->add_option("--texture-budget", a.texture_budget, "Paged scenes: the texture-tile cache's budget (overrides its share)");
+    cmd->add_option("--batch", a.batch_paths,
+                    "Paged scenes: paths traced as one batch (1024..16777216, default 262144; about 250 bytes a path)")
+        ->check(CLI::Range(1024u, 16u << 20));
 }
 
 PagedSceneOptions paged_scene_options(const PagedReadArgs& a, int threads) {
@@ -61,6 +64,7 @@ PagedSceneOptions paged_scene_options(const PagedReadArgs& a, int threads) {
     if (!a.attribute_budget.empty()) o.attribute_budget = parse_bytes(a.attribute_budget, "--attribute-budget");
     if (!a.texture_budget.empty()) o.texture_budget = parse_bytes(a.texture_budget, "--texture-budget");
     o.threads = threads;
+    o.batch_paths = a.batch_paths;
     return o;
 }
 

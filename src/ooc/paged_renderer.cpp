@@ -33,9 +33,6 @@ namespace rf {
 
 namespace {
 
-// Paths (or pixels) per batch: large batches amortise page loads (§6.6: up to 16M rays).
-constexpr uint32_t kPagedChunk = 1u << 18;
-
 // The integrators' view of a paged scene: SceneView with shading records
 // from the current batch's table and textures read through the tile cache.
 struct PagedShadingView : SceneView {
@@ -128,9 +125,13 @@ private:
 
     bool wavefront_pass(const ProgressCallback& progress, const std::atomic<bool>* cancel, PassStats& stats);
     bool replay_pass(const ProgressCallback& progress, const std::atomic<bool>* cancel, PassStats& stats);
-    void replay_chunk(uint32_t first, uint32_t count, PassStats& stats);
+    // False when `cancel` was seen set between rounds.
+    bool replay_chunk(uint32_t first, uint32_t count, const std::atomic<bool>* cancel, PassStats& stats);
     // Closest hits of `rays` with their shading records appended to records_; each found hit's prim becomes its record.
     void trace_and_shade(std::span<const Ray> rays, std::span<Hit> hits);
+
+    // Paths (or pixels) per batch: large batches amortise page loads (§6.6: up to 16M rays).
+    [[nodiscard]] uint32_t chunk() const { return paged_.batch_paths(); }
 
     pack::PagedSceneImpl& paged_;
     PagedShadingView view_;
@@ -172,10 +173,10 @@ bool PagedRenderer::wavefront_pass(const ProgressCallback& progress, const std::
         },
         paged_.engine());
     cpu::CpuWavefront<PagedShadingView> wavefront(accel(), queries, view_, s, uint32_t(passes()), films(),
-                                                  std::min(pixels, kPagedChunk));
-    for (uint32_t first = 0; first < pixels; first += kPagedChunk) {
+                                                  std::min(pixels, chunk()));
+    for (uint32_t first = 0; first < pixels; first += chunk()) {
         if (cancel && cancel->load(std::memory_order_relaxed)) return false;
-        const uint32_t count = std::min(kPagedChunk, pixels - first);
+        const uint32_t count = std::min(chunk(), pixels - first);
         wavefront.start_chunk(first);
         run_wavefront(wavefront, s, count, stats.waves);
         if (progress) progress(double(first + count) / double(pixels));
@@ -188,16 +189,16 @@ bool PagedRenderer::wavefront_pass(const ProgressCallback& progress, const std::
 
 bool PagedRenderer::replay_pass(const ProgressCallback& progress, const std::atomic<bool>* cancel, PassStats& stats) {
     const uint32_t pixels = uint32_t(settings().width) * uint32_t(settings().height);
-    for (uint32_t first = 0; first < pixels; first += kPagedChunk) {
+    for (uint32_t first = 0; first < pixels; first += chunk()) {
         if (cancel && cancel->load(std::memory_order_relaxed)) return false;
-        const uint32_t count = std::min(kPagedChunk, pixels - first);
-        replay_chunk(first, count, stats);
+        const uint32_t count = std::min(chunk(), pixels - first);
+        if (!replay_chunk(first, count, cancel, stats)) return false;
         if (progress) progress(double(first + count) / double(pixels));
     }
     return true;
 }
 
-void PagedRenderer::replay_chunk(uint32_t first, uint32_t count, PassStats& stats) {
+bool PagedRenderer::replay_chunk(uint32_t first, uint32_t count, const std::atomic<bool>* cancel, PassStats& stats) {
     const IntegratorSettings& s = settings();
     const uint32_t sample = uint32_t(passes());
     const Films out = films();
@@ -212,6 +213,7 @@ void PagedRenderer::replay_chunk(uint32_t first, uint32_t count, PassStats& stat
     std::vector<uint32_t> closest_of, any_of;
     records_.clear();
     while (!open.empty()) {
+        if (cancel && cancel->load(std::memory_order_relaxed)) return false;
         view_.shading_triangles = records_.data();
         parallel::for_range(size_t(0), open.size(), size_t(64), [&](size_t lo, size_t hi) {
             for (size_t j = lo; j < hi; ++j) {
@@ -250,6 +252,7 @@ void PagedRenderer::replay_chunk(uint32_t first, uint32_t count, PassStats& stat
             if (blocked[j]) open[kept++] = open[j];
         open.resize(kept);
     }
+    return true;
 }
 
 }  // namespace

@@ -84,7 +84,7 @@ AccelStats PagedAccel::stats() const {
 }
 
 PagedSceneImpl::PagedSceneImpl(const std::string& path, const PagedSceneOptions& options)
-    : file_(std::make_shared<const PackFile>(path)) {
+    : file_(std::make_shared<const PackFile>(path)), batch_paths_(options.batch_paths) {
     const Budgets budgets = split_budget(options, file_->header().texture_pages > 0);
     engine_ = std::make_unique<PagedEngine>(file_, EngineBudgets{budgets.geometry, budgets.attributes}, options.threads);
     textures_ = std::make_unique<TextureTileCache>(*file_, budgets.textures, "textures");
@@ -178,6 +178,8 @@ bool is_paged_scene_file(const std::string& path) {
 std::unique_ptr<PagedScene> open_paged_scene(const std::string& path, const PagedSceneOptions& options) {
     if (options.memory_budget == 0 && (!options.geometry_budget || !options.attribute_budget))
         throw Error("paged scene: the memory budget must be positive");
+    if (options.batch_paths < 1024 || options.batch_paths > (16u << 20))
+        throw Error("paged scene: the batch must hold 1024 to 16M paths, got " + std::to_string(options.batch_paths));
     return std::make_unique<pack::PagedSceneImpl>(path, options);
 }
 

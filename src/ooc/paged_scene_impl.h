@@ -47,6 +47,7 @@ public:
     [[nodiscard]] const PackFile& file() const { return *file_; }
     [[nodiscard]] PagedEngine& engine() { return *engine_; }
     [[nodiscard]] const std::vector<PagedTexture>& textures() const { return paged_textures_; }
+    [[nodiscard]] uint32_t batch_paths() const { return batch_paths_; }
 
 private:
     void fill_info(const std::string& path);
@@ -57,6 +58,7 @@ private:
     std::vector<PagedTexture> paged_textures_;
     std::unique_ptr<PagedAccel> accel_;
     size_t budgets_[3] = {0, 0, 0};
+    uint32_t batch_paths_ = 0;
     PagedSceneInfo info_;
 };
 

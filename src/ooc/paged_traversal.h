@@ -94,7 +94,39 @@ RF_HDI Triangle quad_half(const Quad& q, int half) {
             Vec3f(float(q.v[d][0]), float(q.v[d][1]), float(q.v[d][2]))};
 }
 
-// Searches one cached page; true when `hit` got closer (or, any-hit, when anything was hit).
+RF_HDI Box3f page_box(const PageNode& n) {
+    return {Vec3f(float(n.lo[0]), float(n.lo[1]), float(n.lo[2])), Vec3f(float(n.hi[0]), float(n.hi[1]), float(n.hi[2]))};
+}
+
+// A node to come back to and where the ray enters it (skipped once a hit is closer).
+struct PendingNode {
+    uint32_t node;
+    float entry;
+};
+
+// Tests quads [first, first + count) of a page; true when `hit` got closer.
+template <bool kAnyHit>
+RF_HDI bool test_quads(const Quad* quads, uint32_t first, uint32_t count, uint32_t page, const WatertightRay& wt,
+                       float tmin, Hit& hit, PagedCounters& counters) {
+    bool found = false;
+    for (uint32_t q = first; q < first + count; ++q) {
+        ++counters.quads;
+        for (int half = 0; half < 2; ++half) {
+            TriangleHit th;
+            if (!intersect_triangle(wt, quad_half(quads[q], half), tmin, hit.t, th)) continue;
+            hit.t = th.t;
+            hit.u = th.u;
+            hit.v = th.v;
+            hit.prim = page * kTrianglesPerPageSlot + 2 * q + uint32_t(half);
+            found = true;
+            if (kAnyHit) return true;
+        }
+    }
+    return found;
+}
+
+// Searches one cached page, nearer child first; true when `hit` got closer
+// (or, any-hit, when anything was hit).
 template <bool kAnyHit>
 RF_HDI bool search_page(const uint8_t* bytes, const PageInfo& info, uint32_t page, const Ray& world, Hit& hit,
                         PagedCounters& counters) {
@@ -108,37 +140,44 @@ RF_HDI bool search_page(const uint8_t* bytes, const PageInfo& info, uint32_t pag
     const rf::detail::SlabRay slab = rf::detail::SlabRay::make(local);
     const WatertightRay wt = WatertightRay::make(local);
     bool found = false;
-    uint32_t stack[kBvhMaxDepth];
+    PendingNode stack[kBvhMaxDepth];
     int top = 0;
+    float entry;
+    ++counters.nodes;
+    if (!rf::detail::slab_test(slab, page_box(nodes[0]), world.tmin, hit.t, entry)) return false;
     uint32_t node = 0;
     for (;;) {
         const PageNode& n = nodes[node];
-        ++counters.nodes;
-        const Box3f box{Vec3f(float(n.lo[0]), float(n.lo[1]), float(n.lo[2])),
-                        Vec3f(float(n.hi[0]), float(n.hi[1]), float(n.hi[2]))};
-        float entry;
-        if (rf::detail::slab_test(slab, box, world.tmin, hit.t, entry)) {
-            if (!n.is_leaf()) {
-                if (top < kBvhMaxDepth) stack[top++] = n.left() + 1;
-                node = n.left();
+        if (n.is_leaf()) {
+            if (test_quads<kAnyHit>(quads, n.first(), n.count(), page, wt, world.tmin, hit, counters)) {
+                found = true;
+                if (kAnyHit) return true;
+            }
+        } else {
+            counters.nodes += 2;
+            float e0, e1;
+            const bool h0 = rf::detail::slab_test(slab, page_box(nodes[n.left()]), world.tmin, hit.t, e0);
+            const bool h1 = rf::detail::slab_test(slab, page_box(nodes[n.left() + 1]), world.tmin, hit.t, e1);
+            if (h0 && h1) {
+                const bool first_near = e0 <= e1;
+                if (top < kBvhMaxDepth) stack[top++] = {n.left() + (first_near ? 1u : 0u), first_near ? e1 : e0};
+                node = n.left() + (first_near ? 0u : 1u);
                 continue;
             }
-            for (uint32_t q = n.first(); q < n.first() + n.count(); ++q) {
-                ++counters.quads;
-                for (int half = 0; half < 2; ++half) {
-                    TriangleHit th;
-                    if (!intersect_triangle(wt, quad_half(quads[q], half), world.tmin, hit.t, th)) continue;
-                    hit.t = th.t;
-                    hit.u = th.u;
-                    hit.v = th.v;
-                    hit.prim = page * kTrianglesPerPageSlot + 2 * q + uint32_t(half);
-                    found = true;
-                    if (kAnyHit) return true;
-                }
+            if (h0 || h1) {
+                node = n.left() + (h0 ? 0u : 1u);
+                continue;
             }
         }
-        if (top == 0) return found;
-        node = stack[--top];
+        // Back to the nearest pending node the ray still reaches before its hit.
+        for (;;) {
+            if (top == 0) return found;
+            const PendingNode p = stack[--top];
+            if (p.entry <= hit.t * rf::detail::kSlabFarScale) {
+                node = p.node;
+                break;
+            }
+        }
     }
 }
 
@@ -187,6 +226,82 @@ RF_HDI bool start_cell(const PagedSceneView& v, const Ray& ray, float tmax, int 
     return true;
 }
 
+// One ray's visit of a cell's middle BVH, nearer child first: cached pages
+// are searched, the first missing one is requested (see the file's comment).
+struct CellVisit {
+    const PagedSceneView& v;
+    const Ray& ray;
+    const rf::detail::SlabRay& slab;
+    PagedRayState& state;
+    PagedCounters& counters;
+    PageMailbox mailbox;
+    bool requested = false;
+
+    // True when an any-hit query found a hit (the ray is then finished).
+    template <bool kAnyHit>
+    RF_HDI bool walk(uint32_t root, uint32_t cell) {
+        PendingNode stack[kBvhMaxDepth];
+        int top = 0;
+        float entry;
+        ++counters.middle;
+        if (!rf::detail::slab_test(slab, v.middle_nodes[root].bounds, ray.tmin, state.hit.t, entry)) return false;
+        uint32_t node = root;
+        for (;;) {
+            const BvhNode& n = v.middle_nodes[node];
+            if (n.is_leaf()) {
+                if (visit_page<kAnyHit>(n.first, cell)) return true;
+            } else {
+                counters.middle += 2;
+                float e0, e1;
+                const bool h0 = rf::detail::slab_test(slab, v.middle_nodes[n.first].bounds, ray.tmin, state.hit.t, e0);
+                const bool h1 = rf::detail::slab_test(slab, v.middle_nodes[n.first + 1].bounds, ray.tmin, state.hit.t, e1);
+                if (h0 && h1) {
+                    const bool first_near = e0 <= e1;
+                    if (top < kBvhMaxDepth) stack[top++] = {n.first + (first_near ? 1u : 0u), first_near ? e1 : e0};
+                    node = n.first + (first_near ? 0u : 1u);
+                    continue;
+                }
+                if (h0 || h1) {
+                    node = n.first + (h0 ? 0u : 1u);
+                    continue;
+                }
+            }
+            for (;;) {
+                if (top == 0) return false;
+                const PendingNode p = stack[--top];
+                if (p.entry <= state.hit.t * rf::detail::kSlabFarScale) {
+                    node = p.node;
+                    break;
+                }
+            }
+        }
+    }
+
+    template <bool kAnyHit>
+    RF_HDI bool visit_page(uint32_t page, uint32_t cell) {
+        const uint32_t d = v.geometry.descriptor(page);
+        if ((d & kWasRead) || mailbox.seen(page)) return false;
+        if (d & kOutOfCore) {
+            if (!requested) {
+                v.geometry.request(page);
+                requested = true;
+                state.restart = cell;
+            }
+            return false;
+        }
+        v.geometry.request(page);  // a use, for the LFU counts
+        mailbox.add(page);
+        ++counters.pages;
+        const uint8_t* bytes = v.geometry.slots + uint64_t(d & kSlotMask) * v.geometry.slot_bytes;
+        if (search_page<kAnyHit>(bytes, v.pages[page], page, ray, state.hit, counters) && kAnyHit) {
+            state.occluded = 1;
+            state.restart = kRayFinished;
+            return true;
+        }
+        return false;
+    }
+};
+
 }  // namespace detail
 
 // One iteration of one ray (see above). Returns true when the ray asked for
@@ -211,53 +326,16 @@ RF_HD bool paged_iteration(const PagedSceneView& v, const Ray& ray, PagedRayStat
     GridWalk walk;
     walk.init(v, ray, start);
     const rf::detail::SlabRay slab = rf::detail::SlabRay::make(ray);
-    PageMailbox mailbox;
-    bool requested = false;
+    CellVisit visit{v, ray, slab, state, counters, PageMailbox{}, false};
     for (;;) {
         ++counters.cells;
         const uint32_t root = v.cell_roots[walk.index(v)];
-        if (root != kEmptyCell) {
-            uint32_t stack[kBvhMaxDepth];
-            int top = 0;
-            uint32_t node = root;
-            for (;;) {
-                const BvhNode& n = v.middle_nodes[node];
-                ++counters.middle;
-                float entry;
-                if (rf::detail::slab_test(slab, n.bounds, ray.tmin, state.hit.t, entry)) {
-                    if (!n.is_leaf()) {
-                        if (top < kBvhMaxDepth) stack[top++] = n.first + 1;
-                        node = n.first;
-                        continue;
-                    }
-                    const uint32_t page = n.first;
-                    const uint32_t d = v.geometry.descriptor(page);
-                    if (!(d & kWasRead) && !mailbox.seen(page)) {
-                        if (!(d & kOutOfCore)) {
-                            v.geometry.request(page);  // a use, for the LFU counts
-                            mailbox.add(page);
-                            ++counters.pages;
-                            const uint8_t* bytes = v.geometry.slots + uint64_t(d & kSlotMask) * v.geometry.slot_bytes;
-                            if (search_page<kAnyHit>(bytes, v.pages[page], page, ray, state.hit, counters) && kAnyHit) {
-                                state.occluded = 1;
-                                state.restart = kRayFinished;
-                                return false;
-                            }
-                        } else if (!requested) {
-                            v.geometry.request(page);
-                            requested = true;
-                            state.restart = walk.index(v);
-                        }
-                    }
-                }
-                if (top == 0) break;
-                node = stack[--top];
-            }
-        }
+        if (root != kEmptyCell && visit.walk<kAnyHit>(root, walk.index(v))) return false;
         // A hit before this cell's far side cannot be beaten further on.
         if (state.hit.t <= walk.exit() || walk.exit() > ray.tmax) break;
         if (!walk.advance(v, ray)) break;
     }
+    const bool requested = visit.requested;
     if (!requested) state.restart = kRayFinished;
     return requested;
 }

@@ -74,6 +74,10 @@ struct PagedSceneOptions {
     size_t attribute_budget = 0;
     size_t texture_budget = 0;
     int threads = 0;  // 0 = all cores
+    // Rendering: paths (or pixels) traced as one batch of query loops; larger
+    // batches amortise page loads (the seed: up to 16M rays) and cost about
+    // 250 bytes a path. 1024 .. 16M.
+    uint32_t batch_paths = 1u << 18;
 };
 
 // One page manager's state and counts since the last reset.
