@@ -26,18 +26,20 @@
 //   4. every texture sampled at a few uvs on every level and at a few
 //      levels of detail;
 //   5. a 4x4 render of one pass (make_paged_renderer);
-//   6. rays with NaN and infinite components and from very far away (last,
-//      so that a reproducer of an earlier step does not stop here first).
+//   6. rays from very far away, with NaN and infinite components, with a
+//      denormal direction, one batch each (last, so that a reproducer of an
+//      earlier step does not stop here first).
 // FUZZ_PACK_TRACE=1 in the environment prints each step's outcome (and the
 // rf::Error it threw) to stderr, for reading a reproducer.
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <memory>
-#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -181,26 +183,32 @@ std::vector<Ray> test_rays(const Box3f& bounds) {
     return rays;
 }
 
-// Rays with NaN and infinite components, as a camera read from the file can
-// make them, and rays from very far away.
-std::vector<Ray> extreme_rays() {
+// Rays from very far away, with NaN and infinite components (as a camera read
+// from the file can make them), and with a denormal direction and an infinite
+// tmax; traced one batch each, in this order.
+std::vector<Ray> extreme_rays(const Box3f& bounds) {
     const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
-    const Ray rays[] = {
+    std::vector<Ray> rays = {
+        {{-1e30f, 0.5f, 0.25f}, 0.0f, {1, 0, 0}, kInfinity},
+        {{3e37f, -2e37f, 1e37f}, 0.0f, {-0.8f, 0.53f, -0.27f}, kInfinity},
         {{nan, 0, 5}, 0.0f, {0, 0, -1}, kInfinity},
         {{0, 0, 5}, 0.0f, {0.1f, nan, -1}, kInfinity},
         {{inf, 0.2f, 0.1f}, 0.0f, {-1, 0, 0}, kInfinity},
         {{0, 0, 5}, nan, {0, 0, -1}, nan},
         {{nan, nan, nan}, 0.0f, {nan, nan, nan}, kInfinity},
         {{0, 0, 5}, 0.0f, {0, 0, -1}, inf},
-        {{-1e30f, 0.5f, 0.25f}, 0.0f, {1, 0, 0}, kInfinity},
-        {{3e37f, -2e37f, 1e37f}, 0.0f, {-0.8f, 0.53f, -0.27f}, kInfinity},
+        {{0.5f, 0.5f, 0.25f}, 0.0f, {1e-39f, 0, 0}, inf},
     };
-    return {std::begin(rays), std::end(rays)};
+    const Vec3f centre = (bounds.lo + bounds.hi) * 0.5f;
+    if (std::isfinite(centre.x) && std::isfinite(centre.y) && std::isfinite(centre.z))
+        rays.push_back({centre, 0.0f, {0, 0, 1e-39f}, inf});
+    return rays;
 }
 
 // The budget that gives a manager of `pages` pages of `slot_bytes` exactly `slots` slots.
 size_t cache_budget(uint64_t pages, size_t slot_bytes, uint32_t slots) {
-    const uint64_t b = pages * PageCache::kTableBytesPerPage + uint64_t(slots) * (slot_bytes + PageCache::kBookkeepingBytesPerSlot);
+    const uint64_t b =
+        pages * PageCache::kTableBytesPerPage + uint64_t(slots) * (slot_bytes + PageCache::kBookkeepingBytesPerSlot);
     return size_t(std::min<uint64_t>(b, kMaxManagerBudget));
 }
 
@@ -318,6 +326,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     step("trace", [&] { trace(*scene, impl, test_rays(impl.file().resident().bounds)); });
     step("sample_textures", [&] { sample_textures(impl); });
     step("render", [&] { render(*scene, mode); });
-    step("trace extreme rays", [&] { trace(*scene, impl, extreme_rays()); });
+    for (const Ray& ray : extreme_rays(impl.file().resident().bounds))
+        step("trace an extreme ray", [&] { trace(*scene, impl, {ray}); });
     return 0;
 }
