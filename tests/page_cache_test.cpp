@@ -63,7 +63,8 @@ void append(std::vector<uint8_t>& out, const T& value) {
 void pad16(std::vector<uint8_t>& out) { out.resize((out.size() + 15) & ~size_t(15), 0); }
 
 // A valid pack of attribute pages only: header | pages | directory |
-// resident section (its header, the one cell of a 1^3 grid, empty). Returns
+// resident section (its header, the one cell of a 1^3 grid, empty, one
+// material). Attribute pages that no geometry page owns are not size-checked. Returns
 // each page's offset in the file.
 std::vector<uint64_t> write_test_pack(const std::string& path, const std::vector<TestPage>& pages) {
     std::vector<uint8_t> file(sizeof(FileHeader), 0);
@@ -93,9 +94,13 @@ std::vector<uint64_t> write_test_pack(const std::string& path, const std::vector
     pad16(file);
 
     std::vector<uint8_t> resident;
-    append(resident, ResidentHeader{});
+    ResidentHeader r;
+    r.material_count = 1;  // a file has at least one material
+    append(resident, r);
     pad16(resident);
     append(resident, kEmptyCell);
+    pad16(resident);
+    append(resident, ShadingMaterial{});
     pad16(resident);
     h.resident_offset = file.size();
     h.resident_bytes = resident.size();

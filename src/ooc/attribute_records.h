@@ -88,7 +88,7 @@ RF_HDI ShadingTriangle decode_attribute_record(const uint8_t* in, AttributeForma
     t.flags = c.material_flags >> 24;
     for (int k = 0; k < 3; ++k) {
         t.normals[k] = c.normals[k];
-        t.uv[k] = Vec2f(half_to_float(c.uv[k][0]), half_to_float(c.uv[k][1]));
+        t.uv[k] = Vec2f{half_to_float(c.uv[k][0]), half_to_float(c.uv[k][1])};
     }
     return t;
 }

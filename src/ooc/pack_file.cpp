@@ -158,6 +158,8 @@ void PackFile::read_directory(uint64_t size) {
     const FileHeader& h = header_;
     const uint64_t kinds = uint64_t(h.geometry_pages) + h.attribute_pages + h.texture_pages;
     if (h.page_count != kinds) throw file_byte_error(path_, 0, "page counts disagree in the header");
+    if (uint64_t(h.geometry_pages) > (uint64_t(1) << 32) / kTrianglesPerPageSlot)
+        throw file_byte_error(path_, 0, "more geometry pages than 32-bit primitive ids can name");
     if (h.directory_offset > size || h.page_count > (size - h.directory_offset) / sizeof(PageEntry))
         throw file_byte_error(path_, h.directory_offset, "page directory lies outside the file");
     budgeted_resize(directory_, size_t(h.page_count), "paged scene directory");
@@ -215,9 +217,13 @@ void PackFile::read_resident(uint64_t size) {
 void PackFile::validate_resident() const {
     const uint64_t at = header_.resident_offset;
     const uint32_t records_per_page = resident_.attribute_page_bytes / attribute_record_bytes(resident_.attribute_format);
+    uint64_t next_attribute_page = 0;  // the writer lays each page's attribute pages after the previous one's
     for (size_t i = 0; i < pages_.size(); ++i) {
         const PageInfo& p = pages_[i];
         const uint64_t attribute_pages = (2ull * p.quad_count + records_per_page - 1) / records_per_page;
+        if (p.first_attribute_page != next_attribute_page)
+            throw file_byte_error(path_, at, "page " + std::to_string(i) + ": its attribute pages are out of order");
+        next_attribute_page += attribute_pages;
         if (!finite_box(p.bounds) || !finite_vec(p.offset) || !finite_vec(p.scale) || p.quad_count == 0 ||
             p.quad_count > kQuadsPerPage || uint64_t(p.first_attribute_page) + attribute_pages > header_.attribute_pages)
             throw file_byte_error(path_, at, "page " + std::to_string(i) + ": bad bounds, size or attribute range");
@@ -232,11 +238,7 @@ void PackFile::validate_resident() const {
         if (bad || !finite_box(node.bounds))
             throw file_byte_error(path_, at, "middle BVH node " + std::to_string(i) + " is malformed");
     }
-    const auto texture_ok = [&](int32_t id) { return id == -1 || (id >= 0 && uint32_t(id) < textures_.size()); };
-    for (const ShadingMaterial& m : materials_)
-        if (!texture_ok(m.base_color_texture) || !texture_ok(m.metallic_roughness_texture) ||
-            !texture_ok(m.normal_texture) || !texture_ok(m.emission_texture))
-            throw file_byte_error(path_, at, "a material names a texture the file does not have");
+    validate_materials();
     for (const TextureInfo& t : textures_) {
         if (t.width == 0 || t.height == 0 || t.width > 65536 || t.height > 65536 || t.level_count == 0 ||
             t.level_count > uint32_t(TextureInfo::kMaxLevels))
@@ -248,6 +250,25 @@ void PackFile::validate_resident() const {
             if (uint64_t(t.first_tile[level]) + tiles > header_.texture_pages)
                 throw file_byte_error(path_, at, "a texture's tiles lie past the texture pages");
         }
+    }
+}
+
+// Materials are read as they lie in the file: their enum and bool bytes must
+// hold valid values, and they must be opaque (the format's surfaces are).
+void PackFile::validate_materials() const {
+    const uint64_t at = header_.resident_offset;
+    if (materials_.empty()) throw file_byte_error(path_, at, "the file has no material");
+    const auto texture_ok = [&](int32_t id) { return id == -1 || (id >= 0 && uint32_t(id) < textures_.size()); };
+    for (const ShadingMaterial& m : materials_) {
+        uint8_t alpha_mode = 0, two_sided = 0;
+        std::memcpy(&alpha_mode, &m.alpha_mode, 1);
+        std::memcpy(&two_sided, &m.two_sided_emission, 1);
+        static_assert(sizeof(m.alpha_mode) == 1 && sizeof(m.two_sided_emission) == 1);
+        if (alpha_mode != uint8_t(AlphaMode::Opaque) || two_sided > 1)
+            throw file_byte_error(path_, at, "a material is not opaque or has bad flags (paged surfaces are opaque)");
+        if (!texture_ok(m.base_color_texture) || !texture_ok(m.metallic_roughness_texture) ||
+            !texture_ok(m.normal_texture) || !texture_ok(m.emission_texture))
+            throw file_byte_error(path_, at, "a material names a texture the file does not have");
     }
 }
 
@@ -298,7 +319,45 @@ size_t PackFile::read_page(uint64_t index, std::span<uint8_t> out, std::vector<u
         if (ZSTD_isError(got) || got != e.raw_bytes)
             throw file_byte_error(path_, e.offset, "page " + std::to_string(index) + " does not decompress");
     }
+    check_page_contents(index, out.first(e.raw_bytes));
     return e.stored_bytes;
+}
+
+// A page whose checksum is right may still have been written wrong (or
+// crafted): what the traversal and the shading read from it is checked here,
+// once per read, so the per-ray code can trust cached pages.
+void PackFile::check_page_contents(uint64_t index, std::span<const uint8_t> raw) const {
+    const std::string what = path_ + ": page " + std::to_string(index);
+    if (index < header_.geometry_pages) {
+        const GeometryPageView g = view_geometry_page(raw, what);
+        if (g.quad_count != pages_[size_t(index)].quad_count)
+            throw Error(what + ": holds " + std::to_string(g.quad_count) + " quads, its bounds record says " +
+                        std::to_string(pages_[size_t(index)].quad_count));
+        return;
+    }
+    if (index < first_texture_page()) {
+        // (A page no geometry page owns is never read by shading: not checked.)
+        const size_t expected = expected_attribute_bytes(uint32_t(index - first_attribute_page()));
+        if (expected != 0 && raw.size() != expected) throw Error(what + ": an attribute page of the wrong size");
+        return;
+    }
+    if (raw.size() != size_t(kTextureTileSide) * kTextureTileSide * 4) throw Error(what + ": a texture tile of the wrong size");
+}
+
+// Attribute page `a` holds records of the geometry page whose range contains
+// it: full pages, and the rest of its 2 * quad_count records in the last.
+size_t PackFile::expected_attribute_bytes(uint32_t a) const {
+    const uint32_t record = attribute_record_bytes(resident_.attribute_format);
+    const uint32_t per_page = resident_.attribute_page_bytes / record;
+    const auto owner = std::upper_bound(pages_.begin(), pages_.end(), a, [](uint32_t x, const PageInfo& p) {
+        return x < p.first_attribute_page;
+    });
+    if (owner == pages_.begin()) return 0;
+    const PageInfo& p = *(owner - 1);
+    const uint64_t records = 2ull * p.quad_count;
+    const uint64_t first = uint64_t(a - p.first_attribute_page) * per_page;
+    if (first >= records) return 0;
+    return size_t(std::min<uint64_t>(per_page, records - first)) * record;
 }
 
 size_t PackFile::resident_memory_bytes() const {

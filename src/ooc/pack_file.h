@@ -48,7 +48,9 @@ public:
     [[nodiscard]] Environment environment() const;
 
     // Reads directory page `index` into `out` (resized to its raw size),
-    // verifying its checksum and decompressing it; `scratch` holds the
+    // verifying its checksum, decompressing it and checking its contents
+    // (a geometry page's nodes and quad count, an attribute page's or a
+    // tile's size); `scratch` holds the
     // stored bytes of a compressed page (pass one per thread to avoid
     // reallocations). Thread-safe. Returns the bytes read from the file.
     size_t read_page(uint64_t index, std::vector<uint8_t>& out, std::vector<uint8_t>& scratch) const;
@@ -63,6 +65,9 @@ private:
     void read_directory(uint64_t size);
     void read_resident(uint64_t size);
     void validate_resident() const;
+    void validate_materials() const;
+    void check_page_contents(uint64_t index, std::span<const uint8_t> raw) const;
+    [[nodiscard]] size_t expected_attribute_bytes(uint32_t attribute_page) const;
 
     std::string path_;
     int fd_ = -1;

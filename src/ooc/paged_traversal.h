@@ -220,8 +220,9 @@ RF_HDI bool start_cell(const PagedSceneView& v, const Ray& ray, float tmax, int 
     if (!rf::detail::slab_test(slab, v.grid_bounds, ray.tmin, tmax, entry)) return false;
     for (int a = 0; a < 3; ++a) {
         const float p = add_rn(ray.org[a], mul_rn(ray.dir[a], entry));
-        const int c = int(floorf((p - v.grid_bounds.lo[a]) / v.cell_size[a]));
-        out[a] = c < 0 ? 0 : (c >= v.res[a] ? v.res[a] - 1 : c);
+        // Clamped as a float (NaN goes to 0): the conversion to int is then defined.
+        const float c = floorf((p - v.grid_bounds.lo[a]) / v.cell_size[a]);
+        out[a] = c >= 0.0f ? (c < float(v.res[a] - 1) ? int(c) : v.res[a] - 1) : 0;
     }
     return true;
 }
@@ -312,8 +313,13 @@ RF_HD bool paged_iteration(const PagedSceneView& v, const Ray& ray, PagedRayStat
     if (state.restart == kRayFinished) return false;
     int start[3];
     if (state.restart == kRayNotStarted) {
-        state.hit.t = ray.tmax;
-        if (v.page_count == 0 || !start_cell(v, ray, ray.tmax, start)) {
+        // A ray with a non-finite origin or direction meets nothing (and an
+        // infinite tmax is the largest float), so the walk below always ends.
+        const bool finite = fabsf(ray.org.x) <= kInfinity && fabsf(ray.org.y) <= kInfinity &&
+                            fabsf(ray.org.z) <= kInfinity && fabsf(ray.dir.x) <= kInfinity &&
+                            fabsf(ray.dir.y) <= kInfinity && fabsf(ray.dir.z) <= kInfinity;
+        state.hit.t = fminf(ray.tmax, kInfinity);
+        if (v.page_count == 0 || !finite || !start_cell(v, ray, state.hit.t, start)) {
             state.restart = kRayFinished;
             return false;
         }
@@ -327,12 +333,14 @@ RF_HD bool paged_iteration(const PagedSceneView& v, const Ray& ray, PagedRayStat
     walk.init(v, ray, start);
     const rf::detail::SlabRay slab = rf::detail::SlabRay::make(ray);
     CellVisit visit{v, ray, slab, state, counters, PageMailbox{}, false};
-    for (;;) {
+    // A straight line crosses at most res[0] + res[1] + res[2] cells; the cap
+    // also ends walks whose plane distances rounding made non-finite.
+    for (int steps = v.res[0] + v.res[1] + v.res[2] + 2; steps > 0; --steps) {
         ++counters.cells;
         const uint32_t root = v.cell_roots[walk.index(v)];
         if (root != kEmptyCell && visit.walk<kAnyHit>(root, walk.index(v))) return false;
         // A hit before this cell's far side cannot be beaten further on.
-        if (state.hit.t <= walk.exit() || walk.exit() > ray.tmax) break;
+        if (state.hit.t <= walk.exit()) break;
         if (!walk.advance(v, ray)) break;
     }
     const bool requested = visit.requested;

@@ -23,7 +23,7 @@ double usable(double p) { return std::isfinite(p) && p > 0.0 ? p : 0.0; }
 void triangle_uvs(const Scene& scene, const SceneGeometry& geometry, uint32_t prim, Vec2f uv[3]) {
     const Mesh& mesh = scene.meshes[scene.instances[geometry.triangle_instance[prim]].mesh];
     const uint32_t* idx = &mesh.indices[3 * size_t(geometry.local_triangle[prim])];
-    for (int k = 0; k < 3; ++k) uv[k] = mesh.uvs.empty() ? Vec2f(0.0f) : mesh.uvs[idx[k]];
+    for (int k = 0; k < 3; ++k) uv[k] = mesh.uvs.empty() ? Vec2f{0.0f, 0.0f} : mesh.uvs[idx[k]];
 }
 
 // Mean colour of texture `t` over the triangle of texture coordinates uv[],

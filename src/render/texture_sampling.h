@@ -126,7 +126,10 @@ RF_HDI BilinearTaps bilinear_taps(int width, int height, TextureWrap wrap_s, Tex
     BilinearTaps taps;
     taps.wx = px - fx0;
     taps.wy = py - fy0;
-    int x = int(fx0), y = int(fy0);
+    // |u| <= 1e6 times a side of up to 65536 texels exceeds int: clamp the
+    // texel index (a coordinate that far out has no meaningful texel anyway).
+    int x = int(fminf(fmaxf(fx0, -1073741824.0f), 1073741824.0f));
+    int y = int(fminf(fmaxf(fy0, -1073741824.0f), 1073741824.0f));
     taps.x0 = wrap_texel(x, width, wrap_s);
     taps.x1 = wrap_texel(x + 1, width, wrap_s);
     taps.y0 = wrap_texel(y, height, wrap_t);
