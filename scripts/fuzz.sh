@@ -16,9 +16,7 @@ set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 BUILD="${FUZZ_BUILD_DIR:-$ROOT/build-fuzz}"
-ALL_TARGETS=(obj mtl ply gltf glb json_scene texture exr aff viewer_script bookmarks)
-# fuzz_pack runs only when named (scripts/fuzz.sh 300 pack) until it passes
-# (docs/robustness.md, "Fuzzing"); then it belongs in the list above.
+ALL_TARGETS=(obj mtl ply gltf glb json_scene texture exr aff viewer_script bookmarks pack)
 
 seconds=60
 runs=""

@@ -129,7 +129,7 @@ TEST(PagedScene, HitsEqualBruteForceOverTheSamePagesUnderAnyBudget) {
     const PagedFixture& f = fixture();
     auto file = std::make_shared<const PackFile>(f.path);
     const auto pages = read_all_geometry(*file);
-    const std::vector<Ray> rays = test::make_rays(f.geometry, 3000, 7);
+    const std::vector<Ray> rays = test::make_rays(f.geometry, 1200, 7);
     std::vector<Hit> expected(rays.size());
     for (size_t i = 0; i < rays.size(); ++i) expected[i] = brute_force(*file, pages, rays[i]);
 
