@@ -1,6 +1,6 @@
 #include "ooc/quad_pairing.h"
 
-#include <tbb/parallel_sort.h>
+#include "backend/cpu/parallel.h"
 
 #include <algorithm>
 
@@ -25,7 +25,7 @@ std::vector<uint32_t> find_neighbours(std::span<const uint32_t> indices, std::sp
             const uint32_t a = indices[3 * t + e], b = indices[3 * t + (e + 1) % 3];
             uses[3 * t + e] = {uint64_t(std::min(a, b)) << 32 | std::max(a, b), uint32_t(3 * t + e)};
         }
-    tbb::parallel_sort(uses.begin(), uses.end());
+    parallel::sort(uses, std::less<EdgeUse>());
     std::vector<uint32_t> neighbour(3 * n, kNone);
     for (size_t i = 0; i + 1 < uses.size();) {
         size_t j = i + 1;

@@ -131,4 +131,26 @@ void for_each_index(Index begin, Index end, Body&& body) {
     });
 }
 
+namespace detail {
+template <class T, class Less>
+void merge_sort(T* data, T* tmp, size_t n, const Less& less) {
+    constexpr size_t kSerialSize = 32 * 1024;
+    if (n <= kSerialSize) {
+        std::sort(data, data + n, less);
+        return;
+    }
+    const size_t half = n / 2;
+    invoke([&] { merge_sort(data, tmp, half, less); }, [&] { merge_sort(data + half, tmp + half, n - half, less); });
+    std::merge(data, data + half, data + half, data + n, tmp, less);
+    std::copy(tmp, tmp + n, data);
+}
+}  // namespace detail
+
+// Sorts `values` by `less` (not stable): halves sorted in parallel, then merged.
+template <class T, class Less>
+void sort(std::vector<T>& values, const Less& less) {
+    std::vector<T> tmp(values.size());
+    detail::merge_sort(values.data(), tmp.data(), values.size(), less);
+}
+
 }  // namespace rf::parallel
