@@ -195,6 +195,9 @@ TEST(PagedRender, CliConvertsGeneratesDescribesAndRendersPagedFiles) {
     EXPECT_EQ(test::lines_of(bad.err).size(), 1u) << bad.err;
     EXPECT_EQ(test::run_cli("render " + dir + "/c.rfpack -o " + dir + "/x.png --memory-budget lots").exit_code, 1);
     EXPECT_EQ(test::run_cli("generate nothing -o " + dir + "/x.rfpack").exit_code, 2);
+    const test::CliResult again = test::run_cli("convert " + dir + "/c.rfpack -o " + dir + "/d.rfpack");
+    EXPECT_EQ(again.exit_code, 1);
+    EXPECT_NE(again.err.find("already a paged scene"), std::string::npos) << again.err;
 }
 
 }  // namespace

@@ -59,6 +59,7 @@ CLI::App* add_convert_command(CLI::App& app, ConvertArgs& a) {
 }
 
 int run_convert(const ConvertArgs& a) {
+    if (is_paged_scene_file(a.scene)) throw Error(a.scene + ": already a paged scene file (convert reads the formats render reads)");
     const PagedWriteOptions options = paged_write_options(a.write, a.threads);
     const Clock::time_point start = Clock::now();
     const Scene scene = load_scene(a.scene);
