@@ -8,15 +8,26 @@
 
 namespace rf::cli {
 
-uint64_t parse_bytes(const std::string& text, const std::string& what) {
+namespace {
+
+// "1.5G" -> 1.5 and "G"; false when the text does not start with a number.
+bool split_number(const std::string& text, double& value, std::string& unit) {
     size_t used = 0;
-    double value = 0.0;
     try {
         value = std::stod(text, &used);
     } catch (const std::exception&) {
-        used = 0;
+        return false;
     }
-    std::string unit = text.substr(used);
+    unit = text.substr(used);
+    return used > 0;
+}
+
+}  // namespace
+
+uint64_t parse_bytes(const std::string& text, const std::string& what) {
+    double value = 0.0;
+    std::string unit;
+    const bool number = split_number(text, value, unit);
     if (!unit.empty() && (unit.back() == 'B' || unit.back() == 'b')) unit.pop_back();
     if (!unit.empty() && unit.back() == 'i') unit.pop_back();
     double scale = 1.0;
@@ -27,9 +38,19 @@ uint64_t parse_bytes(const std::string& text, const std::string& what) {
         scale = 0.0;
     }
     const double bytes = value * scale;
-    if (used == 0 || scale == 0.0 || !std::isfinite(bytes) || bytes < 0.0 || bytes > 1e18)
+    if (!number || scale == 0.0 || !std::isfinite(bytes) || bytes < 0.0 || bytes > 1e18)
         throw Error(what + ": '" + text + "' is not a size (e.g. 512M, 2G, 65536)");
     return uint64_t(std::llround(bytes));
+}
+
+uint64_t parse_count(const std::string& text, const std::string& what) {
+    double value = 0.0;
+    std::string unit;
+    const bool number = split_number(text, value, unit);
+    const double scale = unit.empty() ? 1.0 : unit == "K" || unit == "k" ? 1e3 : unit == "M" ? 1e6 : unit == "G" ? 1e9 : 0.0;
+    if (!number || scale == 0.0 || !(value >= 0.0) || value * scale > 1e13)
+        throw Error(what + ": '" + text + "' is not a count (e.g. 500K, 20M, 1.2G)");
+    return uint64_t(value * scale + 0.5);
 }
 
 std::string format_bytes(double bytes) {

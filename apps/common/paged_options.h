@@ -33,6 +33,8 @@ PagedWriteOptions paged_write_options(const PagedWriteArgs& args, int threads);
 
 // "1.5G", "512M", "64K", "1000" (bytes; K/M/G/T are powers of 1024); rf::Error naming `what` when malformed.
 uint64_t parse_bytes(const std::string& text, const std::string& what);
+// "20M" -> 20,000,000, "1.2G", "500K" (decimal units, for counts); rf::Error naming `what` when malformed.
+uint64_t parse_count(const std::string& text, const std::string& what);
 // "1.2 GiB", "340 MiB", ...
 std::string format_bytes(double bytes);
 

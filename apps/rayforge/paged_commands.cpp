@@ -93,23 +93,6 @@ CLI::App* add_generate_command(CLI::App& app, GenerateArgs& a) {
     return cmd;
 }
 
-namespace {
-// "20M" -> 20,000,000 (decimal units for counts).
-uint64_t parse_count(const std::string& text, const std::string& what) {
-    size_t used = 0;
-    double value = 0.0;
-    try {
-        value = std::stod(text, &used);
-    } catch (const std::exception&) {
-        used = 0;
-    }
-    const std::string unit = text.substr(used);
-    const double scale = unit.empty() ? 1.0 : unit == "K" || unit == "k" ? 1e3 : unit == "M" ? 1e6 : unit == "G" ? 1e9 : 0.0;
-    if (used == 0 || scale == 0.0 || !(value >= 0.0) || value * scale > 1e13)
-        throw Error(what + ": '" + text + "' is not a count (e.g. 500K, 20M, 1.2G)");
-    return uint64_t(value * scale + 0.5);
-}
-}  // namespace
 
 int run_generate(const GenerateArgs& a) {
     GenerateOptions g;

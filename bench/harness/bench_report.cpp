@@ -30,14 +30,6 @@ std::string pad(const std::string& text, size_t width, bool left = false) {
     return left ? text + std::string(width - text.size(), ' ') : std::string(width - text.size(), ' ') + text;
 }
 
-std::string thousands(size_t value) {
-    std::string digits = std::to_string(value), out;
-    for (size_t i = 0; i < digits.size(); ++i) {
-        if (i > 0 && (digits.size() - i) % 3 == 0) out += ',';
-        out += digits[i];
-    }
-    return out;
-}
 
 const PeerFigures* peer(const BenchRecord& record, EmbreeQuality quality) {
     for (const PeerFigures& f : record.embree)
@@ -311,6 +303,15 @@ void write_json(const std::string& path, const std::vector<BenchRecord>& records
     if (!out) throw Error(path + ": cannot open for writing");
     out << root.dump(1) << '\n';
     if (!out) throw Error(path + ": write failed");
+}
+
+std::string thousands(uint64_t value) {
+    std::string digits = std::to_string(value), out;
+    for (size_t i = 0; i < digits.size(); ++i) {
+        if (i > 0 && (digits.size() - i) % 3 == 0) out += ',';
+        out += digits[i];
+    }
+    return out;
 }
 
 }  // namespace rf::bench

@@ -43,4 +43,7 @@ struct RunInfo {
 // Writes the JSON file; throws rf::Error when it cannot be written.
 void write_json(const std::string& path, const std::vector<BenchRecord>& records, const RunInfo& info);
 
+// 1234567 -> "1,234,567".
+std::string thousands(uint64_t value);
+
 }  // namespace rf::bench

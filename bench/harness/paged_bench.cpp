@@ -77,15 +77,6 @@ std::string pad(const std::string& text, size_t width, bool left = false) {
     return left ? text + std::string(width - text.size(), ' ') : std::string(width - text.size(), ' ') + text;
 }
 
-std::string thousands(uint64_t value) {
-    std::string digits = std::to_string(value), out;
-    for (size_t i = 0; i < digits.size(); ++i) {
-        if (i > 0 && (digits.size() - i) % 3 == 0) out += ',';
-        out += digits[i];
-    }
-    return out;
-}
-
 std::string megabytes(double bytes) { return format(bytes < 10e6 ? "%.2f MB" : "%.1f MB", bytes / 1e6); }
 
 std::string budget_label(double f) {

@@ -92,11 +92,7 @@ void PagedEngine::run_queries(std::span<const Ray> rays, std::span<PagedRayState
             throw Error(file_->path() + ": paged query loop did not converge (a page manager bug)");
         start = Clock::now();
         const uint32_t count = uint32_t(pending_.size());
-        struct Totals {
-            uint64_t cells = 0, middle = 0, pages = 0, nodes = 0, quads = 0;
-        };
         std::mutex totals_mutex;
-        Totals totals;
         parallel::for_range(0u, count, kRayGrain, [&](uint32_t lo, uint32_t hi) {
             PagedCounters c;
             for (uint32_t k = lo; k < hi; ++k) {
@@ -104,17 +100,8 @@ void PagedEngine::run_queries(std::span<const Ray> rays, std::span<PagedRayState
                 again[k] = paged_iteration<kAnyHit>(v, rays[i], states[i], c) ? 1 : 0;
             }
             std::lock_guard<std::mutex> lock(totals_mutex);
-            totals.cells += c.cells;
-            totals.middle += c.middle;
-            totals.pages += c.pages;
-            totals.nodes += c.nodes;
-            totals.quads += c.quads;
+            stats_.add(c);
         });
-        stats_.cells += totals.cells;
-        stats_.middle += totals.middle;
-        stats_.pages += totals.pages;
-        stats_.nodes += totals.nodes;
-        stats_.quads += totals.quads;
         ++stats_.iterations;
         stats_.ray_iterations += count;
         uint32_t kept = 0;

@@ -39,6 +39,13 @@ struct EngineStats {
     double traversal_ms = 0.0;   // inside the iterations
     double sort_ms = 0.0;
     uint64_t cells = 0, middle = 0, pages = 0, nodes = 0, quads = 0;
+    void add(const PagedCounters& c) {
+        cells += c.cells;
+        middle += c.middle;
+        pages += c.pages;
+        nodes += c.nodes;
+        quads += c.quads;
+    }
 };
 
 class PagedEngine {
