@@ -35,6 +35,8 @@ int run_render(const RenderArgs& args);
 // Paged scenes (paged_commands.cpp): convert, generate, and the paged forms of render and info.
 struct ConvertArgs {
     std::string scene, output;
+    std::string memory_budget = "1G";  // the streaming converter's working memory
+    std::string temp_dir;              // its scratch files
     PagedWriteArgs write;
     int threads = 0;
     bool quiet = false;

@@ -52,6 +52,12 @@ CLI::App* add_convert_command(CLI::App& app, ConvertArgs& a) {
     CLI::App* cmd = app.add_subcommand("convert", "Write a scene as a paged scene file (.rfpack) for out-of-core rendering");
     cmd->add_option("scene", a.scene, "Scene file (.obj, .gltf, .glb, .ply, .aff, .json) or builtin:NAME")->required();
     cmd->add_option("-o,--output", a.output, "The paged scene file to write (.rfpack)")->required();
+    cmd->add_option("--memory-budget", a.memory_budget,
+                    "Working memory when streaming an .obj input, e.g. 512M, 4G (default 1G, at least 96M); other "
+                    "formats are loaded in core");
+    cmd->add_option("--temp-dir", a.temp_dir,
+                    "Folder for the streaming converter's scratch files, about 160 bytes a triangle (default: the "
+                    "output's folder)");
     add_paged_write_options(cmd, a.write);
     cmd->add_option("--threads", a.threads, "Threads (default: all cores)")->check(CLI::NonNegativeNumber);
     cmd->add_flag("-q,--quiet", a.quiet, "No progress bar");
@@ -61,16 +67,23 @@ CLI::App* add_convert_command(CLI::App& app, ConvertArgs& a) {
 int run_convert(const ConvertArgs& a) {
     if (is_paged_scene_file(a.scene)) throw Error(a.scene + ": already a paged scene file (convert reads the formats render reads)");
     const PagedWriteOptions options = paged_write_options(a.write, a.threads);
+    ConvertInputOptions input;
+    input.memory_budget = parse_bytes(a.memory_budget, "--memory-budget");
+    input.temp_dir = a.temp_dir;
     const Clock::time_point start = Clock::now();
-    const Scene scene = load_scene(a.scene);
     PagedWriteReport report;
     {
         ProgressBar bar("convert");
         ProgressCallback progress;
         if (!a.quiet) progress = [&bar](double f) { bar.update(f); };
-        report = convert_to_paged(scene, a.output, options, progress);
+        report = convert_file_to_paged(a.scene, a.output, options, input, progress);
     }
     print_write_report(a.output, report, ms_since(start));
+    if (report.streamed)
+        std::printf("%s: streamed within %s: %llu objects of at most %llu triangles, %s of scratch files\n",
+                    a.output.c_str(), format_bytes(double(input.memory_budget)).c_str(),
+                    (unsigned long long)report.objects, (unsigned long long)report.max_object_triangles,
+                    format_bytes(double(report.scratch_bytes)).c_str());
     return 0;
 }
 

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "io/file_reader.h"
+#include "io/obj_parser.h"
 #include "io/texture_batch.h"
 #include "io/number_parsing.h"
 #include "io/path_utils.h"
@@ -38,203 +39,37 @@ namespace rf {
 
 namespace {
 
-constexpr uint32_t kAbsent = 0xFFFFFFFFu;
+using io::ObjCorner;
+constexpr uint32_t kAbsent = io::kObjAbsent;
 
 void warn(const std::string& message) { std::cerr << "rayforge: warning: " << message << '\n'; }
 
 // ---------------------------------------------------------------------------
 // Geometry
 
-struct ObjCorner {
-    uint32_t v = 0, vt = kAbsent, vn = kAbsent;  // 0-based indices into the attribute arrays
-};
-
+// The whole file's statements in memory (obj_parser.h's sink).
 struct ObjGeometry {
+    explicit ObjGeometry(const std::string& path)
+        : positions_what(path + ": OBJ vertex array"), uvs_what(path + ": OBJ texture coordinate array"),
+          normals_what(path + ": OBJ normal array"), corners_what(path + ": OBJ face corner array") {}
+
     std::vector<Vec3f> positions;
     std::vector<Vec2f> uvs;
     std::vector<Vec3f> normals;
     std::vector<ObjCorner> corners;           // 3 per triangle
-    std::vector<uint32_t> triangle_material;  // per triangle: index into used_materials, or kAbsent
-    std::vector<std::string> used_materials;  // usemtl names, in order of first use
-    std::vector<std::string> libraries;       // mtllib arguments
-    size_t skipped_faces = 0;                 // faces with fewer than 3 corners
-};
+    std::vector<uint32_t> triangle_material;  // per triangle: index into the used materials, or kAbsent
+    const std::string positions_what, uvs_what, normals_what, corners_what;  // budget error prefixes
 
-// The largest positive index seen for one attribute and where, so that
-// references to vertices defined later in the file are checked at the end.
-struct ForwardReference {
-    uint64_t max_index = 0;
-    long line = 0;
-    void note(uint64_t index, long at) {
-        if (index > max_index) {
-            max_index = index;
-            line = at;
-        }
+    void position(Vec3f p) { budgeted_push_back(positions, p, positions_what); }
+    void uv(Vec2f t) { budgeted_push_back(uvs, t, uvs_what); }
+    void normal(Vec3f n) { budgeted_push_back(normals, n, normals_what); }
+    void triangle(const ObjCorner& a, const ObjCorner& b, const ObjCorner& c, uint32_t material) {
+        if (corners.capacity() - corners.size() < 3) budgeted_reserve(corners, 2 * corners.size() + 3, corners_what);
+        corners.push_back(a);
+        corners.push_back(b);
+        corners.push_back(c);
+        budgeted_push_back(triangle_material, material, corners_what);
     }
-};
-
-class ObjParser {
-public:
-    ObjParser(const std::string& path, std::string_view text)
-        : path_(path), text_(text), positions_what_(path + ": OBJ vertex array"),
-          uvs_what_(path + ": OBJ texture coordinate array"), normals_what_(path + ": OBJ normal array"),
-          corners_what_(path + ": OBJ face corner array") {}
-
-    ObjGeometry parse() {
-        std::unordered_map<std::string, uint32_t> material_ids;
-        uint32_t current_material = kAbsent;
-        size_t pos = 0;
-        while (pos < text_.size()) {
-            size_t eol = text_.find('\n', pos);
-            if (eol == std::string_view::npos) eol = text_.size();
-            ++line_;
-            line_text_ = text_.substr(pos, eol - pos);
-            pos = eol + 1;
-            p_ = line_text_.data();
-            end_ = p_ + line_text_.size();
-            skip_space();
-            if (p_ == end_) continue;
-
-            if (keyword("v")) {
-                budgeted_push_back(out_.positions, read_vec3("vertex position"), positions_what_);
-            } else if (keyword("vt")) {
-                float u = read_float("texture coordinate");
-                float v = at_end() ? 0.0f : read_float("texture coordinate");
-                // OBJ's v points up; ours has v = 0 at the top row of the image.
-                budgeted_push_back(out_.uvs, Vec2f{u, 1.0f - v}, uvs_what_);
-            } else if (keyword("vn")) {
-                budgeted_push_back(out_.normals, read_vec3("normal"), normals_what_);
-            } else if (keyword("f")) {
-                read_face(current_material);
-            } else if (keyword("usemtl")) {
-                std::string name(rest_of_line());
-                auto [it, inserted] = material_ids.try_emplace(name, uint32_t(out_.used_materials.size()));
-                if (inserted) out_.used_materials.push_back(name);
-                current_material = it->second;
-            } else if (keyword("mtllib")) {
-                std::string_view names = rest_of_line();
-                if (!names.empty()) out_.libraries.emplace_back(names);
-            }
-            // Everything else (o, g, s, l, p, comments, curves) does not affect triangles.
-        }
-        check_forward_references();
-        return std::move(out_);
-    }
-
-private:
-    [[nodiscard]] Error error(const std::string& reason) const { return file_error(path_, line_, reason); }
-
-    void skip_space() {
-        while (p_ < end_ && (*p_ == ' ' || *p_ == '\t' || *p_ == '\r')) ++p_;
-    }
-    bool at_end() {
-        skip_space();
-        return p_ == end_ || *p_ == '#';
-    }
-    // Consumes `word` when the line starts with it followed by whitespace.
-    bool keyword(std::string_view word) {
-        size_t left = size_t(end_ - p_);
-        if (left < word.size() || std::string_view(p_, word.size()) != word) return false;
-        if (left > word.size() && p_[word.size()] != ' ' && p_[word.size()] != '\t') return false;
-        p_ += word.size();
-        return true;
-    }
-    std::string_view rest_of_line() {
-        skip_space();
-        std::string_view rest(p_, size_t(end_ - p_));
-        while (!rest.empty() && (rest.back() == ' ' || rest.back() == '\t' || rest.back() == '\r'))
-            rest.remove_suffix(1);
-        return rest;
-    }
-
-    float read_float(const char* what) {
-        skip_space();
-        float value = 0.0f;
-        const char* after = io::parse_float(p_, end_, value);
-        if (after == nullptr || (after < end_ && *after != ' ' && *after != '\t' && *after != '\r'))
-            throw error(std::string("bad number '") + std::string(p_, std::min<size_t>(end_ - p_, 24)) + "' in " +
-                        what);
-        if (!std::isfinite(value)) throw error(std::string("non-finite number in ") + what);
-        p_ = after;
-        return value;
-    }
-    Vec3f read_vec3(const char* what) {
-        float x = read_float(what);
-        float y = read_float(what);
-        float z = read_float(what);
-        return {x, y, z};
-    }
-
-    // One index of a face corner: 1-based, or negative relative to the end so far.
-    uint32_t resolve_index(size_t count_so_far, ForwardReference& forward, const char* what) {
-        int64_t index = 0;
-        const char* after = io::parse_int(p_, end_, index);
-        if (after == nullptr) throw error(std::string("bad ") + what + " index in face");
-        p_ = after;
-        if (index == 0) throw error(std::string(what) + " index 0 in face (OBJ indices start at 1)");
-        if (index < 0) {
-            if (uint64_t(-index) > count_so_far)
-                throw error(std::string(what) + " index " + std::to_string(index) + " out of range (" +
-                            std::to_string(count_so_far) + " defined so far)");
-            return uint32_t(count_so_far - uint64_t(-index));
-        }
-        if (uint64_t(index) > 0xFFFFFFFEull) throw error(std::string(what) + " index out of range");
-        forward.note(uint64_t(index), line_);
-        return uint32_t(index - 1);
-    }
-
-    void read_face(uint32_t material) {
-        face_.clear();
-        while (!at_end()) {
-            ObjCorner c;
-            c.v = resolve_index(out_.positions.size(), forward_v_, "vertex");
-            if (p_ < end_ && *p_ == '/') {
-                ++p_;
-                if (p_ < end_ && *p_ != '/') c.vt = resolve_index(out_.uvs.size(), forward_vt_, "texture coordinate");
-                if (p_ < end_ && *p_ == '/') {
-                    ++p_;
-                    c.vn = resolve_index(out_.normals.size(), forward_vn_, "normal");
-                }
-            }
-            if (p_ < end_ && *p_ != ' ' && *p_ != '\t' && *p_ != '\r') throw error("malformed face corner");
-            face_.push_back(c);
-        }
-        if (face_.size() < 3) {
-            ++out_.skipped_faces;
-            return;
-        }
-        // Fan triangulation, as most exporters write convex polygons.
-        for (size_t k = 2; k < face_.size(); ++k) {
-            if (out_.corners.capacity() - out_.corners.size() < 3)
-                budgeted_reserve(out_.corners, 2 * out_.corners.size() + 3, corners_what_);
-            out_.corners.push_back(face_[0]);
-            out_.corners.push_back(face_[k - 1]);
-            out_.corners.push_back(face_[k]);
-            budgeted_push_back(out_.triangle_material, material, corners_what_);
-        }
-    }
-
-    void check_forward_references() const {
-        auto check = [&](const ForwardReference& f, size_t count, const char* what) {
-            if (f.max_index > count)
-                throw file_error(path_, f.line, std::string(what) + " index " + std::to_string(f.max_index) +
-                                                    " out of range (" + std::to_string(count) + " in file)");
-        };
-        check(forward_v_, out_.positions.size(), "vertex");
-        check(forward_vt_, out_.uvs.size(), "texture coordinate");
-        check(forward_vn_, out_.normals.size(), "normal");
-    }
-
-    const std::string& path_;
-    std::string_view text_;
-    const std::string positions_what_, uvs_what_, normals_what_, corners_what_;  // budget error prefixes
-    std::string_view line_text_;
-    const char* p_ = nullptr;
-    const char* end_ = nullptr;
-    long line_ = 0;
-    std::vector<ObjCorner> face_;
-    ForwardReference forward_v_, forward_vt_, forward_vn_;
-    ObjGeometry out_;
 };
 
 // One mesh vertex per distinct (v, vt, vn). Variants of a position are chained
@@ -422,14 +257,7 @@ Material material_from_mtl(const tinyobj::material_t& m, MtlStatements written) 
     return out;
 }
 
-// A material for faces with no usemtl or an unknown name: MTL's defaults
-// have no specular, so a grey Lambertian.
-Material default_obj_material(const std::string& name) {
-    Material m;
-    m.name = name;
-    m.specular = 0.0f;
-    return m;
-}
+using io::default_obj_material;
 
 // The textures one material asks for, as resolved file paths ("" = none).
 struct MaterialTextures {
@@ -551,14 +379,15 @@ bool looks_like_normal_map(const Texture& t) {
 
 // Adds the used materials (in order of first use) and returns, for each
 // usemtl name, its index in scene.materials.
-std::vector<uint32_t> add_materials(Scene& scene, const std::string& obj_path, const ObjGeometry& geo,
+std::vector<uint32_t> add_materials(Scene& scene, const std::string& obj_path,
+                                    const std::vector<std::string>& used_materials,
                                     const std::vector<MaterialLibrary>& libraries, bool load_textures) {
     TextureTable textures(load_textures);
-    std::vector<MaterialTextures> wanted(geo.used_materials.size());
-    std::vector<uint32_t> scene_index(geo.used_materials.size());
+    std::vector<MaterialTextures> wanted(used_materials.size());
+    std::vector<uint32_t> scene_index(used_materials.size());
 
-    for (size_t i = 0; i < geo.used_materials.size(); ++i) {
-        const std::string& name = geo.used_materials[i];
+    for (size_t i = 0; i < used_materials.size(); ++i) {
+        const std::string& name = used_materials[i];
         const tinyobj::material_t* source = nullptr;
         const MaterialLibrary* library = nullptr;
         for (const MaterialLibrary& lib : libraries) {
@@ -620,17 +449,38 @@ std::vector<uint32_t> add_materials(Scene& scene, const std::string& obj_path, c
 
 }  // namespace
 
+namespace io {
+
+Material default_obj_material(const std::string& name) {
+    // MTL's defaults have no specular: a grey Lambertian.
+    Material m;
+    m.name = name;
+    m.specular = 0.0f;
+    return m;
+}
+
+std::vector<uint32_t> add_obj_materials(Scene& scene, const std::string& obj_path,
+                                        const std::vector<std::string>& used_materials,
+                                        const std::vector<std::string>& libraries, bool load_textures) {
+    return add_materials(scene, obj_path, used_materials, load_material_libraries(obj_path, libraries), load_textures);
+}
+
+}  // namespace io
+
 Scene load_obj(const std::string& path, const LoadOptions& options) {
-    ObjGeometry geo = ObjParser(path, io::MappedFile(path).bytes()).parse();
+    ObjGeometry geo(path);
+    io::ObjParser<ObjGeometry> parser(path, geo);
+    parser.lines(io::MappedFile(path).bytes());
+    parser.finish();
     if (geo.corners.empty()) throw file_error(path, 0, "no faces");
-    if (geo.skipped_faces > 0)
-        warn(path + ": skipped " + std::to_string(geo.skipped_faces) + " faces with fewer than 3 vertices");
+    if (parser.skipped_faces() > 0)
+        warn(path + ": skipped " + std::to_string(parser.skipped_faces()) + " faces with fewer than 3 vertices");
     checked_index_count(path + ": OBJ triangle count", geo.corners.size() / 3);
 
     Scene scene;
     scene.source = path;
-    std::vector<MaterialLibrary> libraries = load_material_libraries(path, geo.libraries);
-    std::vector<uint32_t> material_index = add_materials(scene, path, geo, libraries, options.load_textures);
+    std::vector<uint32_t> material_index =
+        io::add_obj_materials(scene, path, parser.used_materials(), parser.libraries(), options.load_textures);
 
     // Triangles before any usemtl get a default material.
     std::vector<uint32_t> triangle_material(geo.triangle_material.size());

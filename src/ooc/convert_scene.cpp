@@ -43,18 +43,34 @@ void write_materials(const Scene& scene, const std::map<int32_t, int32_t>& textu
 
 }  // namespace
 
+void write_scene_look(const Scene& scene, const Camera& camera, PackWriter& writer, std::vector<std::string>& notes) {
+    const std::map<int32_t, int32_t> textures = write_textures(scene, writer);
+    write_materials(scene, textures, writer, notes);
+    for (const Light& light : scene.lights) writer.add_light(light);
+    const Environment& env = scene.environment;
+    const bool env_emits = (env.texture >= 0 || max_component(env.color) > 0.0f) && env.strength > 0.0f;
+    if (scene.lights.empty() && !env_emits) {
+        // As `render` does for an unlit in-core scene (paged files sample
+        // no emitting triangles): lights a white diffuse surface at the
+        // target distance to about 1.
+        Light headlight;
+        headlight.position = camera.eye;
+        const float distance = length(camera.target - camera.eye);
+        headlight.intensity = 3.14159265f * distance * distance;
+        writer.add_light(headlight);
+        notes.push_back("the scene has no light: a headlight at the default camera was added");
+    }
+    writer.set_camera(camera);
+    writer.set_environment(scene.environment);
+    if (scene.environment.texture >= 0)
+        notes.push_back("the environment map was replaced by its constant colour times strength");
+}
+
 ConvertResult convert_scene(const Scene& scene, const std::string& path, const PackWriterOptions& options,
                             const ProgressCallback& progress) {
     ConvertResult result;
     PackWriter writer(path, options);
-    const std::map<int32_t, int32_t> textures = write_textures(scene, writer);
-    write_materials(scene, textures, writer, result.notes);
-    for (const Light& light : scene.lights) writer.add_light(light);
-    if (scene.camera) writer.set_camera(*scene.camera);
-    else writer.set_camera(scene.camera_or_default());
-    writer.set_environment(scene.environment);
-    if (scene.environment.texture >= 0)
-        result.notes.push_back("the environment map was replaced by its constant colour times strength");
+    write_scene_look(scene, scene.camera_or_default(), writer, result.notes);
     if (progress) progress(0.0);
     size_t done = 0;
     const size_t total = std::max<size_t>(1, scene.triangle_count());

@@ -18,6 +18,10 @@ struct ConvertResult {
     std::vector<std::string> notes;
 };
 
+// Everything but the geometry: textures and materials (made opaque, with
+// notes), lights, `camera`, the environment.
+void write_scene_look(const Scene& scene, const Camera& camera, PackWriter& writer, std::vector<std::string>& notes);
+
 ConvertResult convert_scene(const Scene& scene, const std::string& path, const PackWriterOptions& options,
                             const ProgressCallback& progress = {});
 

@@ -1,9 +1,12 @@
 // Writing paged scenes through the public API: converting a scene in memory,
 // and generating a procedural one straight into a paged (or OBJ) file.
+#include <cctype>
 #include <cstdio>
 #include <fstream>
 
 #include "ooc/convert_scene.h"
+#include "ooc/obj_stream_convert.h"
+#include "rayforge/io/scene_io.h"
 #include "ooc/generate/massive_scene.h"
 #include "rayforge/core/error.h"
 #include "rayforge/ooc/paged_scene.h"
@@ -107,12 +110,40 @@ bool ends_with(const std::string& s, const std::string& suffix) {
     return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
+bool is_obj_file(const std::string& path) {
+    if (path.size() < 4) return false;
+    std::string suffix = path.substr(path.size() - 4);
+    for (char& c : suffix) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return suffix == ".obj";
+}
+
 }  // namespace
 
 PagedWriteReport convert_to_paged(const Scene& scene, const std::string& path, const PagedWriteOptions& options,
                                   const ProgressCallback& progress) {
     pack::ConvertResult r = pack::convert_scene(scene, path, writer_options(options), progress);
     return to_report(r.summary, std::move(r.notes));
+}
+
+PagedWriteReport convert_file_to_paged(const std::string& scene_file, const std::string& path,
+                                       const PagedWriteOptions& options, const ConvertInputOptions& input,
+                                       const ProgressCallback& progress) {
+    if (!is_obj_file(scene_file)) {
+        PagedWriteReport r = convert_to_paged(load_scene(scene_file), path, options, progress);
+        r.notes.push_back("the input was loaded in core (convert streams .obj files only)");
+        return r;
+    }
+    pack::StreamConvertOptions stream;
+    stream.memory_budget = size_t(input.memory_budget);
+    stream.temp_dir = input.temp_dir;
+    pack::StreamConvertResult s =
+        pack::convert_obj_streaming(scene_file, path, writer_options(options), stream, progress);
+    PagedWriteReport r = to_report(s.convert.summary, std::move(s.convert.notes));
+    r.streamed = true;
+    r.objects = s.objects;
+    r.scratch_bytes = s.scratch_bytes;
+    r.max_object_triangles = s.budget.max_object_triangles;
+    return r;
 }
 
 std::vector<std::string> generated_scene_names() { return pack::generator_names(); }

@@ -33,10 +33,10 @@ size_t Scene::memory_bytes() const {
     return n;
 }
 
-Camera Scene::camera_or_default() const {
-    if (camera) return *camera;
+Camera Scene::camera_or_default() const { return camera ? *camera : framing(bounds()); }
+
+Camera Scene::framing(const Box3f& b) {
     Camera cam;
-    Box3f b = bounds();
     if (b.is_empty()) return cam;
     // Frame the bounding sphere from the +z side with the default 45° field of view.
     Vec3f center = b.center();

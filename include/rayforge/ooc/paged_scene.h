@@ -42,11 +42,29 @@ struct PagedWriteReport {
     uint64_t file_bytes = 0, geometry_bytes = 0, attribute_bytes = 0, texture_bytes = 0, resident_bytes = 0;
     double max_quantisation_error = 0.0;  // largest |decoded - input| vertex coordinate, world units
     std::vector<std::string> notes;       // what the paged form leaves out (opaque cut-outs, ...)
+    // convert_file_to_paged only:
+    bool streamed = false;                // the input was streamed (OBJ), not loaded in core
+    uint64_t objects = 0;                 // objects handed to the writer when streamed
+    uint64_t scratch_bytes = 0;           // the streaming converter's scratch files, together
+    uint64_t max_object_triangles = 0;    // the largest object its memory budget allowed
 };
 
 // Writes `scene` (finalize()d) as a paged scene file, instance by instance.
 PagedWriteReport convert_to_paged(const Scene& scene, const std::string& path, const PagedWriteOptions& options = {},
                                   const ProgressCallback& progress = {});
+
+// How convert_file_to_paged reads its input.
+struct ConvertInputOptions {
+    uint64_t memory_budget = uint64_t(1) << 30;  // the streaming converter's working memory, >= 96 MiB
+    std::string temp_dir;                        // its scratch files (unlinked at once); "" = the output's folder
+};
+// Converts a scene file. OBJ input is streamed: read in blocks, its arrays
+// spilled to scratch files, the triangles cut into spatially compact objects
+// that fit `input.memory_budget`, so a file larger than memory converts.
+// Other formats (and builtin:NAME) are loaded in core first (a note says so).
+PagedWriteReport convert_file_to_paged(const std::string& scene_file, const std::string& path,
+                                       const PagedWriteOptions& options = {}, const ConvertInputOptions& input = {},
+                                       const ProgressCallback& progress = {});
 
 struct GenerateOptions {
     std::string name = "terrain-statues";  // generated_scene_names()

@@ -44,6 +44,8 @@ struct Scene {
     [[nodiscard]] size_t memory_bytes() const;    // meshes + textures
     // A camera looking at the whole scene from the +z side when the file has none.
     [[nodiscard]] Camera camera_or_default() const;
+    // The camera camera_or_default() makes for a scene bounded by `bounds`.
+    [[nodiscard]] static Camera framing(const Box3f& bounds);
     // Adds a default material when there is none, instances each mesh once when
     // there are no instances, and validates every mesh and index; throws rf::Error.
     void finalize();
