@@ -1,6 +1,8 @@
 // The paged-scene verbs (docs/paged-scenes.md): `convert` writes a scene as
 // a paged file, `generate` writes a procedural one; `render` and `info` of a
 // paged file come here from their commands.
+#include <sys/resource.h>
+
 #include <chrono>
 #include <cstdio>
 #include <string>
@@ -31,6 +33,13 @@ void print_write_report(const std::string& path, const PagedWriteReport& r, doub
                 format_bytes(double(r.texture_bytes)).c_str(), format_bytes(double(r.resident_bytes)).c_str(),
                 r.max_quantisation_error, ms / 1e3, ms > 0.0 ? double(r.triangles) / (ms * 1e3) : 0.0);
     for (const std::string& note : r.notes) std::printf("%s: note: %s\n", path.c_str(), note.c_str());
+}
+
+// The process's peak resident set (the kernel's high-water mark).
+double peak_resident_bytes() {
+    rusage usage{};
+    getrusage(RUSAGE_SELF, &usage);
+    return double(usage.ru_maxrss) * 1024.0;  // kilobytes on Linux
 }
 
 // "geometry 93.1% hit, 120 MiB read" for the progress bar and the summary.
@@ -80,10 +89,11 @@ int run_convert(const ConvertArgs& a) {
     }
     print_write_report(a.output, report, ms_since(start));
     if (report.streamed)
-        std::printf("%s: streamed within %s: %llu objects of at most %llu triangles, %s of scratch files\n",
+        std::printf("%s: streamed within %s: %llu objects of at most %llu triangles, %s of scratch files, peak "
+                    "resident %s\n",
                     a.output.c_str(), format_bytes(double(input.memory_budget)).c_str(),
                     (unsigned long long)report.objects, (unsigned long long)report.max_object_triangles,
-                    format_bytes(double(report.scratch_bytes)).c_str());
+                    format_bytes(double(report.scratch_bytes)).c_str(), format_bytes(peak_resident_bytes()).c_str());
     return 0;
 }
 

@@ -79,7 +79,8 @@ struct Spill {
 };
 
 // Reads `path` in blocks, line by line, into the parser.
-void parse_in_blocks(const std::string& path, io::ObjParser<Spill>& parser, const ProgressCallback& progress) {
+void parse_in_blocks(const std::string& path, size_t block_bytes, io::ObjParser<Spill>& parser,
+                     const ProgressCallback& progress) {
     const int fd = ::open(path.c_str(), O_RDONLY);
     if (fd < 0) throw Error(path + ": " + std::strerror(errno));
     struct Closer {
@@ -88,7 +89,7 @@ void parse_in_blocks(const std::string& path, io::ObjParser<Spill>& parser, cons
     } closer{fd};
     std::error_code ec;
     const uint64_t size = std::filesystem::file_size(path, ec);
-    std::vector<char> block(kReadBlock);
+    std::vector<char> block(std::max<size_t>(1, block_bytes));
     std::string carry;  // a line cut by the block's end
     uint64_t done = 0;
     for (;;) {
@@ -353,10 +354,12 @@ StreamConvertResult convert_obj_streaming(const std::string& obj_path, const std
                                           const ProgressCallback& progress) {
     StreamConvertResult result;
     result.budget = plan_stream_budget(stream.memory_budget);
+    if (stream.max_object_triangles > 0)
+        result.budget.max_object_triangles = std::min(result.budget.max_object_triangles, stream.max_object_triangles);
     const std::string folder = scratch_folder(out_path, stream.temp_dir);
     Spill spill(folder);
     io::ObjParser<Spill> parser(obj_path, spill);
-    parse_in_blocks(obj_path, parser, stage(progress, 0.0, 0.35));
+    parse_in_blocks(obj_path, stream.read_block_bytes, parser, stage(progress, 0.0, 0.35));
     spill.flush();
     if (spill.triangle_count() == 0) throw file_error(obj_path, 0, "no faces");
     checked_index_count(obj_path + ": OBJ triangle count", spill.triangle_count());

@@ -43,6 +43,8 @@ struct StreamConvertOptions {
     std::string temp_dir;                    // scratch files; "" = the output's folder
     bool compute_missing_normals = true;     // as LoadOptions
     bool load_textures = true;
+    uint64_t max_object_triangles = 0;       // 0 = what the budget allows; else at most this (tests, fuzzing)
+    size_t read_block_bytes = size_t(4) << 20;  // the input is read in blocks of this size (>= 1)
 };
 
 // How a budget is divided (exposed for tests and the summary).
