@@ -3,6 +3,7 @@
 // paged file come here from their commands.
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <string>
@@ -23,6 +24,13 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 void print_write_report(const std::string& path, const PagedWriteReport& r, double ms) {
+    if (r.geometry_pages == 0) {  // `generate` into an OBJ file: no pages
+        std::printf("%s: %llu triangles, %s written in %.1f s (%.2f Mtriangles/s)\n", path.c_str(),
+                    (unsigned long long)r.triangles, format_bytes(double(r.file_bytes)).c_str(), ms / 1e3,
+                    ms > 0.0 ? double(r.triangles) / (ms * 1e3) : 0.0);
+        for (const std::string& note : r.notes) std::printf("%s: note: %s\n", path.c_str(), note.c_str());
+        return;
+    }
     std::printf("%s: %llu triangles -> %llu quads (%.1f%% paired) in %u geometry, %u attribute, %u texture pages | "
                 "%s (geometry %s, attributes %s, textures %s, resident %s) | max quantisation error %.3g | %.1f s "
                 "(%.2f Mtriangles/s)\n",
@@ -165,12 +173,13 @@ int run_paged_render(const RenderArgs& a) {
     const PagedSceneInfo& info = scene->info();
     const PagedQueryStats q = scene->query_stats();
     std::printf("%s: %dx%d %s %d spp, %llu paged triangles | open %.1f ms | render %.1f ms (%.2f Mrays/s, %.1f ms/pass) "
-                "| %llu query iterations | memory %s of budget %s\n",
+                "| %llu query iterations | memory: caches %s of budget %s + always-resident levels %s\n",
                 a.outputs.front().c_str(), options.width, options.height, integrator_name(options.integrator).c_str(),
                 renderer->passes(), (unsigned long long)info.triangles, open_ms, render_ms,
                 render_ms > 0.0 ? double(rs.rays()) / (render_ms * 1e3) : 0.0,
                 renderer->passes() ? render_ms / renderer->passes() : 0.0, (unsigned long long)q.iterations,
-                format_bytes(double(scene->memory_bytes())).c_str(), a.paged.memory_budget.c_str());
+                format_bytes(double(scene->memory_bytes() - std::min(scene->memory_bytes(), info.resident_bytes))).c_str(),
+                a.paged.memory_budget.c_str(), format_bytes(double(info.resident_bytes)).c_str());
     std::printf("%s: caches: %s\n", a.outputs.front().c_str(), cache_line(*scene).c_str());
     const double per_ray = q.queries ? 1.0 / double(q.queries) : 0.0;
     std::printf("%s: per query: %.2f iterations, %.1f cells, %.1f middle nodes, %.2f pages searched, %.1f page nodes, "
