@@ -16,7 +16,7 @@ set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 BUILD="${FUZZ_BUILD_DIR:-$ROOT/build-fuzz}"
-ALL_TARGETS=(obj mtl ply gltf glb json_scene texture exr aff viewer_script bookmarks pack)
+ALL_TARGETS=(obj mtl ply gltf glb json_scene texture exr aff viewer_script bookmarks pack obj_stream)
 
 seconds=60
 runs=""
@@ -33,7 +33,7 @@ done
 
 dictionary_for() {
   case "$1" in
-    obj|mtl) echo "$ROOT/fuzz/dictionaries/obj.dict" ;;
+    obj|mtl|obj_stream) echo "$ROOT/fuzz/dictionaries/obj.dict" ;;
     ply) echo "$ROOT/fuzz/dictionaries/ply.dict" ;;
     gltf|glb) echo "$ROOT/fuzz/dictionaries/gltf.dict" ;;
     json_scene) echo "$ROOT/fuzz/dictionaries/json.dict" ;;

@@ -207,6 +207,19 @@ TEST(ObjStreamConvert, BadInputIsAOneLineError) {
     EXPECT_NE(no_folder.find("scratch file"), std::string::npos) << no_folder;
     EXPECT_NE(stream_error(dir, "missing.obj", "").find("no faces"), std::string::npos);
     for (const std::string& m : {bad_number, no_folder}) EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+    // Blank lines at read-block boundaries still count (fuzz_obj_stream found them lost).
+    std::ofstream(dir + "/g.obj") << tri << "\n\nf 1 2 x\n";
+    for (size_t block : {size_t(1), size_t(3), size_t(25), size_t(4096)}) {
+        StreamConvertOptions small_blocks;
+        small_blocks.memory_budget = kMinStreamBudget;
+        small_blocks.read_block_bytes = block;
+        try {
+            convert_obj_streaming(dir + "/g.obj", dir + "/out.rfpack", {}, small_blocks);
+            ADD_FAILURE() << "no error";
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find("g.obj:6:"), std::string::npos) << e.what() << " block " << block;
+        }
+    }
     StreamConvertOptions tiny;
     tiny.memory_budget = size_t(8) << 20;
     EXPECT_THROW(convert_obj_streaming(dir + "/f.obj", dir + "/out.rfpack", {}, tiny), Error);

@@ -98,26 +98,19 @@ void parse_in_blocks(const std::string& path, size_t block_bytes, io::ObjParser<
         if (n < 0) throw Error(path + ": read failed: " + std::strerror(errno));
         if (n == 0) break;
         done += uint64_t(n);
+        // Every '\n' ends a line, blank ones too (the parser counts them
+        // for its messages); the piece after the last one waits in `carry`.
         std::string_view text(block.data(), size_t(n));
-        const size_t last_eol = text.rfind('\n');
-        if (last_eol == std::string_view::npos) {
-            carry.append(text);
-            continue;
+        for (size_t eol; (eol = text.find('\n')) != std::string_view::npos; text.remove_prefix(eol + 1)) {
+            if (carry.empty()) {
+                parser.line(text.substr(0, eol));
+            } else {
+                carry.append(text.substr(0, eol));
+                parser.line(carry);
+                carry.clear();
+            }
         }
-        if (!carry.empty()) {
-            const size_t first_eol = text.find('\n');
-            carry.append(text.substr(0, first_eol));
-            parser.line(carry);
-            carry.clear();
-            text.remove_prefix(first_eol + 1);
-        }
-        const size_t cut = text.rfind('\n');
-        if (cut != std::string_view::npos) {
-            parser.lines(text.substr(0, cut));
-            carry.assign(text.substr(cut + 1));
-        } else {
-            carry.assign(text);
-        }
+        carry.append(text);
         if (progress && size > 0) progress(double(done) / double(size));
     }
     if (!carry.empty()) parser.line(carry);
