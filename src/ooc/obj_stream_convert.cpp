@@ -29,7 +29,6 @@ constexpr int kBinBits = 7;  // 128 bins on each axis
 constexpr uint32_t kBinsPerAxis = 1u << kBinBits;
 constexpr uint32_t kBins = 1u << (3 * kBinBits);
 constexpr size_t kBinBytes = 3 * sizeof(uint32_t);  // count, first object, seen so far
-constexpr size_t kReadBlock = size_t(4) << 20;
 constexpr size_t kDistributeBuffers = size_t(16) << 20;  // all the objects' write buffers together
 
 // Pass 1's record of one triangle.
@@ -259,8 +258,7 @@ private:
         if (cursor_[o] + b.size() > plan_.begin[o + 1]) throw Error("convert: object plan overflow (internal)");
         file_.write(cursor_[o] * sizeof(ObjectRecord), b.data(), b.size() * sizeof(ObjectRecord));
         cursor_[o] += b.size();
-        b.clear();
-        b.shrink_to_fit();
+        b.clear();  // kept: at most capacity_ records, inside the planned kDistributeBuffers
     }
     SpillFile& file_;
     const ObjectPlan& plan_;
@@ -335,7 +333,7 @@ StreamBudget plan_stream_budget(size_t memory_budget) {
         throw Error("convert: a memory budget of " + std::to_string(memory_budget >> 20) +
                     " MiB is too small for streaming (at least " + std::to_string(kMinStreamBudget >> 20) + " MiB)");
     StreamBudget b;
-    b.fixed_bytes = size_t(kBins) * kBinBytes + kReadBlock + 5 * (size_t(1) << 20) + kDistributeBuffers;
+    b.fixed_bytes = size_t(kBins) * kBinBytes + kStreamReadBlock + 5 * (size_t(1) << 20) + kDistributeBuffers;
     const size_t rest = memory_budget - b.fixed_bytes;
     b.cache_bytes = std::min(rest / 4, size_t(512) << 20);
     b.max_object_triangles = std::max<uint64_t>(1024, (rest - b.cache_bytes) / kObjectBytesPerTriangle);

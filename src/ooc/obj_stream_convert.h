@@ -37,6 +37,7 @@ namespace rf::pack {
 // welding map, positions, indices, shading records and the writer's own.
 inline constexpr size_t kObjectBytesPerTriangle = 112 + 48 + 6 + 12 + 64 + kWriterBytesPerTriangle;
 inline constexpr size_t kMinStreamBudget = size_t(96) << 20;
+inline constexpr size_t kStreamReadBlock = size_t(4) << 20;  // the input's read size, part of the fixed bytes
 
 struct StreamConvertOptions {
     size_t memory_budget = size_t(1) << 30;  // bytes, at least kMinStreamBudget
@@ -44,7 +45,7 @@ struct StreamConvertOptions {
     bool compute_missing_normals = true;     // as LoadOptions
     bool load_textures = true;
     uint64_t max_object_triangles = 0;       // 0 = what the budget allows; else at most this (tests, fuzzing)
-    size_t read_block_bytes = size_t(4) << 20;  // the input is read in blocks of this size (>= 1)
+    size_t read_block_bytes = kStreamReadBlock;  // the input is read in blocks of this size (>= 1)
 };
 
 // How a budget is divided (exposed for tests and the summary).

@@ -1,9 +1,9 @@
 // Writing paged scenes through the public API: converting a scene in memory,
 // and generating a procedural one straight into a paged (or OBJ) file.
-#include <cctype>
 #include <cstdio>
 #include <fstream>
 
+#include "io/path_utils.h"
 #include "ooc/convert_scene.h"
 #include "ooc/obj_stream_convert.h"
 #include "rayforge/io/scene_io.h"
@@ -110,12 +110,7 @@ bool ends_with(const std::string& s, const std::string& suffix) {
     return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
-bool is_obj_file(const std::string& path) {
-    if (path.size() < 4) return false;
-    std::string suffix = path.substr(path.size() - 4);
-    for (char& c : suffix) c = char(std::tolower(static_cast<unsigned char>(c)));
-    return suffix == ".obj";
-}
+bool is_obj_file(const std::string& path) { return io::lowercase_extension(path) == ".obj"; }
 
 }  // namespace
 
