@@ -48,6 +48,63 @@ void add_accel_options(CLI::App* cmd, AccelArgs& a) {
         ->group(group);
 }
 
+void add_update_options(CLI::App* cmd, AccelArgs& a) {
+    const std::string group = "Animation: acceleration-structure updates";
+    cmd->add_option("--update", a.update_method,
+                    "How the structure follows an animation: refit | adapt (Garanzha 2014 ch. 2: refit, local "
+                    "rebuilds, migrations) | rebuild | clusters (ch. 3: builds over precomputed clusters) | "
+                    "two-level (a BVH per mesh, a top level over instances) (default: the scene's, else " +
+                        to_string(kDefaultUpdateMethod) + ")")
+        ->group(group);
+    cmd->add_option("--adapt-reading", a.adapt_reading,
+                    "adapt: the text's two readings of its swapped thresholds: stated (dM 0.05, dE 0.01; the "
+                    "default) | closing (dM 0.01, dE 0.05)")
+        ->group(group);
+    cmd->add_option("--adapt-dm", a.adapt_dm, "adapt: dM, migrating when SAH/saved SAH < 1 - dM (overrides the reading)")
+        ->check(CLI::Range(0.0f, 1.0f))
+        ->group(group);
+    cmd->add_option("--adapt-de", a.adapt_de, "adapt: dE, exploded when SAH/saved SAH > 1 + dE (overrides the reading)")
+        ->check(CLI::Range(0.0f, 1.0f))
+        ->group(group);
+    cmd->add_option("--adapt-overlap", a.update.adapt.max_overlap,
+                    "adapt: exploded only when MaxOverlap exceeds this (default 0.5)")
+        ->check(CLI::Range(0.0f, 1.0f))
+        ->group(group);
+    cmd->add_option("--cluster-heuristic", a.cluster_heuristic,
+                    "clusters: acc (Acc(k) = reg - sizeBound * regBound; the default) | naive (the SAH baseline)")
+        ->group(group);
+    cmd->add_option("--cluster-generation", a.cluster_generation,
+                    "clusters: merge (iterative merging on the dual graph; the default) | grow")
+        ->group(group);
+    cmd->add_option("--cluster-max-count", a.update.clusters.max_count, "clusters: MaxCount (default 50)")
+        ->check(CLI::Range(1, 1000000))
+        ->group(group);
+    cmd->add_option("--cluster-max-size", a.update.clusters.max_size, "clusters: MaxSize (default 50)")
+        ->check(CLI::Range(1e-3f, 1e6f))
+        ->group(group);
+    cmd->add_option("--cluster-leaf", a.update.clusters.leaf_triangles,
+                    "clusters: the build over clusters stops at nodes of at most this many triangles (default 32)")
+        ->check(CLI::Range(1, 64))
+        ->group(group);
+}
+
+UpdateOptions to_update_options(const AccelArgs& a, const std::string& scene_default) {
+    UpdateOptions update = a.update;
+    const std::string& method = !a.update_method.empty() ? a.update_method : scene_default;
+    update.method = method.empty() ? kDefaultUpdateMethod : parse_update_method(method);
+    if (!a.adapt_reading.empty()) {
+        const AdaptOptions reading = parse_adapt_reading(a.adapt_reading);
+        update.adapt.migrate_threshold = reading.migrate_threshold;
+        update.adapt.explode_threshold = reading.explode_threshold;
+    }
+    if (a.adapt_dm > 0.0f) update.adapt.migrate_threshold = a.adapt_dm;
+    if (a.adapt_de > 0.0f) update.adapt.explode_threshold = a.adapt_de;
+    if (!a.cluster_heuristic.empty()) update.clusters.heuristic = parse_cluster_heuristic(a.cluster_heuristic);
+    if (!a.cluster_generation.empty()) update.clusters.generation = parse_cluster_generation(a.cluster_generation);
+    validate_update_options(update);
+    return update;
+}
+
 BuildOptions to_build_options(const AccelArgs& a, int threads) {
     BuildOptions options = a.options;
     if (!a.accel.empty()) options.structure = parse_structure(a.accel);

@@ -65,6 +65,20 @@ void add_frame_options(CLI::App* cmd, RenderArgs& a, const std::string& spp_help
     cmd->add_option("--threads", a.threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
 }
 
+void add_animation_options(CLI::App* cmd, RenderArgs& a) {
+    a.time_opt = cmd->add_option("--time", a.time,
+                                 "Animated scenes: the scene at this time in seconds (default: the animation's start)")
+                     ->check(CLI::Range(-1e6f, 1e6f))
+                     ->group("Animation: acceleration-structure updates");
+    add_update_options(cmd, a.accel);
+}
+
+float apply_time_option(const RenderArgs& a, Scene& scene) {
+    const float t = a.time_opt && a.time_opt->count() ? a.time : scene.animation.start;
+    if (scene.animated()) scene.set_time(t);
+    return t;
+}
+
 void add_integrator_options(CLI::App* cmd, RenderArgs& a) {
     a.max_depth_opt = cmd->add_option("--max-depth", a.max_depth, "path: bounces after the camera ray (default 8)")
                           ->check(CLI::Range(0, 1024));

@@ -57,6 +57,10 @@ struct RenderArgs {
     bool wavefront = false;           // CPU path tracer: wavefront passes
     bool sort_rays = false;           // CPU wavefront: sort rays before tracing
     PagedReadArgs paged;              // paged scenes: the page caches' budgets
+    // Animated scenes.
+    float time = 0.0f;                // --time: the scene at this time (seconds)
+    std::string frames;               // render --frames FIRST:LAST[:STEP]
+    CLI::Option* time_opt = nullptr;
     // Options whose presence overrides the scene file's render settings.
     CLI::Option* resolution_opt = nullptr;
     CLI::Option* spp_opt = nullptr;
@@ -77,6 +81,10 @@ void add_integrator_options(CLI::App* cmd, RenderArgs& args);
 void add_tone_options(CLI::App* cmd, RenderArgs& args);
 void add_light_options(CLI::App* cmd, RenderArgs& args);
 void add_device_options(CLI::App* cmd, RenderArgs& args);
+// --time and the structure's update options (--update ...).
+void add_animation_options(CLI::App* cmd, RenderArgs& args);
+// The scene at --time when given (no change otherwise); returns the time used.
+float apply_time_option(const RenderArgs& args, Scene& scene);
 
 // "640x480" -> (640, 480); false when malformed.
 bool parse_resolution(const std::string& text, int& width, int& height);

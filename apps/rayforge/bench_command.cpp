@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "animate_bench.h"
 #include "bench_report.h"
 #include "bench_runner.h"
 #include "commands.h"
@@ -245,6 +246,116 @@ int run_paged_bench_command(const BenchArgs& a, const std::string& command_line)
     return 0;
 }
 
+// --embree under --animate: the dynamic peer's modes.
+std::vector<bench::EmbreeUpdate> parse_embree_updates(const std::vector<std::string>& names) {
+    std::vector<bench::EmbreeUpdate> updates;
+    for (const std::string& name : names) {
+        if (name == "none") return {};
+        if (name == "all") return {std::begin(bench::kAllEmbreeUpdates), std::end(bench::kAllEmbreeUpdates)};
+        bool found = false;
+        for (bench::EmbreeUpdate u : bench::kAllEmbreeUpdates) {
+            if (name != bench::embree_update_name(u)) continue;
+            updates.push_back(u);
+            found = true;
+        }
+        if (!found) throw Error("--embree: with --animate, one of refit, low, medium, all, none (got '" + name + "')");
+    }
+    return updates;
+}
+
+// The one builder and layout of --animate and --cluster-table (first of --builder / --layout).
+BuildOptions animate_build(const BenchArgs& a) {
+    BuildOptions build;
+    const std::vector<std::string> builders = split_list(a.builders), layouts = split_list(a.layouts);
+    if (!builders.empty()) build.builder = parse_builder(builders.front());
+    if (!layouts.empty()) build.layout = parse_layout(layouts.front());
+    build.threads = a.threads;
+    return build;
+}
+
+std::vector<bench::LoadedScene> load_animate_scenes(const BenchArgs& a, const std::string& scenes_dir) {
+    std::vector<std::string> names = split_list(a.scenes);
+    if (names.empty()) names = {"builtin:explode", "builtin:cloth", "builtin:nbody"};
+    std::vector<bench::LoadedScene> scenes;
+    for (const std::string& name : names) {
+        if (!a.quiet) std::cerr << "loading " << name << '\n';
+        scenes.push_back(bench::load_bench_scene(bench::resolve_scene(name, scenes_dir)));
+    }
+    return scenes;
+}
+
+// `--cluster-table`: ch. 3's Table 3.1 on each scene (frame 0 of an animated one).
+int run_cluster_table_command(const BenchArgs& a, const std::string& scenes_dir) {
+    bench::ClusterTableConfig config;
+    config.build = animate_build(a);
+    config.threads = a.threads;
+    config.repetitions = a.build_repetitions;
+    config.progress = !a.quiet;
+    const std::vector<std::string> resolutions = split_list(a.resolutions);
+    if (!resolutions.empty()) {
+        const bench::Resolution res = parse_resolution_or_throw(resolutions.front());
+        config.width = res.width;
+        config.height = res.height;
+    }
+    std::vector<bench::ClusterTable> tables;
+    std::ostringstream sink;
+    for (bench::LoadedScene& scene : load_animate_scenes(a, scenes_dir))
+        tables.push_back(bench::run_cluster_table(scene, config, a.quiet ? sink : std::cerr));
+    bench::print_cluster_tables(std::cout, tables, a.threads > 0 ? a.threads : bench::machine_info().cores);
+    return 0;
+}
+
+// `--animate`: per-frame updates of every method against a rebuild and Embree (bench/harness/animate_bench.h).
+int run_animate_command(const BenchArgs& a, const std::string& command_line, const std::string& scenes_dir) {
+    if (!a.paged.empty() || !a.integrators.empty() || !a.preset.empty() || !a.gpu_kernels.empty())
+        throw Error("--animate, --cluster-table: not with --paged, --integrator, --preset or --gpu-kernel");
+    for (const std::string& d : split_list(a.devices))
+        if (parse_device(d).is_cuda()) throw Error("--animate, --cluster-table: CPU only for now (--device cpu)");
+    if (a.cluster_table) return run_cluster_table_command(a, scenes_dir);
+    bench::AnimateConfig config;
+    config.build = animate_build(a);
+    const std::vector<std::string> updates = split_list(a.updates);
+    if (!updates.empty() && updates.front() != "all") {
+        config.methods.clear();
+        for (const std::string& u : updates) config.methods.push_back(parse_update_method(u));
+    }
+    if (!a.adapt_reading.empty()) config.update.adapt = parse_adapt_reading(a.adapt_reading);
+    if (!a.frames.empty()) config.frames = bench::parse_frame_range(a.frames);
+    config.backwards = a.backwards;
+    if (!a.ray_sets.empty()) config.ray_sets = parse_ray_sets(split_list(a.ray_sets));
+    const std::vector<std::string> resolutions = split_list(a.resolutions);
+    if (!resolutions.empty()) {
+        const bench::Resolution res = parse_resolution_or_throw(resolutions.front());
+        config.width = res.width;
+        config.height = res.height;
+    }
+    if (a.ray_count < 0) throw Error("--ray-count: expected a count >= 0");
+    config.diffuse_rays = size_t(a.ray_count);
+    config.embree = a.embree.empty() ? std::vector<bench::EmbreeUpdate>{std::begin(bench::kAllEmbreeUpdates),
+                                                                         std::end(bench::kAllEmbreeUpdates)}
+                                     : parse_embree_updates(split_list(a.embree));
+    if (!bench::embree_available()) {
+        if (!a.embree.empty() && !config.embree.empty())
+            throw Error("--embree: this rayforge was built without Embree (Debian: libembree-dev)");
+        if (!config.embree.empty()) std::cout << "note: built without Embree; no peer columns\n";
+        config.embree.clear();
+    }
+    config.threads = a.threads;
+    config.repetitions = a.frame_reps;
+    config.progress = !a.quiet;
+    std::vector<bench::AnimateResult> results;
+    std::ostringstream sink;
+    for (bench::LoadedScene& scene : load_animate_scenes(a, scenes_dir)) {
+        results.push_back(bench::run_animate_bench(scene, config, a.quiet ? sink : std::cerr));
+        bench::print_animate_tables(std::cout, results.back());
+    }
+    if (!a.json.empty()) {
+        bench::write_animate_json(a.json, results, command_line);
+        std::cout << "\nwrote the frames of " << results.size() << " scenes to " << a.json << '\n';
+    }
+    return 0;
+}
+
 }  // namespace
 
 // Without --builder: the default BVH builder, and every "builder" of the
@@ -324,6 +435,24 @@ CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
     cmd->add_option("--light-dir", a.light_dir,
                     "--paged: the shadow set's light, a directional light travelling along x,y,z (default: the file's "
                     "first light, when the API lists it)");
+    cmd->add_flag("--animate", a.animate,
+                  "Per-frame acceleration updates over each scene's animation (default scenes builtin:explode, "
+                  "builtin:cloth, builtin:nbody): every --update method against a full rebuild of the same frame "
+                  "(first --builder/--layout) and the Embree peer (--embree refit,low,medium), on the frame's "
+                  "--rays (default primary,shadow,diffuse; --res view, default 512x384); docs/cli.md");
+    cmd->add_option("--update", a.updates, "--animate: refit, adapt, rebuild, clusters, two-level, or all (default all)")
+        ->delimiter(',');
+    cmd->add_option("--frames", a.frames, "--animate: FIRST:LAST[:STEP] (default every frame; built at FIRST)");
+    cmd->add_flag("--backwards", a.backwards,
+                  "--animate: play FIRST..LAST, back to FIRST and forward to LAST again (the seed's 100-1-100)");
+    cmd->add_option("--ray-count", a.ray_count, "--animate: diffuse rays per frame (default 1000000; 0 = the --res view's)");
+    cmd->add_option("--frame-reps", a.frame_reps, "--animate: timed traces per set and frame, median (default 1)")
+        ->check(CLI::Range(1, 100));
+    cmd->add_option("--adapt-reading", a.adapt_reading,
+                    "--animate: adapt's thresholds, stated (dM 0.05, dE 0.01; default) or closing (dM 0.01, dE 0.05)");
+    cmd->add_flag("--cluster-table", a.cluster_table,
+                  "Garanzha ch. 3 Table 3.1 on each scene: MaxCount=MaxSize 0,10,50,100,200 with the Acc and Naive "
+                  "heuristics: clustering ms, clusters, build ms, primary and diffuse trace ms (--build-reps runs)");
     cmd->add_flag("--list", a.list, "List scenes, structures, presets and the Embree peer, then exit");
     cmd->add_flag("-q,--quiet", a.quiet, "No progress lines on stderr");
     return cmd;
@@ -468,6 +597,7 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
         print_list(config.scenes_dir);
         return 0;
     }
+    if (a.animate || a.cluster_table) return run_animate_command(a, command_line, config.scenes_dir);
     bench::RunInfo info;
     info.command = command_line;
     const DeviceSelection devices = parse_devices(a.devices.empty() ? std::vector<std::string>{"cpu"}

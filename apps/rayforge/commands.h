@@ -113,6 +113,15 @@ struct BenchArgs {
     std::vector<std::string> budgets;      // cache fractions of the scene, "0.01" or "1/100" ("" = the seed's five)
     int passes = 4;                        // path-tracing passes per budget
     std::string light_dir;                 // "x,y,z": a directional light for the shadow set
+    // --animate: per-frame updates over an animation (bench/harness/animate_bench.h).
+    bool animate = false;
+    std::vector<std::string> updates;      // refit, adapt, rebuild, clusters, two-level ("" = all)
+    std::string frames;                    // FIRST:LAST[:STEP] ("" = every frame)
+    bool backwards = false;                // play FIRST..LAST, back to FIRST, forward to LAST
+    long long ray_count = 1000000;         // diffuse rays per frame (0 = as the view gives)
+    bool cluster_table = false;            // ch. 3's Table 3.1 instead
+    int frame_reps = 1;                    // --animate: timed traces per set and frame (median)
+    std::string adapt_reading;             // --animate: stated | closing (dM/dE of ch. 2; "" = stated)
 };
 CLI::App* add_bench_command(CLI::App& app, BenchArgs& args);
 int run_bench(const BenchArgs& args, const std::string& command_line);

@@ -56,4 +56,49 @@ private:
     size_t bytes_ = 0;
 };
 
+// The dynamic peer (`rayforge bench --animate`): one Embree scene over the
+// frame's triangles, kept current each frame by refitting
+// (RTC_BUILD_QUALITY_REFIT on the geometry of a LOW scene, Embree's
+// dynamic-scene mode) or by a full rebuild at LOW or MEDIUM.
+enum class EmbreeUpdate : uint8_t { Refit, Low, Medium };
+inline constexpr EmbreeUpdate kAllEmbreeUpdates[] = {EmbreeUpdate::Refit, EmbreeUpdate::Low, EmbreeUpdate::Medium};
+inline const char* embree_update_name(EmbreeUpdate update) {
+    switch (update) {
+        case EmbreeUpdate::Refit: return "refit";
+        case EmbreeUpdate::Low: return "low";
+        case EmbreeUpdate::Medium: return "medium";
+    }
+    return "?";
+}
+
+class EmbreeDynamicPeer {
+public:
+    // Builds the scene over `geometry` (primitive i = geometry.triangles[i]);
+    // build_ms() times it as EmbreePeer does. Throws rf::Error when Embree is
+    // missing or fails.
+    EmbreeDynamicPeer(const SceneGeometry& geometry, EmbreeUpdate update, int threads);
+    ~EmbreeDynamicPeer();
+    EmbreeDynamicPeer(const EmbreeDynamicPeer&) = delete;
+    EmbreeDynamicPeer& operator=(const EmbreeDynamicPeer&) = delete;
+
+    // The frame's positions (same triangle count and order): copied into the
+    // scene's vertex buffer (copy_ms()), then rtcUpdateGeometryBuffer,
+    // rtcCommitGeometry and rtcCommitScene refit or rebuild it. Returns the
+    // milliseconds of the commits (the refit or rebuild alone).
+    double update(const SceneGeometry& geometry);
+    [[nodiscard]] double copy_ms() const { return copy_ms_; }
+
+    void intersect(std::span<const Ray> rays, std::span<Hit> hits) const;
+    void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const;
+    [[nodiscard]] double build_ms() const { return build_ms_; }
+    [[nodiscard]] EmbreeUpdate mode() const { return update_; }
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+    EmbreeUpdate update_ = EmbreeUpdate::Refit;
+    double build_ms_ = 0.0;
+    double copy_ms_ = 0.0;
+};
+
 }  // namespace rf::bench

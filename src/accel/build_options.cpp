@@ -8,6 +8,7 @@
 #include <utility>
 
 #include "rayforge/accel/accel.h"
+#include "rayforge/accel/dynamic_accel.h"
 #include "rayforge/core/error.h"
 
 namespace rf {
@@ -111,6 +112,14 @@ constexpr std::pair<const char*, Layout> kLayoutNames[] = {
 constexpr std::pair<const char*, KdTraversal> kKdTraversalNames[] = {
     {"stack", KdTraversal::Stack}, {"short-stack", KdTraversal::ShortStack},
     {"restart", KdTraversal::Restart}, {"pushdown", KdTraversal::Pushdown}};
+constexpr std::pair<const char*, UpdateMethod> kUpdateMethodNames[] = {
+    {"refit", UpdateMethod::Refit},       {"adapt", UpdateMethod::Adapt},
+    {"rebuild", UpdateMethod::Rebuild},   {"clusters", UpdateMethod::Clusters},
+    {"two-level", UpdateMethod::TwoLevel}};
+constexpr std::pair<const char*, ClusterHeuristic> kClusterHeuristicNames[] = {
+    {"acc", ClusterHeuristic::Acc}, {"naive", ClusterHeuristic::Naive}};
+constexpr std::pair<const char*, ClusterGeneration> kClusterGenerationNames[] = {
+    {"merge", ClusterGeneration::Merge}, {"grow", ClusterGeneration::Grow}};
 
 }  // namespace
 
@@ -124,5 +133,45 @@ std::string to_string(Structure structure) { return name_of(structure, kStructur
 std::string to_string(Builder builder) { return name_of(builder, kBuilderNames); }
 std::string to_string(Layout layout) { return name_of(layout, kLayoutNames); }
 std::string to_string(KdTraversal traversal) { return name_of(traversal, kKdTraversalNames); }
+
+}  // namespace rf
+
+namespace rf {
+
+UpdateMethod parse_update_method(const std::string& name) {
+    return parse_name(name, kUpdateMethodNames, "update method");
+}
+ClusterHeuristic parse_cluster_heuristic(const std::string& name) {
+    return parse_name(name, kClusterHeuristicNames, "cluster heuristic");
+}
+ClusterGeneration parse_cluster_generation(const std::string& name) {
+    return parse_name(name, kClusterGenerationNames, "cluster generation");
+}
+AdaptOptions parse_adapt_reading(const std::string& name) {
+    if (name == "stated") return AdaptOptions::stated();
+    if (name == "closing") return AdaptOptions::closing();
+    throw Error("unknown adapt reading '" + name + "' (expected one of: stated, closing)");
+}
+std::string to_string(UpdateMethod method) { return name_of(method, kUpdateMethodNames); }
+std::string to_string(ClusterHeuristic heuristic) { return name_of(heuristic, kClusterHeuristicNames); }
+std::string to_string(ClusterGeneration generation) { return name_of(generation, kClusterGenerationNames); }
+
+void validate_update_options(const UpdateOptions& update) {
+    const AdaptOptions& a = update.adapt;
+    const auto fraction = [](float v) { return std::isfinite(v) && v > 0.0f && v < 1.0f; };
+    if (!fraction(a.migrate_threshold))
+        throw Error("adapt: dM (migrate threshold) must be in (0, 1), got " + std::to_string(a.migrate_threshold));
+    if (!fraction(a.explode_threshold))
+        throw Error("adapt: dE (explode threshold) must be in (0, 1), got " + std::to_string(a.explode_threshold));
+    if (!(a.max_overlap >= 0.0f && a.max_overlap <= 1.0f))
+        throw Error("adapt: max overlap must be in [0, 1], got " + std::to_string(a.max_overlap));
+    const ClusterOptions& c = update.clusters;
+    if (c.max_count < 1 || c.max_count > 1000000)
+        throw Error("clusters: max count must be in [1, 1000000], got " + std::to_string(c.max_count));
+    if (!(c.max_size > 0.0f && c.max_size <= 1e6f))
+        throw Error("clusters: max size must be in (0, 1e6], got " + std::to_string(c.max_size));
+    if (c.leaf_triangles < 1 || c.leaf_triangles > 64)
+        throw Error("clusters: leaf triangles must be in [1, 64], got " + std::to_string(c.leaf_triangles));
+}
 
 }  // namespace rf

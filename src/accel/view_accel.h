@@ -85,6 +85,15 @@ public:
 
     [[nodiscard]] const Structure& structure() const { return structure_; }
     [[nodiscard]] const Tracer& tracer() const { return tracer_; }
+    // For updates that keep every array's size (refits): `update` changes
+    // the structure, the tracer is made again over it (its views may copy
+    // values such as a coordinate scale), `stats` replaces the name and times.
+    template <class Update, class MakeTracer>
+    void update_in_place(Update&& update, MakeTracer&& make_tracer, AccelStats stats) {
+        update(structure_);
+        tracer_ = make_tracer(structure_);
+        stats_ = std::move(stats);
+    }
 
 private:
     Structure structure_;

@@ -1,6 +1,7 @@
 // The CUDA half of the device seam (backend/backends.h) in a build without
 // the CUDA backend: no devices, and one error for every request.
 #include "backend/backends.h"
+#include "backend/cuda/bvh_refit.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {
@@ -22,5 +23,19 @@ std::unique_ptr<Renderer> make_renderer(const Scene&, const SceneGeometry&, cons
 std::unique_ptr<GlPixelBuffer> register_gl_pixel_buffer(int index, unsigned int) {
     throw Error("cuda:" + std::to_string(index) + ": " + kCudaNotBuilt);
 }
+
+DeviceRefitTimes refit_bvh_on_device(Bvh&, std::span<const Triangle>, int, int device) {
+    throw Error("cuda:" + std::to_string(device) + ": " + kCudaNotBuilt);
+}
+void compute_refit_parents_on_device(const BvhNode*, uint32_t, uint32_t*) { throw Error(kCudaNotBuilt); }
+void refit_bvh_on_device(const DeviceRefitArrays&) { throw Error(kCudaNotBuilt); }
+struct DeviceBvhRefit::Impl {};
+DeviceBvhRefit::DeviceBvhRefit(const Bvh&, int device) {
+    throw Error("cuda:" + std::to_string(device) + ": " + kCudaNotBuilt);
+}
+DeviceBvhRefit::~DeviceBvhRefit() = default;
+double DeviceBvhRefit::refit(std::span<const Triangle>) { throw Error(kCudaNotBuilt); }
+void DeviceBvhRefit::download(Bvh&) const { throw Error(kCudaNotBuilt); }
+DeviceRefitArrays DeviceBvhRefit::arrays() const { throw Error(kCudaNotBuilt); }
 
 }  // namespace rf::cuda

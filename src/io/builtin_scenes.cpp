@@ -6,7 +6,11 @@
 // external scene folder is absent), the tiny "triangle", "plane" and "cube",
 // and the path-tracing test scenes "furnace" (white furnace test),
 // "material-spheres" (glass, metal, plastic under an area light and the
-// procedural sky) and "sky-sphere" (lit only by the procedural sky).
+// procedural sky) and "sky-sphere" (lit only by the procedural sky); and
+// "skinned", a walking glTF character generated in memory and loaded back
+// (io/skinned_character.h).
+// The animated "explode", "cloth" and "nbody" (io/animated_scenes.h) take an
+// optional size and seed: "explode@800k#7" (NAME[@TRIANGLES][#SEED]).
 //
 // Every random choice comes from fixed seeds through integer hashes or integer
 // generators (never std:: distributions, whose output is implementation-
@@ -20,7 +24,9 @@
 #include <vector>
 
 #include "rayforge/core/error.h"
+#include "io/animated_scenes.h"
 #include "io/procedural_sky.h"
+#include "io/skinned_character.h"
 #include "rayforge/io/scene_io.h"
 #include "math/random.h"
 
@@ -734,12 +740,14 @@ Scene make_sky_sphere() {
 
 std::vector<std::string> builtin_scene_names() {
     return {"cornell",  "spheres", "sphereflake", "terrain",          "instances",
-            "triangle", "plane",   "cube",        "furnace", "material-spheres", "sky-sphere"};
+            "triangle", "plane",   "cube",        "furnace", "material-spheres", "sky-sphere", "skinned",
+            "explode",  "cloth",   "nbody"};
 }
 
 Scene make_builtin_scene(const std::string& name) {
     Scene scene;
-    if (name == "cornell") scene = make_cornell();
+    if (is_animated_scene_name(name)) scene = make_animated_scene(name);  // NAME[@SIZE][#SEED]
+    else if (name == "cornell") scene = make_cornell();
     else if (name == "spheres") scene = make_spheres();
     else if (name == "sphereflake") scene = make_sphereflake();
     else if (name == "terrain") scene = make_terrain();
@@ -750,6 +758,7 @@ Scene make_builtin_scene(const std::string& name) {
     else if (name == "furnace") scene = make_furnace();
     else if (name == "material-spheres") scene = make_material_spheres();
     else if (name == "sky-sphere") scene = make_sky_sphere();
+    else if (name == "skinned") scene = io::make_skinned_character_scene();  // glTF, generated
     else {
         std::string known;
         for (const auto& n : builtin_scene_names()) known += (known.empty() ? "" : ", ") + n;

@@ -8,6 +8,19 @@
 // transform; the first camera node gives Scene::camera; KHR_lights_punctual
 // nodes give Scene::lights. Images are kept encoded by tinygltf and decoded
 // here, so the sRGB/linear choice follows the texture's use.
+//
+// Animation (Scene::animation): the FIRST animation of the file only (files
+// with several usually hold alternative clips: walk, run ...), its
+// translation/rotation/scale channels as node tracks and its weights channels
+// as morph weights; skins (linear blend, the 4 largest of JOINTS_0/1 weights,
+// renormalised) and morph targets (POSITION/NORMAL deltas). Only the nodes
+// needed become Animation::nodes: joints, nodes under an animated node that
+// carry a mesh, and their ancestors (one parent per node, as glTF requires).
+// A mesh that is skinned or morphed is converted once per node using it (its
+// skin and weights belong to the node), and a skinned mesh's instance is the
+// identity (glTF ignores the skinned node's transform). An animated scene is
+// evaluated at its start time before it is returned. Cameras and lights do
+// not follow animated nodes.
 #include <tiny_gltf.h>
 
 #include <algorithm>
@@ -18,11 +31,13 @@
 #include <filesystem>
 #include <limits>
 #include <map>
+#include <set>
 #include <string>
 #include <tuple>
 #include <vector>
 
 #include "io/file_reader.h"
+#include "io/gltf_loader.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 #include "rayforge/io/image_io.h"
@@ -218,7 +233,8 @@ private:
     std::vector<uint32_t> read_indices(int accessor_index) const;
 
     Affine3f local_transform(const tinygltf::Node& node, int node_index) const;
-    void visit_node(int node_index, const Affine3f& parent, Scene& scene, int depth);
+    void visit_node(int node_index, const Affine3f& parent, Scene& scene, int depth, bool animated);
+    void add_instances(int node_index, const Affine3f& world, bool animated, Scene& scene);
     const std::vector<uint32_t>& mesh_primitives(int mesh_index, Scene& scene);
     bool convert_primitive(const tinygltf::Primitive& primitive, const std::string& name,
                            Scene& scene, Mesh& mesh);
@@ -228,6 +244,28 @@ private:
     int32_t texture_index(int gltf_texture, TextureEncoding encoding, Scene& scene);
     void add_light(int light_index, const Affine3f& world, Scene& scene) const;
     void set_camera(int camera_index, const Affine3f& world, Scene& scene);
+
+    // Animation: tracks of the first animation, skins, morph targets.
+    struct NodeTracks {
+        Track translation, rotation, scale;
+    };
+    enum class TrackKind { Translation, Rotation, Scale, Weights };
+    void read_animation();
+    Track read_track(const tinygltf::Animation& animation, int sampler_index, TrackKind kind, int width,
+                     const std::string& where) const;
+    int32_t animated_node(int node_index, Scene& scene, int depth = 0);
+    size_t morph_target_count(int mesh_index) const;
+    const std::vector<uint32_t>& deformed_meshes(int node_index, Scene& scene);
+    void add_morph_targets(const tinygltf::Primitive& primitive, int node_index, const std::string& name,
+                           uint32_t mesh_id, size_t vertex_count, Scene& scene);
+    std::vector<Vec3f> read_deltas(int accessor_index, const std::string& what, size_t vertex_count) const;
+    void add_skin(int skin_index, const tinygltf::Primitive& primitive, const std::string& name, uint32_t mesh_id,
+                  size_t vertex_count, Scene& scene);
+    std::vector<float> read_skin_attribute(int accessor_index, const std::string& what, size_t vertex_count,
+                                           bool joints) const;
+    void read_influences(const tinygltf::Primitive& primitive, const std::string& name, size_t vertex_count,
+                         Skin& skin) const;
+    void finish_animation(Scene& scene) const;
 
     const std::string& path_;
     const tinygltf::Model& model_;
@@ -239,6 +277,15 @@ private:
     int default_material_ = -1;      // appended for primitives without a material
     bool warned_non_triangles_ = false;
     bool warned_specular_textures_ = false;
+
+    std::vector<int> node_parent_;           // glTF parent of each node (the first listed), -1 for roots
+    std::vector<int32_t> animation_node_;    // glTF node -> Animation::nodes index, -1 when none yet
+    std::map<int, NodeTracks> node_tracks_;  // glTF node -> its TRS tracks
+    std::map<int, Track> weight_tracks_;     // glTF node -> its morph weights track
+    std::map<std::pair<int, int>, std::vector<uint32_t>> deformed_cache_;  // (mesh, node) -> rf meshes
+    float key_start_ = 0.0f, key_end_ = 0.0f;
+    bool has_keys_ = false;
+    bool warned_channel_path_ = false;
 };
 
 GltfReader::ElementView GltfReader::element_view(int accessor_index, const char* what) const {
@@ -680,7 +727,24 @@ void GltfReader::set_camera(int camera_index, const Affine3f& world, Scene& scen
 constexpr int kMaxNodeDepth = 1000;
 constexpr size_t kMaxNodeVisits = size_t(1) << 22;
 
-void GltfReader::visit_node(int node_index, const Affine3f& parent, Scene& scene, int depth) {
+// The instances of a node's mesh: a skinned one at the identity (skinning
+// yields world space), the others at `world`, and linked to the node when an
+// ancestor (or the node) is animated.
+void GltfReader::add_instances(int node_index, const Affine3f& world, bool animated, Scene& scene) {
+    const tinygltf::Node& node = model_.nodes[size_t(node_index)];
+    const bool skinned = node.skin >= 0;
+    const bool deformed = skinned || morph_target_count(node.mesh) > 0;
+    const std::vector<uint32_t>& meshes = deformed ? deformed_meshes(node_index, scene) : mesh_primitives(node.mesh, scene);
+    for (uint32_t mesh : meshes) {
+        const auto instance = uint32_t(scene.instances.size());
+        budgeted_push_back(scene.instances, Instance{mesh, skinned ? Affine3f::identity() : world},
+                           path_ + ": instance array");
+        if (animated && !skinned)
+            scene.animation.instances.push_back(InstanceAnimation{instance, uint32_t(animated_node(node_index, scene))});
+    }
+}
+
+void GltfReader::visit_node(int node_index, const Affine3f& parent, Scene& scene, int depth, bool animated) {
     if (node_index < 0 || size_t(node_index) >= model_.nodes.size())
         fail("node " + std::to_string(node_index) + " does not exist");
     if (on_path_[size_t(node_index)])
@@ -693,11 +757,9 @@ void GltfReader::visit_node(int node_index, const Affine3f& parent, Scene& scene
              " node instances (nodes shared by many parents)");
     const tinygltf::Node& node = model_.nodes[size_t(node_index)];
     const Affine3f world = parent * local_transform(node, node_index);
+    animated = animated || node_tracks_.count(node_index) != 0;
 
-    if (node.mesh >= 0) {
-        for (uint32_t mesh : mesh_primitives(node.mesh, scene))
-            budgeted_push_back(scene.instances, Instance{mesh, world}, path_ + ": instance array");
-    }
+    if (node.mesh >= 0) add_instances(node_index, world, animated, scene);
     if (node.camera >= 0 && !scene.camera) set_camera(node.camera, world, scene);
     if (auto it = node.extensions.find("KHR_lights_punctual"); it != node.extensions.end()) {
         if (it->second.Has("light") && it->second.Get("light").IsNumber()) {
@@ -709,8 +771,355 @@ void GltfReader::visit_node(int node_index, const Affine3f& parent, Scene& scene
     }
 
     on_path_[size_t(node_index)] = 1;
-    for (int child : node.children) visit_node(child, world, scene, depth + 1);
+    for (int child : node.children) visit_node(child, world, scene, depth + 1, animated);
     on_path_[size_t(node_index)] = 0;
+}
+
+// --- Animation --------------------------------------------------------------
+
+// A quaternion scaled to unit length; false for a zero one.
+bool normalize_quaternion(float* q) {
+    const double n = std::sqrt(double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2] + double(q[3]) * q[3]);
+    if (!(n > 0.0)) return false;
+    for (int i = 0; i < 4; ++i) q[i] = float(q[i] / n);
+    return true;
+}
+
+// A sampler's keys. Times must be float scalars, finite and strictly
+// increasing; outputs hold `width` floats per key (three groups per key for
+// CUBICSPLINE), float or, for rotations and weights, normalised integers.
+Track GltfReader::read_track(const tinygltf::Animation& animation, int sampler_index, TrackKind kind, int width,
+                             const std::string& where) const {
+    if (sampler_index < 0 || size_t(sampler_index) >= animation.samplers.size())
+        fail(where + ": sampler " + std::to_string(sampler_index) + " does not exist");
+    const tinygltf::AnimationSampler& sampler = animation.samplers[size_t(sampler_index)];
+    const std::string at = where + " (sampler " + std::to_string(sampler_index) + ")";
+    Track track;
+    track.width = width;
+    if (sampler.interpolation == "LINEAR") track.interpolation = Interpolation::Linear;
+    else if (sampler.interpolation == "STEP") track.interpolation = Interpolation::Step;
+    else if (sampler.interpolation == "CUBICSPLINE") track.interpolation = Interpolation::CubicSpline;
+    else fail(at + ": unknown interpolation '" + sampler.interpolation + "'");
+
+    const ElementView input = element_view(sampler.input, "animation input");
+    if (model_.accessors[size_t(sampler.input)].type != TINYGLTF_TYPE_SCALAR ||
+        input.component_type != TINYGLTF_COMPONENT_TYPE_FLOAT)
+        fail(at + ": input accessor " + std::to_string(sampler.input) + " must hold float scalars");
+    int components = 0;
+    track.times = read_floats(sampler.input, "animation input", {TINYGLTF_TYPE_SCALAR}, components);
+    if (track.times.empty()) fail(at + ": input accessor " + std::to_string(sampler.input) + " has no keys");
+    for (size_t k = 0; k < track.times.size(); ++k) {
+        if (!std::isfinite(track.times[k])) fail(at + ": key time " + std::to_string(k) + " is not finite");
+        if (k > 0 && !(track.times[k] > track.times[k - 1]))
+            fail(at + ": key times are not strictly increasing (key " + std::to_string(k) + ")");
+    }
+
+    const ElementView output = element_view(sampler.output, "animation output");
+    const bool quantized_ok = kind == TrackKind::Rotation || kind == TrackKind::Weights;
+    const bool quantized = output.normalized && component_size(output.component_type) <= 2;
+    if (output.component_type != TINYGLTF_COMPONENT_TYPE_FLOAT && !(quantized_ok && quantized))
+        fail(at + ": output accessor " + std::to_string(sampler.output) + " has an unsupported component type");
+    const int type = kind == TrackKind::Rotation ? TINYGLTF_TYPE_VEC4
+                     : kind == TrackKind::Weights ? TINYGLTF_TYPE_SCALAR : TINYGLTF_TYPE_VEC3;
+    track.values = read_floats(sampler.output, "animation output", {type}, components);
+    const size_t groups = track.interpolation == Interpolation::CubicSpline ? 3 : 1;
+    const size_t expected = track.times.size() * groups * size_t(width);
+    if (track.values.size() != expected)
+        fail(at + ": output accessor " + std::to_string(sampler.output) + " holds " +
+             std::to_string(track.values.size()) + " floats, expected " + std::to_string(expected) + " (" +
+             std::to_string(track.times.size()) + " keys)");
+    for (float v : track.values)
+        if (!std::isfinite(v)) fail(at + ": output accessor " + std::to_string(sampler.output) + " is not finite");
+    if (kind == TrackKind::Rotation) {
+        // Key values are unit quaternions; cubic tangents (groups 0 and 2) are not.
+        const size_t value_group = groups == 3 ? 1 : 0;
+        for (size_t k = 0; k < track.times.size(); ++k)
+            if (!normalize_quaternion(&track.values[(k * groups + value_group) * 4]))
+                fail(at + ": rotation key " + std::to_string(k) + " is a zero quaternion");
+    }
+    return track;
+}
+
+size_t GltfReader::morph_target_count(int mesh_index) const {
+    if (mesh_index < 0 || size_t(mesh_index) >= model_.meshes.size())
+        fail("mesh " + std::to_string(mesh_index) + " does not exist");
+    size_t count = 0;
+    for (const auto& primitive : model_.meshes[size_t(mesh_index)].primitives)
+        count = std::max(count, primitive.targets.size());
+    return count;
+}
+
+void GltfReader::read_animation() {
+    if (model_.animations.empty()) return;
+    const tinygltf::Animation& animation = model_.animations[0];  // the first clip (see the top)
+    std::set<std::pair<int, std::string>> seen;
+    for (size_t c = 0; c < animation.channels.size(); ++c) {
+        const tinygltf::AnimationChannel& channel = animation.channels[c];
+        const std::string where = "animation 0 channel " + std::to_string(c);
+        if (channel.target_node < 0) continue;  // targets given by extensions only
+        if (size_t(channel.target_node) >= model_.nodes.size())
+            fail(where + ": node " + std::to_string(channel.target_node) + " does not exist");
+        const int index = channel.target_node;
+        const tinygltf::Node& node = model_.nodes[size_t(index)];
+        const std::string& path = channel.target_path;
+        const std::string target = "node " + std::to_string(index) + " " + path;
+        if (path != "translation" && path != "rotation" && path != "scale" && path != "weights") {
+            if (!warned_channel_path_) warn(path_, where + ": ignoring target path '" + path + "'");
+            warned_channel_path_ = true;
+            continue;
+        }
+        if (!seen.insert({index, path}).second) fail(where + ": " + target + " is animated twice");
+        Track track;
+        if (path == "weights") {
+            const size_t targets = node.mesh >= 0 ? morph_target_count(node.mesh) : 0;
+            if (targets == 0) fail(where + ": node " + std::to_string(index) + " has no morph targets to weight");
+            track = read_track(animation, channel.sampler, TrackKind::Weights, int(targets), where);
+            weight_tracks_[index] = track;
+        } else {
+            if (!node.matrix.empty()) fail(where + ": node " + std::to_string(index) + " has a matrix, so it cannot be animated");
+            NodeTracks& tracks = node_tracks_[index];
+            if (path == "translation") track = tracks.translation = read_track(animation, channel.sampler, TrackKind::Translation, 3, where);
+            else if (path == "rotation") track = tracks.rotation = read_track(animation, channel.sampler, TrackKind::Rotation, 4, where);
+            else track = tracks.scale = read_track(animation, channel.sampler, TrackKind::Scale, 3, where);
+        }
+        key_start_ = has_keys_ ? std::min(key_start_, track.times.front()) : track.times.front();
+        key_end_ = has_keys_ ? std::max(key_end_, track.times.back()) : track.times.back();
+        has_keys_ = true;
+    }
+}
+
+// The Animation::nodes entry of a glTF node, created on first use after its
+// ancestors (so a parent's index is always smaller than its child's).
+int32_t GltfReader::animated_node(int node_index, Scene& scene, int depth) {
+    if (node_index < 0 || size_t(node_index) >= model_.nodes.size())
+        fail("node " + std::to_string(node_index) + " does not exist");
+    if (animation_node_[size_t(node_index)] >= 0) return animation_node_[size_t(node_index)];
+    if (depth > kMaxNodeDepth)
+        fail("node " + std::to_string(node_index) + ": its ancestors form a cycle or a chain deeper than " +
+             std::to_string(kMaxNodeDepth) + " levels");
+    const int gltf_parent = node_parent_[size_t(node_index)];
+    const int32_t parent = gltf_parent >= 0 ? animated_node(gltf_parent, scene, depth + 1) : -1;
+    const tinygltf::Node& gltf = model_.nodes[size_t(node_index)];
+    (void)local_transform(gltf, node_index);  // validates the rest values
+    AnimatedNode node;
+    node.name = gltf.name.empty() ? "node" + std::to_string(node_index) : gltf.name;
+    node.parent = parent;
+    if (!gltf.matrix.empty()) {
+        node.matrix = Affine3f::from_column_major(gltf.matrix.data());
+    } else {
+        node.translation = vec3_or(gltf.translation, Vec3f(0.0f));
+        node.scale = vec3_or(gltf.scale, Vec3f(1.0f));
+        if (gltf.rotation.size() == 4) {
+            float q[4] = {float(gltf.rotation[0]), float(gltf.rotation[1]), float(gltf.rotation[2]),
+                          float(gltf.rotation[3])};
+            if (normalize_quaternion(q)) node.rotation = Vec4f{q[0], q[1], q[2], q[3]};
+        }
+    }
+    if (auto it = node_tracks_.find(node_index); it != node_tracks_.end()) {
+        node.translation_track = it->second.translation;
+        node.rotation_track = it->second.rotation;
+        node.scale_track = it->second.scale;
+    }
+    const auto index = int32_t(scene.animation.nodes.size());
+    budgeted_push_back(scene.animation.nodes, std::move(node), path_ + ": animation node array");
+    animation_node_[size_t(node_index)] = index;
+    return index;
+}
+
+// The rf meshes of a skinned or morphed node: its mesh converted anew for
+// this node, since the skin and the morph weights belong to the node.
+const std::vector<uint32_t>& GltfReader::deformed_meshes(int node_index, Scene& scene) {
+    const tinygltf::Node& node = model_.nodes[size_t(node_index)];
+    const auto key = std::make_pair(node.mesh, node_index);
+    if (auto it = deformed_cache_.find(key); it != deformed_cache_.end()) return it->second;
+    (void)morph_target_count(node.mesh);  // checks the mesh index
+    const tinygltf::Mesh& gltf = model_.meshes[size_t(node.mesh)];
+    std::vector<uint32_t> ids;
+    for (size_t p = 0; p < gltf.primitives.size(); ++p) {
+        std::string name = (gltf.name.empty() ? "mesh" + std::to_string(node.mesh) : gltf.name);
+        if (gltf.primitives.size() > 1) name += "#" + std::to_string(p);
+        Mesh mesh;
+        if (!convert_primitive(gltf.primitives[p], name, scene, mesh)) continue;
+        const auto id = uint32_t(scene.meshes.size());
+        const size_t vertex_count = mesh.positions.size();
+        scene.meshes.push_back(std::move(mesh));
+        if (morph_target_count(node.mesh) > 0)
+            add_morph_targets(gltf.primitives[p], node_index, name, id, vertex_count, scene);
+        if (node.skin >= 0) add_skin(node.skin, gltf.primitives[p], name, id, vertex_count, scene);
+        ids.push_back(id);
+    }
+    return deformed_cache_[key] = std::move(ids);
+}
+
+std::vector<Vec3f> GltfReader::read_deltas(int accessor_index, const std::string& what, size_t vertex_count) const {
+    std::vector<Vec3f> out;
+    budgeted_resize(out, vertex_count, path_ + ": " + what);
+    if (accessor_index < 0) return out;  // a target without this attribute moves nothing
+    int components = 0;
+    const std::vector<float> values = read_floats(accessor_index, what.c_str(), {TINYGLTF_TYPE_VEC3}, components);
+    if (values.size() != vertex_count * 3) fail(what + ": count differs from POSITION count");
+    for (size_t i = 0; i < vertex_count; ++i) {
+        out[i] = Vec3f(values[3 * i], values[3 * i + 1], values[3 * i + 2]);
+        if (!is_finite(out[i])) fail(what + ": delta " + std::to_string(i) + " is not finite");
+    }
+    return out;
+}
+
+void GltfReader::add_morph_targets(const tinygltf::Primitive& primitive, int node_index, const std::string& name,
+                                   uint32_t mesh_id, size_t vertex_count, Scene& scene) {
+    const tinygltf::Node& node = model_.nodes[size_t(node_index)];
+    const tinygltf::Mesh& gltf = model_.meshes[size_t(node.mesh)];
+    const size_t targets = morph_target_count(node.mesh);
+    if (primitive.targets.size() != targets)
+        fail(name + ": has " + std::to_string(primitive.targets.size()) + " morph targets, another primitive " +
+             std::to_string(targets));
+    auto attribute = [](const std::map<std::string, int>& target, const char* key) {
+        auto it = target.find(key);
+        return it == target.end() ? -1 : it->second;
+    };
+    bool normals = false;
+    for (const auto& target : primitive.targets) normals = normals || attribute(target, "NORMAL") >= 0;
+    MorphTargets morph;
+    morph.mesh = mesh_id;
+    for (size_t t = 0; t < targets; ++t) {
+        const std::string what = name + ": morph target " + std::to_string(t);
+        morph.position_deltas.push_back(
+            read_deltas(attribute(primitive.targets[t], "POSITION"), what + " POSITION", vertex_count));
+        if (normals)
+            morph.normal_deltas.push_back(
+                read_deltas(attribute(primitive.targets[t], "NORMAL"), what + " NORMAL", vertex_count));
+    }
+    // The node's weights override the mesh's; both default to zero.
+    const std::vector<double>& defaults = !node.weights.empty() ? node.weights : gltf.weights;
+    if (!defaults.empty() && defaults.size() != targets)
+        fail(name + ": " + std::to_string(defaults.size()) + " default weights for " + std::to_string(targets) +
+             " morph targets");
+    morph.default_weights.assign(targets, 0.0f);
+    for (size_t t = 0; t < defaults.size(); ++t) {
+        if (!std::isfinite(defaults[t])) fail(name + ": default morph weight " + std::to_string(t) + " is not finite");
+        morph.default_weights[t] = float(defaults[t]);
+    }
+    if (auto it = weight_tracks_.find(node_index); it != weight_tracks_.end()) morph.weights = it->second;
+    scene.animation.morphs.push_back(std::move(morph));
+}
+
+// JOINTS_n (unsigned byte/short) or WEIGHTS_n (float, normalised unsigned
+// byte/short): four values per vertex.
+std::vector<float> GltfReader::read_skin_attribute(int accessor_index, const std::string& what, size_t vertex_count,
+                                                   bool joints) const {
+    const ElementView view = element_view(accessor_index, what.c_str());
+    const int type = view.component_type;
+    const bool small_unsigned =
+        type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE || type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT;
+    const bool ok = joints ? small_unsigned && !view.normalized
+                           : type == TINYGLTF_COMPONENT_TYPE_FLOAT || (small_unsigned && view.normalized);
+    if (!ok)
+        fail(what + ": must be " +
+             (joints ? "unsigned byte or short" : "float or normalized unsigned byte or short") + " VEC4");
+    int components = 0;
+    std::vector<float> values = read_floats(accessor_index, what.c_str(), {TINYGLTF_TYPE_VEC4}, components);
+    if (values.size() != vertex_count * 4) fail(what + ": count differs from POSITION count");
+    return values;
+}
+
+// Up to two influence sets (8 per vertex); zero weights are dropped, and of
+// more than 4 the largest (ties in file order); the rest renormalised to sum to 1.
+void GltfReader::read_influences(const tinygltf::Primitive& primitive, const std::string& name, size_t vertex_count,
+                                 Skin& skin) const {
+    std::vector<std::vector<float>> joints, weights;
+    for (int set = 0; set < 2; ++set) {
+        const std::string j = "JOINTS_" + std::to_string(set), w = "WEIGHTS_" + std::to_string(set);
+        auto jt = primitive.attributes.find(j), wt = primitive.attributes.find(w);
+        if (jt == primitive.attributes.end() && wt == primitive.attributes.end()) break;
+        if (jt == primitive.attributes.end() || wt == primitive.attributes.end())
+            fail(name + ": " + j + " and " + w + " must come together");
+        joints.push_back(read_skin_attribute(jt->second, name + ": " + j, vertex_count, true));
+        weights.push_back(read_skin_attribute(wt->second, name + ": " + w, vertex_count, false));
+    }
+    if (joints.empty()) fail(name + ": skinned mesh has no JOINTS_0/WEIGHTS_0");
+    budgeted_resize(skin.vertex_joints, vertex_count, path_ + ": " + name + ": skin joint array");
+    budgeted_resize(skin.vertex_weights, vertex_count, path_ + ": " + name + ": skin weight array");
+    const size_t joint_count = skin.joints.size();
+    for (size_t v = 0; v < vertex_count; ++v) {
+        std::pair<float, uint32_t> influences[8];
+        size_t n = 0;
+        for (size_t set = 0; set < joints.size(); ++set)
+            for (size_t k = 0; k < 4; ++k) {
+                const float weight = weights[set][4 * v + k];
+                const auto joint = uint32_t(joints[set][4 * v + k]);
+                if (!(weight >= 0.0f) || !std::isfinite(weight))
+                    fail(name + ": vertex " + std::to_string(v) + ": skin weight is negative or not finite");
+                if (weight == 0.0f) continue;
+                if (joint >= joint_count)
+                    fail(name + ": vertex " + std::to_string(v) + ": joint " + std::to_string(joint) +
+                         " is out of range (" + std::to_string(joint_count) + " joints)");
+                influences[n++] = {weight, joint};
+            }
+        if (n > 4) {
+            std::stable_sort(influences, influences + n, [](const auto& a, const auto& b) { return a.first > b.first; });
+            n = 4;
+        }
+        float sum = 0.0f;
+        for (size_t k = 0; k < n; ++k) sum += influences[k].first;
+        if (!(sum > 0.0f)) fail(name + ": vertex " + std::to_string(v) + " has no skin weight");
+        float w[4] = {0, 0, 0, 0};
+        for (size_t k = 0; k < n; ++k) {
+            skin.vertex_joints[v][k] = uint16_t(influences[k].second);
+            w[k] = influences[k].first / sum;
+        }
+        for (size_t k = n; k < 4; ++k) skin.vertex_joints[v][k] = 0;
+        skin.vertex_weights[v] = Vec4f{w[0], w[1], w[2], w[3]};
+    }
+}
+
+void GltfReader::add_skin(int skin_index, const tinygltf::Primitive& primitive, const std::string& name,
+                          uint32_t mesh_id, size_t vertex_count, Scene& scene) {
+    if (skin_index < 0 || size_t(skin_index) >= model_.skins.size())
+        fail("skin " + std::to_string(skin_index) + " does not exist");
+    const tinygltf::Skin& gltf = model_.skins[size_t(skin_index)];
+    const std::string where = "skin " + std::to_string(skin_index);
+    if (gltf.joints.empty()) fail(where + ": has no joints");
+    if (gltf.joints.size() > 65536) fail(where + ": has more than 65536 joints");
+    Skin skin;
+    skin.mesh = mesh_id;
+    for (int joint : gltf.joints) {
+        if (joint < 0 || size_t(joint) >= model_.nodes.size())
+            fail(where + ": joint node " + std::to_string(joint) + " does not exist");
+        skin.joints.push_back(uint32_t(animated_node(joint, scene)));
+    }
+    skin.inverse_bind.assign(gltf.joints.size(), Affine3f::identity());
+    if (gltf.inverseBindMatrices >= 0) {
+        const std::string what = where + ": inverseBindMatrices";
+        const ElementView view = element_view(gltf.inverseBindMatrices, what.c_str());
+        if (view.component_type != TINYGLTF_COMPONENT_TYPE_FLOAT) fail(what + ": must be float MAT4");
+        int components = 0;
+        const std::vector<float> m = read_floats(gltf.inverseBindMatrices, what.c_str(), {TINYGLTF_TYPE_MAT4}, components);
+        if (m.size() / 16 < gltf.joints.size())
+            fail(what + ": " + std::to_string(m.size() / 16) + " matrices for " + std::to_string(gltf.joints.size()) +
+                 " joints");
+        for (size_t j = 0; j < gltf.joints.size(); ++j) {
+            double column_major[16];
+            for (int k = 0; k < 16; ++k) {
+                column_major[k] = m[16 * j + size_t(k)];
+                if (!std::isfinite(column_major[k])) fail(what + ": matrix " + std::to_string(j) + " is not finite");
+            }
+            skin.inverse_bind[j] = Affine3f::from_column_major(column_major);
+        }
+    }
+    read_influences(primitive, name, vertex_count, skin);
+    scene.animation.skins.push_back(std::move(skin));
+}
+
+void GltfReader::finish_animation(Scene& scene) const {
+    Animation& animation = scene.animation;
+    if (animation.empty()) {
+        animation = Animation{};  // nodes alone move nothing: a still scene
+        return;
+    }
+    if (has_keys_) {
+        animation.start = key_start_;
+        animation.end = key_end_;
+    }
 }
 
 Scene GltfReader::read() {
@@ -718,6 +1127,13 @@ Scene GltfReader::read() {
     scene.source = path_;
     convert_materials(scene);
     on_path_.assign(model_.nodes.size(), 0);
+    node_parent_.assign(model_.nodes.size(), -1);
+    animation_node_.assign(model_.nodes.size(), -1);
+    for (size_t i = 0; i < model_.nodes.size(); ++i)
+        for (int child : model_.nodes[i].children)
+            if (child >= 0 && size_t(child) < model_.nodes.size() && node_parent_[size_t(child)] < 0 && size_t(child) != i)
+                node_parent_[size_t(child)] = int(i);
+    read_animation();
 
     // The default scene, else scene 0, else every root node.
     std::vector<int> roots;
@@ -733,31 +1149,24 @@ Scene GltfReader::read() {
         for (size_t i = 0; i < model_.nodes.size(); ++i)
             if (!is_child[i]) roots.push_back(int(i));
     }
-    for (int root : roots) visit_node(root, Affine3f::identity(), scene, 0);
+    for (int root : roots) visit_node(root, Affine3f::identity(), scene, 0, false);
+    finish_animation(scene);
     return scene;
 }
 
 }  // namespace
 
-Scene load_gltf(const std::string& path, const LoadOptions& options) {
-    if (!regular_file_exists(path, nullptr)) throw file_error(path, 0, "cannot open file");
-    tinygltf::Model model;
-    tinygltf::TinyGLTF loader;
-    ImageLoaderContext image_context{&model};
+namespace {
+
+void configure_loader(tinygltf::TinyGLTF& loader, ImageLoaderContext& image_context) {
     loader.SetImageLoader(&keep_encoded_image, &image_context);
     loader.SetFsCallbacks({&regular_file_exists, &unexpanded_path, &read_regular_file, &refuse_write, nullptr});
+}
 
-    std::string err, warnings;
-    // A .glb starts with the magic "glTF"; decide by content so a misnamed
-    // file still loads.
-    bool binary = lowercase_extension(path) == ".glb";
-    if (std::FILE* f = std::fopen(path.c_str(), "rb")) {
-        char magic[4] = {};
-        binary = std::fread(magic, 1, 4, f) == 4 && std::memcmp(magic, "glTF", 4) == 0;
-        std::fclose(f);
-    }
-    bool ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warnings, path)
-                     : loader.LoadASCIIFromFile(&model, &err, &warnings, path);
+// The parsed model converted, finalised and, when animated, evaluated at its
+// start; errors name `path`.
+Scene convert_model(const std::string& path, bool ok, const std::string& err, const std::string& warnings,
+                    const tinygltf::Model& model, const LoadOptions& options) {
     if (!ok) {
         std::string reason = one_line(err.empty() ? warnings : err + "\n" + warnings);
         throw file_error(path, 0, reason.empty() ? "invalid glTF file" : reason);
@@ -770,6 +1179,43 @@ Scene load_gltf(const std::string& path, const LoadOptions& options) {
     } catch (const Error& e) {
         throw file_error(path, 0, e.what());
     }
+    if (scene.animated()) scene.set_time(scene.animation.start);
+    return scene;
+}
+
+}  // namespace
+
+Scene load_gltf(const std::string& path, const LoadOptions& options) {
+    if (!regular_file_exists(path, nullptr)) throw file_error(path, 0, "cannot open file");
+    tinygltf::Model model;
+    tinygltf::TinyGLTF loader;
+    ImageLoaderContext image_context{&model};
+    configure_loader(loader, image_context);
+
+    std::string err, warnings;
+    // A .glb starts with the magic "glTF"; decide by content so a misnamed
+    // file still loads.
+    bool binary = lowercase_extension(path) == ".glb";
+    if (std::FILE* f = std::fopen(path.c_str(), "rb")) {
+        char magic[4] = {};
+        binary = std::fread(magic, 1, 4, f) == 4 && std::memcmp(magic, "glTF", 4) == 0;
+        std::fclose(f);
+    }
+    bool ok = binary ? loader.LoadBinaryFromFile(&model, &err, &warnings, path)
+                     : loader.LoadASCIIFromFile(&model, &err, &warnings, path);
+    return convert_model(path, ok, err, warnings, model, options);
+}
+
+Scene io::load_gltf_text(const std::string& text, const std::string& name, const LoadOptions& options) {
+    tinygltf::Model model;
+    tinygltf::TinyGLTF loader;
+    ImageLoaderContext image_context{&model};
+    configure_loader(loader, image_context);
+    std::string err, warnings;
+    // No base directory: only data URIs resolve.
+    bool ok = loader.LoadASCIIFromString(&model, &err, &warnings, text.data(), unsigned(text.size()), "");
+    Scene scene = convert_model(name, ok, err, warnings, model, options);
+    scene.source = name;
     return scene;
 }
 

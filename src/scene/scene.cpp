@@ -4,6 +4,7 @@
 #include <string>
 
 #include "rayforge/core/error.h"
+#include "scene/animation_eval.h"
 
 namespace rf {
 
@@ -21,7 +22,8 @@ size_t Scene::vertex_count() const {
 
 Box3f Scene::bounds() const {
     Box3f b;
-    for (const Instance& inst : instances) b.extend(inst.transform.transform_box(meshes[inst.mesh].bounds()));
+    for (const Instance& inst : instances)  // hidden instances are collapsed to a point: not part of the view
+        if (inst.visible) b.extend(inst.transform.transform_box(meshes[inst.mesh].bounds()));
     return b;
 }
 
@@ -80,6 +82,7 @@ void Scene::finalize() {
     }
     if (environment.texture != -1 && (environment.texture < 0 || size_t(environment.texture) >= textures.size()))
         throw Error("environment texture " + std::to_string(environment.texture) + " of " + std::to_string(textures.size()));
+    finalize_animation(*this);  // src/scene/animation.cpp: validation, rest positions and camera
 }
 
 }  // namespace rf

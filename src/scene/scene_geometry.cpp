@@ -9,6 +9,42 @@
 
 namespace rf {
 
+namespace {
+
+// World-space triangles of one instance into triangles[base ..]; a hidden
+// instance's triangles all collapse onto its origin (zero area: never hit).
+void write_instance(const Scene& scene, uint32_t inst_id, size_t base, SceneGeometry& g) {
+    const Instance& inst = scene.instances[inst_id];
+    const Mesh& mesh = scene.meshes[inst.mesh];
+    const Vec3f origin = inst.transform.transform_point(Vec3f(0.0f));
+    parallel::for_range(size_t(0), mesh.triangle_count(), size_t(4096), [&](size_t lo, size_t hi) {
+        for (size_t t = lo; t != hi; ++t) {
+            const uint32_t* idx = &mesh.indices[3 * t];
+            Triangle& tri = g.triangles[base + t];
+            if (!inst.visible) {
+                tri = Triangle{origin, origin, origin};
+                continue;
+            }
+            tri.v0 = inst.transform.transform_point(mesh.positions[idx[0]]);
+            tri.v1 = inst.transform.transform_point(mesh.positions[idx[1]]);
+            tri.v2 = inst.transform.transform_point(mesh.positions[idx[2]]);
+        }
+    });
+}
+
+Box3f checked_bounds(std::span<const Triangle> triangles, size_t base) {
+    Box3f bounds;
+    for (size_t t = 0; t < triangles.size(); ++t) {
+        const Triangle& tri = triangles[t];
+        if (!is_finite(tri.v0) || !is_finite(tri.v1) || !is_finite(tri.v2))
+            throw Error("triangle " + std::to_string(base + t) + " has a non-finite world-space coordinate");
+        bounds.extend(tri.bounds());
+    }
+    return bounds;
+}
+
+}  // namespace
+
 SceneGeometry SceneGeometry::build(const Scene& scene) {
     SceneGeometry g;
     const size_t total = scene.triangle_count();
@@ -19,20 +55,18 @@ SceneGeometry SceneGeometry::build(const Scene& scene) {
     budgeted_resize(g.local_triangle, total, "scene geometry: local triangle indices");
     budgeted_resize(g.material, total, "scene geometry: triangle materials");
     g.normal_matrices.reserve(scene.instances.size());
+    g.instance_first_triangle.reserve(scene.instances.size() + 1);
 
     size_t base = 0;
     for (uint32_t inst_id = 0; inst_id < scene.instances.size(); ++inst_id) {
         const Instance& inst = scene.instances[inst_id];
         const Mesh& mesh = scene.meshes[inst.mesh];
         g.normal_matrices.push_back(inst.transform.normal_matrix());
+        g.instance_first_triangle.push_back(uint32_t(base));
+        write_instance(scene, inst_id, base, g);
         const size_t count = mesh.triangle_count();
         parallel::for_range(size_t(0), count, size_t(4096), [&](size_t lo, size_t hi) {
             for (size_t t = lo; t != hi; ++t) {
-                const uint32_t* idx = &mesh.indices[3 * t];
-                Triangle& tri = g.triangles[base + t];
-                tri.v0 = inst.transform.transform_point(mesh.positions[idx[0]]);
-                tri.v1 = inst.transform.transform_point(mesh.positions[idx[1]]);
-                tri.v2 = inst.transform.transform_point(mesh.positions[idx[2]]);
                 g.triangle_instance[base + t] = inst_id;
                 g.local_triangle[base + t] = uint32_t(t);
                 g.material[base + t] = mesh.material_ids[t];
@@ -40,15 +74,32 @@ SceneGeometry SceneGeometry::build(const Scene& scene) {
         });
         base += count;
     }
+    g.instance_first_triangle.push_back(uint32_t(base));
+    g.bounds = checked_bounds(g.triangles, 0);
     for (size_t t = 0; t < total; ++t) {
-        const Triangle& tri = g.triangles[t];
-        if (!is_finite(tri.v0) || !is_finite(tri.v1) || !is_finite(tri.v2))
-            throw Error("triangle " + std::to_string(t) + " has a non-finite world-space coordinate");
-        g.bounds.extend(tri.bounds());
-        if (scene.materials[g.material[t]].is_emissive() && tri.area() > 0.0f)
+        if (scene.materials[g.material[t]].is_emissive() && g.triangles[t].area() > 0.0f)
             g.emissive_triangles.push_back(uint32_t(t));
     }
     return g;
+}
+
+void SceneGeometry::update(const Scene& scene, const GeometryChange& change) {
+    if (instance_first_triangle.size() != scene.instances.size() + 1)
+        throw Error("scene geometry update: the scene has " + std::to_string(scene.instances.size()) +
+                    " instances, the geometry was built for " +
+                    std::to_string(instance_first_triangle.size() - 1));
+    for (uint32_t inst_id : change.instances) {
+        if (inst_id >= scene.instances.size())
+            throw Error("scene geometry update: instance " + std::to_string(inst_id) + " does not exist");
+        const size_t base = instance_first_triangle[inst_id];
+        const size_t count = instance_first_triangle[inst_id + 1] - base;
+        if (scene.meshes[scene.instances[inst_id].mesh].triangle_count() != count)
+            throw Error("scene geometry update: instance " + std::to_string(inst_id) +
+                        " changed its triangle count");
+        normal_matrices[inst_id] = scene.instances[inst_id].transform.normal_matrix();
+        write_instance(scene, inst_id, base, *this);
+    }
+    if (change.geometry()) bounds = checked_bounds(triangles, 0);
 }
 
 size_t SceneGeometry::memory_bytes() const {

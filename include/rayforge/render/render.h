@@ -143,6 +143,12 @@ public:
     virtual void set_options(const RenderOptions& options) = 0;
     // The scene changed in place: shading tables (and their device copies) rebuilt.
     virtual void scene_changed(SceneChange what) = 0;
+    // An animated scene moved (Scene::set_time, then SceneGeometry::update and
+    // the accel's update): `change` names the meshes and instances that moved.
+    // The shading records of those instances are refreshed and accumulation restarts.
+    virtual void geometry_changed(const GeometryChange& change) {
+        if (change.geometry()) scene_changed(SceneChange::Geometry);
+    }
 };
 
 // A renderer on options.device for `accel`, which must live on that device

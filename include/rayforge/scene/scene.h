@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "rayforge/math/affine.h"
+#include "rayforge/scene/animation.h"
 #include "rayforge/scene/camera.h"
 #include "rayforge/scene/light.h"
 #include "rayforge/scene/material.h"
@@ -18,6 +19,7 @@ namespace rf {
 struct Instance {
     uint32_t mesh = 0;                        // index into Scene::meshes
     Affine3f transform = Affine3f::identity(); // object to world
+    bool visible = true;                       // false: its triangles are kept, collapsed to one point
 };
 
 // Settings a scene file may carry; command-line options override them.
@@ -25,6 +27,7 @@ struct RenderSettings {
     std::optional<int> width, height, spp, max_depth, rr_depth, reflection_depth, refraction_depth;
     std::optional<std::string> integrator, light_sampling, shading;
     std::optional<float> ao_radius;
+    std::optional<std::string> update;  // animated scenes: refit | adapt | rebuild | clusters | two-level
 };
 
 struct Scene {
@@ -37,6 +40,8 @@ struct Scene {
     Environment environment;
     std::optional<Camera> camera;      // from the file; default_camera() otherwise
     RenderSettings render_settings;
+    Animation animation;               // empty for a still scene
+    float time = 0.0f;                 // the time the instances, meshes and camera were last evaluated at
 
     [[nodiscard]] size_t triangle_count() const;  // over instances
     [[nodiscard]] size_t vertex_count() const;    // over instances
@@ -49,6 +54,13 @@ struct Scene {
     // Adds a default material when there is none, instances each mesh once when
     // there are no instances, and validates every mesh and index; throws rf::Error.
     void finalize();
+    // Evaluates the animation at time t (seconds) in place: instance
+    // transforms and visibility, deformed meshes' positions and normals, and
+    // the camera when it is animated. Returns what moved since the last
+    // evaluation (everything animated on the first call). A still scene
+    // returns an empty change. Triangle counts and order never change.
+    GeometryChange set_time(float t);
+    [[nodiscard]] bool animated() const { return !animation.empty(); }
 };
 
 }  // namespace rf

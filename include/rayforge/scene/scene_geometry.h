@@ -30,12 +30,17 @@ struct SceneGeometry {
     std::vector<uint32_t> material;           // per triangle: index into Scene::materials
     std::vector<uint32_t> emissive_triangles; // triangles whose material emits (area lights)
     std::vector<Affine3f> normal_matrices;    // per instance
+    std::vector<uint32_t> instance_first_triangle;  // per instance + 1: its triangles are [first[i], first[i+1])
     Box3f bounds;
 
     // Flattens every instance; throws rf::Error on non-finite coordinates or
     // more than 2^32-1 triangles. Degenerate (zero-area) triangles are kept:
     // they never produce hits.
     static SceneGeometry build(const Scene& scene);
+    // Rewrites the world-space triangles of the instances `change` names
+    // (after Scene::set_time) and the bounds; the triangle order, count,
+    // materials and emitter list stay. Throws rf::Error on non-finite coordinates.
+    void update(const Scene& scene, const GeometryChange& change);
     [[nodiscard]] size_t size() const { return triangles.size(); }
     [[nodiscard]] size_t memory_bytes() const;
 };

@@ -1,12 +1,15 @@
-// The rf::Scene of a parsed AFF file at one time: transform blocks and
-// animated triangles evaluated, meshes instanced in their blocks, materials
-// and textures, the camera (animated by `k camera`), lights, and the notes
-// and warnings about what was approximated or skipped.
+// The rf::Scene of a parsed AFF file at one time (load_aff_at_time: a still
+// snapshot, without Scene::animation): transform blocks and animated
+// triangles evaluated, meshes of visible blocks instanced in their blocks,
+// materials and textures, the camera (animated by `k camera`), lights, and
+// the notes and warnings about what was approximated or skipped. The pieces
+// load_aff's animated scene (aff_animation.cpp) shares are here too.
 #include <cmath>
 #include <string>
 
 #include "io/aff/aff_parser.h"
 #include "rayforge/core/memory_budget.h"
+#include "scene/animation_eval.h"
 
 namespace rf::io::aff {
 
@@ -35,6 +38,20 @@ KeyBlend blend_at(const std::vector<TriKey>& k, double t) {
     return blend;
 }
 
+}  // namespace
+
+void animated_triangle_at(const AnimatedTriangle& tri, double t, Vec3f p[3], Vec3f n[3]) {
+    const auto& k = tri.keys;
+    const KeyBlend blend = blend_at(k, t);
+    const double w = blend.w;
+    for (int c = 0; c < 3; ++c) {
+        p[c] = k[blend.a].p[c] * float(1 - w) + k[blend.b].p[c] * float(w);
+        n[c] = k[blend.a].n[c] * float(1 - w) + k[blend.b].n[c] * float(w);
+    }
+}
+
+namespace {
+
 void append_triangle(Mesh& mesh, const Vec3f p[3], const Vec3f n[3], uint32_t material, const std::string& what) {
     const Vec3f face = cross(p[1] - p[0], p[2] - p[0]);
     const Vec3f face_n = length(face) > 0.0f ? normalize(face) : Vec3f{0, 0, 1};
@@ -56,17 +73,21 @@ Scene AffParser::assemble(double t) {
     const BlockStates blocks = evaluate_blocks(t);
     add_animated_triangles(t);
     move_meshes(scene, blocks);
+    add_materials_and_settings(scene);
+    if (view_ || animations_.count("camera")) scene.camera = make_camera(t);
+    add_lights(scene);
+    report(blocks.unanimated);
+    return scene;
+}
+
+void AffParser::add_materials_and_settings(Scene& scene) {
     scene.materials = std::move(materials_);
     if (options_.load_textures) attach_textures(scene);
-    if (view_ || animations_.count("camera")) scene.camera = make_camera(t);
     if (resolution_) {
         scene.render_settings.width = resolution_->first;
         scene.render_settings.height = resolution_->second;
     }
     if (background_) scene.environment.color = *background_;
-    add_lights(scene);
-    report(blocks.unanimated);
-    return scene;
 }
 
 // Transform blocks: parents come before their children.
@@ -99,14 +120,8 @@ AffParser::BlockStates AffParser::evaluate_blocks(double t) const {
 // Animated triangles at time t, into their blocks' loose meshes.
 void AffParser::add_animated_triangles(double t) {
     for (const AnimatedTriangle& tri : animated_triangles_) {
-        const auto& k = tri.keys;
-        const KeyBlend blend = blend_at(k, t);
-        const double w = blend.w;
         Vec3f p[3], n[3];
-        for (int c = 0; c < 3; ++c) {
-            p[c] = k[blend.a].p[c] * float(1 - w) + k[blend.b].p[c] * float(w);
-            n[c] = k[blend.a].n[c] * float(1 - w) + k[blend.b].n[c] * float(w);
-        }
+        animated_triangle_at(tri, t, p, n);
         append_triangle(pending_[tri.mesh].mesh, p, n, tri.material, polygon_what_);
     }
 }
@@ -133,9 +148,11 @@ Camera AffParser::make_camera(double t) const {
     Vec3f up = view.up;
     if (auto it = animations_.find("camera"); it != animations_.end()) {
         const Animation& anim = it->second;
-        if (!anim.transl.empty()) camera.eye = kb_position(anim.transl, t);
+        if (!anim.transl.empty()) evaluate_track(anim.transl, float(t), &camera.eye.x, false);
         if (!anim.rot.empty()) {
-            const Affine3f r = quat_matrix(kb_rotation(anim.rot, t));
+            float q[4];
+            evaluate_track(anim.rot, float(t), q, true);
+            const Affine3f r = quaternion_matrix(q);
             dir = r.transform_vector(Vec3f{0, 0, -1});  // the viewer looks down -z with +y up
             up = r.transform_vector(Vec3f{0, 1, 0});
         }

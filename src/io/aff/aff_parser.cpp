@@ -31,8 +31,8 @@ Scene AffParser::load(std::optional<double> time) {
     std::string canonical = fs::weakly_canonical(root_, ec).string();
     if (ec) canonical = root_;
     parse_file(root_, canonical, 0);
-    const double t = time ? *time : (anim_start_ ? *anim_start_ : 0.0);
-    return assemble(t);
+    if (time) return assemble(*time);
+    return assemble_animated(anim_start_ ? *anim_start_ : 0.0);
 }
 
 // Each file is read once; includes that occur again parse the same text.

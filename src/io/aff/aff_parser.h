@@ -4,10 +4,13 @@
 // AFF ("Animated File Format") is the scene format of BART, "A Benchmark for
 // Animated Ray Tracing" (J. Lext, U. Assarsson, T. Möller, IEEE CG&A 2001); it
 // extends Eric Haines's NFF 3.9 with meshes, textured and animated triangles,
-// includes, static and keyframe-animated transform blocks. rayforge is static,
-// so the loader evaluates the animation at one time: the start of the
-// animation (`a start end frames`), or 0 when the file has no `a` line;
-// load_aff_at_time picks another time.
+// includes, static and keyframe-animated transform blocks. load_aff keeps the
+// animation in Scene::animation (one node per transform block under or above
+// an animated one, the tpa triangles as vertex keyframes, `k camera` as the
+// camera's node) and evaluates it at the start of the animation (`a start end
+// frames`), or 0 when the file has no `a` line; Scene::set_time moves it.
+// load_aff_at_time gives a still scene at another time (the blocks evaluated
+// here, hidden blocks left out), the reference the animated scene is tested against.
 //
 // Supported (see docs/scene-format.md for the mapping onto rf::Scene):
 //   comments (# and %, to the end of the line), v (from/at/up/angle/hither/
@@ -37,7 +40,8 @@
 //   aff_mesh.cpp        m
 //   aff_transforms.cpp  xs, x, k
 //   aff_keyframes.*     spline and quaternion evaluation
-//   aff_assemble.cpp    the rf::Scene at one time
+//   aff_assemble.cpp    the still rf::Scene at one time
+//   aff_animation.cpp   the rf::Scene with its animation
 #pragma once
 
 #include <cstddef>
@@ -105,6 +109,10 @@ struct AnimatedTriangle {
     uint32_t material = 0;
     size_t mesh = 0;  // pending_ index of the loose mesh it goes into
 };
+
+// An animated triangle's corners and raw (unnormalised) normals at time t:
+// linear between the two keys around t, clamped.
+void animated_triangle_at(const AnimatedTriangle& tri, double t, Vec3f p[3], Vec3f n[3]);
 
 struct LightDef {
     Vec3f position, color;
@@ -179,14 +187,24 @@ private:
     void parse_animated_transform(long line);
     void parse_keyframes(long line);
 
-    // aff_assemble.cpp
+    // aff_assemble.cpp: the still scene at one time, and what both scenes share
     Scene assemble(double t);
+    void add_materials_and_settings(Scene& scene);
     [[nodiscard]] BlockStates evaluate_blocks(double t) const;
     void add_animated_triangles(double t);
     void move_meshes(Scene& scene, const BlockStates& blocks);
     [[nodiscard]] Camera make_camera(double t) const;
     void add_lights(Scene& scene) const;
     void report(const std::set<std::string>& unanimated) const;
+
+    // aff_animation.cpp: the scene with its animation (Scene::animation), evaluated at t
+    Scene assemble_animated(double t);
+    [[nodiscard]] std::vector<int32_t> add_nodes(rf::Animation& animation) const;
+    void place_meshes(Scene& scene, const BlockStates& blocks, const std::vector<int32_t>& node_of,
+                      const std::vector<size_t>& static_vertices);
+    void add_vertex_keyframes(Scene& scene, uint32_t mesh, size_t first_vertex, const std::vector<size_t>& triangles);
+    void add_camera_animation(Scene& scene) const;
+    void set_time_range(rf::Animation& animation) const;
 
     // Input and limits.
     std::string root_;
@@ -204,6 +222,8 @@ private:
     std::vector<int> node_stack_;
     std::map<std::string, Animation> animations_;
     std::optional<double> anim_start_;
+    double anim_end_ = 0.0;
+    int64_t anim_frames_ = 1;
 
     // Materials and textures.
     std::map<MaterialDef, uint32_t> material_defs_;

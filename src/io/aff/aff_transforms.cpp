@@ -1,31 +1,66 @@
 // AFF transform blocks and their keyframes: xs (static T*R*S), x (animated,
 // named) and k (the keyframes of a name: transl, rot, scale, visibility).
 // Blocks are nodes of a tree; '}' (in aff_parser.cpp) closes the innermost.
+#include <limits>
 #include <set>
 #include <string>
 
 #include "io/aff/aff_parser.h"
 #include "rayforge/core/memory_budget.h"
+#include "scene/animation_eval.h"
 
 namespace rf::io::aff {
 
 namespace {
 
-// `count` keys, each: time, 3 values (rot: axis and angle in degrees), tension, continuity, bias.
-void read_keys(TokenReader& in, std::vector<Key>& keys, size_t count, bool rotation, const std::string& what) {
-    keys.clear();
-    budgeted_reserve(keys, count, what);
+// `count` keys, each: time, 3 values (rot: axis and angle in degrees), tension,
+// continuity, bias; into a Kochanek-Bartels track (rot: quaternions, width 4).
+void read_keys(TokenReader& in, Track& track, size_t count, bool rotation, const std::string& what) {
+    track = Track{};
+    track.interpolation = Interpolation::KochanekBartels;
+    track.width = rotation ? 4 : 3;
+    budgeted_reserve(track.times, count, what);
+    budgeted_reserve(track.values, count * size_t(track.width), what);
+    budgeted_reserve(track.tcb, count, what);
     for (size_t i = 0; i < count; ++i) {
-        Key k;
         // Times that go back (Robot1.aff has some) are kept: the segment search
-        // (kb_segment), like BART's, takes the first segment that ends after t.
-        k.t = in.read_float("keyframe time");
-        for (int c = 0; c < (rotation ? 4 : 3); ++c) k.v[c] = in.read_float("keyframe value");
-        if (rotation) k.v[3] *= kPi / 180.0;
-        k.tension = in.read_float("keyframe tension");
-        k.continuity = in.read_float("keyframe continuity");
-        k.bias = in.read_float("keyframe bias");
-        keys.push_back(k);
+        // (kb_segment in src/scene/animation.cpp), like BART's, takes the first segment that ends after t.
+        track.times.push_back(in.read_float("keyframe time"));
+        double v[4];
+        for (int c = 0; c < (rotation ? 4 : 3); ++c) v[c] = in.read_float("keyframe value");
+        if (rotation) {
+            const Vec4f q = axis_angle_quaternion(v[0], v[1], v[2], v[3] * kPi / 180.0);
+            track.values.insert(track.values.end(), {q.x, q.y, q.z, q.w});
+        } else {
+            track.values.insert(track.values.end(), {float(v[0]), float(v[1]), float(v[2])});
+        }
+        const float tension = in.read_float("keyframe tension");
+        const float continuity = in.read_float("keyframe continuity");
+        const float bias = in.read_float("keyframe bias");
+        track.tcb.push_back(Vec3f{tension, continuity, bias});
+    }
+}
+
+// visibility N (time flag)*N: a step track that is visible before the first key;
+// a key at the time of the one before it replaces it (BART applies both, in order).
+void read_visibility(TokenReader& in, Track& track, size_t count, const std::string& what) {
+    track = Track{};
+    track.interpolation = Interpolation::Step;
+    track.width = 1;
+    budgeted_reserve(track.times, count + 1, what);
+    budgeted_reserve(track.values, count + 1, what);
+    track.times.push_back(std::numeric_limits<float>::lowest());
+    track.values.push_back(1.0f);
+    for (size_t i = 0; i < count; ++i) {
+        Token next;
+        const long tline = in.peek(next) ? next.line : 0;
+        const float time = in.read_float("visibility time");
+        long vline = 0;
+        const int64_t flag = in.read_int("visibility flag", &vline);
+        if (flag != 0 && flag != 1) throw in.error(vline, "visibility flag must be 0 or 1");
+        if (time < track.times.back()) throw in.error(tline, "visibility times must not decrease");
+        if (time == track.times.back()) track.values.back() = float(flag);
+        else track.times.push_back(time), track.values.push_back(float(flag));
     }
 }
 
@@ -83,19 +118,13 @@ void AffParser::parse_keyframes(long line) {
         const size_t numbers = type == "rot" ? 8 : type == "visibility" ? 2 : 7;
         const size_t count = in().read_count("keyframe count", numbers);
         if (type == "visibility") {
-            for (size_t i = 0; i < count; ++i) {
-                const float time = in().read_float("visibility time");
-                long vline = 0;
-                const int64_t flag = in().read_int("visibility flag", &vline);
-                if (flag != 0 && flag != 1) throw error(vline, "visibility flag must be 0 or 1");
-                budgeted_push_back(anim.visibility, std::make_pair(double(time), flag == 1), root_ + ": AFF keyframes");
-            }
+            read_visibility(in(), anim.visibility, count, root_ + ": AFF keyframes");
             continue;
         }
         if (count < 4)
             throw error(t.line, "'" + type + "' of animation '" + name +
                                     "' needs at least 4 keyframes (the first and last only shape the spline)");
-        std::vector<Key>& keys = type == "transl" ? anim.transl : type == "rot" ? anim.rot : anim.scale;
+        Track& keys = type == "transl" ? anim.transl : type == "rot" ? anim.rot : anim.scale;
         read_keys(in(), keys, count, type == "rot", root_ + ": AFF keyframes");
     }
     animations_[name] = std::move(anim);  // a later definition replaces an earlier one

@@ -50,7 +50,7 @@ void AffParser::parse_light() {
     budgeted_push_back(lights_, light, in().path() + ": AFF light array");
 }
 
-// a start end frames: the first `a` sets the default time.
+// a start end frames: the first `a` sets the default time and the animation's range.
 void AffParser::parse_anim_params(long line) {
     const float start = in().read_float("animation start time");
     const float end = in().read_float("animation end time");
@@ -58,7 +58,11 @@ void AffParser::parse_anim_params(long line) {
     const int64_t frames = in().read_int("animation frame count", &fline);
     if (frames < 1) throw error(fline, "animation frame count must be at least 1");
     if (end < start) throw error(line, "animation ends before it starts");
-    if (!anim_start_) anim_start_ = start;
+    if (!anim_start_) {
+        anim_start_ = start;
+        anim_end_ = end;
+        anim_frames_ = frames;
+    }
 }
 
 }  // namespace rf::io::aff

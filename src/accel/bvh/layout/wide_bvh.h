@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "rayforge/accel/accel.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/math/ray.h"
 #include "rayforge/scene/scene_geometry.h"
@@ -69,6 +70,14 @@ struct WideBvh {
 // leaves are never split, so leaves may hold up to 16 packs.
 template <int N>
 WideBvh<N> collapse_bvh(const Bvh& bvh, const std::vector<Triangle>& triangles);
+
+// What a wide BVH adds to an accel's stats (accel/view_accel.h).
+template <int N>
+void describe_structure(const WideBvh<N>& bvh, AccelStats& s) {
+    s.node_count = bvh.nodes.size();
+    s.leaf_count = bvh.leaf_count;
+    s.bytes = bvh.memory_bytes();
+}
 
 extern template WideBvh<4> collapse_bvh<4>(const Bvh&, const std::vector<Triangle>&);
 extern template WideBvh<8> collapse_bvh<8>(const Bvh&, const std::vector<Triangle>&);

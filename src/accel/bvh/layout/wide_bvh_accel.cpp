@@ -14,13 +14,6 @@
 
 namespace rf {
 
-template <int N>
-void describe_structure(const WideBvh<N>& bvh, AccelStats& s) {
-    s.node_count = bvh.nodes.size();
-    s.leaf_count = bvh.leaf_count;
-    s.bytes = bvh.memory_bytes();
-}
-
 namespace {
 
 template <int N>

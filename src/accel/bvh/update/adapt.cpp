@@ -1,0 +1,800 @@
+// The per-frame BVH update of Garanzha 2014 ch. 2 (dissertation; paper:
+// Garanzha 2008, "Efficient Clustered BVH Update Algorithm for
+// Highly-Dynamic Models", IRT 2008): UpdateMethod::Adapt.
+//
+// Stages per frame, as the text gives them:
+//  1. adaptation: a post-order refit; each inner node N is tested with eq.
+//     1.3 (SAHCost with the build's SahCosts) against SavedSAHCost(N):
+//     migrating when SAH/Saved < 1 - dM (N goes to MigrateBuffer; never the
+//     root, which cannot be detached), exploded when MaxOverlap(N) (eq. 2.2)
+//     > max_overlap and SAH/Saved > 1 + dE (N goes to RebuildBuffer and is
+//     locked; descendants in RebuildBuffer whose box meets OverlapBV(NL,NR)
+//     are unlocked; N's descendants leave MigrateBuffer);
+//  2. rebuild: every root in RebuildBuffer is rebuilt over its region's
+//     primitives (the triangles of the region's leaves, one by one, and the
+//     locked subtrees below it as indivisible boxes weighted by Count) by a
+//     binned SAH over boxes (this file: RegionBuilder), leaves of at most
+//     max_leaf_size triangles; Count and SavedSAHCost recomputed;
+//  3. migration: MigrateBuffer's nodes in four passes: detach N (its parent
+//     is freed, its sibling takes the parent's place; N is freed and its
+//     children wait), re-adapt the boxes upward from the detachment point
+//     until a box stops changing, find X (the first node upward whose box
+//     contains BV(N)), insert N's children from X by recursive insertion:
+//     merge (a new node over X and the subtree), or descend into XL or XR,
+//     whichever gives the lowest eq. 1.3 for X's configuration (all three
+//     share the box X u N, so the numerators are compared); a descent that
+//     creates or grows the overlap of XL and XR inserts the subtree's two
+//     children from X instead (split N). Count, BV and SavedSAHCost are
+//     updated on the way down. Each inserted subtree ends in one merge, so
+//     the nodes freed equal the nodes created.
+//
+// The text's inconsistencies, resolved (seed digest sec. 8):
+//  - dM/dE readings: AdaptOptions::stated() and ::closing() (both tested).
+//  - MigrateBuffer is filled in post-order but "processed from the end so
+//    lower levels go first": the buffer is sorted by depth, deepest first
+//    (stable, so equal depths keep post-order), and every pass runs in that
+//    order. A node freed by an earlier detach (it was the parent of a
+//    deeper migrating node) is skipped: its children's separation was
+//    resolved by that detach.
+//  - An unlocked descendant exploded node leaves RebuildBuffer: it is
+//    absorbed into the ancestor's region.
+//  - Region primitives: the text says "leaf boxes"; the triangles of the
+//    leaves are used one by one, so exploded leaves are regrouped.
+//  - Insertion SAH: eq. 1.3 of the configuration at X (see above).
+//  - Counts are kept exact: a detach subtracts Count(N) from every
+//    ancestor, an insertion adds it back on its path (the text's early stop
+//    applies to the boxes only). SavedSAHCost is left alone on detachment
+//    paths, so a node thinned by detaches is caught by eq. 2.1 later, as the
+//    text intends.
+//  - Nodes referenced across passes that a pass frees are forwarded to the
+//    node that took their place; a start node found inside a detached
+//    subtree jumps to that subtree's detachment point; an insertion never
+//    starts inside the subtree it inserts.
+//  - Depth: an update that leaves a path of more than kBvhMaxDepth inner
+//    nodes rebuilds the whole tree with the region builder from the root
+//    (whose median fallback keeps every path within the limit), counted as a
+//    rebuilt subtree. Rare; the tests count it.
+//
+// Data layout: AdaptNode (48 bytes: box, children, parent, Count,
+// SavedSAHCost, leaf size, Locked) in one linear array managed by the node
+// memory manager (node_memory_manager.h: an octary tree of free counts;
+// every node is allocated at the free slot nearest its parent); a leaf's
+// triangles sit in a block of max_leaf_size slots at its node index. The
+// canonical Bvh (siblings adjacent, depth-first) is exported only when the
+// topology changed; otherwise its boxes are copied in place from the
+// refitted nodes through source_ (canonical index -> node).
+//
+// Parallelism (TBB via backend/cpu/parallel.h): stage 1 recurses into the
+// two children of large subtrees as tasks, each with its own buffers,
+// appended left then right (the serial post-order); stage 2 builds every
+// region's new topology in parallel into scratch (and splits large nodes
+// into tasks), then links the regions into the tree one after another in
+// buffer order; stage 3 and the allocation are serial.
+//
+// Determinism: buffers, region builds and the order of every allocation
+// are independent of the schedule, so the tree is the same for any thread
+// count.
+#include "accel/bvh/update/adapt.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "accel/bvh/builders/binned_sah.h"
+#include "accel/bvh/builders/build_bvh.h"
+#include "backend/cpu/parallel.h"
+#include "rayforge/core/error.h"
+
+
+#ifdef ADAPT_DEBUG
+#include <cstdio>
+namespace rf {
+static bool adapt_validate(const std::vector<AdaptNode>& nodes, uint32_t root, const char* where) {
+    bool ok = true;
+    auto walk = [&](auto&& self, uint32_t id, uint32_t parent) -> uint32_t {
+        const AdaptNode& n = nodes[id];
+        if (n.parent != parent && ok) { std::printf("%s: parent of %u is %x, want %x\n", where, id, n.parent, parent); ok = false; }
+        if (n.is_leaf()) return n.leaf_size;
+        uint32_t c = self(self, n.child[0], id) + self(self, n.child[1], id);
+        if (c != n.count && ok) { std::printf("%s: count of %u is %u, want %u\n", where, id, n.count, c); ok = false; }
+        return c;
+    };
+    walk(walk, root, 0xffffffffu);
+    return ok;
+}
+}
+#define VALIDATE(where) adapt_validate(nodes_, root_, where)
+#else
+#define VALIDATE(where) true
+#endif
+
+namespace rf {
+namespace {
+
+constexpr uint32_t kNone = AdaptBvh::kNone;
+constexpr uint32_t kTag = 0x80000000u;        // parent field of a detached subtree's root: kTag | record
+constexpr uint32_t kParallelAdapt = 8192;     // triangles under a node to refit its children as tasks
+constexpr uint32_t kParallelRegion = 4096;    // primitives of a region node to build its children as tasks
+constexpr int kMaxBins = 64;
+constexpr size_t kBinnedRegion = 2048;         // triangles of a lock-free region to build with build_binned_sah
+
+bool real(uint32_t id) { return id != kNone && (id & kTag) == 0; }
+
+Box3f overlap_box(const Box3f& a, const Box3f& b) { return {max(a.lo, b.lo), min(a.hi, b.hi)}; }
+bool same(const Box3f& a, const Box3f& b) { return a.lo == b.lo && a.hi == b.hi; }
+
+// A region primitive: a triangle (tri) or a locked subtree (node id).
+struct Prim {
+    Box3f box;
+    Vec3f centre;
+    uint32_t id = 0;
+    uint32_t weight = 1;  // triangles: Count of a subtree, 1 for a triangle
+    bool tri = true;
+};
+
+// A node of a region's new topology. Leaf: n > 0 triangles at
+// prims[first ..]; existing != kNone: a locked subtree; else inner.
+struct ScratchNode {
+    Box3f box;
+    uint32_t child[2] = {0, 0};
+    uint32_t first = 0, n = 0;
+    uint32_t existing = kNone;
+};
+
+int median_levels(uint64_t count, uint32_t leaf_size) {
+    const uint64_t leaves = (count + leaf_size - 1) / leaf_size;
+    int levels = 0;
+    while ((uint64_t{1} << levels) < leaves) ++levels;
+    return levels;
+}
+
+// Binned SAH (Wald 2007) over box primitives weighted by their triangle
+// counts, with the object median where no bin boundary splits or where the
+// depth limit is near (depth counts from the tree's root).
+class RegionBuilder {
+public:
+    RegionBuilder(const BuildOptions& build, std::vector<Prim>& prims)
+        : sah_(build.sah), leaf_(uint32_t(build.max_leaf_size)),
+          bins_(std::clamp(build.binned.bin_count, 2, kMaxBins)), prims_(prims) {}
+
+    // The subtree over prims_[b, e) into `out` (its root at out's first new index).
+    void build(std::vector<ScratchNode>& out, uint32_t b, uint32_t e, int depth) {
+        const uint32_t index = uint32_t(out.size());
+        out.emplace_back();
+        ScratchNode node;
+        Box3f centres;
+        uint64_t weight = 0;
+        bool all_tris = true;
+        for (uint32_t i = b; i < e; ++i) {
+            node.box.extend(prims_[i].box);
+            centres.extend(prims_[i].centre);
+            weight += prims_[i].weight;
+            all_tris = all_tris && prims_[i].tri;
+        }
+        const uint32_t n = e - b;
+        if (n == 1 && !prims_[b].tri) {
+            node.existing = prims_[b].id;
+            out[index] = node;
+            return;
+        }
+        const float area = node.box.surface_area();
+        const Split split = find_split(b, e, centres);
+        const bool leaf_ok = all_tris && n <= leaf_;
+        if (leaf_ok && (!split.valid() || sah_.traversal * area + sah_.intersection * split.cost >=
+                                              sah_.intersection * area * float(weight))) {
+            node.first = b;
+            node.n = n;
+            out[index] = node;
+            return;
+        }
+        const uint32_t leaf = all_tris ? leaf_ : 1;
+        const bool depth_ok = depth + 1 + median_levels(n, leaf) <= kBvhMaxDepth;
+        uint32_t mid = b;
+        if (split.valid() && depth_ok) mid = partition(b, e, centres, split);
+        if (mid == b || mid == e) mid = median(b, e, centres);
+        out[index] = node;
+        build_children(out, index, b, mid, e, depth);
+    }
+
+private:
+    struct Split {
+        int axis = -1, bin = 0;
+        float cost = INFINITY;
+        [[nodiscard]] bool valid() const { return axis >= 0; }
+    };
+
+    [[nodiscard]] int bin_of(const Vec3f& c, int axis, const Box3f& centres) const {
+        const float lo = centres.lo[axis], extent = centres.hi[axis] - lo;
+        const int bin = int(float(bins_) * ((c[axis] - lo) / extent));
+        return std::clamp(bin, 0, bins_ - 1);
+    }
+
+    Split find_split(uint32_t b, uint32_t e, const Box3f& centres) const {
+        Split best;
+        for (int axis = 0; axis < 3; ++axis) {
+            if (!(centres.hi[axis] > centres.lo[axis])) continue;
+            Box3f boxes[kMaxBins];
+            uint64_t weights[kMaxBins] = {};
+            for (uint32_t i = b; i < e; ++i) {
+                const int bin = bin_of(prims_[i].centre, axis, centres);
+                boxes[bin].extend(prims_[i].box);
+                weights[bin] += prims_[i].weight;
+            }
+            float right_area[kMaxBins];
+            uint64_t right_weight[kMaxBins];
+            Box3f acc;
+            uint64_t w = 0;
+            for (int i = bins_ - 1; i > 0; --i) {
+                acc.extend(boxes[i]);
+                w += weights[i];
+                right_area[i] = acc.surface_area();
+                right_weight[i] = w;
+            }
+            acc = Box3f();
+            w = 0;
+            for (int i = 1; i < bins_; ++i) {
+                acc.extend(boxes[i - 1]);
+                w += weights[i - 1];
+                if (w == 0 || right_weight[i] == 0) continue;
+                const float cost = acc.surface_area() * float(w) + right_area[i] * float(right_weight[i]);
+                if (cost < best.cost) best = {axis, i, cost};
+            }
+        }
+        return best;
+    }
+
+    uint32_t partition(uint32_t b, uint32_t e, const Box3f& centres, const Split& split) {
+        auto it = std::partition(prims_.begin() + b, prims_.begin() + e, [&](const Prim& p) {
+            return bin_of(p.centre, split.axis, centres) < split.bin;
+        });
+        return uint32_t(it - prims_.begin());
+    }
+
+    uint32_t median(uint32_t b, uint32_t e, const Box3f& centres) {
+        const int axis = centres.largest_axis();
+        const uint32_t mid = b + (e - b) / 2;
+        std::nth_element(prims_.begin() + b, prims_.begin() + mid, prims_.begin() + e,
+                         [axis](const Prim& p, const Prim& q) {
+                             if (p.centre[axis] != q.centre[axis]) return p.centre[axis] < q.centre[axis];
+                             if (p.tri != q.tri) return p.tri;
+                             return p.id < q.id;
+                         });
+        return mid;
+    }
+
+    void build_children(std::vector<ScratchNode>& out, uint32_t index, uint32_t b, uint32_t mid, uint32_t e,
+                        int depth) {
+        if (e - b < kParallelRegion) {
+            out[index].child[0] = uint32_t(out.size());
+            build(out, b, mid, depth + 1);
+            out[index].child[1] = uint32_t(out.size());
+            build(out, mid, e, depth + 1);
+            return;
+        }
+        std::vector<ScratchNode> left, right;
+        parallel::invoke([&] { build(left, b, mid, depth + 1); }, [&] { build(right, mid, e, depth + 1); });
+        for (auto* part : {&left, &right}) {
+            const uint32_t offset = uint32_t(out.size());
+            out[index].child[part == &left ? 0 : 1] = offset;
+            for (ScratchNode node : *part) {
+                if (node.n == 0 && node.existing == kNone) {
+                    node.child[0] += offset;
+                    node.child[1] += offset;
+                }
+                out.push_back(node);
+            }
+        }
+    }
+
+    SahCosts sah_;
+    uint32_t leaf_;
+    int bins_;
+    std::vector<Prim>& prims_;
+};
+
+}  // namespace
+
+struct AdaptBvh::Buffers {
+    std::vector<uint32_t> migrate, rebuild;
+    uint64_t refitted = 0;
+    void append(const Buffers& other) {
+        migrate.insert(migrate.end(), other.migrate.begin(), other.migrate.end());
+        rebuild.insert(rebuild.end(), other.rebuild.begin(), other.rebuild.end());
+        refitted += other.refitted;
+    }
+};
+
+struct AdaptBvh::Region {
+    uint32_t root = kNone;
+    int depth = 0;
+    std::vector<Prim> prims;
+    std::vector<uint32_t> old_nodes;  // freed when the region is linked
+    std::vector<ScratchNode> nodes;
+};
+
+struct AdaptBvh::Pending {
+    uint32_t child[2];
+    uint32_t anchor;  // the sibling that took the detached parent's place
+    uint32_t fix;     // the node whose child changed (re-adapt starts there)
+    uint32_t start;   // X, found in pass 3
+};
+
+// ---------------------------------------------------------------------------
+// Construction, import, export.
+
+AdaptBvh::AdaptBvh(std::span<const Triangle> triangles, const BuildOptions& build, const AdaptOptions& options)
+    : build_(build), options_(options), triangle_count_(uint32_t(triangles.size())),
+      leaf_capacity_(uint32_t(std::max(build.max_leaf_size, 1))) {
+    if (triangles.size() >= (size_t{1} << 30)) throw Error("adapt update: more than 2^30 triangles");
+    if (!(options.migrate_threshold > 0.0f && options.migrate_threshold < 1.0f) ||
+        !(options.explode_threshold > 0.0f && options.explode_threshold < 1.0f) ||
+        !(options.max_overlap >= 0.0f && options.max_overlap <= 1.0f)) {
+        throw Error("adapt update: dM and dE must be in (0, 1) and the overlap threshold in [0, 1]");
+    }
+    if (triangles.empty()) return;
+    BuildOptions initial = build;
+    // Spatial splits reference a triangle from several leaves; the adapt tree holds each once.
+    if (initial.builder == Builder::Sbvh || initial.builder == Builder::GridBvhSplit) {
+        initial.builder = Builder::BinnedSah;
+    }
+    triangles_ = triangles;
+    parallel::with_threads(build.threads, [&] {
+        import(build_bvh_on_cpu(triangles, initial));
+        export_bvh();
+    });
+}
+
+void AdaptBvh::import(const Bvh& bvh) {
+    const uint32_t capacity = 2 * triangle_count_ - 1;
+    nodes_.assign(capacity, AdaptNode{});
+    slots_.assign(size_t(capacity) * leaf_capacity_, 0);
+    forward_.assign(capacity, kNone);
+    memory_.reset(capacity, uint32_t(bvh.nodes.size()));
+    for (uint32_t i = 0; i < bvh.nodes.size(); ++i) {
+        const BvhNode& in = bvh.nodes[i];
+        AdaptNode& node = nodes_[i];
+        node.box = in.bounds;
+        if (in.is_leaf()) {
+            node.leaf_size = uint16_t(in.count);
+            for (uint32_t k = 0; k < in.count; ++k) slots_[size_t(i) * leaf_capacity_ + k] = bvh.prim_indices[in.first + k];
+        } else {
+            node.child[0] = in.first;
+            node.child[1] = in.first + 1;
+            nodes_[in.first].parent = nodes_[in.first + 1].parent = i;
+        }
+    }
+    root_ = 0;
+    nodes_[0].parent = kNone;
+    finish_import(0);
+}
+
+uint32_t AdaptBvh::finish_import(uint32_t id) {
+    AdaptNode& node = nodes_[id];
+    if (node.is_leaf()) return node.count = node.leaf_size;
+    node.count = finish_import(node.child[0]) + finish_import(node.child[1]);
+    node.saved_cost = sah_cost(id);
+    return node.count;
+}
+
+float AdaptBvh::sah_cost(uint32_t id) const {
+    const AdaptNode& node = nodes_[id];
+    const float area = node.box.surface_area();
+    if (node.is_leaf() || !(area > 0.0f)) return build_.sah.traversal + build_.sah.intersection * float(node.count);
+    const AdaptNode& l = nodes_[node.child[0]];
+    const AdaptNode& r = nodes_[node.child[1]];
+    const float sum = l.box.surface_area() * float(l.count) + r.box.surface_area() * float(r.count);
+    return build_.sah.traversal + build_.sah.intersection * sum / area;
+}
+
+int AdaptBvh::export_bvh() {
+    bvh_.nodes.clear();
+    bvh_.nodes.reserve(memory_.used_count());
+    bvh_.prim_indices.resize(triangle_count_);
+    source_.clear();
+    source_.reserve(memory_.used_count());
+    uint32_t slot = 0;
+    int max_depth = 0;
+    bvh_.nodes.push_back({nodes_[root_].box, 0, 0});
+    source_.push_back(root_);
+    auto emit = [&](auto&& self, uint32_t id, uint32_t index, int depth) -> void {
+        const AdaptNode& node = nodes_[id];
+        if (node.is_leaf()) {
+            max_depth = std::max(max_depth, depth);
+            bvh_.nodes[index].first = slot;
+            bvh_.nodes[index].count = node.leaf_size;
+            for (uint32_t t : leaf_triangles(id)) bvh_.prim_indices[slot++] = t;
+            return;
+        }
+        const uint32_t pair = uint32_t(bvh_.nodes.size());
+        bvh_.nodes[index].first = pair;
+        for (uint32_t k = 0; k < 2; ++k) {
+            bvh_.nodes.push_back({nodes_[node.child[k]].box, 0, 0});
+            source_.push_back(node.child[k]);
+        }
+        self(self, node.child[0], pair, depth + 1);
+        self(self, node.child[1], pair + 1, depth + 1);
+    };
+    emit(emit, root_, 0, 0);
+    return max_depth;
+}
+
+void AdaptBvh::refresh_boxes() {
+    parallel::for_range<size_t>(0, bvh_.nodes.size(), 8192, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i < hi; ++i) bvh_.nodes[i].bounds = nodes_[source_[i]].box;
+    });
+}
+
+// ---------------------------------------------------------------------------
+// The update.
+
+bool AdaptBvh::update(std::span<const Triangle> triangles, UpdateStats& stats) {
+    if (triangles.size() != triangle_count_) {
+        throw Error("adapt update: " + std::to_string(triangles.size()) + " triangles, the tree was built over " +
+                    std::to_string(triangle_count_));
+    }
+    if (root_ == kNone) return false;
+    triangles_ = triangles;
+    return parallel::with_threads(build_.threads, [&] {
+        Buffers buffers;
+        adapt(root_, buffers, triangles);
+        stats.refitted_nodes += buffers.refitted;
+        bool changed = false;
+        VALIDATE("stage 1");
+        if (!buffers.rebuild.empty()) {
+            stats.rebuilt_nodes += rebuild(buffers.rebuild, triangles);
+            stats.rebuilt_subtrees += buffers.rebuild.size();
+            changed = true;
+        }
+        if (!buffers.migrate.empty()) {
+            VALIDATE("stage 2");
+            const uint64_t moved = migrate(buffers.migrate);
+            VALIDATE("stage 3");
+            stats.migrations += moved;
+            changed = changed || moved > 0;
+        }
+        if (!changed) {
+            refresh_boxes();
+            return false;
+        }
+        if (export_bvh() > kBvhMaxDepth) {
+            full_rebuild(triangles);
+            stats.rebuilt_subtrees += 1;
+            stats.rebuilt_nodes += memory_.used_count();
+            export_bvh();
+        }
+        return true;
+    });
+}
+
+// Stage 1: post-order refit with detection.
+void AdaptBvh::adapt(uint32_t id, Buffers& out, std::span<const Triangle> triangles) {
+    AdaptNode& node = nodes_[id];
+    ++out.refitted;
+    if (node.is_leaf()) {
+        Box3f box;
+        for (uint32_t t : leaf_triangles(id)) box.extend(triangles[t].bounds());
+        node.box = box;
+        return;
+    }
+    const size_t migrate_start = out.migrate.size(), rebuild_start = out.rebuild.size();
+    if (node.count > kParallelAdapt) {
+        Buffers left, right;
+        parallel::invoke([&] { adapt(node.child[0], left, triangles); },
+                         [&] { adapt(node.child[1], right, triangles); });
+        out.append(left);
+        out.append(right);
+    } else {
+        adapt(node.child[0], out, triangles);
+        adapt(node.child[1], out, triangles);
+    }
+    node.box = merge(nodes_[node.child[0]].box, nodes_[node.child[1]].box);
+    detect(id, out, migrate_start, rebuild_start);
+}
+
+void AdaptBvh::detect(uint32_t id, Buffers& out, size_t migrate_start, size_t rebuild_start) {
+    AdaptNode& node = nodes_[id];
+    const float ratio = node.saved_cost > 0.0f ? sah_cost(id) / node.saved_cost : 1.0f;
+    if (options_.migrate && id != root_ && ratio < 1.0f - options_.migrate_threshold) out.migrate.push_back(id);
+    if (!options_.rebuild || !(ratio > 1.0f + options_.explode_threshold)) return;
+    const Box3f& l = nodes_[node.child[0]].box;
+    const Box3f& r = nodes_[node.child[1]].box;
+    const Box3f overlap = overlap_box(l, r);
+    const float smaller = std::min(l.surface_area(), r.surface_area());
+    const float max_overlap = smaller > 0.0f ? overlap.surface_area() / smaller : 0.0f;
+    if (!(max_overlap > options_.max_overlap)) return;
+    node.locked = 1;
+    size_t kept = rebuild_start;
+    for (size_t i = rebuild_start; i < out.rebuild.size(); ++i) {
+        AdaptNode& inner = nodes_[out.rebuild[i]];
+        if (overlap_box(inner.box, overlap).is_empty()) {
+            out.rebuild[kept++] = out.rebuild[i];
+        } else {
+            inner.locked = 0;  // absorbed into this region
+        }
+    }
+    out.rebuild.resize(kept);
+    out.migrate.resize(std::min(out.migrate.size(), migrate_start));
+    out.rebuild.push_back(id);
+}
+
+// ---------------------------------------------------------------------------
+// Stage 2: local rebuilds.
+
+void AdaptBvh::collect_region(uint32_t root, Region& region) const {
+    region.root = root;
+    region.depth = 0;
+    for (uint32_t p = nodes_[root].parent; real(p); p = nodes_[p].parent) ++region.depth;
+    std::vector<uint32_t> stack = {nodes_[root].child[1], nodes_[root].child[0]};
+    while (!stack.empty()) {
+        const uint32_t id = stack.back();
+        stack.pop_back();
+        const AdaptNode& node = nodes_[id];
+        if (node.locked) {
+            region.prims.push_back({node.box, node.box.center(), id, node.count, false});
+            continue;
+        }
+        region.old_nodes.push_back(id);
+        if (node.is_leaf()) {
+            for (uint32_t t : leaf_triangles(id)) {
+                const Box3f box = triangles_[t].bounds();
+                region.prims.push_back({box, box.center(), t, 1, true});
+            }
+        } else {
+            stack.push_back(node.child[1]);
+            stack.push_back(node.child[0]);
+        }
+    }
+}
+
+void AdaptBvh::build_region(Region& region, std::span<const Triangle> triangles) const {
+    const bool all_tris = std::all_of(region.prims.begin(), region.prims.end(), [](const Prim& p) { return p.tri; });
+    if (all_tris && region.prims.size() >= kBinnedRegion) {
+        // Triangles only: the project's binned SAH builder (the same SAH, parallel, SIMD).
+        std::vector<Triangle> subset(region.prims.size());
+        for (size_t i = 0; i < subset.size(); ++i) subset[i] = triangles[region.prims[i].id];
+        const Bvh bvh = build_binned_sah(subset, bvh_build_config(build_), build_.binned);
+        std::vector<Prim> ordered(region.prims.size());
+        for (size_t i = 0; i < ordered.size(); ++i) ordered[i] = region.prims[bvh.prim_indices[i]];
+        region.prims = std::move(ordered);
+        region.nodes.resize(bvh.nodes.size());
+        for (size_t i = 0; i < bvh.nodes.size(); ++i) {
+            const BvhNode& in = bvh.nodes[i];
+            ScratchNode& out = region.nodes[i];
+            out.box = in.bounds;
+            if (in.is_leaf()) {
+                out.first = in.first;
+                out.n = in.count;
+            } else {
+                out.child[0] = in.first;
+                out.child[1] = in.first + 1;
+            }
+        }
+        return;
+    }
+    RegionBuilder builder(build_, region.prims);
+    builder.build(region.nodes, 0, uint32_t(region.prims.size()), region.depth);
+}
+
+uint32_t AdaptBvh::apply_region(const Region& region, uint32_t scratch, uint32_t id, uint32_t parent) {
+    const ScratchNode& in = region.nodes[scratch];
+    if (in.existing != kNone) {
+        nodes_[in.existing].parent = parent;
+        return in.existing;
+    }
+    if (id == kNone) id = memory_.allocate_near(parent);
+    AdaptNode& node = nodes_[id];
+    node.box = in.box;
+    node.parent = parent;
+    node.locked = 0;
+    if (in.n > 0) {
+        node.leaf_size = uint16_t(in.n);
+        node.count = in.n;
+        for (uint32_t k = 0; k < in.n; ++k) slots_[size_t(id) * leaf_capacity_ + k] = region.prims[in.first + k].id;
+        return id;
+    }
+    node.leaf_size = 0;
+    for (int k = 0; k < 2; ++k) nodes_[id].child[k] = apply_region(region, in.child[k], kNone, id);
+    nodes_[id].count = nodes_[nodes_[id].child[0]].count + nodes_[nodes_[id].child[1]].count;
+    nodes_[id].saved_cost = sah_cost(id);
+    return id;
+}
+
+uint64_t AdaptBvh::rebuild(std::span<const uint32_t> roots, std::span<const Triangle> triangles) {
+    std::vector<Region> regions(roots.size());
+    for (size_t i = 0; i < roots.size(); ++i) collect_region(roots[i], regions[i]);
+    parallel::for_range<size_t>(0, regions.size(), 1, [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i < hi; ++i) build_region(regions[i], triangles);
+    });
+    uint64_t created = 0;
+    for (const Region& region : regions) {  // buffer order: nested regions first
+        for (uint32_t id : region.old_nodes) memory_.free(id);
+        apply_region(region, 0, region.root, nodes_[region.root].parent);
+        created += region.nodes.size();
+    }
+    for (uint32_t id : roots) nodes_[id].locked = 0;
+    return created;
+}
+
+void AdaptBvh::full_rebuild(std::span<const Triangle> triangles) {
+    std::vector<uint32_t> roots = {root_};
+    if (nodes_[root_].is_leaf()) return;
+    rebuild(roots, triangles);
+}
+
+// ---------------------------------------------------------------------------
+// Stage 3: migration.
+
+uint32_t AdaptBvh::resolve(uint32_t id) const {
+    for (int guard = 0; real(id) && forward_[id] != kNone && guard < (1 << 20); ++guard) id = forward_[id];
+    return id;
+}
+
+void AdaptBvh::release(uint32_t id, uint32_t replacement) {
+    memory_.free(id);
+    forward_[id] = replacement;
+    forwarded_.push_back(id);
+}
+
+void AdaptBvh::replace_child(uint32_t parent, uint32_t old_child, uint32_t new_child,
+                             std::vector<Pending>* pending) {
+    nodes_[new_child].parent = parent;
+    if (parent == kNone) {
+        root_ = new_child;
+    } else if (parent & kTag) {
+        Pending& record = (*pending)[parent & ~kTag];
+        record.child[record.child[0] == old_child ? 0 : 1] = new_child;
+    } else {
+        AdaptNode& p = nodes_[parent];
+        p.child[p.child[0] == old_child ? 0 : 1] = new_child;
+    }
+}
+
+void AdaptBvh::detach(uint32_t id, std::vector<Pending>& pending) {
+    if (forward_[id] != kNone || memory_.is_free(id)) return;  // freed by a deeper detach
+    const uint32_t parent = nodes_[id].parent;
+    if (!real(parent) || nodes_[id].is_leaf()) return;
+    const AdaptNode& p = nodes_[parent];
+    const uint32_t sibling = p.child[p.child[0] == id ? 1 : 0];
+    const uint32_t grand = p.parent;
+    replace_child(grand, parent, sibling, &pending);
+    for (uint32_t x = grand; real(x); x = nodes_[x].parent) nodes_[x].count -= nodes_[id].count;
+    const uint32_t record = uint32_t(pending.size());
+    pending.push_back({{nodes_[id].child[0], nodes_[id].child[1]}, sibling, grand, kNone});
+    nodes_[nodes_[id].child[0]].parent = nodes_[nodes_[id].child[1]].parent = kTag | record;
+    release(parent, sibling);
+    release(id, sibling);
+}
+
+void AdaptBvh::refit_upward(uint32_t id) {
+    bool first = true;
+    for (uint32_t y = resolve(id); real(y); y = nodes_[y].parent) {
+        AdaptNode& node = nodes_[y];
+        if (node.is_leaf()) continue;
+        const Box3f box = merge(nodes_[node.child[0]].box, nodes_[node.child[1]].box);
+        if (!first && same(box, node.box)) break;  // the ancestors already agree
+        node.box = box;
+        first = false;
+    }
+}
+
+uint32_t AdaptBvh::find_start(uint32_t id, const Box3f& box, const std::vector<Pending>& pending) const {
+    uint32_t y = id;
+    for (int guard = 0; guard < 4096; ++guard) {
+        if (y == kNone) return root_;
+        if (y & kTag) {  // the root of a detached subtree: continue from where it was detached
+            y = pending[y & ~kTag].anchor;
+            continue;
+        }
+        y = resolve(y);
+        if (!real(y)) continue;
+        const uint32_t parent = nodes_[y].parent;
+        if (parent & kTag && parent != kNone) {
+            y = parent;
+            continue;
+        }
+        if (nodes_[y].box.contains(box) || parent == kNone) return y;
+        y = parent;
+    }
+    return root_;
+}
+
+void AdaptBvh::merge_at(uint32_t at, uint32_t id) {
+    const uint32_t parent = nodes_[at].parent;
+    const uint32_t u = memory_.allocate_near(real(parent) ? parent : at);
+    forward_[u] = kNone;
+    AdaptNode& node = nodes_[u];
+    node = AdaptNode{};
+    node.box = merge(nodes_[at].box, nodes_[id].box);
+    node.child[0] = at;
+    node.child[1] = id;
+    node.count = nodes_[at].count + nodes_[id].count;
+    replace_child(parent, at, u, nullptr);
+    nodes_[at].parent = nodes_[id].parent = u;
+    nodes_[u].saved_cost = sah_cost(u);
+}
+
+// Recursive insertion of subtree `id` at or below `at` (whose ancestors already count it).
+void AdaptBvh::descend(uint32_t at, uint32_t id) {
+    const AdaptNode& n = nodes_[id];
+    const float sa_n = n.box.surface_area(), c_n = float(n.count);
+    for (uint32_t x = at;;) {
+        AdaptNode& node = nodes_[x];
+        if (node.is_leaf()) return merge_at(x, id);
+        const AdaptNode& l = nodes_[node.child[0]];
+        const AdaptNode& r = nodes_[node.child[1]];
+        const Box3f l_n = merge(l.box, n.box), r_n = merge(r.box, n.box);
+        const float cost_merge = node.box.surface_area() * float(node.count) + sa_n * c_n;
+        const float cost_left = l_n.surface_area() * (float(l.count) + c_n) + r.box.surface_area() * float(r.count);
+        const float cost_right = l.box.surface_area() * float(l.count) + r_n.surface_area() * (float(r.count) + c_n);
+        if (cost_merge <= std::min(cost_left, cost_right)) return merge_at(x, id);
+        const int side = cost_left <= cost_right ? 0 : 1;
+        const float before = overlap_box(l.box, r.box).surface_area();
+        const float after = side == 0 ? overlap_box(l_n, r.box).surface_area() : overlap_box(l.box, r_n).surface_area();
+        if (after > before && !n.is_leaf()) {  // split N: its children go in one by one
+            const uint32_t children[2] = {n.child[0], n.child[1]};
+            const uint32_t above = node.parent;
+            release(id, x);
+            descend(x, children[0]);
+            // A merge at x put a new node in x's place: the second child starts there.
+            uint32_t top = x;
+            while (nodes_[top].parent != above) top = nodes_[top].parent;
+            descend(top, children[1]);
+            return;
+        }
+        node.box = merge(node.box, n.box);
+        node.count += n.count;
+        const float area = node.box.surface_area();
+        node.saved_cost = build_.sah.traversal +
+                          build_.sah.intersection * (area > 0.0f ? std::min(cost_left, cost_right) / area : c_n);
+        x = node.child[side];
+    }
+}
+
+void AdaptBvh::insert(uint32_t at, uint32_t id, const std::vector<Pending>& pending) {
+    uint32_t x = find_start(at, nodes_[id].box, pending);
+    for (uint32_t y = x; real(y); y = nodes_[y].parent) {
+        if (y == id) {  // never inside the subtree being inserted
+            x = root_;
+            break;
+        }
+    }
+    for (uint32_t y = nodes_[x].parent; real(y); y = nodes_[y].parent) {
+        nodes_[y].count += nodes_[id].count;
+        nodes_[y].box.extend(nodes_[id].box);
+    }
+    descend(x, id);
+}
+
+uint64_t AdaptBvh::migrate(std::vector<uint32_t>& buffer) {
+    std::vector<std::pair<int, uint32_t>> order;
+    order.reserve(buffer.size());
+    for (uint32_t id : buffer) {
+        int depth = 0;
+        for (uint32_t p = nodes_[id].parent; real(p); p = nodes_[p].parent) ++depth;
+        order.push_back({depth, id});
+    }
+    std::stable_sort(order.begin(), order.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+    std::vector<Pending> pending;
+    for (const auto& [depth, id] : order) detach(id, pending);  // pass 1
+    for (const Pending& p : pending) {                        // pass 2
+        if (real(p.fix)) refit_upward(p.fix);
+    }
+    for (Pending& p : pending) {  // pass 3
+        const Box3f box = merge(nodes_[p.child[0]].box, nodes_[p.child[1]].box);
+        p.start = find_start(p.anchor, box, pending);
+    }
+    VALIDATE("pass 3");
+    for (size_t i = 0; i < pending.size(); ++i) {  // pass 4
+        for (int k = 0; k < 2; ++k) insert(pending[i].start, pending[i].child[k], pending);
+    }
+    for (uint32_t id : forwarded_) forward_[id] = kNone;
+    forwarded_.clear();
+    return pending.size();
+}
+
+std::unique_ptr<BvhUpdater> make_adapt_updater(std::span<const Triangle> triangles, const BuildOptions& build,
+                                               const AdaptOptions& options) {
+    return std::make_unique<AdaptBvh>(triangles, build, options);
+}
+
+}  // namespace rf
