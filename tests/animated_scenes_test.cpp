@@ -41,7 +41,10 @@ public:
 uint64_t geometry_hash(const Scene& scene) {
     Hasher h;
     for (const Mesh& m : scene.meshes) h.vec(m.positions), h.vec(m.normals), h.vec(m.indices), h.vec(m.material_ids);
-    for (const Instance& i : scene.instances) h.bytes(&i.mesh, sizeof i.mesh), h.bytes(i.transform.m, sizeof i.transform.m);
+    for (const Instance& i : scene.instances) {
+        h.bytes(&i.mesh, sizeof i.mesh);
+        h.bytes(i.transform.m, sizeof i.transform.m);
+    }
     for (const AnimatedNode& n : scene.animation.nodes) {
         h.vec(n.translation_track.times), h.vec(n.translation_track.values);
         h.vec(n.rotation_track.times), h.vec(n.rotation_track.values);
@@ -81,8 +84,8 @@ Affine3f quaternion_affine(const float* q) {
 Affine3f keyed_transform(const Scene& scene, const InstanceAnimation& ia, int frame) {
     const AnimatedNode& node = scene.animation.nodes[ia.node];
     const float* t = &node.translation_track.values[3 * size_t(frame)];
-    return Affine3f::translation({t[0], t[1], t[2]}) * quaternion_affine(&node.rotation_track.values[4 * size_t(frame)]) *
-           ia.local;
+    const float* q = &node.rotation_track.values[4 * size_t(frame)];
+    return Affine3f::translation({t[0], t[1], t[2]}) * quaternion_affine(q) * ia.local;
 }
 
 float max_difference(const Affine3f& a, const Affine3f& b) {
@@ -144,26 +147,35 @@ TEST(AnimatedScenes, NamesParseSizesAndSeeds) {
         EXPECT_NE(std::find(names.begin(), names.end(), kind), names.end()) << kind;
 }
 
-TEST(AnimatedScenes, SameSeedSameGeometryOnAnyThreadCount) {
-    for (const char* name : {"explode@20k", "cloth@2k", "nbody@20k"}) {
-        const uint64_t first = geometry_hash(make_animated_scene(name));
-        const uint64_t one_thread = parallel::with_threads(1, [&] { return geometry_hash(make_animated_scene(name)); });
-        EXPECT_EQ(first, one_thread) << name;
-        EXPECT_NE(first, geometry_hash(make_animated_scene(std::string(name) + "#7"))) << name;
-    }
+// Generated twice on all threads and once on one: the same hash; another seed: another.
+void expect_deterministic(const std::string& name) {
+    const uint64_t first = geometry_hash(make_animated_scene(name));
+    EXPECT_EQ(first, geometry_hash(make_animated_scene(name))) << name;
+    const uint64_t one_thread = parallel::with_threads(1, [&] { return geometry_hash(make_animated_scene(name)); });
+    EXPECT_EQ(first, one_thread) << name;
+    EXPECT_NE(first, geometry_hash(make_animated_scene(name + "#7"))) << name;
 }
 
-TEST(AnimatedScenes, TriangleCountsNearTheRequestedSizes) {
-    const std::pair<const char*, size_t> defaults[] = {
-        {"explode", kExplodeDefaultTriangles}, {"cloth", kClothDefaultTriangles}, {"nbody", kNbodyDefaultTriangles}};
-    for (const auto& [kind, count] : defaults) {
-        const double n = double(default_scene(kind).triangle_count());
-        EXPECT_NEAR(n, double(count), 0.03 * double(count)) << kind;
-    }
+TEST(AnimatedScenes, ExplodeIsDeterministic) { expect_deterministic("explode@20k"); }
+TEST(AnimatedScenes, ClothIsDeterministic) { expect_deterministic("cloth@1k"); }
+TEST(AnimatedScenes, NbodyIsDeterministic) { expect_deterministic("nbody@20k"); }
+
+// The default sizes (the seed's 252K, 92K and 146K), within 3%.
+TEST(AnimatedScenes, ExplodeDefaultSize) {
+    EXPECT_NEAR(double(default_scene("explode").triangle_count()), double(kExplodeDefaultTriangles),
+                0.03 * double(kExplodeDefaultTriangles));
+}
+TEST(AnimatedScenes, ClothDefaultSize) {
+    EXPECT_NEAR(double(default_scene("cloth").triangle_count()), double(kClothDefaultTriangles),
+                0.03 * double(kClothDefaultTriangles));
+}
+TEST(AnimatedScenes, NbodyDefaultSize) {
+    EXPECT_NEAR(double(default_scene("nbody").triangle_count()), double(kNbodyDefaultTriangles),
+                0.03 * double(kNbodyDefaultTriangles));
 }
 
 TEST(AnimatedScenes, SmallSizesAreNearTheRequestedCounts) {
-    for (const char* name : {"explode@30k", "nbody@30k", "cloth@2k", "explode@1k", "nbody@1k"}) {
+    for (const char* name : {"explode@30k", "nbody@30k", "cloth@1k", "explode@1k", "nbody@1k"}) {
         const double wanted = double(parse_animated_scene_name(name).triangles);
         EXPECT_NEAR(double(make_animated_scene(name).triangle_count()), wanted, 0.1 * wanted) << name;
     }
@@ -323,7 +335,7 @@ TEST(AnimatedScenes, NbodyBodiesDoNotInterpenetrateDeeply) {
 }
 
 TEST(AnimatedScenes, LoadThroughLoadScene) {
-    for (const char* name : {"explode@20k", "cloth@2k#5", "nbody@10k"}) {
+    for (const char* name : {"explode@20k", "cloth@1k#5", "nbody@10k"}) {
         const Scene scene = load_scene(std::string("builtin:") + name);  // finalize() validates
         EXPECT_EQ(scene.source, std::string("builtin:") + name);
         EXPECT_TRUE(scene.animated()) << name;
@@ -338,9 +350,10 @@ TEST(AnimatedScenes, SetTimeReproducesTheRigidKeys) {
         Scene scene = load_scene(std::string("builtin:") + name);
         for (int frame : {0, 15, 16, 50, 99, 1, 99}) {  // forwards, back to the start, forwards again
             scene.set_time(scene.animation.frame_time(frame));
-            for (const InstanceAnimation& ia : scene.animation.instances)
-                ASSERT_LT(max_difference(scene.instances[ia.instance].transform, keyed_transform(scene, ia, frame)), 1e-4f)
-                    << name << " frame " << frame;
+            for (const InstanceAnimation& ia : scene.animation.instances) {
+                const Affine3f& evaluated = scene.instances[ia.instance].transform;
+                ASSERT_LT(max_difference(evaluated, keyed_transform(scene, ia, frame)), 1e-4f) << name << " " << frame;
+            }
         }
         // Half-way between two keys the translation is half-way too.
         scene.set_time(0.5f * (scene.animation.frame_time(40) + scene.animation.frame_time(41)));
@@ -354,8 +367,7 @@ TEST(AnimatedScenes, SetTimeReproducesTheRigidKeys) {
 
 TEST(AnimatedScenes, SetTimeMovesTheFragmentsAndKeepsThemAboveTheGround) {
     Scene scene = load_scene("builtin:explode@20k");
-    const GeometryChange intact = scene.set_time(scene.animation.frame_time(10));
-    (void)intact;
+    scene.set_time(scene.animation.frame_time(10));  // still intact
     const GeometryChange flying = scene.set_time(scene.animation.frame_time(40));
     EXPECT_EQ(flying.instances.size(), scene.animation.instances.size());
     EXPECT_TRUE(flying.meshes.empty());
@@ -364,14 +376,15 @@ TEST(AnimatedScenes, SetTimeMovesTheFragmentsAndKeepsThemAboveTheGround) {
         float lowest = 1e30f;
         for (const InstanceAnimation& ia : scene.animation.instances) {
             const Instance& in = scene.instances[ia.instance];
-            for (const Vec3f& p : scene.meshes[in.mesh].positions) lowest = std::min(lowest, in.transform.transform_point(p).y);
+            for (const Vec3f& p : scene.meshes[in.mesh].positions)
+                lowest = std::min(lowest, in.transform.transform_point(p).y);
         }
         EXPECT_GE(lowest, -1e-3f) << "frame " << frame;
     }
 }
 
 TEST(AnimatedScenes, SetTimeDeformsTheCloth) {
-    Scene scene = load_scene("builtin:cloth@2k");
+    Scene scene = load_scene("builtin:cloth@1k");
     const VertexKeyframes keys = scene.animation.vertex_keyframes[0];
     for (int frame : {30, 99, 1}) {
         const GeometryChange change = scene.set_time(scene.animation.frame_time(frame));

@@ -335,3 +335,63 @@ TEST(Animation, MalformedDataGivesOneLineErrors) {
 
 }  // namespace
 }  // namespace rf
+
+// JSON scene keys (src/io/json_scene_loader.cpp): keyframed placements.
+#include <fstream>
+
+#include "rayforge/io/scene_io.h"
+#include "scene_load_error.h"
+#include "test_paths.h"
+
+namespace rf {
+namespace {
+
+std::string write_json(const std::string& name, const std::string& text) {
+    const std::string path = test::temp_dir("animation_json") + "/" + name;
+    std::ofstream(path) << text;
+    return path;
+}
+
+TEST(AnimationJson, KeyedTransformsMoveTheirInstances) {
+    const std::string path = write_json("keys.json", R"({"meshes": [
+      {"file": "builtin:cube"},
+      {"file": "builtin:cube", "transform": {"translate": [0, 5, 0]},
+       "animation": {"keys": [
+         {"time": 1, "translate": [0, 0, 0], "rotate": {"axis": [0, 0, 1], "degrees": 0}},
+         {"time": 3, "translate": [4, 0, 0], "rotate": {"quaternion": [0, 0, 1, 0]}, "scale": 2}]}}]})");
+    Scene s = load_scene(path);
+    ASSERT_EQ(s.instances.size(), 2u);
+    EXPECT_FLOAT_EQ(s.animation.start, 1.0f);
+    EXPECT_FLOAT_EQ(s.animation.end, 3.0f);
+    expect_near3(s.instances[1].transform.transform_point({0, 0, 0}), {0, 10, 0});  // at the start: the lone scale key holds from the start
+    GeometryChange c = s.set_time(2.0f);
+    EXPECT_EQ(c.instances, std::vector<uint32_t>({1}));
+    // keys(2) = T(2,0,0) * R(90 about z) * S(2), after the entry's transform T(0,5,0): (0,5,0) -> (0,10,0) -> (-10,0,0) -> (-8,0,0).
+    expect_near3(s.instances[1].transform.transform_point({0, 0, 0}), {-8, 0, 0});
+    expect_near3(s.instances[0].transform.transform_point({0, 0, 0}), {0, 0, 0});
+}
+
+TEST(AnimationJson, StepKeysAndErrors) {
+    Scene s = load_scene(write_json("step.json", R"({"meshes": [{"file": "builtin:cube",
+       "animation": {"interpolation": "step", "keys": [{"time": 0, "translate": [0, 0, 0]}, {"time": 1, "translate": [1, 0, 0]}]}}]})"));
+    s.set_time(0.99f);
+    expect_near3(s.instances[0].transform.transform_point({0, 0, 0}), {0, 0, 0});
+    s.set_time(1.0f);
+    expect_near3(s.instances[0].transform.transform_point({0, 0, 0}), {1, 0, 0});
+    const std::pair<const char*, const char*> bad[] = {
+        {R"({"time": 1, "translate": [0, 0, 0]}, {"time": 1, "translate": [1, 0, 0]})", "meshes[0].animation.keys[1].time: times must increase"},
+        {R"({"time": 0, "rotate": {"axis": [0, 0, 0], "degrees": 3}})", "meshes[0].animation.keys[0].rotate.axis: axis must not be zero"},
+        {R"({"time": 0, "spin": 1})", "unknown key"},
+        {R"({"translate": [0, 0, 0]})", "missing \"time\""},
+        {R"({"time": 0, "scale": 0})", "scale must not be zero"},
+    };
+    for (const auto& [keys, expected] : bad) {
+        const std::string message = test::load_error(write_json(
+            "bad.json", std::string(R"({"meshes": [{"file": "builtin:cube", "animation": {"keys": [)") + keys + "]}}]}"));
+        EXPECT_NE(message.find(expected), std::string::npos) << message;
+        EXPECT_EQ(message.find('\n'), std::string::npos) << message;
+    }
+}
+
+}  // namespace
+}  // namespace rf

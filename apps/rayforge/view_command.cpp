@@ -30,8 +30,14 @@ auto scene_preparation(const ViewArgs& a, const Device& device) {
             settings.render = from_file;
             settings.render.spp = r.spp_opt->count() > 0 ? r.spp : kViewerPasses;
             if (!r.camera.empty()) data.camera = initial_camera(r, scene);
+            if (r.accel.update_method.empty() && scene.render_settings.update)
+                settings.update.method = parse_update_method(*scene.render_settings.update);
         }
         if (data.paged) return;
+        if (first && scene.animated() && r.time_opt->count() > 0) {  // the first scene at --time
+            apply_time_option(r, scene);
+            data.geometry = SceneGeometry::build(scene);
+        }
         if (first) apply_light_options(r, scene, data.geometry);
         if (data.source.light && has_no_light(scene, data.geometry)) {  // the views.json light, as the bench uses
             Light light;
@@ -67,6 +73,7 @@ CLI::App* add_view_command(CLI::App& app, ViewArgs& a) {
     add_light_options(cmd, a.render);
     add_device_options(cmd, a.render);
     add_paged_read_options(cmd, a.render.paged);
+    add_animation_options(cmd, a.render);
     const std::string group = "Viewer";
     cmd->add_option("--script", a.script,
                     "Run the commands of FILE (one per line, docs/viewer.md), then exit: 0 when all succeeded")
@@ -107,6 +114,7 @@ int run_view(const ViewArgs& a) {
     config.settings.render = render_options(r, RenderSettings{}, device);
     config.settings.render.spp = r.spp_opt->count() > 0 ? r.spp : kViewerPasses;
     config.settings.tone = tone_mapping(r);
+    config.settings.update = to_update_options(r.accel);
     config.settings.motion_divisor = a.motion_scale == "auto" ? 0 : std::stoi(a.motion_scale);
     config.prepare = scene_preparation(a, device);
     config.paged = paged_scene_options(r.paged, r.threads);  // a malformed budget fails before the window opens

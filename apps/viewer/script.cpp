@@ -55,6 +55,9 @@ constexpr Grammar kGrammar[] = {
     {"print-camera", ScriptOp::PrintCamera, Args::None},
     {"print-stats", ScriptOp::PrintStats, Args::None},
     {"reset-stats", ScriptOp::ResetStats, Args::None},
+    {"play", ScriptOp::Play, Args::None},
+    {"pause", ScriptOp::Pause, Args::None},
+    {"time", ScriptOp::Time, Args::OneNumber},
     {"quit", ScriptOp::Quit, Args::None},
 };
 

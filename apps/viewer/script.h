@@ -27,6 +27,8 @@
 //   print-camera             the camera as a --camera string, on stdout
 //   print-stats              the statistics as one JSON line, on stdout
 //   reset-stats              start the maxima (latency, window frame time) and rates afresh
+//   play | pause             animated scenes: playback (the space key)
+//   time SECONDS             animated scenes: show this time (pauses; the time slider)
 //   quit
 #pragma once
 
@@ -38,7 +40,7 @@ namespace rf::viewer {
 enum class ScriptOp {
     WaitPasses, WaitFrames, WaitIdle, Sleep, Orbit, Look, Pan, Dolly, Walk, Fov, Camera, Reset,
     BookmarkSave, BookmarkLoad, Set, Load, Drop, Screenshot, ScreenshotWindow, ExpectError, ExpectNoError,
-    PrintCamera, PrintStats, ResetStats, Quit,
+    PrintCamera, PrintStats, ResetStats, Play, Pause, Time, Quit,
 };
 
 struct ScriptCommand {

@@ -120,6 +120,9 @@ bool ScriptRunner::start(App& app, const ScriptCommand& c, Clock::time_point now
             std::fflush(stdout);
             return true;
         case ScriptOp::ResetStats: app.stats().reset(); return true;
+        case ScriptOp::Play: need_scene(); app.session().play(true); return true;
+        case ScriptOp::Pause: need_scene(); app.session().play(false); return true;
+        case ScriptOp::Time: need_scene(); app.session().set_time(float(c.a)); return true;
         case ScriptOp::Quit: app.quit(0); finished_ = true; return true;
     }
     return true;

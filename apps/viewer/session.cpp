@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <new>
 #include <utility>
 
@@ -63,13 +64,25 @@ PagedStatus paged_status(const PagedScene& scene, const std::vector<PageCacheRep
 
 }  // namespace
 
+// An animated scene's own copy of the scene and its triangles, which the
+// render thread moves through time (the published SceneData stays as
+// loaded), with the structure that follows them.
+struct Session::AnimationState {
+    Scene scene;
+    SceneGeometry geometry;
+    std::unique_ptr<DynamicAccel> accel;
+    double update_ms_sum = 0.0;
+};
+
 struct Session::Target {
     std::shared_ptr<const SceneData> scene;
     std::shared_ptr<const Accel> accel;  // null for a paged scene, which traces through its own caches
+    std::shared_ptr<AnimationState> animation;  // an animated scene's; accel is then its accel
 
     // A renderer over the structure, or over the paged scene's caches.
     [[nodiscard]] std::unique_ptr<Renderer> new_renderer(const Camera& camera, const RenderOptions& options) const {
         if (scene->paged) return make_paged_renderer(*scene->paged, camera, options);
+        if (animation) return make_renderer(animation->scene, animation->geometry, *accel, camera, options);
         return make_renderer(scene->scene, scene->geometry, *accel, camera, options);
     }
 };
@@ -94,9 +107,15 @@ struct Session::RenderState {
     std::vector<std::shared_ptr<DisplayImage>> pool;
     std::vector<PageCacheReport> caches_before;  // a paged target's caches when the pass began
     PagedStatus paged;                           // and after its last pass (empty in core)
+    bool playing = false;                        // an animated target's time advances
+    float requested_time = 0.0f;
+    uint64_t time_version = 0;
+    Clock::time_point last_tick;                 // when the animation's time last advanced
 
+    [[nodiscard]] bool animating() const { return playing && target && target->animation && !halted; }
     [[nodiscard]] bool wants_pass() const {
         if (!renderer || halted) return false;
+        if (animating()) return true;
         return moving ? !preview_done : renderer->passes() < renderer->options().spp;
     }
     // The film's options for rendering `on`: its structure's device (the
@@ -202,6 +221,29 @@ void Session::set_camera(const Camera& camera, uint64_t scene_id, bool moving, C
         ++camera_version_;
         // A preview pass is short and shows motion: let it finish.
         if (!pass_is_preview_.load()) cancel_.store(true);
+    }
+    render_cv_.notify_one();
+}
+
+void Session::play(bool playing) {
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        playing_ = playing;
+        status_.animation.playing = playing && status_.animation.animated;
+        status_.animation.updates = 0;
+        status_.animation.mean_update_ms = 0.0;
+    }
+    render_cv_.notify_one();
+}
+
+void Session::set_time(float t) {
+    {
+        std::lock_guard<std::mutex> lock(mutex_);
+        playing_ = false;
+        status_.animation.playing = false;
+        time_request_ = t;
+        ++time_version_;
+        cancel_.store(true);
     }
     render_cv_.notify_one();
 }
@@ -313,6 +355,25 @@ std::string structure_name(const BuildOptions& o) {
 
 }  // namespace
 
+// A static scene's structure, or an animated scene's copy with a dynamic
+// structure (a CUDA device rebuilds it there each frame).
+Session::Target Session::build_target(std::shared_ptr<const SceneData> data, const BuildOptions& build,
+                                      UpdateOptions update, const ProgressCallback& progress) const {
+    Target target{data, nullptr, nullptr};
+    if (!data->scene.animated()) {
+        target.accel = build_accel(data->geometry, build, progress);
+        return target;
+    }
+    if (build.device.is_cuda()) update.method = UpdateMethod::Rebuild;
+    auto animation = std::make_shared<AnimationState>();
+    animation->scene = data->scene;
+    animation->geometry = data->geometry;
+    animation->accel = build_dynamic_accel(animation->scene, animation->geometry, build, update, progress);
+    target.accel = std::shared_ptr<const Accel>(animation, animation->accel.get());
+    target.animation = std::move(animation);
+    return target;
+}
+
 void Session::run_load(const SceneSource& source) {
     std::function<void()> wake;
     bool first = false;
@@ -359,12 +420,11 @@ void Session::run_load(const SceneSource& source) {
         first_load_ = false;
     }
     if (data->paged) {  // its structure came with the file
-        hand_over(std::move(data), nullptr);
+        hand_over(Target{std::move(data), nullptr, nullptr});
         return;
     }
     JobProgress progress(mutex_, status_, wake, "building " + structure_name(build) + " for " + source.name);
-    std::shared_ptr<const Accel> accel = build_accel(data->geometry, build, std::ref(progress));
-    hand_over(std::move(data), std::move(accel));
+    hand_over(build_target(std::move(data), build, settings.update, std::ref(progress)));
 }
 
 // Opens a paged scene file with the session's budgets. Its renderer runs on
@@ -379,27 +439,43 @@ void Session::open_paged(SceneData& data, const ViewSettings& settings) const {
 
 void Session::run_build(std::shared_ptr<const SceneData> data, const BuildOptions& options) {
     std::function<void()> wake;
+    UpdateOptions update;
     {
         std::lock_guard<std::mutex> lock(mutex_);
         wake = wake_;
+        update = settings_.update;
     }
     JobProgress progress(mutex_, status_, wake, "building " + structure_name(options));
-    std::shared_ptr<const Accel> accel = build_accel(data->geometry, options, std::ref(progress));
+    Target target = build_target(data, options, update, std::ref(progress));
     {
         std::lock_guard<std::mutex> lock(mutex_);
         // A newer request makes this structure stale before it is shown.
         if (queued_load_ || queued_build_ || shown_scene_ != data) return;
     }
-    hand_over(std::move(data), std::move(accel));
+    hand_over(std::move(target));
 }
 
-void Session::hand_over(std::shared_ptr<const SceneData> data, std::shared_ptr<const Accel> accel) {
+void Session::hand_over(Target target) {
     // Outside the lock: a structure may compute its statistics (a kd-tree's
     // SAH cost walks the tree), and the window reads the status every frame.
-    const AccelStats stats = accel ? accel->stats() : data->paged->accel().stats();
+    std::shared_ptr<const SceneData> data = target.scene;
+    const AccelStats stats = target.accel ? target.accel->stats() : data->paged->accel().stats();
     {
         std::lock_guard<std::mutex> lock(mutex_);
         status_.accel = stats;
+        AnimationStatus& a = status_.animation;
+        if (target.animation) {
+            const Animation& anim = target.animation->scene.animation;
+            if (!a.animated || shown_scene_ != data) a.time = target.animation->scene.time;
+            a.animated = true;
+            a.start = anim.start;
+            a.end = anim.end;
+            a.frames_per_second = anim.frames_per_second;
+            a.method = to_string(target.animation->accel->method());
+            a.playing = playing_;
+        } else {
+            a = AnimationStatus{};
+        }
         if (shown_scene_ != data) {
             shown_scene_ = data;
             camera_ = data->camera;
@@ -410,7 +486,7 @@ void Session::hand_over(std::shared_ptr<const SceneData> data, std::shared_ptr<c
             status_.triangles = data->triangles();
             status_.load_ms = data->load_ms;
         }
-        new_target_ = std::make_shared<const Target>(Target{std::move(data), std::move(accel)});
+        new_target_ = std::make_shared<const Target>(std::move(target));
         ++target_version_;
         cancel_.store(true);
     }
@@ -426,6 +502,7 @@ struct Session::RenderRequests {
     unsigned effects = 0;                  // Restart | Retone
     bool camera_changed = false;
     bool was_moving = false;
+    bool time_requested = false;
     std::vector<std::promise<Image>> films;
 };
 
@@ -435,6 +512,7 @@ void Session::render_loop() {
     RenderRequests r;
     while (take_requests(st, r)) {
         apply_requests(st, r);
+        advance_animation(st, r.time_requested);
         for (std::promise<Image>& film : r.films) film.set_value(st.renderer ? st.renderer->image() : Image{});
         if (!r.films.empty()) wake();
         bool publish = st.renderer && (r.effects & unsigned(Effect::Retone)) && st.renderer->passes() > 0;
@@ -453,7 +531,8 @@ bool Session::take_requests(RenderState& st, RenderRequests& r) {
     std::unique_lock<std::mutex> lock(mutex_);
     render_cv_.wait(lock, [&] {
         return stopping_ || new_target_ || pending_effects_ || camera_version_ != st.camera_version ||
-               !film_requests_.empty() || st.wants_pass();
+               !film_requests_.empty() || time_version_ != st.time_version || playing_ != st.playing ||
+               st.wants_pass();
     });
     if (stopping_) return false;
     cancel_.store(false);
@@ -463,6 +542,13 @@ bool Session::take_requests(RenderState& st, RenderRequests& r) {
     r.films = std::exchange(film_requests_, {});
     st.settings = settings_;
     st.settings_version = settings_version_;
+    if (playing_ && !st.playing) st.last_tick = Clock::now();
+    st.playing = playing_;
+    if (time_version_ != st.time_version) {
+        r.time_requested = true;
+        st.requested_time = time_request_;
+        st.time_version = time_version_;
+    }
     if (camera_version_ != st.camera_version) {
         r.camera_changed = true;
         st.camera = camera_;
@@ -471,7 +557,7 @@ bool Session::take_requests(RenderState& st, RenderRequests& r) {
         st.moving = moving_;
         st.preview_done = false;
     }
-    if (r.target || r.effects || r.camera_changed) st.halted = false;
+    if (r.target || r.effects || r.camera_changed || r.time_requested) st.halted = false;
     if (st.moving && !r.was_moving)  // a motion starts: size its previews
         st.motion_divisor = st.settings.motion_divisor > 0 ? st.settings.motion_divisor
                                                            : auto_motion_divisor(st.full_pass_ms, kPreviewTargetMs);
@@ -500,6 +586,42 @@ void Session::apply_requests(RenderState& st, const RenderRequests& r) {
             st.renderer->options().width != film.width || st.renderer->options().height != film.height)
             st.renderer->set_options(film);
     } catch (const Error& e) {
+        report_error(e.what());
+    }
+}
+
+// An animated target at the requested time, or, while playing, at the time
+// the wall clock has advanced to (looping at the end): the scene evaluated,
+// its triangles and structure updated, the renderer told what moved.
+void Session::advance_animation(RenderState& st, bool time_requested) {
+    if (!st.renderer || !st.target || !st.target->animation || st.halted) return;
+    AnimationState& anim = *st.target->animation;
+    const Animation& a = anim.scene.animation;
+    float t = anim.scene.time;
+    if (time_requested) {
+        t = std::clamp(st.requested_time, a.start, a.end);
+    } else if (st.playing) {
+        const Clock::time_point now = Clock::now();
+        t += float(std::chrono::duration<double>(now - st.last_tick).count());
+        st.last_tick = now;
+        if (t > a.end) t = a.duration() > 0.0f ? a.start + std::fmod(t - a.start, a.duration()) : a.start;
+    } else {
+        return;
+    }
+    try {
+        const GeometryChange change = anim.scene.set_time(t);
+        anim.geometry.update(anim.scene, change);
+        const UpdateStats u = anim.accel->update(change);
+        st.renderer->geometry_changed(change);
+        std::lock_guard<std::mutex> lock(mutex_);
+        AnimationStatus& s = status_.animation;
+        s.time = t;
+        if (!change.geometry()) return;
+        s.last = u;
+        ++s.updates;
+        s.mean_update_ms += (u.update_ms - s.mean_update_ms) / double(s.updates);
+    } catch (const Error& e) {
+        st.halted = true;
         report_error(e.what());
     }
 }

@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "rayforge/accel/accel.h"
+#include "rayforge/accel/dynamic_accel.h"
 #include "rayforge/ooc/paged_scene.h"
 #include "rayforge/render/display.h"
 #include "rayforge/render/render.h"
@@ -99,6 +100,18 @@ struct PagedStatus {
     size_t resident_bytes = 0;   // the always-resident levels (grid, middle BVHs, tables), outside the budget
 };
 
+// An animated scene's playback (Session::play, Session::set_time).
+struct AnimationStatus {
+    bool animated = false;       // the shown scene has an animation
+    float start = 0.0f, end = 0.0f, frames_per_second = 30.0f;
+    float time = 0.0f;           // the time rendered
+    bool playing = false;
+    std::string method;          // the structure's update method
+    UpdateStats last;            // the last update
+    double mean_update_ms = 0.0; // over the updates since playback started
+    uint64_t updates = 0;
+};
+
 struct SessionStatus {
     // The scene shown (empty before the first one is ready).
     std::string scene_name;
@@ -117,6 +130,7 @@ struct SessionStatus {
     uint64_t error_count = 0;
     int motion_divisor = 2;      // in use for previews
     double full_pass_ms = 0.0;   // the last full-resolution pass
+    AnimationStatus animation;
 };
 
 struct SessionConfig {
@@ -154,6 +168,12 @@ public:
     // resolution. `asked` is when the change was made (latency statistics).
     void set_camera(const Camera& camera, uint64_t scene_id, bool moving, Clock::time_point asked = Clock::now());
 
+    // Animated scenes: play (time advances with the wall clock, looping at
+    // the end, the structure updated each frame by the settings' update
+    // method) or pause; set_time shows one time (scrubbing) and pauses.
+    void play(bool playing);
+    void set_time(float t);
+
     [[nodiscard]] std::shared_ptr<const Frame> frame() const;
     [[nodiscard]] std::shared_ptr<const SceneData> scene() const;
     [[nodiscard]] SessionStatus status() const;
@@ -168,6 +188,7 @@ public:
 
 private:
     struct Target;  // a scene with its structure, ready to render
+    struct AnimationState;
     struct RenderState;
     struct RenderRequests;
 
@@ -180,7 +201,10 @@ private:
     void run_load(const SceneSource& source);
     void open_paged(SceneData& data, const ViewSettings& settings) const;
     void run_build(std::shared_ptr<const SceneData> data, const BuildOptions& options);
-    void hand_over(std::shared_ptr<const SceneData> data, std::shared_ptr<const Accel> accel);
+    Target build_target(std::shared_ptr<const SceneData> data, const BuildOptions& build, UpdateOptions update,
+                        const ProgressCallback& progress) const;
+    void hand_over(Target target);
+    void advance_animation(RenderState& st, bool time_requested);
     void report_error(const std::string& message);
     void wake();
 
@@ -207,6 +231,9 @@ private:
     Clock::time_point camera_time_;
     bool moving_ = false;
     std::vector<std::promise<Image>> film_requests_;
+    bool playing_ = false;
+    float time_request_ = 0.0f;
+    uint64_t time_version_ = 0;
     std::atomic<bool> cancel_{false};
     std::atomic<bool> pass_is_preview_{false};
 

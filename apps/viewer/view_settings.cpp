@@ -114,6 +114,11 @@ void add_structure_settings(std::vector<Setting>& t) {
         "layout", "structure", rebuild, {"bvh2", "bvh4", "bvh8"}, "BVH layout traced on the CPU",
         [](ViewSettings& s) -> Layout& { return s.build.layout; },
         [](const std::string& v) { return parse_layout(v); }, [](Layout v) { return to_string(v); }));
+    t.push_back(enum_setting<UpdateMethod>(
+        "update", "structure", rebuild, {"refit", "adapt", "rebuild", "clusters", "two-level"},
+        "animated scenes: how the structure follows the motion each frame",
+        [](ViewSettings& s) -> UpdateMethod& { return s.update.method; },
+        [](const std::string& v) { return parse_update_method(v); }, [](UpdateMethod v) { return to_string(v); }));
     t.push_back(bool_setting("optimize", "structure", rebuild, "reinsertion optimizer after the build",
                              [](ViewSettings& s) -> bool& { return s.build.reinsertion.enabled; }));
     t.push_back(int_setting("optimize-iterations", "structure", rebuild, 0, 1000, "reinsertion rounds (0 = until no gain)",

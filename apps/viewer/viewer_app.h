@@ -98,6 +98,7 @@ private:
     void draw_camera_section();
     void draw_bookmarks_section();
     void draw_structure_section(const SessionStatus& status);
+    void draw_animation_section(const SessionStatus& status);
     void draw_paged_caches(const PagedStatus& paged);
     void setting_widget(const SettingInfo& info);
     void setting_group(const char* group);

@@ -87,6 +87,7 @@ void App::handle_input(Clock::time_point now) {
                 show_message(e.what(), true);
             }
         }
+        if (pressed(GLFW_KEY_SPACE)) session_->play(!session_->status().animation.playing);
         if (pressed(GLFW_KEY_F1)) panel_visible_ = !panel_visible_;
         if (pressed(GLFW_KEY_F12)) screenshot_now();
         if (pressed(GLFW_KEY_ESCAPE)) quit(0);

@@ -181,6 +181,21 @@ void App::draw_structure_section(const SessionStatus& status) {
     ImGui::TextWrapped("%s (the current structure renders until it is ready)", status.job.c_str());
 }
 
+// Play/pause, the time slider (scrubbing pauses) and the last update.
+void App::draw_animation_section(const SessionStatus& status) {
+    const AnimationStatus& a = status.animation;
+    if (ImGui::Button(a.playing ? "Pause (space)" : "Play (space)")) session_->play(!a.playing);
+    float t = a.time;
+    if (ImGui::SliderFloat("time", &t, a.start, std::max(a.end, a.start + 1e-3f), "%.3f s")) session_->set_time(t);
+    ImGui::Text("frame %d of %d at %.0f fps", int(std::lround((a.time - a.start) * a.frames_per_second)),
+                int(std::lround((a.end - a.start) * a.frames_per_second)) + 1, double(a.frames_per_second));
+    ImGui::Text("update (%s): %.2f ms, mean %.2f ms", a.method.c_str(), a.last.update_ms, a.mean_update_ms);
+    if (a.method == "adapt")
+        ImGui::Text("rebuilt subtrees %llu, migrations %llu", (unsigned long long)a.last.rebuilt_subtrees,
+                    (unsigned long long)a.last.migrations);
+    ImGui::TextDisabled("SAH cost %.2f; the method is the structure's `update` setting", a.last.sah_cost);
+}
+
 void App::draw_panel() {
     const ImGuiIO& io = ImGui::GetIO();
     ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_FirstUseEver);
@@ -196,6 +211,7 @@ void App::draw_panel() {
     if (ImGui::CollapsingHeader("Scene", open)) draw_scene_section(status);
     if (has_scene() && ImGui::CollapsingHeader("Camera", open)) draw_camera_section();
     if (has_scene() && ImGui::CollapsingHeader("Bookmarks")) draw_bookmarks_section();
+    if (status.animation.animated && ImGui::CollapsingHeader("Animation", open)) draw_animation_section(status);
     if (ImGui::CollapsingHeader("Structure", open)) draw_structure_section(status);
     if (ImGui::CollapsingHeader("Integrator", open)) setting_group("integrator");
     if (ImGui::CollapsingHeader("Image")) setting_group("image");
@@ -238,6 +254,10 @@ void App::draw_overlay(Clock::time_point now) {
         ImGui::Text("%s, page caches in the last pass:", status.accel.name.c_str());
         draw_paged_caches(status.paged);
     }
+    if (status.animation.animated)
+        ImGui::Text("t %.3f s %s  update %.2f ms (%s)", double(status.animation.time),
+                    status.animation.playing ? "playing" : "paused", status.animation.last.update_ms,
+                    status.animation.method.c_str());
     if (status.busy) ImGui::Text("%s %.0f%%", status.job.c_str(), 100.0 * status.job_progress);
     ImGui::End();
 }

@@ -92,6 +92,13 @@ std::string ViewerStats::json(const SessionStatus& status, Clock::time_point now
         {"errors", status.error_count},
     };
     if (!status.paged.caches.empty()) j["paged"] = paged_json(status.paged);
+    if (status.animation.animated) {
+        const AnimationStatus& a = status.animation;
+        j["animation"] = {{"time", a.time},          {"playing", a.playing},
+                          {"method", a.method},      {"updates", a.updates},
+                          {"update_ms", a.last.update_ms}, {"mean_update_ms", a.mean_update_ms},
+                          {"rebuilt_subtrees", a.last.rebuilt_subtrees}, {"migrations", a.last.migrations}};
+    }
     return j.dump();
 }
 

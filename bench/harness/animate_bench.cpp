@@ -219,6 +219,8 @@ void update_methods(Built& built, const GeometryChange& change, const std::vecto
             const auto start = Clock::now();
             m.stats = accel->update(change);
             m.update_ms = ms_since(start);
+            // A frame where nothing moved leaves the tree (and reports no cost).
+            if (!(m.stats.sah_cost > 0.0)) m.stats.sah_cost = accel->stats().sah_cost;
             m.traces = trace_sets(*accel, sets, config.repetitions, &reference, nullptr);
             m.ok = true;
         } catch (const std::exception& e) {
@@ -522,39 +524,57 @@ void print_summary_row(std::ostream& out, const std::string& label, const Totals
     out << '\n';
 }
 
+// The run's sums per structure, and per method the frames where update +
+// diffuse trace beat Embree refit's.
+struct Summary {
+    Totals rebuilt;
+    std::vector<Totals> methods, peers;
+    std::vector<int> wins;
+    int refit_peer = -1;
+};
+
+void add_method_frame(Summary& sum, size_t m, const AnimateFrame& f, int diffuse) {
+    const MethodFrame& mf = f.methods[m];
+    if (!mf.ok) return;
+    Totals& t = sum.methods[m];
+    add_frame(t, f, mf.update_ms, mf.traces, diffuse);
+    t.sah += mf.stats.sah_cost;
+    t.counts.refitted_nodes += mf.stats.refitted_nodes;
+    t.counts.rebuilt_subtrees += mf.stats.rebuilt_subtrees;
+    t.counts.rebuilt_nodes += mf.stats.rebuilt_nodes;
+    t.counts.migrations += mf.stats.migrations;
+    t.counts.meshes_updated += mf.stats.meshes_updated;
+    if (sum.refit_peer < 0 || diffuse < 0) return;
+    const PeerFrame& refit = f.embree[size_t(sum.refit_peer)];
+    const size_t d = size_t(diffuse);
+    if (refit.ok && mf.update_ms + mf.traces.trace_ms[d] < refit.update_ms + refit.traces.trace_ms[d]) ++sum.wins[m];
+}
+
+Summary summarise(const AnimateResult& r, int diffuse) {
+    Summary sum;
+    sum.methods.resize(r.methods.size());
+    sum.peers.resize(r.embree.size());
+    sum.wins.assign(r.methods.size(), 0);
+    for (size_t p = 0; p < r.embree.size(); ++p)
+        if (r.embree[p].update == EmbreeUpdate::Refit) sum.refit_peer = int(p);
+    for (const AnimateFrame& f : r.frames) {
+        add_frame(sum.rebuilt, f, f.rebuild_ms, FrameTraces{f.rebuild_trace_ms, 1.0}, diffuse);
+        sum.rebuilt.sah += f.rebuild_sah;
+        for (size_t p = 0; p < f.embree.size(); ++p)
+            if (f.embree[p].ok) add_frame(sum.peers[p], f, f.embree[p].update_ms, f.embree[p].traces, diffuse);
+        for (size_t m = 0; m < f.methods.size(); ++m) add_method_frame(sum, m, f, diffuse);
+    }
+    return sum;
+}
+
 void print_summary(std::ostream& out, const AnimateResult& r) {
     const int diffuse = diffuse_index(r);
-    std::vector<Totals> methods(r.methods.size()), peers(r.embree.size());
-    std::vector<int> wins(r.methods.size(), 0);
-    Totals rebuilt;
-    const int refit_peer = [&] {
-        for (size_t p = 0; p < r.embree.size(); ++p)
-            if (r.embree[p].update == EmbreeUpdate::Refit) return int(p);
-        return -1;
-    }();
-    for (const AnimateFrame& f : r.frames) {
-        add_frame(rebuilt, f, f.rebuild_ms, FrameTraces{f.rebuild_trace_ms, 1.0}, diffuse);
-        rebuilt.sah += f.rebuild_sah;
-        for (size_t p = 0; p < f.embree.size(); ++p)
-            if (f.embree[p].ok) add_frame(peers[p], f, f.embree[p].update_ms, f.embree[p].traces, diffuse);
-        const PeerFrame* refit = refit_peer >= 0 && f.embree[size_t(refit_peer)].ok ? &f.embree[size_t(refit_peer)] : nullptr;
-        for (size_t m = 0; m < f.methods.size(); ++m) {
-            const MethodFrame& mf = f.methods[m];
-            if (!mf.ok) continue;
-            add_frame(methods[m], f, mf.update_ms, mf.traces, diffuse);
-            methods[m].sah += mf.stats.sah_cost;
-            UpdateStats& c = methods[m].counts;
-            c.refitted_nodes += mf.stats.refitted_nodes;
-            c.rebuilt_subtrees += mf.stats.rebuilt_subtrees;
-            c.rebuilt_nodes += mf.stats.rebuilt_nodes;
-            c.migrations += mf.stats.migrations;
-            c.meshes_updated += mf.stats.meshes_updated;
-            if (refit && diffuse >= 0 &&
-                mf.update_ms + mf.traces.trace_ms[size_t(diffuse)] <
-                    refit->update_ms + refit->traces.trace_ms[size_t(diffuse)])
-                ++wins[m];
-        }
-    }
+    const Summary sum = summarise(r, diffuse);
+    const Totals& rebuilt = sum.rebuilt;
+    const std::vector<Totals>& methods = sum.methods;
+    const std::vector<Totals>& peers = sum.peers;
+    const int refit_peer = sum.refit_peer;
+    const std::vector<int>& wins = sum.wins;
     out << "\n-- averages over " << r.frames.size() << " frames (" << r.scene << ")\n"
         << padl("structure", 16) << pad("update ms", 11) << pad("vs rebuild", 12) << pad("SAH", 8);
     for (RaySetKind kind : r.ray_sets) out << pad(ray_set_name(kind), 16);

@@ -37,6 +37,7 @@
 #include <cmath>
 #include <limits>
 #include <queue>
+#include <tuple>
 #include <unordered_map>
 #include <utility>
 
@@ -493,9 +494,10 @@ public:
                 x_.push_back(corner + Vec3f(float(i) * h, 0.002f * rng.range(-1.0f, 1.0f), float(j) * h));
         v_.assign(x_.size(), Vec3f(0.0f));
         p_ = x_;
-        add_links(1, 0, 1.0f), add_links(0, 1, 1.0f);                      // structural
-        add_links(1, 1, 0.9f), add_links(1, -1, 0.9f);                     // shear
-        add_links(2, 0, 0.3f), add_links(0, 2, 0.3f);                      // bend
+        for (const auto& [di, dj, stiffness] : {std::tuple{1, 0, 1.0f}, {0, 1, 1.0f},    // structural
+                                                {1, 1, 0.9f}, {1, -1, 0.9f},             // shear
+                                                {2, 0, 0.3f}, {0, 2, 0.3f}})             // bend
+            add_links(di, dj, stiffness);
     }
     void step_frame() {
         const float dt = 1.0f / (kAnimatedSceneFps * float(kClothSubsteps));
@@ -616,7 +618,8 @@ void upsample_cloth(const std::vector<Vec3f>& sim, int m, const std::vector<Taps
                              (tj.weight[b] * ti.weight[a]);
                 const Vec3f d = p - kBallCenter;
                 const float r = length(d);
-                if (r < kBallRadius + kClothOffset && r > 1e-6f) p = kBallCenter + d * ((kBallRadius + kClothOffset) / r);
+                const float reach = kBallRadius + kClothOffset;
+                if (r < reach && r > 1e-6f) p = kBallCenter + d * (reach / r);
                 p.y = std::fmax(p.y, 0.5f * kClothOffset);
                 out[size_t(j) * size_t(n) + size_t(i)] = p;
             }
@@ -630,7 +633,9 @@ void grid_normals(const std::vector<Vec3f>& p, int n, std::vector<Vec3f>& out) {
     parallel::for_range<int>(0, n, 16, [&](int lo, int hi) {
         for (int j = lo; j < hi; ++j) {
             for (int i = 0; i < n; ++i) {
-                auto at = [&](int a, int b) { return p[size_t(std::clamp(b, 0, n - 1)) * size_t(n) + size_t(std::clamp(a, 0, n - 1))]; };
+                auto at = [&](int a, int b) {
+                    return p[size_t(std::clamp(b, 0, n - 1)) * size_t(n) + size_t(std::clamp(a, 0, n - 1))];
+                };
                 const Vec3f c = cross(at(i, j + 1) - at(i, j - 1), at(i + 1, j) - at(i - 1, j));
                 const float len = length(c);
                 out[size_t(j) * size_t(n) + size_t(i)] = len > 1e-12f ? c / len : Vec3f(0, 1, 0);
@@ -727,7 +732,7 @@ private:
     void substep(float dt);
     void contacts(bool impulses);
     static void resolve_pair(Body& a, Body& b, bool impulses);
-    static void resolve_plane(Body& b, Vec3f n, float offset);
+    static void resolve_plane(Body& b, Vec3f n, float offset, bool impulses);
 
     std::vector<Body> bodies_;
     float half_;
@@ -767,10 +772,11 @@ void BodySim::resolve_pair(Body& a, Body& b, bool impulses) {
 }
 
 // Keeps the sphere on the positive side of dot(n, p) = offset.
-void BodySim::resolve_plane(Body& b, Vec3f n, float offset) {
+void BodySim::resolve_plane(Body& b, Vec3f n, float offset, bool impulses) {
     const float depth = offset + b.r - dot(n, b.p);
     if (depth <= 0.0f) return;
     b.p += n * depth;
+    if (!impulses) return;
     const Vec3f arm = n * (-b.r);
     const Vec3f rel = b.v + cross(b.w, arm);
     const float vn = dot(rel, n);
@@ -794,7 +800,7 @@ void BodySim::substep(float dt) {
     }
     contacts(true);
     contacts(true);
-    relax(2);  // what the impulses left overlapping (stacks on the floor)
+    relax(4);  // what the impulses left overlapping (stacks on the floor)
 }
 
 // One Gauss-Seidel pass over the overlapping pairs (sweep and prune on x,
@@ -809,11 +815,11 @@ void BodySim::contacts(bool impulses) {
         for (size_t u = s + 1; u < sweep_.size() && sweep_[u].first <= right; ++u)
             resolve_pair(a, bodies_[sweep_[u].second], impulses);
     }
-    if (!impulses) return;
+    if (half_ <= 0.0f) return;  // no box (the heap being relaxed)
     for (Body& b : bodies_) {
-        resolve_plane(b, {0, 1, 0}, 0.0f);
-        resolve_plane(b, {1, 0, 0}, -half_), resolve_plane(b, {-1, 0, 0}, -half_);
-        resolve_plane(b, {0, 0, 1}, -half_), resolve_plane(b, {0, 0, -1}, -half_);
+        resolve_plane(b, {0, 1, 0}, 0.0f, impulses);
+        for (const Vec3f wall : {Vec3f(1, 0, 0), Vec3f(-1, 0, 0), Vec3f(0, 0, 1), Vec3f(0, 0, -1)})
+            resolve_plane(b, wall, -half_, impulses);
     }
 }
 
@@ -860,7 +866,8 @@ std::vector<Body> make_heap(size_t count, uint32_t seed, float& heap_radius) {
     for (size_t b = 0; b < count; ++b) {
         const int k = cells[b].second;
         const Vec3f cell(float(k % side - reach), float(k / side % side - reach), float(k / (side * side) - reach));
-        bodies[b].p = cell * spacing + Vec3f(rng.range(-0.01f, 0.01f), rng.range(-0.01f, 0.01f), rng.range(-0.01f, 0.01f));
+        const Vec3f jitter(rng.range(-0.01f, 0.01f), rng.range(-0.01f, 0.01f), rng.range(-0.01f, 0.01f));
+        bodies[b].p = cell * spacing + jitter;
     }
     BodySim relaxed(std::move(bodies), 0.0f);
     relaxed.relax(200);
@@ -870,7 +877,8 @@ std::vector<Body> make_heap(size_t count, uint32_t seed, float& heap_radius) {
     for (Body& body : bodies) {
         const Vec3f out = length(body.p) > 1e-6f ? normalize(body.p) : Vec3f(0, 1, 0);
         body.p.y += heap_radius + 0.3f;
-        body.v = out * rng.range(1.5f, 4.0f) + Vec3f(rng.range(-0.5f, 0.5f), rng.range(0.0f, 1.0f), rng.range(-0.5f, 0.5f));
+        const Vec3f scatter(rng.range(-0.5f, 0.5f), rng.range(0.0f, 1.0f), rng.range(-0.5f, 0.5f));
+        body.v = out * rng.range(1.5f, 4.0f) + scatter;
         body.w = rng.unit_vector() * rng.range(0.0f, 8.0f);
         body.q = quat_axis_angle(rng.unit_vector(), rng.range(0.0f, 2.0f * kPi));
     }
@@ -881,7 +889,8 @@ Scene make_nbody(size_t total, uint32_t seed) {
     Scene scene;
     const size_t guess = std::clamp<size_t>(total / 500, 8, 1024);
     const auto budget = int(total / guess);
-    const Vec3f colors[kBodyColors] = {{0.8f, 0.25f, 0.2f}, {0.2f, 0.45f, 0.8f}, {0.85f, 0.75f, 0.3f}, {0.3f, 0.7f, 0.35f}};
+    const Vec3f colors[kBodyColors] = {
+        {0.8f, 0.25f, 0.2f}, {0.2f, 0.45f, 0.8f}, {0.85f, 0.75f, 0.3f}, {0.3f, 0.7f, 0.35f}};
     uint32_t shapes[kBodyShapes][kBodyColors];
     double mean = 0.0;
     for (int c = 0; c < kBodyColors; ++c) {
@@ -911,7 +920,8 @@ Scene make_nbody(size_t total, uint32_t seed) {
         const Affine3f local = Affine3f::scale(Vec3f(sim.bodies()[b].r));
         const auto instance = uint32_t(scene.instances.size());
         const uint32_t mesh = shapes[b % kBodyShapes][pcg_hash(seed ^ uint32_t(b)) % kBodyColors];
-        scene.instances.push_back({mesh, Affine3f::translation(node.translation) * quat_to_affine(node.rotation) * local});
+        const Affine3f frame0 = Affine3f::translation(node.translation) * quat_to_affine(node.rotation) * local;
+        scene.instances.push_back({mesh, frame0});
         animation.instances.push_back({instance, uint32_t(b), local});
     }
     add_sun_and_sky(scene, {-0.4f, -1.0f, -0.5f});
@@ -954,7 +964,8 @@ bool is_animated_scene_name(const std::string& name) {
 }
 
 AnimatedSceneSpec parse_animated_scene_name(const std::string& name) {
-    if (!is_animated_scene_name(name)) throw Error("builtin:" + name + ": not an animated scene (explode, cloth, nbody)");
+    if (!is_animated_scene_name(name))
+        throw Error("builtin:" + name + ": not an animated scene (explode, cloth, nbody)");
     AnimatedSceneSpec spec;
     spec.kind = kind_of(name);
     const size_t at = name.find('@'), hash = name.find('#');
@@ -964,9 +975,11 @@ AnimatedSceneSpec parse_animated_scene_name(const std::string& name) {
         const std::string text = name.substr(at + 1, hash == std::string::npos ? std::string::npos : hash - at - 1);
         spec.triangles = parse_size(text);
         if (spec.triangles == 0)
-            throw Error("builtin:" + name + ": bad size '" + text + "' (expected a triangle count like 250000, 800k or 1.5m)");
+            throw Error("builtin:" + name + ": bad size '" + text +
+                        "' (expected a triangle count like 250000, 800k or 1.5m)");
         if (spec.triangles < kAnimatedSceneMinTriangles || spec.triangles > kAnimatedSceneMaxTriangles)
-            throw Error("builtin:" + name + ": size " + std::to_string(spec.triangles) + " is outside 1k .. 2m triangles");
+            throw Error("builtin:" + name + ": size " + std::to_string(spec.triangles) +
+                        " is outside 1k .. 2m triangles");
     }
     if (hash != std::string::npos) spec.seed = parse_seed(name, name.substr(hash + 1));
     return spec;

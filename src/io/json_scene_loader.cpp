@@ -7,6 +7,7 @@
 // error naming its JSON path, so typos do not silently change a scene.
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -22,6 +23,7 @@
 #include "rayforge/io/image_io.h"
 #include "rayforge/io/scene_io.h"
 #include "io/procedural_sky.h"
+#include "scene/animation_eval.h"
 
 namespace rf {
 namespace {
@@ -71,6 +73,8 @@ private:
                               Scene& scene) const;
 
     Affine3f transform(const Json& value, const std::string& where) const;
+    AnimatedNode animation(const Json& value, const std::string& where) const;
+    Vec4f rotation_key(const Json& value, const std::string& where) const;
     Material material(const std::string& name, const Json& value, const std::string& where,
                       Scene& scene) const;
     void read_materials(const Json& value, Scene& scene);
@@ -203,6 +207,70 @@ Affine3f JsonSceneReader::transform(const Json& value, const std::string& where)
     return t * r * s;
 }
 
+// {"axis": [x,y,z], "degrees": d} or {"quaternion": [x,y,z,w]}: a unit quaternion.
+Vec4f JsonSceneReader::rotation_key(const Json& value, const std::string& where) const {
+    expect_object(value, where);
+    expect_keys(value, where, {"axis", "degrees", "quaternion"});
+    if (value.contains("quaternion")) {
+        const Json& q = value["quaternion"];
+        if (value.size() != 1 || !q.is_array() || q.size() != 4) fail(where, "expected {\"quaternion\": [x, y, z, w]}");
+        Vec4f r;
+        float* c[4] = {&r.x, &r.y, &r.z, &r.w};
+        for (size_t i = 0; i < 4; ++i) *c[i] = number(q[i], where + ".quaternion[" + std::to_string(i) + "]");
+        const float n = std::sqrt(r.x * r.x + r.y * r.y + r.z * r.z + r.w * r.w);
+        if (!(n > 0.0f) || !std::isfinite(n)) fail(where + ".quaternion", "must not be zero");
+        return Vec4f{r.x / n, r.y / n, r.z / n, r.w / n};
+    }
+    if (!value.contains("axis") || !value.contains("degrees")) fail(where, "expected {\"axis\": [x, y, z], \"degrees\": number}");
+    const Vec3f axis = vec3(value["axis"], where + ".axis");
+    if (!(length(axis) > 0.0f)) fail(where + ".axis", "axis must not be zero");
+    return axis_angle_quaternion(axis.x, axis.y, axis.z, radians(number(value["degrees"], where + ".degrees")));
+}
+
+// {"interpolation": "linear" | "step", "keys": [{"time": t, "translate": [..], "rotate": {..}, "scale": s or [..]}, ...]}:
+// a node whose translation, rotation and scale tracks take the keys that give them.
+AnimatedNode JsonSceneReader::animation(const Json& value, const std::string& where) const {
+    expect_object(value, where);
+    expect_keys(value, where, {"interpolation", "keys"});
+    Interpolation interp = Interpolation::Linear;
+    if (value.contains("interpolation")) {
+        const std::string name = string(value["interpolation"], where + ".interpolation");
+        if (name == "step") interp = Interpolation::Step;
+        else if (name != "linear") fail(where + ".interpolation", "expected \"linear\" or \"step\"");
+    }
+    const Json& keys = value.contains("keys") ? value["keys"] : Json();
+    if (!keys.is_array() || keys.empty()) fail(where + ".keys", "expected a non-empty array of keys");
+    AnimatedNode node;
+    Track* tracks[3] = {&node.translation_track, &node.rotation_track, &node.scale_track};
+    for (Track* t : tracks) t->interpolation = interp;
+    node.rotation_track.width = 4;
+    for (size_t i = 0; i < keys.size(); ++i) {
+        const std::string w = where + ".keys[" + std::to_string(i) + "]";
+        expect_object(keys[i], w);
+        expect_keys(keys[i], w, {"time", "translate", "rotate", "scale"});
+        if (!keys[i].contains("time")) fail(w, "missing \"time\"");
+        const float time = number(keys[i]["time"], w + ".time");
+        const char* names[3] = {"translate", "rotate", "scale"};
+        for (int k = 0; k < 3; ++k) {
+            if (!keys[i].contains(names[k])) continue;
+            Track& t = *tracks[k];
+            if (!t.times.empty() && !(time > t.times.back())) fail(w + ".time", "times must increase");
+            t.times.push_back(time);
+            const Json& v = keys[i][names[k]];
+            const std::string vw = w + "." + names[k];
+            if (k == 1) {
+                const Vec4f q = rotation_key(v, vw);
+                t.values.insert(t.values.end(), {q.x, q.y, q.z, q.w});
+                continue;
+            }
+            const Vec3f x = k == 2 && v.is_number() ? Vec3f(number(v, vw)) : vec3(v, vw);
+            if (k == 2 && (x.x == 0.0f || x.y == 0.0f || x.z == 0.0f)) fail(vw, "scale must not be zero");
+            t.values.insert(t.values.end(), {x.x, x.y, x.z});
+        }
+    }
+    return node;
+}
+
 // "two_sided_emission", or its older name "double_sided"; false (front face
 // only) when neither is given.
 bool JsonSceneReader::two_sided_emission(const Json& value, const std::string& where) const {
@@ -306,7 +374,7 @@ void merge_into(Scene& scene, Scene&& part, int64_t override_material) {
 
 void JsonSceneReader::read_mesh_entry(const Json& value, const std::string& where, Scene& scene) {
     expect_object(value, where);
-    expect_keys(value, where, {"file", "transform", "material"});
+    expect_keys(value, where, {"file", "transform", "material", "animation"});
     if (!value.contains("file")) fail(where, "missing \"file\"");
     const std::string file_value = string(value["file"], where + ".file");
     const bool builtin = file_value.rfind("builtin:", 0) == 0;
@@ -343,8 +411,17 @@ void JsonSceneReader::read_mesh_entry(const Json& value, const std::string& wher
         it = parts_.emplace(key, std::move(loaded)).first;
     }
     const LoadedPart& part = it->second;
-    for (const Instance& instance : part.instances)
+    int32_t node = -1;
+    if (value.contains("animation")) {
+        node = int32_t(scene.animation.nodes.size());
+        scene.animation.nodes.push_back(animation(value["animation"], where + ".animation"));
+    }
+    for (const Instance& instance : part.instances) {
+        if (node >= 0)  // the keys move the placed part: world = keys(t) * transform * the part's own
+            scene.animation.instances.push_back(
+                InstanceAnimation{uint32_t(scene.instances.size()), uint32_t(node), placement * instance.transform});
         scene.instances.push_back({instance.mesh, placement * instance.transform});
+    }
     for (Light light : part.lights) {
         light.position = placement.transform_point(light.position);
         Vec3f d = placement.transform_vector(light.direction);
@@ -490,6 +567,21 @@ RenderSettings JsonSceneReader::render_settings(const Json& value, const std::st
     return r;
 }
 
+// The keys' time range; the scene as at its start.
+void start_animation(Scene& scene) {
+    Animation& a = scene.animation;
+    bool first = true;
+    for (const AnimatedNode& n : a.nodes)
+        for (const Track* t : {&n.translation_track, &n.rotation_track, &n.scale_track}) {
+            if (t->empty()) continue;
+            a.start = first ? t->times.front() : std::min(a.start, t->times.front());
+            a.end = first ? t->times.back() : std::max(a.end, t->times.back());
+            first = false;
+        }
+    scene.set_time(a.start);
+    a.evaluated = false;  // the caller's first set_time reports everything animated
+}
+
 Scene JsonSceneReader::read(const Json& root) {
     if (!root.is_object()) throw file_error(path_, 0, "expected a JSON object at the top level");
     expect_keys(root, "", {"description", "meshes", "materials", "camera", "lights", "environment", "render"});
@@ -513,6 +605,7 @@ Scene JsonSceneReader::read(const Json& root) {
     }
     if (root.contains("environment")) read_environment(root["environment"], "environment", scene);
     if (root.contains("render")) scene.render_settings = render_settings(root["render"], "render");
+    if (!scene.animation.nodes.empty()) start_animation(scene);
     return scene;
 }
 

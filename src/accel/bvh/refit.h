@@ -22,7 +22,9 @@ struct RefitPlan {
     std::vector<uint32_t> arrivals;  // per node
 };
 
-// The plan of `bvh`'s topology (parallel over nodes).
+// The plan of `bvh`'s topology (parallel over nodes). Every node must be
+// reachable from the root (a tree with free slots in its node array, as
+// adapt's memory manager keeps, needs its own refit).
 RefitPlan make_refit_plan(const Bvh& bvh);
 
 // Recomputes every node box of `bvh` from `triangles` (the ones its

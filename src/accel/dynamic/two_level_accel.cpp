@@ -14,7 +14,9 @@
 // one stand-in triangle per instance whose bounds are the instance's world
 // box (the BLAS root box through Instance::transform, padded by a few ulps
 // of its magnitude) and whose centroid is the box centre; leaves hold one
-// instance. Traversal: trace/two_level_traversal.h.
+// instance. BVH2 traces it as is (trace/two_level_traversal.h, the RF_HD
+// path a kernel takes); BVH4/BVH8 collapse it into 8-wide nodes traced with
+// the SIMD slab test, and both call the same per-leaf instance step.
 //
 // Per frame (update): the meshes GeometryChange::meshes names are refitted
 // (their object-space triangles re-read, boxes recomputed bottom-up, the
@@ -51,6 +53,8 @@ namespace rf {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
 double ms_since(Clock::time_point start) {
     return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
@@ -140,6 +144,109 @@ Box3f padded_world_box(const Affine3f& transform, const Box3f& object_box) {
     return Box3f{box.lo - pad, box.hi + pad};
 }
 
+// The top level in 8-wide nodes for the SIMD layouts: each binary node's
+// slots are expanded, largest area first, until 8 are filled; a slot is a
+// wide node or (kWideLeafFlag | binary leaf index), its instances named by
+// the binary leaf. Traced with the SIMD slab test of wide_bvh_traversal.h.
+struct WideTop {
+    std::vector<WideNode<8>> nodes;  // empty: every ray misses
+    float coord_scale = 1.0f;
+};
+
+uint32_t collapse_top_node(const Bvh& top, uint32_t binary, WideTop& out) {
+    uint32_t slots[8];
+    int count = 0;
+    if (top.nodes[binary].is_leaf()) {
+        slots[count++] = binary;
+    } else {
+        slots[count++] = top.nodes[binary].first;
+        slots[count++] = top.nodes[binary].first + 1;
+    }
+    while (count < 8) {
+        int widest = -1;
+        for (int i = 0; i < count; ++i) {
+            const BvhNode& n = top.nodes[slots[i]];
+            if (!n.is_leaf() && (widest < 0 || n.bounds.surface_area() > top.nodes[slots[widest]].bounds.surface_area()))
+                widest = i;
+        }
+        if (widest < 0) break;
+        const uint32_t first = top.nodes[slots[widest]].first;
+        slots[widest] = first;
+        slots[count++] = first + 1;
+    }
+    const auto index = uint32_t(out.nodes.size());
+    out.nodes.emplace_back();
+    for (int c = 0; c < 8; ++c) {
+        const Box3f box = c < count ? top.nodes[slots[c]].bounds : Box3f{Vec3f(kInf), Vec3f(-kInf)};
+        for (int axis = 0; axis < 3; ++axis) {
+            out.nodes[index].bounds[2 * axis][c] = box.lo[axis];
+            out.nodes[index].bounds[2 * axis + 1][c] = box.hi[axis];
+        }
+        uint32_t ref = kWideEmptyRef;
+        if (c < count) ref = top.nodes[slots[c]].is_leaf() ? (kWideLeafFlag | slots[c]) : collapse_top_node(top, slots[c], out);
+        out.nodes[index].child[c] = ref;  // after the recursion: it may move the array
+    }
+    return index;
+}
+
+void collapse_top(const Bvh& top, WideTop& out) {
+    out.nodes.clear();
+    if (top.nodes.empty()) return;
+    const Box3f& root = top.nodes[0].bounds;
+    out.coord_scale = max_component(max(abs(root.lo), abs(root.hi)));
+    collapse_top_node(top, 0, out);
+}
+
+// Nearest hit child first; the others wait on the stack with their entry
+// distance and are dropped once a closer hit is known.
+template <bool kAnyHit, class View, class Trace>
+Hit traverse_wide_top(const WideTop& top, const TwoLevelView<View>& view, const Ray& ray, const Trace& trace) {
+    using namespace simd;
+    Hit hit;
+    if (top.nodes.empty()) return hit;
+    const wide_detail::BoxRay<8> box_ray = wide_detail::BoxRay<8>::make(ray, top.coord_scale);
+    const vfloat<8> tmin_v = set1<8>(ray.tmin);
+    float tmax = ray.tmax;
+    float tmax_far = tmax * detail::kSlabFarScale;
+    vfloat<8> tmax_far_v = set1<8>(tmax_far);
+    wide_detail::StackItem stack[wide_detail::kStackSize<8>];
+    int size = 0;
+    uint32_t ref = 0;
+    for (;;) {
+        if (!wide_is_leaf(ref)) {
+            const WideNode<8>& node = top.nodes[ref];
+            vfloat<8> near_v;
+            unsigned mask = wide_detail::box_hits(node, box_ray, tmin_v, tmax_far_v, near_v);
+            alignas(32) float near[8];
+            store<8>(near, near_v);
+            // Push the hit children farthest first (insertion into the stack's top).
+            const int base = size;
+            for (; mask; mask &= mask - 1) {
+                const int c = first_bit(mask);
+                int at = size++;
+                while (at > base && stack[at - 1].dist < near[c]) {
+                    stack[at] = stack[at - 1];
+                    --at;
+                }
+                stack[at] = {node.child[c], near[c]};
+            }
+        } else {
+            if (detail::two_level_leaf<kAnyHit>(view, view.top_nodes[ref & ~kWideLeafFlag], ray, trace, tmax, hit))
+                return hit;
+            tmax_far = tmax * detail::kSlabFarScale;
+            tmax_far_v = set1<8>(tmax_far);
+        }
+        for (;;) {
+            if (size == 0) return hit;
+            const wide_detail::StackItem item = stack[--size];
+            if (item.dist <= tmax_far) {
+                ref = item.ref;
+                break;
+            }
+        }
+    }
+}
+
 template <int N>
 class TwoLevelAccel final : public DynamicAccel {
 public:
@@ -164,10 +271,12 @@ public:
     }
 
     [[nodiscard]] Hit intersect(const Ray& ray) const override {
-        return two_level_intersect(view_, ray, typename BlasLayout<N>::Trace{});
+        if constexpr (N == 2) return two_level_intersect(view_, ray, typename BlasLayout<N>::Trace{});
+        else return traverse_wide_top<false>(wide_top_, view_, ray, typename BlasLayout<N>::Trace{});
     }
     [[nodiscard]] bool occluded(const Ray& ray) const override {
-        return two_level_occluded(view_, ray, typename BlasLayout<N>::Trace{});
+        if constexpr (N == 2) return two_level_occluded(view_, ray, typename BlasLayout<N>::Trace{});
+        else return traverse_wide_top<true>(wide_top_, view_, ray, typename BlasLayout<N>::Trace{}).found();
     }
     void intersect(std::span<const Ray> rays, std::span<Hit> hits) const override {
         check_batch_sizes("two-level intersect", rays.size(), hits.size());
@@ -216,9 +325,9 @@ public:
         AccelStats s;
         s.name = "two-level/" + to_string(build_.builder) + "/" + to_string(build_.layout);
         s.build_ms = build_ms_;
-        s.node_count = top_.nodes.size();
+        s.node_count = N == 2 ? top_.nodes.size() : wide_top_.nodes.size();
         s.leaf_count = top_.leaf_count();
-        s.bytes = top_.memory_bytes() + instances_.size() * sizeof(TwoLevelInstance) +
+        s.bytes = top_.memory_bytes() + wide_top_.nodes.size() * sizeof(WideNode<8>) + instances_.size() * sizeof(TwoLevelInstance) +
                   views_.size() * sizeof(typename BlasLayout<N>::View);
         for (const Blas<N>& b : blas_) {
             s.node_count += b.node_count();
@@ -262,7 +371,7 @@ private:
         for (uint32_t i = 0; i < scene_.instances.size(); ++i) {
             const Instance& inst = scene_.instances[i];
             const Blas<N>& b = blas_[inst.mesh];
-            if (!inst.visible || b.bvh.nodes.empty()) continue;
+            if (b.bvh.nodes.empty()) continue;  // MUTATION
             Affine3f inverse;
             try {
                 inverse = inst.transform.inverse();
@@ -279,6 +388,7 @@ private:
                                                            uint32_t(top_.nodes.size()), instances_.data(),
                                                            views_.data()};
         sah_cost_ = combined_sah(boxes, blas_cost);
+        if constexpr (N != 2) collapse_top(top_, wide_top_);
     }
 
     // Top inner nodes (C_trav = 1) plus each instance's bottom level, weighted
@@ -300,6 +410,7 @@ private:
     std::vector<typename BlasLayout<N>::View> views_;  // per mesh
     std::vector<TwoLevelInstance> instances_;          // the visible ones
     Bvh top_;
+    WideTop wide_top_;  // the SIMD layouts' top level (N > 2)
     TwoLevelView<typename BlasLayout<N>::View> view_;
     double build_ms_ = 0.0;
     double sah_cost_ = 0.0;
