@@ -88,6 +88,34 @@ TEST(Cli, RenderWritesThePngAndOneSummaryLine) {
     EXPECT_EQ(read_image(exr).width, 16);
 }
 
+// An animation: one image per frame, named by the pattern, the structure
+// updated between frames; --time renders one moment; bad frame ranges,
+// patterns and update methods are one-line errors.
+TEST(Cli, RenderFramesWritesOneImagePerFrame) {
+    const std::string dir = test::temp_dir("cli_frames");
+    for (const char* method : {"refit", "adapt", "two-level"}) {
+        const std::string pattern = dir + "/" + method + "_%03d.png";
+        const CliResult r = run_cli("render builtin:nbody@3k --frames 0:6:3 -o '" + pattern +
+                                    "' --res 24x16 --threads 2 --update " + method);
+        ASSERT_EQ(r.exit_code, 0) << r.err;
+        for (const char* frame : {"000", "003", "006"})
+            EXPECT_TRUE(std::filesystem::exists(dir + "/" + method + "_" + frame + ".png")) << method << frame;
+        EXPECT_FALSE(std::filesystem::exists(dir + "/" + method + "_001.png"));
+        EXPECT_NE(r.out.find("frame 3 (t = 0.100 s): update"), std::string::npos) << r.out;
+        EXPECT_NE(r.out.find(std::string("(") + method), std::string::npos) << r.out;
+    }
+    const std::string one = dir + "/at_time.png";
+    ASSERT_EQ(run_cli("render builtin:nbody@3k --time 1.25 -o '" + one + "' --res 24x16").exit_code, 0);
+    EXPECT_TRUE(std::filesystem::exists(one));
+
+    expect_one_error_line(run_cli("render builtin:nbody@3k --frames 0:4 -o '" + dir + "/plain.png' --res 8x8"));
+    expect_one_error_line(run_cli("render builtin:nbody@3k --frames 4:1:1 -o '" + dir + "/f%d.png' --res 8x8"));
+    expect_one_error_line(run_cli("render builtin:nbody@3k --frames 0:x -o '" + dir + "/f%d.png' --res 8x8"));
+    expect_one_error_line(run_cli("render builtin:nbody@3k --frames 0:1 -o '" + dir + "/f%s.png' --res 8x8"));
+    expect_one_error_line(run_cli("render builtin:nbody@3k --frames 0:1 -o '" + dir + "/f%d.png' --update sideways"));
+    expect_one_error_line(run_cli("render builtin:nbody@3k -o '" + dir + "/f.png' --adapt-reading third"));
+}
+
 TEST(Cli, PathRenderWritesEveryOutputAndTheAovs) {
     const std::string dir = test::temp_dir("cli_path");
     CliResult r = run_cli("render builtin:material-spheres -o '" + dir + "/spheres.png' -o '" + dir +

@@ -274,6 +274,7 @@ TEST(TwoLevelAccel, RaysThroughSharedVerticesHit) {
 
 TEST(TwoLevelAccel, StatsNameAndErrors) {
     Scene scene = make_scene(6, 1, 3.0f);
+    scene.meshes.push_back(make_patch(2));
     SceneGeometry g = SceneGeometry::build(scene);
     auto accel = make_two_level_accel(scene, g, BuildOptions{});
     const AccelStats s = accel->stats();
@@ -282,8 +283,11 @@ TEST(TwoLevelAccel, StatsNameAndErrors) {
     EXPECT_GT(s.bytes, 0u);
     EXPECT_GE(accel->initial_build_ms(), 0.0);
     GeometryChange bad;
-    bad.meshes = {7};
+    bad.meshes = {4};
     EXPECT_THROW(accel->update(bad), Error);
+    GeometryChange unused;  // mesh 3: no instance uses it, nothing to update
+    unused.meshes = {3};
+    EXPECT_EQ(accel->update(unused).meshes_updated, 0u);
     scene.meshes[1].indices.resize(scene.meshes[1].indices.size() - 3);
     bad.meshes = {1};
     EXPECT_THROW(accel->update(bad), Error);

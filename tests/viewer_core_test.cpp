@@ -173,9 +173,11 @@ TEST(Script, ParsesEveryCommand) {
         "camera 0,1,3.9,0,1,0,0,1,0,40\nreset\nbookmark-save my view\nbookmark-load my view\n"
         "set builder sbvh\nset res 320x200\nset device cpu\nload builtin:spheres\ndrop /tmp/a file.obj\n"
         "screenshot out dir/a.png\nscreenshot-window w.png\nexpect-error cannot read\nexpect-no-error\n"
-        "print-camera\nprint-stats\nreset-stats\nquit\n";
+        "print-camera\nprint-stats\nreset-stats\nplay\npause\ntime 1.25\nquit\n";
     const Script s = parse_script(text, "s.txt");
-    ASSERT_EQ(s.commands.size(), 28u);
+    ASSERT_EQ(s.commands.size(), 31u);
+    EXPECT_EQ(s.commands[29].op, ScriptOp::Time);
+    EXPECT_EQ(s.commands[29].a, 1.25);
     EXPECT_EQ(s.commands[0].op, ScriptOp::WaitPasses);
     EXPECT_EQ(s.commands[0].a, 16.0);
     EXPECT_EQ(s.commands[0].line, 3);
@@ -386,6 +388,44 @@ TEST(Session, CameraSettingAndStructureChangesShowWhatTheyAskFor) {
     frame = settled_frame(session, 3);
     ASSERT_TRUE(frame);
     EXPECT_EQ(pixels_of(*frame), reference(builtin("cornell"), s, moved));
+    EXPECT_EQ(session.status().error_count, 0u);
+}
+
+// An animated scene: scrubbing shows the scene at that time as the engine
+// renders it; playing advances the time and updates the structure each frame.
+TEST(Session, ScrubsAndPlaysAnAnimation) {
+    ViewSettings s = small_settings();
+    set_setting(s, "update", "rebuild");
+    Session session(SessionConfig{s, {}});
+    const SceneSource source = builtin("nbody@3k");
+    session.load(source);
+    ASSERT_TRUE(settled_frame(session, 3));
+    SessionStatus status = session.status();
+    ASSERT_TRUE(status.animation.animated);
+    EXPECT_EQ(status.animation.method, "rebuild");
+    EXPECT_FALSE(status.animation.playing);
+    const auto scene = session.scene();
+
+    session.set_time(1.5f);
+    ASSERT_TRUE(eventually([&] { return session.status().animation.time == 1.5f; }));
+    const auto frame = settled_frame(session, 3);
+    ASSERT_TRUE(frame);
+    Scene later = load_scene(source.path);
+    later.set_time(1.5f);
+    const SceneGeometry geometry = SceneGeometry::build(later);
+    const auto accel = build_accel(geometry, s.build);
+    EXPECT_EQ(pixels_of(*frame), display_bytes(render(later, geometry, *accel, scene->camera, film_options(s, false, 1)),
+                                               s.tone));
+
+    session.play(true);
+    ASSERT_TRUE(eventually([&] {
+        status = session.status();
+        return status.animation.updates >= 3 && status.animation.time != 1.5f;
+    })) << session.status().error;
+    EXPECT_TRUE(status.animation.playing);
+    EXPECT_GT(status.animation.mean_update_ms, 0.0);
+    session.play(false);
+    ASSERT_TRUE(eventually([&] { return !session.status().animation.playing; }));
     EXPECT_EQ(session.status().error_count, 0u);
 }
 

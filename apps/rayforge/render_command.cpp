@@ -226,6 +226,7 @@ int run_render(const RenderArgs& a) {
     const Device device = parse_device(a.device);
     require_usable(device, "--device " + a.device);  // before the scene loads: fail fast
     const BuildOptions build = structure_options(a, device);
+    (void)to_update_options(a.accel);  // names and ranges checked before the scene loads
     if (!a.frames.empty()) return run_render_frames(a, device, build);
     Clock::time_point start = Clock::now();
     Scene scene = load_scene(a.scene);

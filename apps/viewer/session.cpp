@@ -276,7 +276,8 @@ ViewSettings Session::settings() const {
 
 Versions Session::versions() const {
     std::lock_guard<std::mutex> lock(mutex_);
-    return {camera_version_, settings_version_, target_version_, status_.busy || queued_load_ || queued_build_};
+    return {camera_version_, settings_version_, target_version_, time_version_,
+            status_.busy || queued_load_ || queued_build_};
 }
 
 SessionStatus Session::status() const {
@@ -663,6 +664,7 @@ void Session::publish_frame(RenderState& st) {
         frame->camera_time = st.camera_time;
         frame->settings_version = st.settings_version;
         frame->target_version = st.target_version;
+        frame->time_version = st.time_version;
         {
             std::lock_guard<std::mutex> lock(mutex_);
             frame_ = std::move(frame);

@@ -78,15 +78,16 @@ struct Frame {
     Clock::time_point camera_time;  // when that camera was asked for
     uint64_t settings_version = 0;  // of the settings it was rendered with
     uint64_t target_version = 0;    // of the scene and structure it was rendered with
+    uint64_t time_version = 0;      // of the animation time asked for (Session::set_time)
 };
 
 // The latest requests, to tell whether a Frame shows all of them.
 struct Versions {
-    uint64_t camera = 0, settings = 0, target = 0;
+    uint64_t camera = 0, settings = 0, target = 0, time = 0;
     bool jobs_pending = false;  // a load or build is queued or running
     [[nodiscard]] bool shown_by(const Frame& frame) const {
         return !jobs_pending && frame.camera_version == camera && frame.settings_version == settings &&
-               frame.target_version == target;
+               frame.target_version == target && frame.time_version == time;
     }
 };
 

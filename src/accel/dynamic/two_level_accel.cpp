@@ -115,7 +115,7 @@ struct Blas {
 
     void relayout() {
         sah_cost = bvh.nodes.empty() ? 0.0 : bvh.sah_cost(1.0f, 1.0f);
-        if constexpr (N != 2) wide = collapse_bvh<N>(bvh, triangles);
+        if constexpr (N != 2) wide = bvh.nodes.empty() ? typename BlasLayout<N>::Wide{} : collapse_bvh<N>(bvh, triangles);
     }
     [[nodiscard]] typename BlasLayout<N>::View view() const {
         if constexpr (N == 2) {
@@ -252,7 +252,7 @@ class TwoLevelAccel final : public DynamicAccel {
 public:
     TwoLevelAccel(const Scene& scene, const SceneGeometry& geometry, const BuildOptions& build)
         : scene_(scene), geometry_(geometry), build_(build), blas_(scene.meshes.size()),
-          views_(scene.meshes.size()) {
+          views_(scene.meshes.size()), used_(scene.meshes.size(), 0) {
         if (geometry.instance_first_triangle.size() != scene.instances.size() + 1)
             throw Error("two-level accel: the geometry was not built from this scene");
         const auto start = Clock::now();
@@ -260,6 +260,7 @@ public:
         for (const Instance& inst : scene.instances) used.push_back(inst.mesh);
         std::sort(used.begin(), used.end());
         used.erase(std::unique(used.begin(), used.end()), used.end());
+        for (uint32_t m : used) used_[m] = 1;
         parallel::with_threads(build.threads, [&] {
             parallel::for_range(size_t(0), used.size(), size_t(1), [&](size_t lo, size_t hi) {
                 for (size_t i = lo; i != hi; ++i) build_blas(used[i]);
@@ -299,9 +300,16 @@ public:
         for (uint32_t m : meshes) {
             if (m >= scene_.meshes.size())
                 throw Error("two-level update: mesh " + std::to_string(m) + " does not exist");
+        }
+        // Meshes no instance uses have no bottom level to update.
+        std::erase_if(meshes, [&](uint32_t m) { return !used_[m]; });
+        for (uint32_t m : meshes) {
             if (scene_.meshes[m].triangle_count() != blas_[m].triangles.size())
                 throw Error("two-level update: mesh " + std::to_string(m) + " changed its triangle count");
         }
+        if (scene_.instances.size() + 1 != geometry_.instance_first_triangle.size() ||
+            scene_.meshes.size() != blas_.size())
+            throw Error("two-level update: the scene's instances or meshes changed in number");
         UpdateStats stats;
         parallel::with_threads(build_.threads, [&] {
             parallel::for_range(size_t(0), meshes.size(), size_t(1), [&](size_t lo, size_t hi) {
@@ -371,7 +379,7 @@ private:
         for (uint32_t i = 0; i < scene_.instances.size(); ++i) {
             const Instance& inst = scene_.instances[i];
             const Blas<N>& b = blas_[inst.mesh];
-            if (b.bvh.nodes.empty()) continue;  // MUTATION
+            if (!inst.visible || b.bvh.nodes.empty()) continue;
             Affine3f inverse;
             try {
                 inverse = inst.transform.inverse();
@@ -408,6 +416,7 @@ private:
     BuildOptions build_;
     std::vector<Blas<N>> blas_;                         // per mesh (empty where no instance uses it)
     std::vector<typename BlasLayout<N>::View> views_;  // per mesh
+    std::vector<uint8_t> used_;                         // per mesh: some instance uses it
     std::vector<TwoLevelInstance> instances_;          // the visible ones
     Bvh top_;
     WideTop wide_top_;  // the SIMD layouts' top level (N > 2)

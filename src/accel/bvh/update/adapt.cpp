@@ -77,6 +77,7 @@
 #include "accel/bvh/update/adapt.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <string>
 
@@ -86,27 +87,6 @@
 #include "rayforge/core/error.h"
 
 
-#ifdef ADAPT_DEBUG
-#include <cstdio>
-namespace rf {
-static bool adapt_validate(const std::vector<AdaptNode>& nodes, uint32_t root, const char* where) {
-    bool ok = true;
-    auto walk = [&](auto&& self, uint32_t id, uint32_t parent) -> uint32_t {
-        const AdaptNode& n = nodes[id];
-        if (n.parent != parent && ok) { std::printf("%s: parent of %u is %x, want %x\n", where, id, n.parent, parent); ok = false; }
-        if (n.is_leaf()) return n.leaf_size;
-        uint32_t c = self(self, n.child[0], id) + self(self, n.child[1], id);
-        if (c != n.count && ok) { std::printf("%s: count of %u is %u, want %u\n", where, id, n.count, c); ok = false; }
-        return c;
-    };
-    walk(walk, root, 0xffffffffu);
-    return ok;
-}
-}
-#define VALIDATE(where) adapt_validate(nodes_, root_, where)
-#else
-#define VALIDATE(where) true
-#endif
 
 namespace rf {
 namespace {
@@ -434,26 +414,34 @@ bool AdaptBvh::update(std::span<const Triangle> triangles, UpdateStats& stats) {
     }
     if (root_ == kNone) return false;
     triangles_ = triangles;
+    times_ = {};
     return parallel::with_threads(build_.threads, [&] {
+        using Clock = std::chrono::steady_clock;
+        auto lap = [last = Clock::now()](double& into) mutable {
+            const auto now = Clock::now();
+            into += std::chrono::duration<double, std::milli>(now - last).count();
+            last = now;
+        };
         Buffers buffers;
         adapt(root_, buffers, triangles);
         stats.refitted_nodes += buffers.refitted;
+        lap(times_.refit_ms);
         bool changed = false;
-        VALIDATE("stage 1");
         if (!buffers.rebuild.empty()) {
             stats.rebuilt_nodes += rebuild(buffers.rebuild, triangles);
             stats.rebuilt_subtrees += buffers.rebuild.size();
             changed = true;
         }
+        lap(times_.rebuild_ms);
         if (!buffers.migrate.empty()) {
-            VALIDATE("stage 2");
             const uint64_t moved = migrate(buffers.migrate);
-            VALIDATE("stage 3");
             stats.migrations += moved;
             changed = changed || moved > 0;
         }
+        lap(times_.migrate_ms);
         if (!changed) {
             refresh_boxes();
+            lap(times_.export_ms);
             return false;
         }
         if (export_bvh() > kBvhMaxDepth) {
@@ -462,6 +450,7 @@ bool AdaptBvh::update(std::span<const Triangle> triangles, UpdateStats& stats) {
             stats.rebuilt_nodes += memory_.used_count();
             export_bvh();
         }
+        lap(times_.export_ms);
         return true;
     });
 }
@@ -783,7 +772,6 @@ uint64_t AdaptBvh::migrate(std::vector<uint32_t>& buffer) {
         const Box3f box = merge(nodes_[p.child[0]].box, nodes_[p.child[1]].box);
         p.start = find_start(p.anchor, box, pending);
     }
-    VALIDATE("pass 3");
     for (size_t i = 0; i < pending.size(); ++i) {  // pass 4
         for (int k = 0; k < 2; ++k) insert(pending[i].start, pending[i].child[k], pending);
     }

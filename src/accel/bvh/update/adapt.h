@@ -30,6 +30,14 @@ struct AdaptNode {
     [[nodiscard]] bool is_leaf() const { return leaf_size != 0; }
 };
 
+// Wall time of the last update's stages (the measurements print them).
+struct AdaptStageTimes {
+    double refit_ms = 0.0;    // stage 1: refit + detection
+    double rebuild_ms = 0.0;  // stage 2: regions collected, built, linked
+    double migrate_ms = 0.0;  // stage 3: the four passes
+    double export_ms = 0.0;   // the canonical Bvh (boxes only, or re-emitted)
+};
+
 class AdaptBvh final : public BvhUpdater {
 public:
     static constexpr uint32_t kNone = 0xffffffffu;
@@ -46,6 +54,7 @@ public:
         return {slots_.data() + size_t(id) * leaf_capacity_, nodes_[id].leaf_size};
     }
     [[nodiscard]] const NodeMemoryManager& memory() const { return memory_; }
+    [[nodiscard]] const AdaptStageTimes& stage_times() const { return times_; }
     // Eq. 1.3 over the node's current children, with the build's SAH costs.
     [[nodiscard]] float sah_cost(uint32_t id) const;
 
@@ -93,6 +102,7 @@ private:
     std::vector<uint32_t> forwarded_;  // the entries of forward_ to clear
     Bvh bvh_;
     std::vector<uint32_t> source_;     // bvh_ node -> dynamic node
+    AdaptStageTimes times_;
 };
 
 }  // namespace rf
