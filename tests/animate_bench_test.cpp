@@ -224,6 +224,25 @@ TEST(AnimateBench, BackwardsPlayKeepsMethodsCorrect) {
     EXPECT_EQ(played, (std::vector<int>{4, 8, 4, 0, 4, 8}));
 }
 
+// Before the keys start nothing moves: the updated trees still report their cost.
+TEST(AnimateBench, FramesWithoutMotionKeepTheirSahCost) {
+    bench::LoadedScene loaded = flying_spheres();
+    for (AnimatedNode& node : loaded.scene.animation.nodes) node.translation_track.times = {0.5f, 1.0f};
+    bench::AnimateConfig config = small_config();
+    config.methods = {UpdateMethod::Refit, UpdateMethod::Adapt, UpdateMethod::Rebuild};
+    config.embree.clear();
+    config.ray_sets = {bench::RaySetKind::Primary};
+    config.frames = {0, 2, 1};
+    std::ostringstream log;
+    const bench::AnimateResult result = bench::run_animate_bench(loaded, config, log);
+    for (const bench::AnimateFrame& f : result.frames)
+        for (const bench::MethodFrame& m : f.methods) {
+            if (!m.ok) continue;
+            EXPECT_GT(m.stats.sah_cost, 1.0) << f.frame;
+            EXPECT_NEAR(m.stats.sah_cost, f.rebuild_sah, 0.5 * f.rebuild_sah) << f.frame;
+        }
+}
+
 TEST(AnimateBench, UnavailableMethodsPrintTheirReason) {
     bench::AnimateResult result;
     result.scene = "hand-made";

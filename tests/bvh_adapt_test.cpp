@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <random>
 #include <vector>
@@ -20,6 +21,7 @@
 #include "accel/bvh/bvh_accel.h"
 #include "accel_test_rays.h"
 #include "backend/cpu/parallel.h"
+#include "rayforge/io/scene_io.h"
 
 namespace rf {
 namespace {
@@ -391,6 +393,9 @@ TEST(BvhAdapt, DISABLED_MeasureExplosion250K) {
             return std::chrono::duration<double, std::milli>(Clock::now() - s).count() + 0.0 * double(hits);
         };
         const double at = trace(adapted), bt = trace(rebuilt);
+        const AdaptStageTimes& st = tree.stage_times();
+        std::printf("  stages: refit %.1f, rebuild %.1f, migrate %.1f, export %.1f ms\n", st.refit_ms, st.rebuild_ms,
+                    st.migrate_ms, st.export_ms);
         std::printf("frame %2d adapt %7.2f ms (refit %llu, rebuilt %llu subtrees / %llu nodes, migrations %llu) "
                     "binned %7.2f ms | sah %.2f vs %.2f | trace %.1f vs %.1f ms\n",
                     f, am, (unsigned long long)stats.refitted_nodes, (unsigned long long)stats.rebuilt_subtrees,
@@ -406,6 +411,62 @@ TEST(BvhAdapt, DISABLED_MeasureExplosion250K) {
     std::printf("mean: adapt %.2f ms, binned %.2f ms (x%.2f); sah %.2f vs %.2f; trace %.1f vs %.1f ms (%+.1f%%)\n",
                 adapt_ms / frames, build_ms / frames, build_ms / adapt_ms, adapt_sah / frames, build_sah / frames,
                 adapt_trace / frames, build_trace / frames, 100.0 * (adapt_trace / build_trace - 1.0));
+}
+
+// The stage breakdown of the adapt update on the animated builtin scenes
+// (explode, nbody, cloth at their default sizes; 2 threads), against a full
+// binned build of the same frame. RF_ADAPT_FRAMES=FIRST:LAST:STEP and
+// RF_ADAPT_READING=stated|closing choose what runs (default 0:40:2, stated).
+TEST(BvhAdapt, DISABLED_MeasureStagesOnBuiltinScenes) {
+    int first = 0, last = 40, step = 2;
+    if (const char* f = std::getenv("RF_ADAPT_FRAMES")) std::sscanf(f, "%d:%d:%d", &first, &last, &step);
+    const char* reading = std::getenv("RF_ADAPT_READING");
+    const AdaptOptions options = parse_adapt_reading(reading ? reading : "stated");
+    const char* only = std::getenv("RF_ADAPT_SCENES");
+    for (const char* name : {"builtin:explode", "builtin:nbody", "builtin:cloth"}) {
+        if (only && !std::strstr(only, name + 8)) continue;
+        Scene scene = load_scene(name);
+        scene.set_time(scene.animation.frame_time(first));
+        SceneGeometry geometry = SceneGeometry::build(scene);
+        const BuildOptions build = two_threads();
+        AdaptBvh tree(geometry.triangles, build, options);
+        AdaptStageTimes sum;
+        double adapt_ms = 0.0, build_ms = 0.0, adapt_sah = 0.0, build_sah = 0.0;
+        UpdateStats total;
+        int frames = 0;
+        using Clock = std::chrono::steady_clock;
+        for (int f = first + step; f <= last; f += step) {
+            const GeometryChange change = scene.set_time(scene.animation.frame_time(f));
+            geometry.update(scene, change);
+            UpdateStats stats;
+            const auto t0 = Clock::now();
+            tree.update(geometry.triangles, stats);
+            const auto t1 = Clock::now();
+            const Bvh full = parallel::with_threads(2, [&] { return build_bvh_on_cpu(geometry.triangles, build); });
+            const auto t2 = Clock::now();
+            const AdaptStageTimes& st = tree.stage_times();
+            sum.refit_ms += st.refit_ms;
+            sum.rebuild_ms += st.rebuild_ms;
+            sum.migrate_ms += st.migrate_ms;
+            sum.export_ms += st.export_ms;
+            adapt_ms += std::chrono::duration<double, std::milli>(t1 - t0).count();
+            build_ms += std::chrono::duration<double, std::milli>(t2 - t1).count();
+            adapt_sah += tree.bvh().sah_cost();
+            build_sah += full.sah_cost();
+            total.rebuilt_subtrees += stats.rebuilt_subtrees;
+            total.rebuilt_nodes += stats.rebuilt_nodes;
+            total.migrations += stats.migrations;
+            ++frames;
+        }
+        const double n = std::max(frames, 1);
+        std::printf("%s (%zu triangles, %s, frames %d:%d:%d): adapt %.2f ms (refit %.2f, rebuild %.2f, migrate %.2f, "
+                    "export %.2f) vs binned %.2f ms: x%.2f; sah %.2f vs %.2f (%+.1f%%); per frame %.0f subtrees "
+                    "rebuilt (%.0f nodes), %.0f migrations\n",
+                    name, geometry.triangles.size(), reading ? reading : "stated", first, last, step, adapt_ms / n,
+                    sum.refit_ms / n, sum.rebuild_ms / n, sum.migrate_ms / n, sum.export_ms / n, build_ms / n,
+                    build_ms / adapt_ms, adapt_sah / n, build_sah / n, 100.0 * (adapt_sah / build_sah - 1.0),
+                    double(total.rebuilt_subtrees) / n, double(total.rebuilt_nodes) / n, double(total.migrations) / n);
+    }
 }
 
 }  // namespace

@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <numeric>
 #include <random>
 #include <vector>
@@ -498,7 +499,9 @@ TEST(ClustersBench, DISABLED_Terrain800K) {
     sub.cluster_subtrees = true;
     ClusterOptions sub_grow = kAllOptions[1];
     sub_grow.cluster_subtrees = true;
+    const char* only = std::getenv("RF_CLUSTERS_BENCH");  // e.g. "acc/grow+sub": one configuration
     for (const ClusterOptions& o : {kAllOptions[0], kAllOptions[1], kAllOptions[2], sub, sub_grow}) {
+        if (only && name_of(o) + (o.cluster_subtrees ? "+sub" : "") != only) continue;
         g.triangles = SceneGeometry::build(first).triangles;
         const auto t0 = std::chrono::steady_clock::now();
         auto updater = parallel::with_threads(2, [&] { return make_cluster_updater(first, g, build, o); });

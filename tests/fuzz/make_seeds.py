@@ -162,3 +162,153 @@ write("json_scene/references.json", json.dumps({
     "environment": {"color": [0.1, 0.2, 0.3], "map": "t.ppm", "strength": 2, "rotation_deg": 30},
     "render": {"width": 32, "height": 24, "spp": 1, "integrator": "ao", "max_depth": 2, "ao_radius": 0.5},
 }, indent=1))
+
+# --- animations (Scene::set_time after loading) -------------------------------------
+# GLB: the glTF animation fixture (skin, morph targets, TRS channels) with its
+# buffer in the BIN chunk.
+import base64
+
+ROOT = os.path.normpath(os.path.join(HERE, "..", ".."))
+with open(os.path.join(ROOT, "tests/data/gltf_anim/anim_basic.gltf")) as f:
+    anim = json.load(f)
+anim_bin = base64.b64decode(anim["buffers"][0]["uri"].split(",", 1)[1])
+anim["buffers"] = [{"byteLength": len(anim_bin)}]
+chunk_json = json.dumps(anim, separators=(",", ":")).encode()
+chunk_json += b" " * (-len(chunk_json) % 4)
+anim_bin += b"\0" * (-len(anim_bin) % 4)
+glb = (struct.pack("<II", len(chunk_json), 0x4E4F534A) + chunk_json +
+       struct.pack("<II", len(anim_bin), 0x004E4942) + anim_bin)
+write("glb/animation_skin_morph.glb", struct.pack("<4sII", b"glTF", 2, 12 + len(glb)) + glb)
+
+
+def gltf_interpolations():
+    """A quad on a node with CUBICSPLINE translation, STEP rotation, LINEAR scale and weights."""
+    times = struct.pack("<3f", 0, 1, 2)
+    cubic = struct.pack("<27f", *([0, 0, 0, 0, 0, 0, 1, 0, 0] + [1, 0, 0, 2, 1, 0, 0, 1, 0] + [0, 0, 0, 3, 0, 0, 0, 0, 0]))
+    rot = struct.pack("<12f", 0, 0, 0, 1, 0, 0.7071068, 0, 0.7071068, 0, 1, 0, 0)
+    scale = struct.pack("<9f", 1, 1, 1, 2, 2, 2, 1, 1, 1)
+    weights = struct.pack("<3f", 0, 1, 0.5)
+    pos = struct.pack("<12f", 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0)
+    delta = struct.pack("<12f", 0, 0, 1, 0, 0, 1, 0, 0, 1, 0, 0, 1)
+    idx = struct.pack("<6H", 0, 1, 2, 0, 2, 3) + b"\0\0"
+    parts = [times, cubic, rot, scale, weights, pos, delta, idx]
+    views, offset = [], 0
+    for p in parts:
+        views.append({"buffer": 0, "byteOffset": offset, "byteLength": len(p)})
+        offset += len(p)
+    views[-1]["byteLength"] = 12
+    data = b"".join(parts)
+    acc = [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "SCALAR", "min": [0], "max": [2]},
+           {"bufferView": 1, "componentType": 5126, "count": 9, "type": "VEC3"},
+           {"bufferView": 2, "componentType": 5126, "count": 3, "type": "VEC4"},
+           {"bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC3"},
+           {"bufferView": 4, "componentType": 5126, "count": 3, "type": "SCALAR"},
+           {"bufferView": 5, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]},
+           {"bufferView": 6, "componentType": 5126, "count": 4, "type": "VEC3"},
+           {"bufferView": 7, "componentType": 5123, "count": 6, "type": "SCALAR"}]
+    return {
+        "asset": {"version": "2.0"},
+        "buffers": [{"uri": "data:application/octet-stream;base64," + base64.b64encode(data).decode(),
+                     "byteLength": len(data)}],
+        "bufferViews": views, "accessors": acc,
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 5}, "indices": 7, "targets": [{"POSITION": 6}]}],
+                    "weights": [0.25]}],
+        "nodes": [{"name": "parent", "children": [1]}, {"name": "quad", "mesh": 0}],
+        "scenes": [{"nodes": [0]}], "scene": 0,
+        "animations": [{"samplers": [{"input": 0, "output": 1, "interpolation": "CUBICSPLINE"},
+                                     {"input": 0, "output": 2, "interpolation": "STEP"},
+                                     {"input": 0, "output": 3, "interpolation": "LINEAR"},
+                                     {"input": 0, "output": 4}],
+                        "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}},
+                                     {"sampler": 1, "target": {"node": 1, "path": "rotation"}},
+                                     {"sampler": 2, "target": {"node": 1, "path": "scale"}},
+                                     {"sampler": 3, "target": {"node": 1, "path": "weights"}}]}],
+    }
+
+
+write("gltf/animation_interpolations.gltf", json.dumps(gltf_interpolations(), indent=1))
+
+# JSON: step keys on a referenced file, linear keys with every rotation form, a mesh without keys.
+write("json_scene/animation_step_and_files.json", json.dumps({
+    "meshes": [{"file": "m.obj", "animation": {"interpolation": "step", "keys": [
+                   {"time": 0, "translate": [0, 0, 0]}, {"time": 0.5, "translate": [0, 1, 0]},
+                   {"time": 3, "translate": [0, 2, 0], "scale": [1, 1, 2]}]}},
+               {"file": "m.ply", "transform": {"translate": [2, 0, 0]}, "animation": {"keys": [
+                   {"time": -1, "rotate": {"axis": [1, 0, 0], "degrees": -90}},
+                   {"time": 1, "rotate": {"quaternion": [0, 0, 0, 1]}, "scale": 0.5},
+                   {"time": 4, "rotate": {"axis": [0, 0, 1], "degrees": 720}, "scale": 3}]}},
+               {"file": "builtin:triangle"}],
+}, indent=1))
+
+# AFF: nested animated blocks, rot/scale/visibility keys with tension/continuity/bias,
+# a tpa mesh with three keys, a camera on transl keys only.
+write("aff/animation_nested.aff", """% nested animated blocks, tcb keys, tpa, camera path
+a 0 4 41
+v
+from 0 0 10
+at 0 0 0
+up 0 1 0
+angle 40
+hither 0.1
+resolution 16 16
+x outer
+{
+  xs 1 1 1  0 0 1 0  1 0 0
+  {
+    x inner
+    {
+      p 3
+      0 0 0
+      1 0 0
+      0 1 0
+    }
+  }
+  tpa 3
+    0
+    0 0 0  0 0 1
+    1 0 0  0 0 1
+    0 1 0  0 0 1
+    1
+    0 0 1  0 0 1
+    1 0 1  0 0 1
+    0 1 1  0 1 0
+    4
+    0 0 2  0 0 1
+    2 0 2  0 0 1
+    0 2 2  0 0 0
+}
+k outer
+{
+  rot 5
+  0 0 0 1 0     0 0 0
+  1 0 0 1 90    0.5 0 0
+  2 0 0 1 180   0 0.5 0
+  3 0 0 1 270   0 0 0.5
+  4 0 0 1 360   0 0 0
+  scale 4
+  0 1 1 1  0 0 0
+  1 2 1 1  -1 0 0
+  2 1 2 1  0 -1 0
+  3 1 1 2  0 0 -1
+  visibility 3
+  0 1
+  1 0
+  2 1
+}
+k inner
+{
+  transl 4
+  0 0 0 0  0 0 0
+  0 0 0 0  0 0 0
+  2 1 1 1  0 0 0
+  1 2 2 2  0 0 0
+}
+k camera
+{
+  transl 4
+  0 0 0 10  0 0 0
+  1 0 0 12  0 0 0
+  2 0 0 14  0 0 0
+  3 0 0 16  0 0 0
+}
+""")

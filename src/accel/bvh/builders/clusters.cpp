@@ -45,6 +45,13 @@
 namespace rf {
 namespace {
 
+// Box3f::extend without the libm calls fminf/fmaxf (not inlined): refits
+// and cluster boxes spend most of their time here.
+inline void grow(Box3f& b, Vec3f p) {
+    b.lo = Vec3f(p.x < b.lo.x ? p.x : b.lo.x, p.y < b.lo.y ? p.y : b.lo.y, p.z < b.lo.z ? p.z : b.lo.z);
+    b.hi = Vec3f(p.x > b.hi.x ? p.x : b.hi.x, p.y > b.hi.y ? p.y : b.hi.y, p.z > b.hi.z ? p.z : b.hi.z);
+}
+
 inline Vec3f corner_of(const Triangle& t, uint64_t corner) { return corner == 0 ? t.v0 : corner == 1 ? t.v1 : t.v2; }
 
 // Each cluster as the degenerate triangle (lo, hi, centre) of its box.
@@ -53,7 +60,7 @@ std::vector<Triangle> cluster_proxies(std::span<const Triangle> triangles, const
     parallel::for_range(size_t{0}, clusters.size(), size_t{1024}, [&](size_t lo, size_t hi) {
         for (size_t c = lo; c < hi; ++c) {
             Box3f box;
-            for (uint64_t ref : clusters.vertices(c)) box.extend(corner_of(triangles[ref / 3], ref % 3));
+            for (uint64_t ref : clusters.vertices(c)) grow(box, corner_of(triangles[ref / 3], ref % 3));
             proxies[c] = Triangle{box.lo, box.hi, box.center()};
         }
     });
@@ -326,9 +333,14 @@ void refit_cluster_subtrees(std::span<const Triangle> triangles, const ClusterPa
                 BvhNode& node = subtrees.nodes[i];
                 Box3f box;
                 if (node.is_leaf()) {
-                    for (uint32_t k = node.first; k < node.first + node.count; ++k) box.extend(triangles[tris[k]].bounds());
+                    for (uint32_t k = node.first; k < node.first + node.count; ++k) {
+                        const Triangle& t = triangles[tris[k]];
+                        grow(box, t.v0), grow(box, t.v1), grow(box, t.v2);
+                    }
                 } else {
-                    box = merge(subtrees.nodes[base + node.first].bounds, subtrees.nodes[base + node.first + 1].bounds);
+                    box = subtrees.nodes[base + node.first].bounds;
+                    const Box3f& other = subtrees.nodes[base + node.first + 1].bounds;
+                    grow(box, other.lo), grow(box, other.hi);
                 }
                 node.bounds = box;
             }

@@ -95,7 +95,7 @@ constexpr uint32_t kNone = AdaptBvh::kNone;
 constexpr uint32_t kTag = 0x80000000u;        // parent field of a detached subtree's root: kTag | record
 constexpr uint32_t kParallelAdapt = 8192;     // triangles under a node to refit its children as tasks
 constexpr uint32_t kParallelRegion = 4096;    // primitives of a region node to build its children as tasks
-constexpr int kMaxBins = 64;
+constexpr int kMaxBins = 32;                  // bin_count is clamped to this
 constexpr size_t kBinnedRegion = 2048;         // triangles of a lock-free region to build with build_binned_sah
 
 bool real(uint32_t id) { return id != kNone && (id & kTag) == 0; }
@@ -130,91 +130,161 @@ int median_levels(uint64_t count, uint32_t leaf_size) {
 
 // Binned SAH (Wald 2007) over box primitives weighted by their triangle
 // counts, with the object median where no bin boundary splits or where the
-// depth limit is near (depth counts from the tree's root).
+// depth limit is near (depth counts from the tree's root). The subtree over
+// prims [b, e) owns the scratch slots [2b, 2e - 1): its root at 2b, the left
+// child's subtree from 2b + 1, the right child's from 2 mid, so subtrees
+// built as tasks write their own slots and nothing is merged afterwards.
 class RegionBuilder {
 public:
-    RegionBuilder(const BuildOptions& build, std::vector<Prim>& prims)
+    RegionBuilder(const BuildOptions& build, std::vector<Prim>& prims, std::vector<ScratchNode>& out)
         : sah_(build.sah), leaf_(uint32_t(build.max_leaf_size)),
-          bins_(std::clamp(build.binned.bin_count, 2, kMaxBins)), prims_(prims) {}
+          bins_(std::clamp(build.binned.bin_count, 2, kMaxBins)), prims_(prims), out_(out) {
+        out_.resize(2 * prims_.size() - 1);
+    }
 
-    // The subtree over prims_[b, e) into `out` (its root at out's first new index).
-    void build(std::vector<ScratchNode>& out, uint32_t b, uint32_t e, int depth) {
-        const uint32_t index = uint32_t(out.size());
-        out.emplace_back();
-        ScratchNode node;
-        Box3f centres;
-        uint64_t weight = 0;
-        bool all_tris = true;
-        for (uint32_t i = b; i < e; ++i) {
-            node.box.extend(prims_[i].box);
-            centres.extend(prims_[i].centre);
-            weight += prims_[i].weight;
-            all_tris = all_tris && prims_[i].tri;
-        }
+    void build(uint32_t b, uint32_t e, int depth) {
+        ScratchNode& node = out_[2 * b];
+        node = ScratchNode{};
         const uint32_t n = e - b;
         if (n == 1 && !prims_[b].tri) {
             node.existing = prims_[b].id;
-            out[index] = node;
+            node.box = prims_[b].box;
             return;
         }
+        const Bounds bounds = n >= kParallelBinning ? parallel_bounds(b, e) : bounds_of(b, e);
+        node.box = bounds.box;
         const float area = node.box.surface_area();
-        const Split split = find_split(b, e, centres);
-        const bool leaf_ok = all_tris && n <= leaf_;
-        if (leaf_ok && (!split.valid() || sah_.traversal * area + sah_.intersection * split.cost >=
-                                              sah_.intersection * area * float(weight))) {
+        const Split split = find_split(b, e, bounds.centres);
+        if (bounds.all_tris && n <= leaf_ &&
+            (!split.valid() ||
+             sah_.traversal * area + sah_.intersection * split.cost >= sah_.intersection * area * float(bounds.weight))) {
             node.first = b;
             node.n = n;
-            out[index] = node;
             return;
         }
-        const uint32_t leaf = all_tris ? leaf_ : 1;
-        const bool depth_ok = depth + 1 + median_levels(n, leaf) <= kBvhMaxDepth;
+        const bool depth_ok = depth + 1 + median_levels(n, bounds.all_tris ? leaf_ : 1) <= kBvhMaxDepth;
         uint32_t mid = b;
-        if (split.valid() && depth_ok) mid = partition(b, e, centres, split);
-        if (mid == b || mid == e) mid = median(b, e, centres);
-        out[index] = node;
-        build_children(out, index, b, mid, e, depth);
+        if (split.valid() && depth_ok) mid = partition(b, e, bounds.centres, split);
+        if (mid == b || mid == e) mid = median(b, e, bounds.centres);
+        node.child[0] = 2 * b + 1;
+        node.child[1] = 2 * mid;
+        if (n >= kParallelRegion) {
+            parallel::invoke([&] { build(b, mid, depth + 1); }, [&] { build(mid, e, depth + 1); });
+        } else {
+            build(b, mid, depth + 1);
+            build(mid, e, depth + 1);
+        }
     }
 
 private:
+    static constexpr uint32_t kParallelBinning = 32 * 1024;  // prims of a node to bound and bin in parallel
+
     struct Split {
         int axis = -1, bin = 0;
         float cost = INFINITY;
         [[nodiscard]] bool valid() const { return axis >= 0; }
     };
+    struct Bounds {
+        Box3f box, centres;
+        uint64_t weight = 0;
+        bool all_tris = true;
+        void add(const Bounds& o) {
+            box.extend(o.box);
+            centres.extend(o.centres);
+            weight += o.weight;
+            all_tris = all_tris && o.all_tris;
+        }
+    };
+    // The bins of all three axes, filled in one pass over the primitives.
+    struct Bins {
+        Box3f box[3][kMaxBins];
+        uint64_t weight[3][kMaxBins] = {};
+        void add(const Bins& o, int bins) {
+            for (int a = 0; a < 3; ++a) {
+                for (int i = 0; i < bins; ++i) {
+                    box[a][i].extend(o.box[a][i]);
+                    weight[a][i] += o.weight[a][i];
+                }
+            }
+        }
+    };
+    struct Binning {  // bin = (c - lo) * scale, per axis; scale 0 on a flat axis
+        Vec3f lo, scale;
+    };
 
-    [[nodiscard]] int bin_of(const Vec3f& c, int axis, const Box3f& centres) const {
-        const float lo = centres.lo[axis], extent = centres.hi[axis] - lo;
-        const int bin = int(float(bins_) * ((c[axis] - lo) / extent));
-        return std::clamp(bin, 0, bins_ - 1);
+    Bounds bounds_of(uint32_t b, uint32_t e) const {
+        Bounds out;
+        for (uint32_t i = b; i < e; ++i) {
+            out.box.extend(prims_[i].box);
+            out.centres.extend(prims_[i].centre);
+            out.weight += prims_[i].weight;
+            out.all_tris = out.all_tris && prims_[i].tri;
+        }
+        return out;
+    }
+    Bounds parallel_bounds(uint32_t b, uint32_t e) const {
+        return parallel::reduce<uint32_t>(
+            b, e, 8192, Bounds{}, [&](uint32_t lo, uint32_t hi, Bounds acc) { acc.add(bounds_of(lo, hi)); return acc; },
+            [](Bounds x, const Bounds& y) { x.add(y); return x; });
+    }
+
+    [[nodiscard]] Binning binning(const Box3f& centres) const {
+        Binning m;
+        m.lo = centres.lo;
+        for (int a = 0; a < 3; ++a) {
+            const float extent = centres.hi[a] - centres.lo[a];
+            m.scale[a] = extent > 0.0f ? float(bins_) / extent : 0.0f;
+        }
+        return m;
+    }
+    [[nodiscard]] int bin_of(float c, int axis, const Binning& m) const {
+        return std::clamp(int((c - m.lo[axis]) * m.scale[axis]), 0, bins_ - 1);
+    }
+
+    void fill(Bins& bins, uint32_t b, uint32_t e, const Binning& m) const {
+        for (uint32_t i = b; i < e; ++i) {
+            const Prim& p = prims_[i];
+            for (int a = 0; a < 3; ++a) {
+                const int bin = bin_of(p.centre[a], a, m);
+                bins.box[a][bin].extend(p.box);
+                bins.weight[a][bin] += p.weight;
+            }
+        }
     }
 
     Split find_split(uint32_t b, uint32_t e, const Box3f& centres) const {
+        const Binning m = binning(centres);
+        auto bins = std::make_unique<Bins>();
+        if (e - b >= kParallelBinning) {
+            std::vector<Bins> parts((e - b + kParallelBinning / 4 - 1) / (kParallelBinning / 4));
+            parallel::for_range<size_t>(0, parts.size(), 1, [&](size_t lo, size_t hi) {
+                for (size_t k = lo; k < hi; ++k) {
+                    fill(parts[k], b + uint32_t(k) * (kParallelBinning / 4),
+                         std::min(e, b + uint32_t(k + 1) * (kParallelBinning / 4)), m);
+                }
+            });
+            for (const Bins& part : parts) bins->add(part, bins_);
+        } else {
+            fill(*bins, b, e, m);
+        }
         Split best;
         for (int axis = 0; axis < 3; ++axis) {
-            if (!(centres.hi[axis] > centres.lo[axis])) continue;
-            Box3f boxes[kMaxBins];
-            uint64_t weights[kMaxBins] = {};
-            for (uint32_t i = b; i < e; ++i) {
-                const int bin = bin_of(prims_[i].centre, axis, centres);
-                boxes[bin].extend(prims_[i].box);
-                weights[bin] += prims_[i].weight;
-            }
+            if (m.scale[axis] == 0.0f) continue;
             float right_area[kMaxBins];
             uint64_t right_weight[kMaxBins];
             Box3f acc;
             uint64_t w = 0;
             for (int i = bins_ - 1; i > 0; --i) {
-                acc.extend(boxes[i]);
-                w += weights[i];
+                acc.extend(bins->box[axis][i]);
+                w += bins->weight[axis][i];
                 right_area[i] = acc.surface_area();
                 right_weight[i] = w;
             }
             acc = Box3f();
             w = 0;
             for (int i = 1; i < bins_; ++i) {
-                acc.extend(boxes[i - 1]);
-                w += weights[i - 1];
+                acc.extend(bins->box[axis][i - 1]);
+                w += bins->weight[axis][i - 1];
                 if (w == 0 || right_weight[i] == 0) continue;
                 const float cost = acc.surface_area() * float(w) + right_area[i] * float(right_weight[i]);
                 if (cost < best.cost) best = {axis, i, cost};
@@ -224,8 +294,9 @@ private:
     }
 
     uint32_t partition(uint32_t b, uint32_t e, const Box3f& centres, const Split& split) {
+        const Binning m = binning(centres);
         auto it = std::partition(prims_.begin() + b, prims_.begin() + e, [&](const Prim& p) {
-            return bin_of(p.centre, split.axis, centres) < split.bin;
+            return bin_of(p.centre[split.axis], split.axis, m) < split.bin;
         });
         return uint32_t(it - prims_.begin());
     }
@@ -242,34 +313,11 @@ private:
         return mid;
     }
 
-    void build_children(std::vector<ScratchNode>& out, uint32_t index, uint32_t b, uint32_t mid, uint32_t e,
-                        int depth) {
-        if (e - b < kParallelRegion) {
-            out[index].child[0] = uint32_t(out.size());
-            build(out, b, mid, depth + 1);
-            out[index].child[1] = uint32_t(out.size());
-            build(out, mid, e, depth + 1);
-            return;
-        }
-        std::vector<ScratchNode> left, right;
-        parallel::invoke([&] { build(left, b, mid, depth + 1); }, [&] { build(right, mid, e, depth + 1); });
-        for (auto* part : {&left, &right}) {
-            const uint32_t offset = uint32_t(out.size());
-            out[index].child[part == &left ? 0 : 1] = offset;
-            for (ScratchNode node : *part) {
-                if (node.n == 0 && node.existing == kNone) {
-                    node.child[0] += offset;
-                    node.child[1] += offset;
-                }
-                out.push_back(node);
-            }
-        }
-    }
-
     SahCosts sah_;
     uint32_t leaf_;
     int bins_;
     std::vector<Prim>& prims_;
+    std::vector<ScratchNode>& out_;
 };
 
 }  // namespace
