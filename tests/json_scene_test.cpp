@@ -156,7 +156,7 @@ TEST(JsonScene, PathAndWhittedRenderSettings) {
     const std::string path = write_scene("json_scene_render_settings", R"({
         "meshes": [{"file": "builtin:triangle"}],
         "render": {"integrator": "path", "max_depth": 5, "rr_depth": 2, "light_sampling": "nee",
-                   "reflection_depth": 3, "refraction_depth": 4, "shading": "blinn"}})");
+                   "reflection_depth": 3, "refraction_depth": 4, "shading": "blinn", "update": "two-level"}})");
     const Scene scene = load_scene(path);
     const RenderSettings& r = scene.render_settings;
     EXPECT_EQ(r.integrator, "path");
@@ -166,6 +166,7 @@ TEST(JsonScene, PathAndWhittedRenderSettings) {
     EXPECT_EQ(r.reflection_depth, 3);
     EXPECT_EQ(r.refraction_depth, 4);
     EXPECT_EQ(r.shading, "blinn");
+    EXPECT_EQ(r.update, "two-level");
 }
 
 TEST(JsonScene, LightsAndCameraOfReferencedFilesAreTransformed) {

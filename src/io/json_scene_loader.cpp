@@ -534,7 +534,7 @@ RenderSettings JsonSceneReader::render_settings(const Json& value, const std::st
     expect_object(value, where);
     expect_keys(value, where,
                 {"width", "height", "spp", "integrator", "max_depth", "rr_depth", "light_sampling", "reflection_depth",
-                 "refraction_depth", "shading", "ao_radius"});
+                 "refraction_depth", "shading", "ao_radius", "update"});
     RenderSettings r;
     if (value.contains("width")) r.width = integer(value["width"], where + ".width", 1);
     if (value.contains("height")) r.height = integer(value["height"], where + ".height", 1);
@@ -560,6 +560,7 @@ RenderSettings JsonSceneReader::render_settings(const Json& value, const std::st
     r.integrator = one_of("integrator", {"normals", "ao", "whitted", "path"});
     r.light_sampling = one_of("light_sampling", {"mis", "nee", "bsdf"});
     r.shading = one_of("shading", {"lambert", "phong", "blinn"});
+    r.update = one_of("update", {"refit", "adapt", "rebuild", "clusters", "two-level"});
     if (value.contains("ao_radius")) {
         r.ao_radius = number(value["ao_radius"], where + ".ao_radius");
         if (!(*r.ao_radius > 0.0f)) fail(where + ".ao_radius", "must be positive");

@@ -96,7 +96,9 @@ constexpr uint32_t kTag = 0x80000000u;        // parent field of a detached subt
 constexpr uint32_t kParallelAdapt = 8192;     // triangles under a node to refit its children as tasks
 constexpr uint32_t kParallelRegion = 4096;    // primitives of a region node to build its children as tasks
 constexpr int kMaxBins = 32;                  // bin_count is clamped to this
-constexpr size_t kBinnedRegion = 2048;         // triangles of a lock-free region to build with build_binned_sah
+constexpr size_t kBinnedRegion = 2048;        // triangles of a region without kept nodes to build with build_binned_sah
+constexpr uint32_t kParallelExport = 16384;   // triangles under a node to export its children as tasks
+constexpr float kLeafGrowth = 2.0f;           // a leaf grown past this factor of its built area is regrouped
 
 bool real(uint32_t id) { return id != kNone && (id & kTag) == 0; }
 
@@ -336,7 +338,7 @@ struct AdaptBvh::Region {
     uint32_t root = kNone;
     int depth = 0;
     std::vector<Prim> prims;
-    std::vector<uint32_t> old_nodes;  // freed when the region is linked
+    std::vector<uint32_t> old_nodes;  // reused, in address order, for the new nodes; the rest freed
     std::vector<ScratchNode> nodes;
 };
 
@@ -398,7 +400,10 @@ void AdaptBvh::import(const Bvh& bvh) {
 
 uint32_t AdaptBvh::finish_import(uint32_t id) {
     AdaptNode& node = nodes_[id];
-    if (node.is_leaf()) return node.count = node.leaf_size;
+    if (node.is_leaf()) {
+        node.saved_cost = node.box.surface_area();  // a leaf's saved value: its area when built
+        return node.count = node.leaf_size;
+    }
     node.count = finish_import(node.child[0]) + finish_import(node.child[1]);
     node.saved_cost = sah_cost(id);
     return node.count;
@@ -414,36 +419,55 @@ float AdaptBvh::sah_cost(uint32_t id) const {
     return build_.sah.traversal + build_.sah.intersection * sum / area;
 }
 
+// Leaves under each node (post-order), which place every subtree of the
+// depth-first export without a serial walk.
+uint32_t AdaptBvh::count_leaves(uint32_t id) {
+    const AdaptNode& node = nodes_[id];
+    if (node.is_leaf()) return leaves_[id] = 1;
+    uint32_t l = 0, r = 0;
+    if (node.count > kParallelExport) {
+        parallel::invoke([&] { l = count_leaves(node.child[0]); }, [&] { r = count_leaves(node.child[1]); });
+    } else {
+        l = count_leaves(node.child[0]);
+        r = count_leaves(node.child[1]);
+    }
+    return leaves_[id] = l + r;
+}
+
+// Node `id` at canonical `index`; its children's pair at `pair`, the pairs
+// below them from pair + 2; its triangles from `slot`. Returns the deepest leaf's depth.
+int AdaptBvh::emit(uint32_t id, uint32_t index, uint32_t pair, uint32_t slot, int depth) {
+    const AdaptNode& node = nodes_[id];
+    BvhNode& out = bvh_.nodes[index];
+    out.bounds = node.box;
+    source_[index] = id;
+    if (node.is_leaf()) {
+        out.first = slot;
+        out.count = node.leaf_size;
+        std::copy_n(slots_.data() + size_t(id) * leaf_capacity_, node.leaf_size, bvh_.prim_indices.data() + slot);
+        return depth;
+    }
+    out.first = pair;
+    out.count = 0;
+    const uint32_t left = node.child[0], right = node.child[1];
+    const uint32_t right_pairs = pair + 2 * leaves_[left];  // the left subtree's 2 * leaves - 2 nodes come first
+    const uint32_t right_slot = slot + nodes_[left].count;
+    if (node.count > kParallelExport) {
+        int dl = 0, dr = 0;
+        parallel::invoke([&] { dl = emit(left, pair, pair + 2, slot, depth + 1); },
+                         [&] { dr = emit(right, pair + 1, right_pairs, right_slot, depth + 1); });
+        return std::max(dl, dr);
+    }
+    return std::max(emit(left, pair, pair + 2, slot, depth + 1), emit(right, pair + 1, right_pairs, right_slot, depth + 1));
+}
+
 int AdaptBvh::export_bvh() {
-    bvh_.nodes.clear();
-    bvh_.nodes.reserve(memory_.used_count());
+    leaves_.resize(nodes_.size());
+    const uint32_t leaves = count_leaves(root_);
+    bvh_.nodes.resize(2 * size_t(leaves) - 1);
+    source_.resize(bvh_.nodes.size());
     bvh_.prim_indices.resize(triangle_count_);
-    source_.clear();
-    source_.reserve(memory_.used_count());
-    uint32_t slot = 0;
-    int max_depth = 0;
-    bvh_.nodes.push_back({nodes_[root_].box, 0, 0});
-    source_.push_back(root_);
-    auto emit = [&](auto&& self, uint32_t id, uint32_t index, int depth) -> void {
-        const AdaptNode& node = nodes_[id];
-        if (node.is_leaf()) {
-            max_depth = std::max(max_depth, depth);
-            bvh_.nodes[index].first = slot;
-            bvh_.nodes[index].count = node.leaf_size;
-            for (uint32_t t : leaf_triangles(id)) bvh_.prim_indices[slot++] = t;
-            return;
-        }
-        const uint32_t pair = uint32_t(bvh_.nodes.size());
-        bvh_.nodes[index].first = pair;
-        for (uint32_t k = 0; k < 2; ++k) {
-            bvh_.nodes.push_back({nodes_[node.child[k]].box, 0, 0});
-            source_.push_back(node.child[k]);
-        }
-        self(self, node.child[0], pair, depth + 1);
-        self(self, node.child[1], pair + 1, depth + 1);
-    };
-    emit(emit, root_, 0, 0);
-    return max_depth;
+    return emit(root_, 0, 1, 0, 0);
 }
 
 void AdaptBvh::refresh_boxes() {
@@ -557,6 +581,11 @@ void AdaptBvh::detect(uint32_t id, Buffers& out, size_t migrate_start, size_t re
 // ---------------------------------------------------------------------------
 // Stage 2: local rebuilds.
 
+bool AdaptBvh::leaf_intact(uint32_t id) const {
+    const AdaptNode& leaf = nodes_[id];
+    return leaf.leaf_size == 1 || leaf.box.surface_area() <= kLeafGrowth * leaf.saved_cost;
+}
+
 void AdaptBvh::collect_region(uint32_t root, Region& region) const {
     region.root = root;
     region.depth = 0;
@@ -566,7 +595,7 @@ void AdaptBvh::collect_region(uint32_t root, Region& region) const {
         const uint32_t id = stack.back();
         stack.pop_back();
         const AdaptNode& node = nodes_[id];
-        if (node.locked) {
+        if (node.locked || (node.is_leaf() && leaf_intact(id))) {
             region.prims.push_back({node.box, node.box.center(), id, node.count, false});
             continue;
         }
@@ -608,17 +637,20 @@ void AdaptBvh::build_region(Region& region, std::span<const Triangle> triangles)
         }
         return;
     }
-    RegionBuilder builder(build_, region.prims);
-    builder.build(region.nodes, 0, uint32_t(region.prims.size()), region.depth);
+    RegionBuilder builder(build_, region.prims, region.nodes);
+    builder.build(0, uint32_t(region.prims.size()), region.depth);
 }
 
-uint32_t AdaptBvh::apply_region(const Region& region, uint32_t scratch, uint32_t id, uint32_t parent) {
+// Links the region's new topology below `parent`, depth first; new nodes
+// take the region's old slots in address order (the root keeps its own),
+// then the memory manager's nearest free slots.
+uint32_t AdaptBvh::apply_region(Region& region, uint32_t scratch, uint32_t id, uint32_t parent, size_t& reused) {
     const ScratchNode& in = region.nodes[scratch];
     if (in.existing != kNone) {
         nodes_[in.existing].parent = parent;
         return in.existing;
     }
-    if (id == kNone) id = memory_.allocate_near(parent);
+    if (id == kNone) id = reused < region.old_nodes.size() ? region.old_nodes[reused++] : memory_.allocate_near(parent);
     AdaptNode& node = nodes_[id];
     node.box = in.box;
     node.parent = parent;
@@ -626,11 +658,12 @@ uint32_t AdaptBvh::apply_region(const Region& region, uint32_t scratch, uint32_t
     if (in.n > 0) {
         node.leaf_size = uint16_t(in.n);
         node.count = in.n;
+        node.saved_cost = in.box.surface_area();
         for (uint32_t k = 0; k < in.n; ++k) slots_[size_t(id) * leaf_capacity_ + k] = region.prims[in.first + k].id;
         return id;
     }
     node.leaf_size = 0;
-    for (int k = 0; k < 2; ++k) nodes_[id].child[k] = apply_region(region, in.child[k], kNone, id);
+    for (int k = 0; k < 2; ++k) nodes_[id].child[k] = apply_region(region, in.child[k], kNone, id, reused);
     nodes_[id].count = nodes_[nodes_[id].child[0]].count + nodes_[nodes_[id].child[1]].count;
     nodes_[id].saved_cost = sah_cost(id);
     return id;
@@ -638,15 +671,20 @@ uint32_t AdaptBvh::apply_region(const Region& region, uint32_t scratch, uint32_t
 
 uint64_t AdaptBvh::rebuild(std::span<const uint32_t> roots, std::span<const Triangle> triangles) {
     std::vector<Region> regions(roots.size());
-    for (size_t i = 0; i < roots.size(); ++i) collect_region(roots[i], regions[i]);
     parallel::for_range<size_t>(0, regions.size(), 1, [&](size_t lo, size_t hi) {
-        for (size_t i = lo; i < hi; ++i) build_region(regions[i], triangles);
+        for (size_t i = lo; i < hi; ++i) {
+            collect_region(roots[i], regions[i]);
+            build_region(regions[i], triangles);
+        }
     });
     uint64_t created = 0;
-    for (const Region& region : regions) {  // buffer order: nested regions first
-        for (uint32_t id : region.old_nodes) memory_.free(id);
-        apply_region(region, 0, region.root, nodes_[region.root].parent);
-        created += region.nodes.size();
+    for (Region& region : regions) {  // buffer order: nested regions first
+        std::sort(region.old_nodes.begin(), region.old_nodes.end());
+        size_t reused = 0;
+        const uint64_t before = memory_.used_count();
+        apply_region(region, 0, region.root, nodes_[region.root].parent, reused);
+        created += reused + (memory_.used_count() - before);
+        for (size_t k = reused; k < region.old_nodes.size(); ++k) memory_.free(region.old_nodes[k]);
     }
     for (uint32_t id : roots) nodes_[id].locked = 0;
     return created;

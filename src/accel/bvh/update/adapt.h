@@ -24,7 +24,7 @@ struct AdaptNode {
     uint32_t child[2] = {0, 0};   // inner node: the children
     uint32_t parent = 0;          // kNone for the root (or a migration tag while detached)
     uint32_t count = 0;           // Count(N): triangles under the node
-    float saved_cost = 0.0f;      // SavedSAHCost(N): eq. 1.3 when built or last inserted into
+    float saved_cost = 0.0f;      // SavedSAHCost(N): eq. 1.3 when built or last inserted into (leaf: its area when built)
     uint16_t leaf_size = 0;       // triangles in a leaf; 0 for inner nodes
     uint8_t locked = 0;           // Locked(N), during one update only
     [[nodiscard]] bool is_leaf() const { return leaf_size != 0; }
@@ -67,9 +67,10 @@ private:
     void adapt(uint32_t id, Buffers& out, std::span<const Triangle> triangles);
     void detect(uint32_t id, Buffers& out, size_t migrate_start, size_t rebuild_start);
     // Stage 2.
+    [[nodiscard]] bool leaf_intact(uint32_t id) const;
     void collect_region(uint32_t root, Region& region) const;
     void build_region(Region& region, std::span<const Triangle> triangles) const;
-    uint32_t apply_region(const Region& region, uint32_t scratch, uint32_t id, uint32_t parent);
+    uint32_t apply_region(Region& region, uint32_t scratch, uint32_t id, uint32_t parent, size_t& reused);
     uint64_t rebuild(std::span<const uint32_t> roots, std::span<const Triangle> triangles);
     // Stage 3.
     uint64_t migrate(std::vector<uint32_t>& nodes);
@@ -85,6 +86,8 @@ private:
     // Import and export.
     void import(const Bvh& bvh);
     uint32_t finish_import(uint32_t id);
+    uint32_t count_leaves(uint32_t id);
+    int emit(uint32_t id, uint32_t index, uint32_t pair, uint32_t slot, int depth);
     int export_bvh();
     void full_rebuild(std::span<const Triangle> triangles);
     void refresh_boxes();
@@ -102,6 +105,7 @@ private:
     std::vector<uint32_t> forwarded_;  // the entries of forward_ to clear
     Bvh bvh_;
     std::vector<uint32_t> source_;     // bvh_ node -> dynamic node
+    std::vector<uint32_t> leaves_;     // export: leaves under each node
     AdaptStageTimes times_;
 };
 
