@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <cstring>
 #include <exception>
 #include <filesystem>
 #include <fstream>
@@ -16,7 +17,9 @@
 #include "rayforge/core/memory_budget.h"
 #include "rayforge/io/image_io.h"
 #include "rayforge/io/scene_io.h"
+#include "rayforge/scene/scene.h"
 #include "test_paths.h"
+#include "../fuzz/fuzz_animation.h"
 
 namespace rf {
 namespace {
@@ -162,6 +165,74 @@ TEST(FuzzRegressionsFiles, FifoIsNotARegularFile) {
     const std::string gltf = dir + "/pipe.gltf";
     std::ofstream(gltf) << R"({"asset": {"version": "2.0"}, "buffers": [{"uri": "pipe.png", "byteLength": 4}]})";
     EXPECT_THROW(load_gltf(gltf), Error);
+}
+
+// ---- animation: tests/data/fuzz_repro/{aff,json_scene,gltf,glb}_*.{aff,json,gltf,glb} ----
+// Inputs of the scene-format fuzz targets, replayed as the harness runs them:
+// next to the harness's scratch files, loaded (rf::Error is an accepted
+// outcome), then animated under fuzz/fuzz_animation.h's checks.
+
+// The files the harnesses write next to the input (fuzz_common.h, fuzz_json_scene.cpp).
+void write_harness_files(const std::string& dir) {
+    auto write = [&](const std::string& name, const std::string& bytes) {
+        std::ofstream(dir + "/" + name, std::ios::binary) << bytes;
+    };
+    write("t.ppm", std::string("P6\n2 2\n255\n") + std::string(12, '\x80'));
+    const float quad[] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0};
+    const uint16_t indices[] = {0, 1, 2, 0, 2, 3};
+    write("buf.bin", std::string(reinterpret_cast<const char*>(quad), sizeof quad) +
+                         std::string(reinterpret_cast<const char*>(indices), sizeof indices));
+    write("m.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    write("m.ply",
+          "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+          "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+}
+
+struct AnimationRepro {
+    std::string path, target;  // target: aff, json_scene, gltf or glb (the file name's prefix)
+};
+
+std::vector<AnimationRepro> animation_repros() {
+    std::vector<AnimationRepro> out;
+    std::error_code ec;
+    for (const auto& entry : fs::directory_iterator(test::data_path("fuzz_repro"), ec)) {
+        const std::string name = entry.path().filename().string();
+        for (const char* target : {"aff_", "json_scene_", "gltf_", "glb_"})
+            if (name.rfind(target, 0) == 0) out.push_back({entry.path().string(), std::string(target, std::strlen(target) - 1)});
+    }
+    std::sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.path < b.path; });
+    return out;
+}
+
+// "" when the reproducer loads and animates consistently or throws rf::Error while loading.
+std::string replay_animation_repro(const AnimationRepro& repro, const std::string& dir) {
+    write_harness_files(dir);
+    const std::string input = dir + "/input" + fs::path(repro.path).extension().string();
+    fs::copy_file(repro.path, input, fs::copy_options::overwrite_existing);
+    Scene scene;
+    try {
+        if (repro.target == "aff") scene = load_aff(input), scene.finalize();
+        else if (repro.target == "json_scene") scene = load_json_scene(input), scene.finalize();
+        else scene = load_gltf(input);
+    } catch (const Error&) {
+        return "";
+    } catch (const std::exception& e) {
+        return std::string("std::exception: ") + e.what();
+    }
+    try {
+        return fuzz::check_animation(scene);
+    } catch (const std::exception& e) {
+        return std::string("escaped the animation: ") + e.what();
+    }
+}
+
+TEST(FuzzRegressionsAnimation, ReproducersLoadOrThrowAndAnimateConsistently) {
+    const std::vector<AnimationRepro> repros = animation_repros();
+    ASSERT_FALSE(repros.empty()) << "no tests/data/fuzz_repro/{aff,json_scene,gltf,glb}_* reproducers";
+    const size_t previous = set_memory_budget(size_t(256) << 20);
+    const std::string dir = test::temp_dir("fuzz_animation_repro");
+    for (const AnimationRepro& repro : repros) EXPECT_EQ(replay_animation_repro(repro, dir), "") << repro.path;
+    set_memory_budget(previous);
 }
 
 }  // namespace

@@ -82,6 +82,10 @@ void add_update_options(CLI::App* cmd, AccelArgs& a) {
     cmd->add_option("--cluster-max-size", a.update.clusters.max_size, "clusters: MaxSize (default 50)")
         ->check(CLI::Range(1e-3f, 1e6f))
         ->group(group);
+    cmd->add_flag("--cluster-subtrees", a.update.clusters.cluster_subtrees,
+                  "clusters: give each cluster its own small SAH tree, built once and refitted (not in the thesis; "
+                  "leaves of --leaf-size triangles instead of whole clusters)")
+        ->group(group);
     cmd->add_option("--cluster-leaf", a.update.clusters.leaf_triangles,
                     "clusters: the build over clusters stops at nodes of at most this many triangles (default 32)")
         ->check(CLI::Range(1, 64))

@@ -116,6 +116,14 @@ int run_info(const InfoArgs& args) {
     std::printf("camera:     eye %s target %s up %s fov %g%s\n", format_vec(camera.eye).c_str(),
                 format_vec(camera.target).c_str(), format_vec(camera.up).c_str(), double(camera.vfov_degrees),
                 scene.camera ? "" : " (default)");
+    if (scene.animated()) {
+        const Animation& a = scene.animation;
+        std::printf("animation:  %g to %g s, %d frames at %g fps; %zu moving instances, %zu deformed meshes "
+                    "(%zu vertex-keyframed, %zu morphed, %zu skinned)%s\n",
+                    double(a.start), double(a.end), a.frame_count(), double(a.frames_per_second),
+                    a.instances.size(), a.vertex_keyframes.size() + a.morphs.size() + a.skins.size(),
+                    a.vertex_keyframes.size(), a.morphs.size(), a.skins.size(), a.camera ? ", camera path" : "");
+    }
     std::printf("memory:     %.2f MiB scene (meshes + textures), %.2f MiB flattened geometry\n",
                 mib(scene.memory_bytes()), mib(geometry.memory_bytes()));
     std::printf("load time:  %.1f ms (parsing, texture decoding, validation)\n", load_ms);
