@@ -1,6 +1,6 @@
 // Cluster generation for cluster-based BVH builds (Garanzha 2014, ch. 3;
-// Garanzha, "Efficient clustered BVH update algorithm for highly-dynamic
-// models", EGSR 2009).
+// Garanzha 2009, "The Use of Precomputed Triangle Clusters for Accelerated
+// Ray Tracing in Dynamic Scenes", EGSR 2009).
 //
 // Heuristics: Acc(k) = reg(k) - sizeBound(k) * regBound(k), eqs. 3.1-3.8;
 // Naive(k) = sum of triangle areas / surface area of the cluster's box.

@@ -1,5 +1,6 @@
-// Cluster-based BVH builds (Garanzha 2014, ch. 3; EGSR 2009, "Efficient
-// clustered BVH update algorithm for highly-dynamic models").
+// Cluster-based BVH builds (Garanzha 2014, ch. 3; Garanzha 2009, "The Use
+// of Precomputed Triangle Clusters for Accelerated Ray Tracing in Dynamic
+// Scenes", EGSR 2009 / CGF 28(4)).
 //
 // Clusters of connected triangles are computed once, from the first frame's
 // positions (cluster_generation.cpp: Acc(k) or Naive(k), merging or
