@@ -7,7 +7,8 @@
 // instances, sorted and unique; SceneGeometry::update with it gives the
 // triangles a fresh build gives (so the change misses nothing); and the
 // scene back at its start is the scene first seen there (evaluation is a
-// function of t, not of the times before it).
+// function of t, not of the times before it), which is also the scene as
+// loaded (every loader returns its scene at Animation::start).
 #pragma once
 
 #include <cmath>
@@ -86,6 +87,7 @@ inline std::string check_animation(Scene& scene) {
     const size_t triangles = scene.triangle_count();
     const std::vector<float> times = animation_times(scene.animation);
     std::optional<SceneGeometry> geometry = detail::try_build(scene);
+    const detail::Snapshot as_loaded = detail::snapshot(scene);
     std::optional<detail::Snapshot> at_start;
     for (size_t i = 0; i < times.size(); ++i) {
         GeometryChange change;
@@ -96,7 +98,10 @@ inline std::string check_animation(Scene& scene) {
         }
         if (scene.triangle_count() != triangles) return "set_time changed the triangle count";
         if (std::string bad = detail::check_change(scene, change); !bad.empty()) return bad;
-        if (i == 0) at_start = detail::snapshot(scene);
+        if (i == 0) {
+            at_start = detail::snapshot(scene);
+            if (!(*at_start == as_loaded)) return "the scene as loaded differs from the scene at its start";
+        }
         if (i + 1 == times.size() && !(detail::snapshot(scene) == *at_start))
             return "the scene back at its start differs from the scene first seen there";
         std::optional<SceneGeometry> fresh = detail::try_build(scene);

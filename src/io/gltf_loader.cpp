@@ -24,6 +24,7 @@
 #include <tiny_gltf.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -266,6 +267,7 @@ private:
     void read_influences(const tinygltf::Primitive& primitive, const std::string& name, size_t vertex_count,
                          Skin& skin) const;
     void finish_animation(Scene& scene) const;
+    void account_animation(size_t count, size_t element_size);
 
     const std::string& path_;
     const tinygltf::Model& model_;
@@ -283,6 +285,11 @@ private:
     std::map<int, NodeTracks> node_tracks_;  // glTF node -> its TRS tracks
     std::map<int, Track> weight_tracks_;     // glTF node -> its morph weights track
     std::map<std::pair<int, int>, std::vector<uint32_t>> deformed_cache_;  // (mesh, node) -> rf meshes
+    // Bytes of the animation data so far (tracks, deformed copies of meshes,
+    // morph deltas, skins): a sampler is read once per channel using it and a
+    // deformed mesh copied once per node, so a small file could multiply them
+    // past the budget in many allocations each under it (found by fuzz_gltf).
+    size_t animation_bytes_ = 0;
     float key_start_ = 0.0f, key_end_ = 0.0f;
     bool has_keys_ = false;
     bool warned_channel_path_ = false;
@@ -882,6 +889,7 @@ void GltfReader::read_animation() {
             else if (path == "rotation") track = tracks.rotation = read_track(animation, channel.sampler, TrackKind::Rotation, 4, where);
             else track = tracks.scale = read_track(animation, channel.sampler, TrackKind::Scale, 3, where);
         }
+        account_animation(track.times.size() + track.values.size(), sizeof(float));
         key_start_ = has_keys_ ? std::min(key_start_, track.times.front()) : track.times.front();
         key_end_ = has_keys_ ? std::max(key_end_, track.times.back()) : track.times.back();
         has_keys_ = true;
@@ -942,6 +950,7 @@ const std::vector<uint32_t>& GltfReader::deformed_meshes(int node_index, Scene& 
         if (!convert_primitive(gltf.primitives[p], name, scene, mesh)) continue;
         const auto id = uint32_t(scene.meshes.size());
         const size_t vertex_count = mesh.positions.size();
+        account_animation(mesh.memory_bytes(), 2);  // the copy and its rest positions (Animation::rest_*)
         scene.meshes.push_back(std::move(mesh));
         if (morph_target_count(node.mesh) > 0)
             add_morph_targets(gltf.primitives[p], node_index, name, id, vertex_count, scene);
@@ -979,6 +988,7 @@ void GltfReader::add_morph_targets(const tinygltf::Primitive& primitive, int nod
     };
     bool normals = false;
     for (const auto& target : primitive.targets) normals = normals || attribute(target, "NORMAL") >= 0;
+    account_animation(targets * (normals ? 2 : 1) * vertex_count, sizeof(Vec3f));
     MorphTargets morph;
     morph.mesh = mesh_id;
     for (size_t t = 0; t < targets; ++t) {
@@ -1080,6 +1090,9 @@ void GltfReader::add_skin(int skin_index, const tinygltf::Primitive& primitive, 
     const std::string where = "skin " + std::to_string(skin_index);
     if (gltf.joints.empty()) fail(where + ": has no joints");
     if (gltf.joints.size() > 65536) fail(where + ": has more than 65536 joints");
+    // Per copy: joints and inverse binds, and as many joint matrices in each Scene::set_time.
+    account_animation(gltf.joints.size(), sizeof(uint32_t) + 2 * sizeof(Affine3f));
+    account_animation(vertex_count, sizeof(std::array<uint16_t, 4>) + sizeof(Vec4f));
     Skin skin;
     skin.mesh = mesh_id;
     for (int joint : gltf.joints) {
@@ -1108,6 +1121,12 @@ void GltfReader::add_skin(int skin_index, const tinygltf::Primitive& primitive, 
     }
     read_influences(primitive, name, vertex_count, skin);
     scene.animation.skins.push_back(std::move(skin));
+}
+
+void GltfReader::account_animation(size_t count, size_t element_size) {
+    const std::string what = path_ + ": animation data (tracks per channel, deformed meshes per node)";
+    animation_bytes_ += checked_array_bytes(what, count, element_size);
+    checked_array_bytes(what, animation_bytes_, 1);
 }
 
 void GltfReader::finish_animation(Scene& scene) const {

@@ -118,7 +118,8 @@ public:
 
     UpdateStats update(const GeometryChange& change) override {
         UpdateStats stats;
-        if (!change.geometry()) return stats;
+        stats.sah_cost = updater_->bvh().sah_cost(build_.sah.traversal, build_.sah.intersection);
+        if (!change.geometry()) return stats;  // nothing moved: nothing to do
         const auto start = std::chrono::steady_clock::now();
         bool topology_changed = false;
         parallel::with_threads(build_.threads, [&] {
@@ -205,7 +206,8 @@ public:
     }
     UpdateStats update(const GeometryChange& change) override {
         UpdateStats stats;
-        if (!change.geometry()) return stats;
+        stats.sah_cost = accel_->stats().sah_cost;
+        if (!change.geometry()) return stats;  // nothing moved: nothing to do
         const auto start = std::chrono::steady_clock::now();
         accel_ = build_accel(geometry_, build_);
         stats.update_ms = ms_since(start);

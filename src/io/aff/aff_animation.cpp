@@ -43,8 +43,23 @@ Scene AffParser::assemble_animated(double t) {
     return scene;
 }
 
+namespace {
+
+// The bytes of a node's tracks.
+size_t track_bytes(const AnimatedNode& n) {
+    size_t bytes = 0;
+    for (const Track* t : {&n.translation_track, &n.rotation_track, &n.scale_track, &n.visibility})
+        bytes += (t->times.size() + t->values.size()) * sizeof(float) + t->tcb.size() * sizeof(Vec3f);
+    return bytes;
+}
+
+}  // namespace
+
 // Per parser node, its AnimatedNode (or -1: static, not under or above an animated block).
-std::vector<int32_t> AffParser::add_nodes(rf::Animation& animation) const {
+// Every `x` block of a name gets its own copy of the name's keys: they count
+// against the budget with the geometry, or a small file with many blocks of
+// one name and many keys would need gigabytes (found by fuzz_aff).
+std::vector<int32_t> AffParser::add_nodes(rf::Animation& animation) {
     const size_t n = nodes_.size();
     std::vector<char> needed(n, 0);
     for (size_t i = 1; i < n; ++i)  // node 0, the world, is the identity
@@ -61,6 +76,7 @@ std::vector<int32_t> AffParser::add_nodes(rf::Animation& animation) const {
             an.matrix = node.local;
         } else if (auto it = animations_.find(node.name); it != animations_.end()) {
             an = it->second.node(node.name);
+            account(track_bytes(an));
         }
         an.parent = node.parent > 0 ? node_of[size_t(node.parent)] : -1;
         node_of[i] = int32_t(animation.nodes.size());

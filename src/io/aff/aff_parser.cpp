@@ -23,7 +23,7 @@ void note(const std::string& message) { std::cerr << "rayforge: note: " << messa
 
 AffParser::AffParser(std::string root, const LoadOptions& options)
     : root_(std::move(root)), options_(options), polygon_what_(root_ + ": AFF polygon array"),
-      geometry_what_(root_ + ": AFF geometry with all includes expanded") {}
+      geometry_what_(root_ + ": AFF geometry and keyframes with all includes expanded") {}
 
 Scene AffParser::load(std::optional<double> time) {
     nodes_.push_back(Node{});

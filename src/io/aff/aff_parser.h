@@ -199,7 +199,7 @@ private:
 
     // aff_animation.cpp: the scene with its animation (Scene::animation), evaluated at t
     Scene assemble_animated(double t);
-    [[nodiscard]] std::vector<int32_t> add_nodes(rf::Animation& animation) const;
+    [[nodiscard]] std::vector<int32_t> add_nodes(rf::Animation& animation);  // accounts the keys it copies
     void place_meshes(Scene& scene, const BlockStates& blocks, const std::vector<int32_t>& node_of,
                       const std::vector<size_t>& static_vertices);
     void add_vertex_keyframes(Scene& scene, uint32_t mesh, size_t first_vertex, const std::vector<size_t>& triangles);
