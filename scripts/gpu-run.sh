@@ -8,7 +8,9 @@
 #   memcheck | synccheck | racecheck   one compute-sanitizer tool
 #   bench       GPU rays (every kernel, protocol ray sets), path tracing, seed 000's builders
 #   builds      every device builder on the Stanford Dragon and 2 and 15 copies of it
-#   all         tests sanitizers bench builds
+#   animate     dynamic scenes: the device refit (1M triangles) and two-level tests' timings, and a
+#               per-frame rebuild on the device (hlbvh2, lbvh30, ploc) of builtin:explode (into builds.txt)
+#   all         tests sanitizers bench builds animate
 # Every run first checks the runtime (`rayforge info --devices`). Each step
 # prints one line, "gpu-run: STEP: ok|FAIL|UNAVAILABLE[: why]", also kept in
 # $OUT/summary.txt. RAYFORGE_REQUIRE_GPU=1 is exported: a gpu test that finds
@@ -38,9 +40,9 @@ summary="$out/summary.txt"
 steps=()
 for arg in "${@:-all}"; do
   case "$arg" in
-    all) steps+=(tests memcheck synccheck racecheck bench builds) ;;
+    all) steps+=(tests memcheck synccheck racecheck bench builds animate) ;;
     sanitizers) steps+=(memcheck synccheck racecheck) ;;
-    tests | memcheck | synccheck | racecheck | bench | builds) steps+=("$arg") ;;
+    tests | memcheck | synccheck | racecheck | bench | builds | animate) steps+=("$arg") ;;
     *) echo "usage: $0 [tests|sanitizers|memcheck|synccheck|racecheck|bench|builds|all]..." >&2; exit 2 ;;
   esac
 done
@@ -298,6 +300,28 @@ step_builds() {
   if ((rc == 0)); then report builds ok "$(grep -c median "$log") timed builds"; else report builds FAIL "$(grep -m1 error "$log")"; fi
 }
 
+# Issue 21's device figures: refit and two-level kernels (their tests print
+# kernel ms), and the structure rebuilt on the device every frame of an
+# explosion (render --frames prints each frame's update). Appended to
+# builds.txt: a device call brings back at most 8 files.
+step_animate() {
+  if [[ -n "$no_device" ]]; then
+    report animate FAIL "not run: no CUDA device: $no_device"
+    return
+  fi
+  local log="$out/builds.txt" rc=0 builder
+  {
+    echo "== animate: device refit and two-level tracer"
+    "$gpu_tests" --gtest_filter='GpuBvhRefit.*:GpuTwoLevel.*' || rc=1
+    for builder in hlbvh2 lbvh30 ploc; do
+      echo "== animate: builtin:explode rebuilt on the device every 11th frame, $builder"
+      "$rf" render builtin:explode --device cuda --update rebuild --builder "$builder" --frames 0:99:11 \
+        --res 256x192 -q -o "$scratch/explode_%03d.png" || rc=1
+    done
+  } >> "$log" 2>&1
+  if ((rc == 0)); then report animate ok "figures in builds.txt"; else report animate FAIL "$(grep -m1 -E 'error|FAILED' "$log")"; fi
+}
+
 if find_binaries; then
   check_runtime
   unpack_scenes
@@ -307,6 +331,7 @@ if find_binaries; then
       memcheck | synccheck | racecheck) step_sanitizer "$step" ;;
       bench) step_bench ;;
       builds) step_builds ;;
+      animate) step_animate ;;
     esac
   done
 else
