@@ -85,6 +85,10 @@ inline std::optional<SceneGeometry> try_build(const Scene& scene) {
 // reports them).
 inline std::string check_animation(Scene& scene) {
     const size_t triangles = scene.triangle_count();
+    if (scene.animation.empty()) {  // a still scene: nothing may move (and no geometry to build 12 times)
+        const GeometryChange change = scene.set_time(1.0f);
+        return change.geometry() || change.camera || scene.triangle_count() != triangles ? "a still scene moved" : "";
+    }
     const std::vector<float> times = animation_times(scene.animation);
     std::optional<SceneGeometry> geometry = detail::try_build(scene);
     const detail::Snapshot as_loaded = detail::snapshot(scene);

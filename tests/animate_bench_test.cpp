@@ -278,7 +278,10 @@ TEST(AnimateBench, ClusterTableHasARowPerSizeAndHeuristic) {
     config.progress = false;
     std::ostringstream log;
     const bench::ClusterTable table = bench::run_cluster_table(loaded, config, log);
-    ASSERT_EQ(table.rows.size(), 5u);  // 0, then Acc and Naive at 10 and 50
+    ASSERT_EQ(table.rows.size(), 6u);  // 0, then Acc and Naive at 10 and 50, Acc with subtrees at 50
+    EXPECT_TRUE(table.rows[5].subtrees);
+    EXPECT_EQ(table.rows[5].clusters, table.rows[3].clusters);  // the same partition as Acc 50/50
+    EXPECT_EQ(table.rows[4].clusters, table.rows[3].clusters);  // Naive merging stops at Acc's count
     EXPECT_TRUE(table.rows[0].ok);
     EXPECT_EQ(table.rows[0].clusters, table.triangles);
     EXPECT_GT(table.primary_rays, 0u);
@@ -295,7 +298,7 @@ TEST(AnimateBench, ClusterTableHasARowPerSizeAndHeuristic) {
     }
     std::ostringstream out;
     bench::print_cluster_tables(out, {table}, 2);
-    for (const char* expected : {"0 (triangles)", "10/10", "50/50", "acc", "naive", "clustering ms"})
+    for (const char* expected : {"0 (triangles)", "10/10", "50/50", "acc", "naive", "acc+sub", "clustering ms"})
         EXPECT_NE(out.str().find(expected), std::string::npos) << expected << "\n" << out.str();
 }
 

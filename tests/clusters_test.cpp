@@ -21,11 +21,13 @@
 #include "accel/bvh/builders/cluster_generation.h"
 #include "accel/bvh/builders/clusters.h"
 #include "accel/bvh/bvh_accel.h"
+#include "accel/bvh/layout/wide_bvh.h"
 #include "accel/dynamic/bvh_updater.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
 #include "backend/cpu/parallel.h"
 #include "rayforge/core/error.h"
+#include "rayforge/io/scene_io.h"
 
 namespace rf {
 namespace {
@@ -528,6 +530,94 @@ TEST(ClustersBench, DISABLED_Terrain800K) {
                     setup_ms, cluster_build, tri_build, tri_build / cluster_build, updater->bvh().sah_cost(),
                     tbvh.sah_cost(), trace_c, trace_t, 100.0 * (trace_c / trace_t - 1.0), double(ct.steps) / ct.rays,
                     double(tt.steps) / tt.rays, double(ct.prim_tests) / ct.rays, double(tt.prim_tests) / tt.rays);
+    }
+}
+
+}  // namespace
+}  // namespace rf
+
+namespace rf {
+namespace {
+
+// A still mesh (RF_CLUSTERS_SCENE, default the Stanford dragon): the leaf
+// limit L and the subtree option against the triangle build, BVH8, with the
+// per-frame stages timed and the traversal counted (pack tests per ray).
+TEST(ClustersBench, DISABLED_LeafProfile) {
+    const char* path = std::getenv("RF_CLUSTERS_SCENE");
+    const Scene scene = load_scene(path ? path : "/work/shared/scenes/stanford-dragon/dragon_vrip.ply");
+    SceneGeometry g = SceneGeometry::build(scene);
+    BuildOptions build;
+    build.threads = 2;
+    build.layout = Layout::Bvh8;
+    const auto rays = test::make_rays(g, 200000, 9);
+    parallel::with_threads(2, [&] {
+        auto t0 = std::chrono::steady_clock::now();
+        const ClusterPartition clusters = cluster_scene(scene, g, ClusterOptions{});
+        std::printf("%zu triangles, %zu clusters (%.1f each), clustering %.0f ms\n", g.size(), clusters.size(),
+                    double(g.size()) / clusters.size(), ms_since(t0));
+        Bvh tbvh;
+        const double tri_build = best_ms(3, [&] { tbvh = build_bvh_on_cpu(g.triangles, build); });
+        auto report = [&](const char* name, const Bvh& bvh, double build_ms, double tri_trace) {
+            WideBvh<8> wide;
+            const double collapse = best_ms(3, [&] { wide = collapse_bvh<8>(bvh, g.triangles); });
+            auto acc = make_wide_bvh_accel(g, bvh, build, 0.0, "bvh8");
+            std::vector<Hit> hits(rays.size());
+            double trace = 1e30;
+            for (int r = 0; r < 5; ++r) trace = std::min(trace, best_ms(1, [&] { acc->intersect(rays, hits); }));
+            TraversalTotals t;
+            acc->count_traversal(rays, false, t);
+            std::printf("%-22s build %6.1f + collapse %6.1f ms | packs %zu (fill %.2f), leaves %zu | trace %.1f ms (%+.1f%%) "
+                        "steps/ray %.1f tests/ray %.1f\n",
+                        name, build_ms, collapse, wide.packs.size(), double(g.size()) / (4.0 * wide.packs.size()),
+                        wide.leaf_count, trace, tri_trace > 0 ? 100.0 * (trace / tri_trace - 1.0) : 0.0,
+                        double(t.steps) / t.rays, double(t.prim_tests) / t.rays);
+            return trace;
+        };
+        const double tri_trace = report("triangles", tbvh, tri_build, 0.0);
+        const BuildOptions box = cluster_box_build_options(build);
+        for (const int leaf : {4, 8, 16, 32}) {
+            Bvh b;
+            const double ms = best_ms(3, [&] { b = build_cluster_bvh(g.triangles, clusters, box, leaf); });
+            report(("L=" + std::to_string(leaf)).c_str(), b, ms, tri_trace);
+        }
+        ClusterPartition sorted = clusters;
+        t0 = std::chrono::steady_clock::now();
+        ClusterSubtrees sub = build_cluster_subtrees(g.triangles, sorted, build);
+        std::printf("subtrees built once in %.0f ms\n", ms_since(t0));
+        for (const int leaf : {4, 8, 16}) {
+            Bvh b;
+            const double refit = best_ms(3, [&] { refit_cluster_subtrees(g.triangles, sorted, sub); });
+            const double ms = best_ms(3, [&] { b = build_cluster_bvh(g.triangles, sorted, box, leaf, &sub); });
+            std::printf("  subtree refit %.1f ms\n", refit);
+            report(("subtrees L=" + std::to_string(leaf)).c_str(), b, refit + ms, tri_trace);
+        }
+    });
+}
+
+}  // namespace
+}  // namespace rf
+
+namespace rf {
+namespace {
+
+// Prints a hash of the partitions of RF_CLUSTERS_SCENE (default the bunny)
+// under the four option sets, and the clustering times: a speed-up of the
+// generation must leave the hashes unchanged.
+TEST(ClustersBench, DISABLED_PartitionHash) {
+    const char* path = std::getenv("RF_CLUSTERS_SCENE");
+    const Scene scene = load_scene(path ? path : "/work/shared/scenes/stanford-bunny/bun_zipper.ply");
+    const SceneGeometry g = SceneGeometry::build(scene);
+    for (const ClusterOptions& o : kAllOptions) {
+        const auto t0 = std::chrono::steady_clock::now();
+        const ClusterPartition p = parallel::with_threads(2, [&] { return cluster_scene(scene, g, o); });
+        const double ms = ms_since(t0);
+        uint64_t h = 1469598103934665603ull;
+        auto mix = [&](uint64_t x) { h = (h ^ x) * 1099511628211ull; };
+        for (uint32_t x : p.first) mix(x);
+        for (uint32_t x : p.triangles) mix(x);
+        for (uint64_t x : p.vertex_refs) mix(x);
+        std::printf("%-12s %zu clusters, hash %016llx, %.0f ms\n", name_of(o).c_str(), p.size(),
+                    static_cast<unsigned long long>(h), ms);
     }
 }
 

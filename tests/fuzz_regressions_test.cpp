@@ -11,6 +11,7 @@
 #include <fstream>
 #include <iterator>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "rayforge/core/error.h"
@@ -233,6 +234,44 @@ TEST(FuzzRegressionsAnimation, ReproducersLoadOrThrowAndAnimateConsistently) {
     const std::string dir = test::temp_dir("fuzz_animation_repro");
     for (const AnimationRepro& repro : repros) EXPECT_EQ(replay_animation_repro(repro, dir), "") << repro.path;
     set_memory_budget(previous);
+}
+
+// Sets the memory budget for one scope.
+struct BudgetScope {
+    size_t previous;
+    explicit BudgetScope(size_t bytes) : previous(set_memory_budget(bytes)) {}
+    ~BudgetScope() { set_memory_budget(previous); }
+};
+
+// Found while fuzzing the animation (crafted inputs, make_animation_repros.py):
+// a deformed glTF mesh is copied per node using it (with all its morph
+// targets), and an AFF `k` block's keys per `x` block of its name, so a
+// small file asked for gigabytes in allocations each under the budget. Both
+// loaders now count these copies together against the budget.
+TEST(FuzzRegressionsAnimation, CopiesPerNodeCountAgainstTheBudget) {
+    const BudgetScope budget(size_t(16) << 20);  // the files need about 20 MB and 17 MB
+    const std::pair<const char*, const char*> cases[] = {
+        {"fuzz_repro/gltf_morph_targets_copied_per_node.gltf", "animation data (tracks per channel, deformed meshes"},
+        {"fuzz_repro/aff_keyframes_copied_per_transform_block.aff", "AFF geometry and keyframes"}};
+    for (const auto& [name, expected] : cases) {
+        try {
+            (void)load_scene(test::data_path(name));
+            ADD_FAILURE() << name << " loaded under a 16 MiB budget";
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+        }
+    }
+}
+
+// Under the fuzzers' budget the same files load and animate.
+TEST(FuzzRegressionsAnimation, CopiesPerNodeLoadUnderTheFuzzBudget) {
+    const BudgetScope budget(size_t(256) << 20);
+    Scene gltf = load_scene(test::data_path("fuzz_repro/gltf_morph_targets_copied_per_node.gltf"));
+    EXPECT_EQ(gltf.animation.morphs.size(), 120u);
+    EXPECT_EQ(fuzz::check_animation(gltf), "");
+    Scene aff = load_scene(test::data_path("fuzz_repro/aff_keyframes_copied_per_transform_block.aff"));
+    EXPECT_EQ(aff.animation.nodes.size(), 1501u);
+    EXPECT_EQ(fuzz::check_animation(aff), "");
 }
 
 }  // namespace

@@ -699,27 +699,45 @@ std::vector<double> runs_of(int repetitions, F&& f) {
     return runs;
 }
 
-ClusterRow cluster_row(LoadedScene& scene, int size, ClusterHeuristic heuristic, const ClusterTableConfig& config,
-                       const std::vector<RaySet>& sets, const SetAnswers& reference) {
+// `acc`: the plain Acc row of the same size, whose partition this row's
+// equals (subtrees; Naive merging stops at Acc's count): its cluster count is
+// reused and the setup is timed from the accel's first build, so the
+// 800K-triangle tables cluster once less per row.
+ClusterRow cluster_row(LoadedScene& scene, int size, ClusterHeuristic heuristic, bool subtrees,
+                       const ClusterTableConfig& config, const std::vector<RaySet>& sets, const SetAnswers& reference,
+                       const ClusterRow* acc) {
     ClusterRow row;
     row.size = size;
     row.heuristic = heuristic;
+    row.subtrees = subtrees;
     UpdateOptions update;
     update.method = UpdateMethod::Clusters;
     update.clusters.heuristic = heuristic;
     update.clusters.generation = config.generation;
     update.clusters.max_count = size;
     update.clusters.max_size = float(size);
+    update.clusters.cluster_subtrees = subtrees;
     BuildOptions build = config.build;
     build.threads = config.threads;
     try {
-        // The clustering alone, timed as the accel runs it (the same partition).
-        const auto start = Clock::now();
-        row.clusters = cluster_scene(scene.scene, scene.geometry, update.clusters).size();
-        row.clustering_ms = ms_since(start);
+        const bool reuse = acc && acc->ok && (subtrees || config.generation == ClusterGeneration::Merge);
+        if (!reuse) {  // the clustering alone, timed as the accel runs it (the same partition)
+            const auto start = Clock::now();
+            row.clusters = cluster_scene(scene.scene, scene.geometry, update.clusters).size();
+            row.clustering_ms = ms_since(start);
+        }
         const std::unique_ptr<DynamicAccel> accel = build_dynamic_accel(scene.scene, scene.geometry, build, update);
         const GeometryChange all = everything(scene.scene);
-        row.build_ms = median(runs_of(config.repetitions, [&] { return accel->update(all).update_ms; }));
+        std::vector<double> canonical;  // the per-frame build without the layout (the first build has none)
+        row.build_ms = median(runs_of(config.repetitions, [&] {
+            const UpdateStats stats = accel->update(all);
+            canonical.push_back(stats.update_ms - stats.layout_ms);
+            return stats.update_ms;
+        }));
+        if (reuse) {
+            row.clusters = acc->clusters;
+            row.clustering_ms = std::max(0.0, accel->initial_build_ms() - median(canonical));
+        }
         const FrameTraces traces = trace_sets(*accel, sets, config.repetitions, &reference, nullptr);
         row.primary_ms = traces.trace_ms[0];
         row.diffuse_ms = traces.trace_ms[1];
@@ -770,7 +788,18 @@ ClusterTable run_cluster_table(LoadedScene& scene, const ClusterTableConfig& con
                 if (config.progress)
                     log << scene.spec.name << ": cluster table, " << to_string(heuristic) << ' ' << size << '/' << size
                         << '\n' << std::flush;
-                table.rows.push_back(cluster_row(scene, size, heuristic, config, sets, reference));
+                const ClusterRow* acc = nullptr;
+                for (const ClusterRow& r : table.rows)
+                    if (r.size == size && r.heuristic == ClusterHeuristic::Acc && !r.subtrees) acc = &r;
+                table.rows.push_back(cluster_row(scene, size, heuristic, false, config, sets, reference, acc));
+            }
+            if (size == config.subtree_size) {
+                if (config.progress)
+                    log << scene.spec.name << ": cluster table, acc+subtrees " << size << '/' << size << '\n' << std::flush;
+                const ClusterRow* acc = nullptr;
+                for (const ClusterRow& r : table.rows)
+                    if (r.size == size && r.heuristic == ClusterHeuristic::Acc && !r.subtrees) acc = &r;
+                table.rows.push_back(cluster_row(scene, size, ClusterHeuristic::Acc, true, config, sets, reference, acc));
             }
         }
     });
@@ -790,7 +819,7 @@ void print_cluster_tables(std::ostream& out, const std::vector<ClusterTable>& ta
             if (row.size == 0) none = &row;
         for (const ClusterRow& row : t.rows) {
             out << pad(row.size == 0 ? "0 (triangles)" : std::to_string(row.size) + "/" + std::to_string(row.size), 17)
-                << pad(row.size == 0 ? "-" : to_string(row.heuristic), 10);
+                << pad(row.size == 0 ? "-" : to_string(row.heuristic) + (row.subtrees ? "+sub" : ""), 10);
             if (!row.ok) {
                 out << "  n/a (" << row.error << ")\n";
                 continue;
@@ -805,7 +834,9 @@ void print_cluster_tables(std::ostream& out, const std::vector<ClusterTable>& ta
         }
     }
     if (!tables.empty())
-        out << "(clustering ms: the one-time clustering (cluster_scene); build ms: the per-frame build, median; vs tris: primary + diffuse trace time against the "
+        out << "(clustering ms: the one-time clustering (cluster_scene; for naive and +sub rows, which reuse acc's "
+               "partition: the accel's first build less a per-frame build, so +sub includes its subtrees' SAH builds); "
+               "+sub: ClusterOptions::cluster_subtrees; build ms: the per-frame build, median; vs tris: primary + diffuse trace time against the "
                "triangle build's)\n";
 }
 

@@ -132,14 +132,16 @@ struct ClusterTableConfig {
     int threads = 0;
     int repetitions = 3;       // builds and traces (median)
     bool progress = true;
+    int subtree_size = 50;     // an extra Acc row with ClusterOptions::cluster_subtrees at this size (0: none)
 };
 
 struct ClusterRow {
     int size = 0;              // MaxCount = MaxSize (0: the triangle build)
     ClusterHeuristic heuristic = ClusterHeuristic::Acc;
+    bool subtrees = false;     // ClusterOptions::cluster_subtrees
     bool ok = false;
     std::string error;
-    double clustering_ms = 0.0;  // the one-time clustering (on frame 0's positions)
+    double clustering_ms = 0.0;  // the one-time setup (clustering on frame 0's positions, subtrees): initial build - build_ms
     size_t clusters = 0;
     double build_ms = 0.0;       // the per-frame build (over cluster boxes, or triangles)
     double primary_ms = 0.0, diffuse_ms = 0.0;

@@ -259,7 +259,7 @@ private:
     const std::vector<uint32_t>& deformed_meshes(int node_index, Scene& scene);
     void add_morph_targets(const tinygltf::Primitive& primitive, int node_index, const std::string& name,
                            uint32_t mesh_id, size_t vertex_count, Scene& scene);
-    std::vector<Vec3f> read_deltas(int accessor_index, const std::string& what, size_t vertex_count) const;
+    std::vector<Vec3f> read_deltas(int accessor_index, const std::string& what, size_t vertex_count);
     void add_skin(int skin_index, const tinygltf::Primitive& primitive, const std::string& name, uint32_t mesh_id,
                   size_t vertex_count, Scene& scene);
     std::vector<float> read_skin_attribute(int accessor_index, const std::string& what, size_t vertex_count,
@@ -288,8 +288,10 @@ private:
     // Bytes of the animation data so far (tracks, deformed copies of meshes,
     // morph deltas, skins): a sampler is read once per channel using it and a
     // deformed mesh copied once per node, so a small file could multiply them
-    // past the budget in many allocations each under it (found by fuzz_gltf).
+    // past the budget in many allocations each under it
+    // (tests/data/fuzz_repro/gltf_morph_targets_copied_per_node.gltf).
     size_t animation_bytes_ = 0;
+    std::map<std::pair<int, size_t>, std::vector<Vec3f>> delta_cache_;  // (accessor, vertex count) -> deltas read
     float key_start_ = 0.0f, key_end_ = 0.0f;
     bool has_keys_ = false;
     bool warned_channel_path_ = false;
@@ -960,7 +962,10 @@ const std::vector<uint32_t>& GltfReader::deformed_meshes(int node_index, Scene& 
     return deformed_cache_[key] = std::move(ids);
 }
 
-std::vector<Vec3f> GltfReader::read_deltas(int accessor_index, const std::string& what, size_t vertex_count) const {
+// Each accessor is read once: a morphed mesh is converted again for every
+// node using it, and reading the same deltas again per node was slow.
+std::vector<Vec3f> GltfReader::read_deltas(int accessor_index, const std::string& what, size_t vertex_count) {
+    if (auto it = delta_cache_.find({accessor_index, vertex_count}); it != delta_cache_.end()) return it->second;
     std::vector<Vec3f> out;
     budgeted_resize(out, vertex_count, path_ + ": " + what);
     if (accessor_index < 0) return out;  // a target without this attribute moves nothing
@@ -971,7 +976,7 @@ std::vector<Vec3f> GltfReader::read_deltas(int accessor_index, const std::string
         out[i] = Vec3f(values[3 * i], values[3 * i + 1], values[3 * i + 2]);
         if (!is_finite(out[i])) fail(what + ": delta " + std::to_string(i) + " is not finite");
     }
-    return out;
+    return delta_cache_[{accessor_index, vertex_count}] = out;
 }
 
 void GltfReader::add_morph_targets(const tinygltf::Primitive& primitive, int node_index, const std::string& name,

@@ -312,3 +312,52 @@ k camera
   3 0 0 16  0 0 0
 }
 """)
+
+
+def gltf_with_accessors(accessors, extra):
+    """A glTF with one data-URI buffer holding `accessors` ((struct format, values, accessor fields) each)."""
+    data, views, accs = b"", [], []
+    for fmt, values, fields in accessors:
+        chunk = struct.pack("<%d%s" % (len(values), fmt), *values)
+        chunk += b"\0" * (-len(chunk) % 4)
+        views.append({"buffer": 0, "byteOffset": len(data), "byteLength": len(chunk)})
+        accs.append(dict(fields, bufferView=len(views) - 1))
+        data += chunk
+    g = {"asset": {"version": "2.0"},
+         "buffers": [{"uri": "data:application/octet-stream;base64," + base64.b64encode(data).decode(),
+                      "byteLength": len(data)}],
+         "bufferViews": views, "accessors": accs}
+    g.update(extra)
+    return g
+
+
+F32 = 5126
+ANIM_ACCESSORS = [
+    ("f", [0, 0, 0, 1, 0, 0, 0, 1, 0], {"componentType": F32, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}),
+    ("f", [0, 1], {"componentType": F32, "count": 2, "type": "SCALAR", "min": [0], "max": [1]}),
+    ("H", [0, 1, 0, 0] * 3, {"componentType": 5123, "count": 3, "type": "VEC4"}),
+    ("f", [0.5, 0.5, 0, 0] * 3, {"componentType": F32, "count": 3, "type": "VEC4"}),
+    ("f", [0, 0, 1] * 3, {"componentType": F32, "count": 3, "type": "VEC3"}),
+    ("f", [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1] * 2, {"componentType": F32, "count": 2, "type": "MAT4"}),
+    ("f", [0, 0, 1, 0.5, 0, 0, 0, 0, 0.2, 1, 0, 0], {"componentType": F32, "count": 12, "type": "SCALAR"}),
+    ("f", [0, 0, 0, 1, 0, 1, 0, 0], {"componentType": F32, "count": 2, "type": "VEC4"}),
+]
+# A mesh both skinned and morphed (cubic-spline weights), also used by a plain
+# node; the skin's joints are the skinned node itself and a node outside the scene.
+write("gltf/animation_skin_morph_shared_mesh.gltf", json.dumps(gltf_with_accessors(ANIM_ACCESSORS, {
+    "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "JOINTS_0": 2, "WEIGHTS_0": 3},
+                                "targets": [{"POSITION": 4}, {"POSITION": 4}]}]}],
+    "skins": [{"joints": [1, 3], "inverseBindMatrices": 5}],
+    "nodes": [{"children": [1, 2]}, {"mesh": 0, "skin": 0}, {"mesh": 0, "translation": [2, 0, 0]}, {"name": "outside"}],
+    "scenes": [{"nodes": [0]}], "scene": 0,
+    "animations": [{"samplers": [{"input": 1, "output": 6, "interpolation": "CUBICSPLINE"}, {"input": 1, "output": 7}],
+                    "channels": [{"sampler": 0, "target": {"node": 1, "path": "weights"}},
+                                 {"sampler": 1, "target": {"node": 3, "path": "rotation"}},
+                                 {"sampler": 0, "target": {"node": 2, "path": "weights"}}]}]})))
+# An animated node shared by two parents (glTF forbids it; the loader must stay consistent).
+write("gltf/animation_shared_node.gltf", json.dumps(gltf_with_accessors(ANIM_ACCESSORS, {
+    "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+    "nodes": [{"children": [2], "translation": [5, 0, 0]}, {"children": [2], "translation": [-5, 0, 0]}, {"mesh": 0}],
+    "scenes": [{"nodes": [0, 1]}], "scene": 0,
+    "animations": [{"samplers": [{"input": 1, "output": 7, "interpolation": "STEP"}],
+                    "channels": [{"sampler": 0, "target": {"node": 2, "path": "rotation"}}]}]})))

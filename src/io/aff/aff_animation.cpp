@@ -45,10 +45,10 @@ Scene AffParser::assemble_animated(double t) {
 
 namespace {
 
-// The bytes of a node's tracks.
-size_t track_bytes(const AnimatedNode& n) {
+// The bytes of an animation's tracks.
+size_t track_bytes(const Animation& a) {
     size_t bytes = 0;
-    for (const Track* t : {&n.translation_track, &n.rotation_track, &n.scale_track, &n.visibility})
+    for (const Track* t : {&a.transl, &a.rot, &a.scale, &a.visibility})
         bytes += (t->times.size() + t->values.size()) * sizeof(float) + t->tcb.size() * sizeof(Vec3f);
     return bytes;
 }
@@ -58,7 +58,8 @@ size_t track_bytes(const AnimatedNode& n) {
 // Per parser node, its AnimatedNode (or -1: static, not under or above an animated block).
 // Every `x` block of a name gets its own copy of the name's keys: they count
 // against the budget with the geometry, or a small file with many blocks of
-// one name and many keys would need gigabytes (found by fuzz_aff).
+// one name and many keys would need gigabytes
+// (tests/data/fuzz_repro/aff_keyframes_copied_per_transform_block.aff).
 std::vector<int32_t> AffParser::add_nodes(rf::Animation& animation) {
     const size_t n = nodes_.size();
     std::vector<char> needed(n, 0);
@@ -75,8 +76,8 @@ std::vector<int32_t> AffParser::add_nodes(rf::Animation& animation) {
         if (!node.animated) {
             an.matrix = node.local;
         } else if (auto it = animations_.find(node.name); it != animations_.end()) {
+            account(track_bytes(it->second));
             an = it->second.node(node.name);
-            account(track_bytes(an));
         }
         an.parent = node.parent > 0 ? node_of[size_t(node.parent)] : -1;
         node_of[i] = int32_t(animation.nodes.size());

@@ -66,13 +66,14 @@ struct MeshData {
     std::span<const uint32_t> indices;
     std::vector<float> area;
     std::vector<Vec3f> normal;   // unit, or zero for a degenerate triangle
+    std::vector<Vec4f> normal_area;  // (normal, area) packed: Acc's projected-area loop reads one line per triangle
     double avg_sphere_area = 0;  // AvgSA
 };
 
 Vec3f corner(const MeshData& m, uint32_t t, int k) { return m.positions[m.indices[3 * size_t{t} + k]]; }
 
 MeshData mesh_data(std::span<const Vec3f> positions, std::span<const uint32_t> indices) {
-    MeshData m{positions, indices, {}, {}, 0.0};
+    MeshData m{positions, indices, {}, {}, {}, 0.0};
     const uint32_t n = static_cast<uint32_t>(indices.size() / 3);
     for (uint32_t i : indices) {
         if (i >= positions.size()) throw Error("clusters: vertex index " + std::to_string(i) + " out of range");
@@ -93,6 +94,8 @@ MeshData mesh_data(std::span<const Vec3f> positions, std::span<const uint32_t> i
             radius[t] = std::sqrt(std::max({length_squared(a - o), length_squared(b - o), length_squared(c - o)}));
         }
     });
+    m.normal_area.resize(n);
+    for (uint32_t t = 0; t < n; ++t) m.normal_area[t] = Vec4f(m.normal[t].x, m.normal[t].y, m.normal[t].z, m.area[t]);
     double sum = 0.0;
     for (float r : radius) sum += r;  // sequential: the same sum for any thread count
     const double r = n ? sum / n : 0.0;
@@ -176,9 +179,8 @@ public:
         const Vec3f n_avg = len > 1e-3f * static_cast<float>(count)  // eq. 3.2, or the fallback
                                 ? sum * (1.0f / len)
                                 : m_.normal[b ? larger_triangle(m_, a.largest, b->largest) : a.largest];
-        double area_p = 0.0;  // eq. 3.3
-        for (uint32_t t : a.tris) area_p += m_.area[t] * std::fabs(dot(n_avg, m_.normal[t]));
-        if (b) for (uint32_t t : b->tris) area_p += m_.area[t] * std::fabs(dot(n_avg, m_.normal[t]));
+        double area_p = projected_area(a, n_avg);  // eq. 3.3
+        if (b) area_p = projected_area(*b, n_avg, area_p);
         const double area_c = kPi * r2;                           // eq. 3.1
         const double reg = area_c > 0.0 ? area_p / area_c : 0.0;  // eq. 3.4
         const double verts = static_cast<double>(b ? union_count(a.verts, b->verts) : a.verts.size());
@@ -191,6 +193,16 @@ public:
     }
 
 private:
+    // Continues the sum in the same order as one loop over a's then b's
+    // triangles would: the result is bit-identical.
+    [[nodiscard]] double projected_area(const Cluster& c, Vec3f n_avg, double sum = 0.0) const {
+        for (uint32_t t : c.tris) {
+            const Vec4f& na = m_.normal_area[t];
+            sum += na.w * std::fabs(dot(n_avg, Vec3f(na.x, na.y, na.z)));
+        }
+        return sum;
+    }
+
     const MeshData& m_;
     ClusterOptions o_;
 };
@@ -227,13 +239,12 @@ public:
                 clusters_[t].adj.assign(nb.begin(), nb.end());
             }
         });
+        stamp_.assign(n, 0u);
         push_initial_edges(n);
         size_t alive = n;
         while (alive > target && !queue_.empty()) {
             const MergeQueue::Entry e = queue_.pop();
-            const Cluster& a = clusters_[e.a];
-            const Cluster& b = clusters_[e.b];
-            if (!a.alive || !b.alive || a.version != e.version_a || b.version != e.version_b) continue;
+            if (stamp_[e.a] != e.version_a || stamp_[e.b] != e.version_b) continue;
             contract(e.a, e.b);
             --alive;
         }
@@ -277,6 +288,8 @@ private:
         Cluster& cb = clusters_[b];
         absorb(m_, ca, cb);
         cb.alive = false;
+        stamp_[a] = ca.version;
+        stamp_[b] = kDead;
         std::vector<uint32_t> adj;
         adj.reserve(ca.adj.size() + cb.adj.size());
         std::set_union(ca.adj.begin(), ca.adj.end(), cb.adj.begin(), cb.adj.end(), std::back_inserter(adj));
@@ -299,6 +312,10 @@ private:
     const DualGraph& g_;
     const Scorer& s_;
     std::vector<Cluster> clusters_;
+    // Per cluster its version, kDead once absorbed: stale queue entries are
+    // found without touching the (large, scattered) clusters.
+    static constexpr uint32_t kDead = std::numeric_limits<uint32_t>::max();
+    std::vector<uint32_t> stamp_;
     MergeQueue queue_;
 };
 

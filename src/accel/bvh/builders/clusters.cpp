@@ -87,13 +87,16 @@ public:
 
     Bvh run(size_t triangle_count) {
         count(0);
-        out_.nodes.reserve(src_.nodes.size());
+        out_.nodes.reserve(src_.nodes.size() + (sub_ ? sub_->nodes.size() : 0));
         out_.nodes.emplace_back();
         emit(0, 0, 0);
         RF_ASSERT(cursor_ == triangle_count, "every triangle in one leaf");
         out_.prim_indices.resize(triangle_count);
         parallel::for_range(size_t{0}, jobs_.size(), size_t{64}, [&](size_t lo, size_t hi) {
             for (size_t j = lo; j < hi; ++j) fill(jobs_[j]);
+        });
+        parallel::for_range(size_t{0}, grafts_.size(), size_t{256}, [&](size_t lo, size_t hi) {
+            for (size_t j = lo; j < hi; ++j) copy_graft(grafts_[j]);
         });
         return std::move(out_);
     }
@@ -105,6 +108,12 @@ private:
         uint32_t first;
         uint32_t node;
         uint32_t slot_begin, slot_end;  // equal: the whole subtree of `node`
+    };
+
+    // A cluster's subtree copied under output node `root`: its other nodes
+    // keep their depth-first order in nodes [block, block + count - 1).
+    struct Graft {
+        uint32_t cluster, root, block, first_slot;
     };
 
     uint32_t cluster_size(uint32_t c) const { return clusters_.first[c + 1] - clusters_.first[c]; }
@@ -182,19 +191,21 @@ private:
             return;
         }
         jobs_.push_back(Job{static_cast<uint32_t>(cursor_), n, slot, slot + 1});
-        graft_node(sub_->node_first[c], sub_->node_first[c], static_cast<uint32_t>(cursor_), o);
+        const uint32_t block = static_cast<uint32_t>(out_.nodes.size());
+        out_.nodes.resize(out_.nodes.size() + (sub_->node_first[c + 1] - sub_->node_first[c] - 1));
+        grafts_.push_back(Graft{c, o, block, static_cast<uint32_t>(cursor_)});
         cursor_ += size;
     }
-    void graft_node(uint32_t base, uint32_t i, uint32_t first_slot, uint32_t o) {
-        const BvhNode& node = sub_->nodes[i];
-        if (node.is_leaf()) {
-            out_.nodes[o] = BvhNode{node.bounds, first_slot + node.first, node.count};
-            return;
+    // Node i of the subtree (0: its root) with its references made absolute;
+    // sibling pairs stay adjacent, so a pair at i maps to block + i - 1.
+    void copy_graft(const Graft& g) {
+        const uint32_t base = sub_->node_first[g.cluster], end = sub_->node_first[g.cluster + 1];
+        for (uint32_t i = base; i < end; ++i) {
+            const BvhNode& node = sub_->nodes[i];
+            const BvhNode copy = node.is_leaf() ? BvhNode{node.bounds, g.first_slot + node.first, node.count}
+                                                : BvhNode{node.bounds, g.block + node.first - 1, 0};
+            out_.nodes[i == base ? g.root : g.block + (i - base) - 1] = copy;
         }
-        const uint32_t c = new_pair();
-        out_.nodes[o] = BvhNode{node.bounds, c, 0};
-        graft_node(base, base + node.first, first_slot, c);
-        graft_node(base, base + node.first + 1, first_slot, c + 1);
     }
 
     uint32_t copy_slots(uint32_t begin, uint32_t end, uint32_t at) {
@@ -223,6 +234,7 @@ private:
     const ClusterSubtrees* sub_;
     std::vector<uint32_t> tris_;  // per source node: triangles of its clusters
     std::vector<Job> jobs_;
+    std::vector<Graft> grafts_;
     Bvh out_;
     size_t cursor_ = 0;
 };

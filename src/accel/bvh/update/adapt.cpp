@@ -11,10 +11,12 @@
 //     locked; descendants in RebuildBuffer whose box meets OverlapBV(NL,NR)
 //     are unlocked; N's descendants leave MigrateBuffer);
 //  2. rebuild: every root in RebuildBuffer is rebuilt over its region's
-//     primitives (the triangles of the region's leaves, one by one, and the
-//     locked subtrees below it as indivisible boxes weighted by Count) by a
-//     binned SAH over boxes (this file: RegionBuilder), leaves of at most
-//     max_leaf_size triangles; Count and SavedSAHCost recomputed;
+//     primitives (the region's leaf boxes and the locked subtrees below it,
+//     as indivisible boxes weighted by Count; a leaf whose box grew past
+//     kLeafGrowth times its area when built gives its triangles one by one
+//     instead, so leaves spanning separating fragments are regrouped) by a
+//     binned SAH over boxes (this file: RegionBuilder), new leaves of at
+//     most max_leaf_size triangles; Count and SavedSAHCost recomputed;
 //  3. migration: MigrateBuffer's nodes in four passes: detach N (its parent
 //     is freed, its sibling takes the parent's place; N is freed and its
 //     children wait), re-adapt the boxes upward from the detachment point
@@ -38,8 +40,9 @@
 //    resolved by that detach.
 //  - An unlocked descendant exploded node leaves RebuildBuffer: it is
 //    absorbed into the ancestor's region.
-//  - Region primitives: the text says "leaf boxes"; the triangles of the
-//    leaves are used one by one, so exploded leaves are regrouped.
+//  - Region primitives: the text's leaf boxes (four times fewer primitives
+//    than triangles, and the leaves' nodes are kept), except leaves grown
+//    past kLeafGrowth (see stage 2), whose triangles are regrouped.
 //  - Insertion SAH: eq. 1.3 of the configuration at X (see above).
 //  - Counts are kept exact: a detach subtracts Count(N) from every
 //    ancestor, an insertion adds it back on its path (the text's early stop
@@ -56,20 +59,37 @@
 //    rebuilt subtree. Rare; the tests count it.
 //
 // Data layout: AdaptNode (48 bytes: box, children, parent, Count,
-// SavedSAHCost, leaf size, Locked) in one linear array managed by the node
-// memory manager (node_memory_manager.h: an octary tree of free counts;
-// every node is allocated at the free slot nearest its parent); a leaf's
-// triangles sit in a block of max_leaf_size slots at its node index. The
+// SavedSAHCost (a leaf: its area when built), leaf size, Locked) in one
+// linear array managed by the node memory manager (node_memory_manager.h:
+// an octary tree of free counts; every node is allocated at the free slot
+// nearest its parent); a leaf's triangles sit in a block of max_leaf_size
+// slots at its node index. A rebuilt region's new nodes take the region's
+// old slots in address order, depth first (no search; the memory manager
+// only for the difference), so they stay where the region was. A region's
+// scratch tree is one array of 2P - 1 slots in which every subtree owns a
+// fixed range (RegionBuilder), so tasks never merge their output. The
 // canonical Bvh (siblings adjacent, depth-first) is exported only when the
 // topology changed; otherwise its boxes are copied in place from the
-// refitted nodes through source_ (canonical index -> node).
+// refitted nodes through source_ (canonical index -> node), and update()
+// returns false, so the dynamic accel refits its wide layout instead of
+// collapsing it again. Boxes grow with plain compares (grow/joined), not
+// Vec3f's min/max, whose fminf/fmaxf calls were a third of the refit.
 //
 // Parallelism (TBB via backend/cpu/parallel.h): stage 1 recurses into the
 // two children of large subtrees as tasks, each with its own buffers,
-// appended left then right (the serial post-order); stage 2 builds every
-// region's new topology in parallel into scratch (and splits large nodes
-// into tasks), then links the regions into the tree one after another in
-// buffer order; stage 3 and the allocation are serial.
+// appended left then right (the serial post-order); stage 2 collects and
+// builds every region in parallel, large region nodes bound and bin their
+// primitives in parallel and build their children as tasks; the regions
+// are then linked into the tree one after another in buffer order (serial:
+// the memory manager); stage 3 is serial; the export counts leaves per
+// subtree and then writes every large subtree as a task at its offset.
+//
+// Measured (2 threads, 2-core machine; tests/bvh_adapt_test.cpp
+// DISABLED_MeasureStagesOnBuiltinScenes): the rebuild stage dominates;
+// with dE = 0.01 thousands of small regions (and at times the root) are
+// flagged every frame, so the update is about as costly as a full binned
+// build on explosions and clusters of bodies (frames without restructuring
+// cost the refit alone, about a tenth of a build).
 //
 // Determinism: buffers, region builds and the order of every allocation
 // are independent of the schedule, so the tree is the same for any thread
@@ -95,12 +115,37 @@ constexpr uint32_t kNone = AdaptBvh::kNone;
 constexpr uint32_t kTag = 0x80000000u;        // parent field of a detached subtree's root: kTag | record
 constexpr uint32_t kParallelAdapt = 8192;     // triangles under a node to refit its children as tasks
 constexpr uint32_t kParallelRegion = 4096;    // primitives of a region node to build its children as tasks
-constexpr int kMaxBins = 32;                  // bin_count is clamped to this
+constexpr int kMaxBins = 16;                  // bin_count (default 16) is clamped to this: bins live on the stack
 constexpr size_t kBinnedRegion = 2048;        // triangles of a region without kept nodes to build with build_binned_sah
 constexpr uint32_t kParallelExport = 16384;   // triangles under a node to export its children as tasks
 constexpr float kLeafGrowth = 2.0f;           // a leaf grown past this factor of its built area is regrouped
 
 bool real(uint32_t id) { return id != kNone && (id & kTag) == 0; }
+
+// Box growth with plain compares: Vec3f's min/max call libm's fminf/fmaxf,
+// which are not inlined and dominated the refit and the binning. Boxes hold
+// no NaNs, so the result is the same.
+inline float lower(float a, float b) { return b < a ? b : a; }
+inline float upper(float a, float b) { return b > a ? b : a; }
+inline void grow(Box3f& b, const Vec3f& p) {
+    b.lo = {lower(b.lo.x, p.x), lower(b.lo.y, p.y), lower(b.lo.z, p.z)};
+    b.hi = {upper(b.hi.x, p.x), upper(b.hi.y, p.y), upper(b.hi.z, p.z)};
+}
+inline void grow(Box3f& b, const Box3f& o) {
+    b.lo = {lower(b.lo.x, o.lo.x), lower(b.lo.y, o.lo.y), lower(b.lo.z, o.lo.z)};
+    b.hi = {upper(b.hi.x, o.hi.x), upper(b.hi.y, o.hi.y), upper(b.hi.z, o.hi.z)};
+}
+inline Box3f joined(const Box3f& a, const Box3f& b) {
+    Box3f out = a;
+    grow(out, b);
+    return out;
+}
+inline Box3f bounds_of(const Triangle& t) {
+    Box3f b{t.v0, t.v0};
+    grow(b, t.v1);
+    grow(b, t.v2);
+    return b;
+}
 
 Box3f overlap_box(const Box3f& a, const Box3f& b) { return {max(a.lo, b.lo), min(a.hi, b.hi)}; }
 bool same(const Box3f& a, const Box3f& b) { return a.lo == b.lo && a.hi == b.hi; }
@@ -133,9 +178,10 @@ int median_levels(uint64_t count, uint32_t leaf_size) {
 // Binned SAH (Wald 2007) over box primitives weighted by their triangle
 // counts, with the object median where no bin boundary splits or where the
 // depth limit is near (depth counts from the tree's root). The subtree over
-// prims [b, e) owns the scratch slots [2b, 2e - 1): its root at 2b, the left
-// child's subtree from 2b + 1, the right child's from 2 mid, so subtrees
-// built as tasks write their own slots and nothing is merged afterwards.
+// prims [b, e) with its root at slot `at` owns the scratch slots
+// [at, at + 2 (e - b) - 1): the left child's subtree from at + 1, the right
+// child's from at + 2 (mid - b), so subtrees built as tasks write their own
+// slots and nothing is merged afterwards.
 class RegionBuilder {
 public:
     RegionBuilder(const BuildOptions& build, std::vector<Prim>& prims, std::vector<ScratchNode>& out)
@@ -144,8 +190,8 @@ public:
         out_.resize(2 * prims_.size() - 1);
     }
 
-    void build(uint32_t b, uint32_t e, int depth) {
-        ScratchNode& node = out_[2 * b];
+    void build(uint32_t at, uint32_t b, uint32_t e, int depth) {
+        ScratchNode& node = out_[at];
         node = ScratchNode{};
         const uint32_t n = e - b;
         if (n == 1 && !prims_[b].tri) {
@@ -168,13 +214,14 @@ public:
         uint32_t mid = b;
         if (split.valid() && depth_ok) mid = partition(b, e, bounds.centres, split);
         if (mid == b || mid == e) mid = median(b, e, bounds.centres);
-        node.child[0] = 2 * b + 1;
-        node.child[1] = 2 * mid;
+        const uint32_t left = at + 1, right = at + 2 * (mid - b);
+        node.child[0] = left;
+        node.child[1] = right;
         if (n >= kParallelRegion) {
-            parallel::invoke([&] { build(b, mid, depth + 1); }, [&] { build(mid, e, depth + 1); });
+            parallel::invoke([&] { build(left, b, mid, depth + 1); }, [&] { build(right, mid, e, depth + 1); });
         } else {
-            build(b, mid, depth + 1);
-            build(mid, e, depth + 1);
+            build(left, b, mid, depth + 1);
+            build(right, mid, e, depth + 1);
         }
     }
 
@@ -191,8 +238,8 @@ private:
         uint64_t weight = 0;
         bool all_tris = true;
         void add(const Bounds& o) {
-            box.extend(o.box);
-            centres.extend(o.centres);
+            grow(box, o.box);
+            grow(centres, o.centres);
             weight += o.weight;
             all_tris = all_tris && o.all_tris;
         }
@@ -200,11 +247,11 @@ private:
     // The bins of all three axes, filled in one pass over the primitives.
     struct Bins {
         Box3f box[3][kMaxBins];
-        uint64_t weight[3][kMaxBins] = {};
+        float weight[3][kMaxBins] = {};  // triangle counts (exact below 2^24)
         void add(const Bins& o, int bins) {
             for (int a = 0; a < 3; ++a) {
                 for (int i = 0; i < bins; ++i) {
-                    box[a][i].extend(o.box[a][i]);
+                    grow(box[a][i], o.box[a][i]);
                     weight[a][i] += o.weight[a][i];
                 }
             }
@@ -217,8 +264,8 @@ private:
     Bounds bounds_of(uint32_t b, uint32_t e) const {
         Bounds out;
         for (uint32_t i = b; i < e; ++i) {
-            out.box.extend(prims_[i].box);
-            out.centres.extend(prims_[i].centre);
+            grow(out.box, prims_[i].box);
+            grow(out.centres, prims_[i].centre);
             out.weight += prims_[i].weight;
             out.all_tris = out.all_tris && prims_[i].tri;
         }
@@ -248,15 +295,33 @@ private:
             const Prim& p = prims_[i];
             for (int a = 0; a < 3; ++a) {
                 const int bin = bin_of(p.centre[a], a, m);
-                bins.box[a][bin].extend(p.box);
-                bins.weight[a][bin] += p.weight;
+                grow(bins.box[a][bin], p.box);
+                bins.weight[a][bin] += float(p.weight);
             }
         }
     }
 
+    // Two primitives: the binned split separates them along the first axis
+    // on which their bins differ, if any, at the cost of both boxes.
+    Split split_pair(uint32_t b, const Box3f& centres) const {
+        const Binning m = binning(centres);
+        const Prim &p = prims_[b], &q = prims_[b + 1];
+        Split best;
+        for (int axis = 0; axis < 3; ++axis) {
+            if (m.scale[axis] == 0.0f) continue;
+            const int bp = bin_of(p.centre[axis], axis, m), bq = bin_of(q.centre[axis], axis, m);
+            if (bp == bq) continue;
+            const float cost = p.box.surface_area() * float(p.weight) + q.box.surface_area() * float(q.weight);
+            if (cost < best.cost) best = {axis, std::max(bp, bq), cost};
+        }
+        return best;
+    }
+
     Split find_split(uint32_t b, uint32_t e, const Box3f& centres) const {
         const Binning m = binning(centres);
-        auto bins = std::make_unique<Bins>();
+        if (e - b == 2) return split_pair(b, centres);
+        Bins bins_on_stack;
+        Bins* bins = &bins_on_stack;
         if (e - b >= kParallelBinning) {
             std::vector<Bins> parts((e - b + kParallelBinning / 4 - 1) / (kParallelBinning / 4));
             parallel::for_range<size_t>(0, parts.size(), 1, [&](size_t lo, size_t hi) {
@@ -272,23 +337,22 @@ private:
         Split best;
         for (int axis = 0; axis < 3; ++axis) {
             if (m.scale[axis] == 0.0f) continue;
-            float right_area[kMaxBins];
-            uint64_t right_weight[kMaxBins];
+            float right_area[kMaxBins], right_weight[kMaxBins];
             Box3f acc;
-            uint64_t w = 0;
+            float w = 0.0f;
             for (int i = bins_ - 1; i > 0; --i) {
-                acc.extend(bins->box[axis][i]);
+                grow(acc, bins->box[axis][i]);
                 w += bins->weight[axis][i];
                 right_area[i] = acc.surface_area();
                 right_weight[i] = w;
             }
             acc = Box3f();
-            w = 0;
+            w = 0.0f;
             for (int i = 1; i < bins_; ++i) {
-                acc.extend(bins->box[axis][i - 1]);
+                grow(acc, bins->box[axis][i - 1]);
                 w += bins->weight[axis][i - 1];
-                if (w == 0 || right_weight[i] == 0) continue;
-                const float cost = acc.surface_area() * float(w) + right_area[i] * float(right_weight[i]);
+                if (w == 0.0f || right_weight[i] == 0.0f) continue;
+                const float cost = acc.surface_area() * w + right_area[i] * right_weight[i];
                 if (cost < best.cost) best = {axis, i, cost};
             }
         }
@@ -396,6 +460,8 @@ void AdaptBvh::import(const Bvh& bvh) {
     root_ = 0;
     nodes_[0].parent = kNone;
     finish_import(0);
+    leaves_.assign(capacity, 0);
+    count_leaves(root_);
 }
 
 uint32_t AdaptBvh::finish_import(uint32_t id) {
@@ -420,7 +486,8 @@ float AdaptBvh::sah_cost(uint32_t id) const {
 }
 
 // Leaves under each node (post-order), which place every subtree of the
-// depth-first export without a serial walk.
+// depth-first export without a serial walk. Counted at import, then kept
+// current wherever Count changes (the same paths) and by the region rebuilds.
 uint32_t AdaptBvh::count_leaves(uint32_t id) {
     const AdaptNode& node = nodes_[id];
     if (node.is_leaf()) return leaves_[id] = 1;
@@ -462,8 +529,7 @@ int AdaptBvh::emit(uint32_t id, uint32_t index, uint32_t pair, uint32_t slot, in
 }
 
 int AdaptBvh::export_bvh() {
-    leaves_.resize(nodes_.size());
-    const uint32_t leaves = count_leaves(root_);
+    const uint32_t leaves = leaves_[root_];
     bvh_.nodes.resize(2 * size_t(leaves) - 1);
     source_.resize(bvh_.nodes.size());
     bvh_.prim_indices.resize(triangle_count_);
@@ -533,7 +599,7 @@ void AdaptBvh::adapt(uint32_t id, Buffers& out, std::span<const Triangle> triang
     ++out.refitted;
     if (node.is_leaf()) {
         Box3f box;
-        for (uint32_t t : leaf_triangles(id)) box.extend(triangles[t].bounds());
+        for (uint32_t t : leaf_triangles(id)) grow(box, bounds_of(triangles[t]));
         node.box = box;
         return;
     }
@@ -548,7 +614,7 @@ void AdaptBvh::adapt(uint32_t id, Buffers& out, std::span<const Triangle> triang
         adapt(node.child[0], out, triangles);
         adapt(node.child[1], out, triangles);
     }
-    node.box = merge(nodes_[node.child[0]].box, nodes_[node.child[1]].box);
+    node.box = joined(nodes_[node.child[0]].box, nodes_[node.child[1]].box);
     detect(id, out, migrate_start, rebuild_start);
 }
 
@@ -602,7 +668,7 @@ void AdaptBvh::collect_region(uint32_t root, Region& region) const {
         region.old_nodes.push_back(id);
         if (node.is_leaf()) {
             for (uint32_t t : leaf_triangles(id)) {
-                const Box3f box = triangles_[t].bounds();
+                const Box3f box = bounds_of(triangles_[t]);
                 region.prims.push_back({box, box.center(), t, 1, true});
             }
         } else {
@@ -638,7 +704,7 @@ void AdaptBvh::build_region(Region& region, std::span<const Triangle> triangles)
         return;
     }
     RegionBuilder builder(build_, region.prims, region.nodes);
-    builder.build(0, uint32_t(region.prims.size()), region.depth);
+    builder.build(0, 0, uint32_t(region.prims.size()), region.depth);
 }
 
 // Links the region's new topology below `parent`, depth first; new nodes
@@ -658,6 +724,7 @@ uint32_t AdaptBvh::apply_region(Region& region, uint32_t scratch, uint32_t id, u
     if (in.n > 0) {
         node.leaf_size = uint16_t(in.n);
         node.count = in.n;
+        leaves_[id] = 1;
         node.saved_cost = in.box.surface_area();
         for (uint32_t k = 0; k < in.n; ++k) slots_[size_t(id) * leaf_capacity_ + k] = region.prims[in.first + k].id;
         return id;
@@ -665,6 +732,7 @@ uint32_t AdaptBvh::apply_region(Region& region, uint32_t scratch, uint32_t id, u
     node.leaf_size = 0;
     for (int k = 0; k < 2; ++k) nodes_[id].child[k] = apply_region(region, in.child[k], kNone, id, reused);
     nodes_[id].count = nodes_[nodes_[id].child[0]].count + nodes_[nodes_[id].child[1]].count;
+    leaves_[id] = leaves_[nodes_[id].child[0]] + leaves_[nodes_[id].child[1]];
     nodes_[id].saved_cost = sah_cost(id);
     return id;
 }
@@ -677,16 +745,22 @@ uint64_t AdaptBvh::rebuild(std::span<const uint32_t> roots, std::span<const Tria
             build_region(regions[i], triangles);
         }
     });
+    const auto link_start = std::chrono::steady_clock::now();
     uint64_t created = 0;
     for (Region& region : regions) {  // buffer order: nested regions first
         std::sort(region.old_nodes.begin(), region.old_nodes.end());
         size_t reused = 0;
         const uint64_t before = memory_.used_count();
+        const uint32_t old_leaves = leaves_[region.root];
         apply_region(region, 0, region.root, nodes_[region.root].parent, reused);
+        for (uint32_t x = nodes_[region.root].parent; real(x); x = nodes_[x].parent) {
+            leaves_[x] = leaves_[x] - old_leaves + leaves_[region.root];  // the region's leaf count changed
+        }
         created += reused + (memory_.used_count() - before);
         for (size_t k = reused; k < region.old_nodes.size(); ++k) memory_.free(region.old_nodes[k]);
     }
     for (uint32_t id : roots) nodes_[id].locked = 0;
+    times_.link_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - link_start).count();
     return created;
 }
 
@@ -732,7 +806,10 @@ void AdaptBvh::detach(uint32_t id, std::vector<Pending>& pending) {
     const uint32_t sibling = p.child[p.child[0] == id ? 1 : 0];
     const uint32_t grand = p.parent;
     replace_child(grand, parent, sibling, &pending);
-    for (uint32_t x = grand; real(x); x = nodes_[x].parent) nodes_[x].count -= nodes_[id].count;
+    for (uint32_t x = grand; real(x); x = nodes_[x].parent) {
+        nodes_[x].count -= nodes_[id].count;
+        leaves_[x] -= leaves_[id];
+    }
     const uint32_t record = uint32_t(pending.size());
     pending.push_back({{nodes_[id].child[0], nodes_[id].child[1]}, sibling, grand, kNone});
     nodes_[nodes_[id].child[0]].parent = nodes_[nodes_[id].child[1]].parent = kTag | record;
@@ -745,7 +822,7 @@ void AdaptBvh::refit_upward(uint32_t id) {
     for (uint32_t y = resolve(id); real(y); y = nodes_[y].parent) {
         AdaptNode& node = nodes_[y];
         if (node.is_leaf()) continue;
-        const Box3f box = merge(nodes_[node.child[0]].box, nodes_[node.child[1]].box);
+        const Box3f box = joined(nodes_[node.child[0]].box, nodes_[node.child[1]].box);
         if (!first && same(box, node.box)) break;  // the ancestors already agree
         node.box = box;
         first = false;
@@ -779,10 +856,11 @@ void AdaptBvh::merge_at(uint32_t at, uint32_t id) {
     forward_[u] = kNone;
     AdaptNode& node = nodes_[u];
     node = AdaptNode{};
-    node.box = merge(nodes_[at].box, nodes_[id].box);
+    node.box = joined(nodes_[at].box, nodes_[id].box);
     node.child[0] = at;
     node.child[1] = id;
     node.count = nodes_[at].count + nodes_[id].count;
+    leaves_[u] = leaves_[at] + leaves_[id];
     replace_child(parent, at, u, nullptr);
     nodes_[at].parent = nodes_[id].parent = u;
     nodes_[u].saved_cost = sah_cost(u);
@@ -797,7 +875,7 @@ void AdaptBvh::descend(uint32_t at, uint32_t id) {
         if (node.is_leaf()) return merge_at(x, id);
         const AdaptNode& l = nodes_[node.child[0]];
         const AdaptNode& r = nodes_[node.child[1]];
-        const Box3f l_n = merge(l.box, n.box), r_n = merge(r.box, n.box);
+        const Box3f l_n = joined(l.box, n.box), r_n = joined(r.box, n.box);
         const float cost_merge = node.box.surface_area() * float(node.count) + sa_n * c_n;
         const float cost_left = l_n.surface_area() * (float(l.count) + c_n) + r.box.surface_area() * float(r.count);
         const float cost_right = l.box.surface_area() * float(l.count) + r_n.surface_area() * (float(r.count) + c_n);
@@ -816,8 +894,9 @@ void AdaptBvh::descend(uint32_t at, uint32_t id) {
             descend(top, children[1]);
             return;
         }
-        node.box = merge(node.box, n.box);
+        node.box = joined(node.box, n.box);
         node.count += n.count;
+        leaves_[x] += leaves_[id];
         const float area = node.box.surface_area();
         node.saved_cost = build_.sah.traversal +
                           build_.sah.intersection * (area > 0.0f ? std::min(cost_left, cost_right) / area : c_n);
@@ -835,7 +914,8 @@ void AdaptBvh::insert(uint32_t at, uint32_t id, const std::vector<Pending>& pend
     }
     for (uint32_t y = nodes_[x].parent; real(y); y = nodes_[y].parent) {
         nodes_[y].count += nodes_[id].count;
-        nodes_[y].box.extend(nodes_[id].box);
+        leaves_[y] += leaves_[id];
+        grow(nodes_[y].box, nodes_[id].box);
     }
     descend(x, id);
 }
@@ -855,7 +935,7 @@ uint64_t AdaptBvh::migrate(std::vector<uint32_t>& buffer) {
         if (real(p.fix)) refit_upward(p.fix);
     }
     for (Pending& p : pending) {  // pass 3
-        const Box3f box = merge(nodes_[p.child[0]].box, nodes_[p.child[1]].box);
+        const Box3f box = joined(nodes_[p.child[0]].box, nodes_[p.child[1]].box);
         p.start = find_start(p.anchor, box, pending);
     }
     for (size_t i = 0; i < pending.size(); ++i) {  // pass 4

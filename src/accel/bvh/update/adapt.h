@@ -34,6 +34,7 @@ struct AdaptNode {
 struct AdaptStageTimes {
     double refit_ms = 0.0;    // stage 1: refit + detection
     double rebuild_ms = 0.0;  // stage 2: regions collected, built, linked
+    double link_ms = 0.0;     // of which: the regions linked into the tree (serial)
     double migrate_ms = 0.0;  // stage 3: the four passes
     double export_ms = 0.0;   // the canonical Bvh (boxes only, or re-emitted)
 };
@@ -105,7 +106,7 @@ private:
     std::vector<uint32_t> forwarded_;  // the entries of forward_ to clear
     Bvh bvh_;
     std::vector<uint32_t> source_;     // bvh_ node -> dynamic node
-    std::vector<uint32_t> leaves_;     // export: leaves under each node
+    std::vector<uint32_t> leaves_;     // leaves under each node (places subtrees in the export)
     AdaptStageTimes times_;
 };
 
