@@ -97,6 +97,7 @@
 #include "accel/bvh/update/adapt.h"
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <string>
@@ -248,8 +249,10 @@ private:
     struct Bins {
         Box3f box[3][kMaxBins];
         float weight[3][kMaxBins] = {};  // triangle counts (exact below 2^24)
+        uint32_t used[3] = {0, 0, 0};      // bit i: bin i holds a primitive
         void add(const Bins& o, int bins) {
             for (int a = 0; a < 3; ++a) {
+                used[a] |= o.used[a];
                 for (int i = 0; i < bins; ++i) {
                     grow(box[a][i], o.box[a][i]);
                     weight[a][i] += o.weight[a][i];
@@ -297,6 +300,7 @@ private:
                 const int bin = bin_of(p.centre[a], a, m);
                 grow(bins.box[a][bin], p.box);
                 bins.weight[a][bin] += float(p.weight);
+                bins.used[a] |= 1u << bin;
             }
         }
     }
@@ -334,26 +338,30 @@ private:
         } else {
             fill(*bins, b, e, m);
         }
+        // The sweep visits the non-empty bins only: a boundary inside a run of
+        // empty bins costs what the first one after a non-empty bin costs,
+        // and that first one is what a full sweep keeps (same split, same cost).
         Split best;
         for (int axis = 0; axis < 3; ++axis) {
-            if (m.scale[axis] == 0.0f) continue;
+            if (m.scale[axis] == 0.0f || std::popcount(bins->used[axis]) < 2) continue;
+            int idx[kMaxBins], k = 0;
+            for (uint32_t u = bins->used[axis]; u != 0; u &= u - 1) idx[k++] = std::countr_zero(u);
             float right_area[kMaxBins], right_weight[kMaxBins];
             Box3f acc;
             float w = 0.0f;
-            for (int i = bins_ - 1; i > 0; --i) {
-                grow(acc, bins->box[axis][i]);
-                w += bins->weight[axis][i];
-                right_area[i] = acc.surface_area();
-                right_weight[i] = w;
+            for (int j = k - 1; j > 0; --j) {
+                grow(acc, bins->box[axis][idx[j]]);
+                w += bins->weight[axis][idx[j]];
+                right_area[j] = acc.surface_area();
+                right_weight[j] = w;
             }
             acc = Box3f();
             w = 0.0f;
-            for (int i = 1; i < bins_; ++i) {
-                grow(acc, bins->box[axis][i - 1]);
-                w += bins->weight[axis][i - 1];
-                if (w == 0.0f || right_weight[i] == 0.0f) continue;
-                const float cost = acc.surface_area() * w + right_area[i] * right_weight[i];
-                if (cost < best.cost) best = {axis, i, cost};
+            for (int j = 1; j < k; ++j) {
+                grow(acc, bins->box[axis][idx[j - 1]]);
+                w += bins->weight[axis][idx[j - 1]];
+                const float cost = acc.surface_area() * w + right_area[j] * right_weight[j];
+                if (cost < best.cost) best = {axis, idx[j - 1] + 1, cost};
             }
         }
         return best;
