@@ -420,7 +420,7 @@ void JsonSceneReader::read_mesh_entry(const Json& value, const std::string& wher
         if (node >= 0)  // the keys move the placed part: world = keys(t) * transform * the part's own
             scene.animation.instances.push_back(
                 InstanceAnimation{uint32_t(scene.instances.size()), uint32_t(node), placement * instance.transform});
-        scene.instances.push_back({instance.mesh, placement * instance.transform});
+        scene.instances.push_back({instance.mesh, placement * instance.transform, instance.visible});
     }
     for (Light light : part.lights) {
         light.position = placement.transform_point(light.position);
