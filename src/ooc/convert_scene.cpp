@@ -74,8 +74,15 @@ ConvertResult convert_scene(const Scene& scene, const std::string& path, const P
     if (progress) progress(0.0);
     size_t done = 0;
     const size_t total = std::max<size_t>(1, scene.triangle_count());
+    if (scene.animated())
+        result.notes.push_back("the scene is animated; a paged file holds it as it is at time " +
+                               std::to_string(scene.time) + " s");
     for (const Instance& instance : scene.instances) {
         const Mesh& mesh = scene.meshes[instance.mesh];
+        if (!instance.visible) {  // hidden at this time: not in the file
+            done += mesh.triangle_count();
+            continue;
+        }
         std::vector<Vec3f> positions(mesh.positions.size());
         for (size_t i = 0; i < positions.size(); ++i) positions[i] = instance.transform.transform_point(mesh.positions[i]);
         const Affine3f normal_matrix = instance.transform.normal_matrix();

@@ -1,5 +1,6 @@
 #include "rayforge/scene/scene_geometry.h"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -76,11 +77,16 @@ SceneGeometry SceneGeometry::build(const Scene& scene) {
     }
     g.instance_first_triangle.push_back(uint32_t(base));
     g.bounds = checked_bounds(g.triangles, 0);
-    for (size_t t = 0; t < total; ++t) {
-        if (scene.materials[g.material[t]].is_emissive() && g.triangles[t].area() > 0.0f)
-            g.emissive_triangles.push_back(uint32_t(t));
-    }
+    g.find_emitters(scene);
     return g;
+}
+
+void SceneGeometry::find_emitters(const Scene& scene) {
+    emissive_triangles.clear();
+    for (size_t t = 0; t < triangles.size(); ++t) {
+        if (scene.materials[material[t]].is_emissive() && triangles[t].area() > 0.0f)
+            emissive_triangles.push_back(uint32_t(t));
+    }
 }
 
 void SceneGeometry::update(const Scene& scene, const GeometryChange& change) {
@@ -99,7 +105,13 @@ void SceneGeometry::update(const Scene& scene, const GeometryChange& change) {
         normal_matrices[inst_id] = scene.instances[inst_id].transform.normal_matrix();
         write_instance(scene, inst_id, base, *this);
     }
-    if (change.geometry()) bounds = checked_bounds(triangles, 0);
+    if (!change.geometry()) return;
+    bounds = checked_bounds(triangles, 0);
+    // Emitters that moved keep their place in the list; ones shown or hidden
+    // (zero area) enter or leave it.
+    const bool emitters = std::any_of(scene.materials.begin(), scene.materials.end(),
+                                      [](const Material& m) { return m.is_emissive(); });
+    if (emitters) find_emitters(scene);
 }
 
 size_t SceneGeometry::memory_bytes() const {

@@ -38,9 +38,12 @@ struct SceneGeometry {
     // they never produce hits.
     static SceneGeometry build(const Scene& scene);
     // Rewrites the world-space triangles of the instances `change` names
-    // (after Scene::set_time) and the bounds; the triangle order, count,
-    // materials and emitter list stay. Throws rf::Error on non-finite coordinates.
+    // (after Scene::set_time), the bounds, and the emitter list (hidden
+    // triangles have zero area and leave it); the triangle order, count and
+    // materials stay. Throws rf::Error on non-finite coordinates.
     void update(const Scene& scene, const GeometryChange& change);
+    // emissive_triangles from the materials and the current triangles (those of zero area never emit).
+    void find_emitters(const Scene& scene);
     [[nodiscard]] size_t size() const { return triangles.size(); }
     [[nodiscard]] size_t memory_bytes() const;
 };
