@@ -191,8 +191,11 @@ int run_render_frames(const RenderArgs& a, const Device& device, BuildOptions bu
         render_total += render_ms;
         if (!a.quiet)
             std::printf("  frame %d (t = %.3f s): %s | render %.1f ms\n", frame, double(t),
-                        update_summary(u, accel->method()).c_str(), render_ms);
+                        k == 0 ? "built" : update_summary(u, accel->method()).c_str(), render_ms);
     }
+    if (range.last >= scene.animation.frame_count())
+        std::fprintf(stderr, "rayforge: note: the animation has %d frames; later ones show its last pose\n",
+                     scene.animation.frame_count());
     std::printf("%s: %d frames | update %.1f ms a frame | render %.1f ms a frame\n", a.outputs.front().c_str(),
                 range.count(), range.count() > 1 ? update_total / (range.count() - 1) : 0.0,
                 render_total / range.count());

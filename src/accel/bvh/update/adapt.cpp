@@ -73,7 +73,8 @@
 // refitted nodes through source_ (canonical index -> node), and update()
 // returns false, so the dynamic accel refits its wide layout instead of
 // collapsing it again. Boxes grow with plain compares (grow/joined), not
-// Vec3f's min/max, whose fminf/fmaxf calls were a third of the refit.
+// Vec3f's min/max, whose fminf/fmaxf library calls (not inlined) were about
+// a tenth of the update's profile.
 //
 // Parallelism (TBB via backend/cpu/parallel.h): stage 1 recurses into the
 // two children of large subtrees as tasks, each with its own buffers,
@@ -85,11 +86,12 @@
 // subtree and then writes every large subtree as a task at its offset.
 //
 // Measured (2 threads, 2-core machine; tests/bvh_adapt_test.cpp
-// DISABLED_MeasureStagesOnBuiltinScenes): the rebuild stage dominates;
-// with dE = 0.01 thousands of small regions (and at times the root) are
-// flagged every frame, so the update is about as costly as a full binned
-// build on explosions and clusters of bodies (frames without restructuring
-// cost the refit alone, about a tenth of a build).
+// DISABLED_MeasureStagesOnBuiltinScenes): the rebuild stage still
+// dominates; with dE = 0.01 thousands of small regions are flagged every
+// frame (rotation alone moves a rigid pair's SAH by more than 1%), so an
+// update costs 0.7-1.1 full binned builds on explode, nbody and cloth;
+// frames without restructuring cost the refit alone, a tenth of a build.
+// With the closing reading (dM = 0.01) stage 3 (serial) dominates.
 //
 // Determinism: buffers, region builds and the order of every allocation
 // are independent of the schedule, so the tree is the same for any thread
@@ -124,8 +126,7 @@ constexpr float kLeafGrowth = 2.0f;           // a leaf grown past this factor o
 bool real(uint32_t id) { return id != kNone && (id & kTag) == 0; }
 
 // Box growth with plain compares: Vec3f's min/max call libm's fminf/fmaxf,
-// which are not inlined and dominated the refit and the binning. Boxes hold
-// no NaNs, so the result is the same.
+// which are not inlined here. Boxes hold no NaNs, so the result is the same.
 inline float lower(float a, float b) { return b < a ? b : a; }
 inline float upper(float a, float b) { return b > a ? b : a; }
 inline void grow(Box3f& b, const Vec3f& p) {
