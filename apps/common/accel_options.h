@@ -30,6 +30,6 @@ BuildOptions to_build_options(const AccelArgs& args, int threads);
 // is the scene file's update method when it names one. Throws rf::Error for unknown names.
 UpdateOptions to_update_options(const AccelArgs& args, const std::string& scene_default = "");
 // The update method used when neither the command line nor the scene names one.
-inline constexpr UpdateMethod kDefaultUpdateMethod = UpdateMethod::Adapt;
+inline constexpr UpdateMethod kDefaultUpdateMethod = UpdateMethod::Rebuild;  // measured: docs/benchmarks.md
 
 }  // namespace rf::cli
