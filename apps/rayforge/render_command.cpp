@@ -163,7 +163,7 @@ int run_render_frames(const RenderArgs& a, const Device& device, BuildOptions bu
     add_headlight_if_unlit(a, options.integrator, camera, scene, geometry);
 
     const std::unique_ptr<DynamicAccel> accel = build_dynamic_accel(scene, geometry, build, update);
-    std::unique_ptr<Renderer> renderer = make_renderer(scene, geometry, *accel, camera, options);
+    std::unique_ptr<Renderer> renderer = make_renderer(scene, geometry, accel->current(), camera, options);
     std::printf("%s: %d frames, %zu triangles, %s, initial build %.1f ms\n", a.scene.c_str(), range.count(),
                 geometry.size(), accel->stats().name.c_str(), accel->initial_build_ms());
     double update_total = 0.0, render_total = 0.0;
@@ -174,10 +174,11 @@ int run_render_frames(const RenderArgs& a, const Device& device, BuildOptions bu
         if (k > 0) {
             const GeometryChange change = scene.set_time(t);
             geometry.update(scene, change);
+            if (device.is_cuda()) renderer.reset();  // it is bound to the structure the update replaces
             u = accel->update(change);
             if (camera_follows) camera = scene.camera_or_default();
-            if (device.is_cuda()) {
-                renderer = make_renderer(scene, geometry, *accel, camera, options);
+            if (device.is_cuda()) {  // the renderer binds to the structure the device rebuilt
+                renderer = make_renderer(scene, geometry, accel->current(), camera, options);
             } else {
                 renderer->geometry_changed(change);
                 if (camera_follows) renderer->set_camera(camera);

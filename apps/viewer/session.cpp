@@ -82,7 +82,8 @@ struct Session::Target {
     // A renderer over the structure, or over the paged scene's caches.
     [[nodiscard]] std::unique_ptr<Renderer> new_renderer(const Camera& camera, const RenderOptions& options) const {
         if (scene->paged) return make_paged_renderer(*scene->paged, camera, options);
-        if (animation) return make_renderer(animation->scene, animation->geometry, *accel, camera, options);
+        if (animation)
+            return make_renderer(animation->scene, animation->geometry, animation->accel->current(), camera, options);
         return make_renderer(scene->scene, scene->geometry, *accel, camera, options);
     }
 };
@@ -612,8 +613,15 @@ void Session::advance_animation(RenderState& st, bool time_requested) {
     try {
         const GeometryChange change = anim.scene.set_time(t);
         anim.geometry.update(anim.scene, change);
+        const bool rebinds = anim.accel->current().device().is_cuda() && change.geometry();
+        if (rebinds) st.renderer.reset();  // it is bound to the structure the update replaces
         const UpdateStats u = anim.accel->update(change);
-        st.renderer->geometry_changed(change);
+        if (rebinds) {
+            st.renderer = st.target->new_renderer(st.camera, st.film(*st.target));  // bound to the new structure
+            st.pool.clear();
+        } else {
+            st.renderer->geometry_changed(change);
+        }
         std::lock_guard<std::mutex> lock(mutex_);
         AnimationStatus& s = status_.animation;
         s.time = t;

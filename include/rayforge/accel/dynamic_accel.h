@@ -84,6 +84,10 @@ public:
     [[nodiscard]] virtual UpdateMethod method() const = 0;
     // The build when the accel was made (or the last full rebuild).
     [[nodiscard]] virtual double initial_build_ms() const = 0;
+    // The structure answering the queries now: this accel on the CPU; on a
+    // CUDA device the accel the last rebuild made there. A renderer on a
+    // device binds to it, so make a new renderer after each update there.
+    [[nodiscard]] virtual const Accel& current() const { return *this; }
 };
 
 // A dynamic structure over `geometry` (the flat triangles of `scene`; both

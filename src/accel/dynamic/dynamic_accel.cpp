@@ -217,6 +217,7 @@ public:
     }
     [[nodiscard]] UpdateMethod method() const override { return UpdateMethod::Rebuild; }
     [[nodiscard]] double initial_build_ms() const override { return initial_build_ms_; }
+    [[nodiscard]] const Accel& current() const override { return *accel_; }
     [[nodiscard]] Hit intersect(const Ray& ray) const override { return accel_->intersect(ray); }
     [[nodiscard]] bool occluded(const Ray& ray) const override { return accel_->occluded(ray); }
     void intersect(std::span<const Ray> rays, std::span<Hit> hits) const override { accel_->intersect(rays, hits); }
