@@ -152,13 +152,13 @@ TEST(DynamicAccel, EveryLayoutFollowsAHiddenInstance) {
         SceneGeometry g = geometry;
         BuildOptions build;
         build.layout = layout;
-        const auto accel = build_dynamic_accel(s, g, build, {.method = UpdateMethod::Refit});
+        const auto accel = build_dynamic_accel(s, g, build, UpdateOptions{UpdateMethod::Refit, {}, {}});
         const GeometryChange change = s.set_time(0.2f);
         EXPECT_FALSE(s.instances[2].visible);
         g.update(s, change);
         accel->update(change);
         expect_brute_force_hits(*accel, g, 7, to_string(layout));
-        const auto two_level = build_dynamic_accel(s, g, build, {.method = UpdateMethod::TwoLevel});
+        const auto two_level = build_dynamic_accel(s, g, build, UpdateOptions{UpdateMethod::TwoLevel, {}, {}});
         expect_brute_force_hits(*two_level, g, 8, "two-level " + to_string(layout), 0.01);
     }
 }

@@ -19,7 +19,7 @@ namespace rf::viewer {
 
 struct ViewSettings {
     BuildOptions build;     // structure, builder, layout, optimizer, parameters; device and threads
-    UpdateOptions update{.method = UpdateMethod::Rebuild};  // animated scenes: how the structure follows the motion
+    UpdateOptions update{UpdateMethod::Rebuild, {}, {}};  // animated scenes: how the structure follows the motion
     RenderOptions render;   // integrator and its settings, full resolution, passes (spp); device and threads
     ToneMapping tone;
     float resolution_scale = 1.0f;  // the film is render.width x render.height times this
