@@ -106,6 +106,31 @@ TEST(ViewerGui, DefaultSceneMatchesTheRenderCommand) {
     EXPECT_GT(stats["first_image_ms"].get<double>(), 0.0);
 }
 
+// An animated scene plays from a script (the structure updated each frame),
+// pauses, and at a scrubbed time shows what `render --time` renders.
+TEST(ViewerGui, PlaysAnAnimationAndAScrubbedTimeMatchesRenderTime) {
+    SKIP_WITHOUT_GUI();
+    const std::string dir = test::temp_dir("viewer_animation");
+    const std::string options = std::string(kSmall) + " --update refit";
+    const test::CliResult v = view(dir, "builtin:nbody@3k", options,
+                                   "wait-passes 4\nplay\nwait-frames 4\nprint-stats\npause\ntime 2\n"
+                                   "wait-passes 4\nscreenshot " + dir + "/v.png\nprint-stats\nquit\n");
+    ASSERT_EQ(v.exit_code, 0) << v.err;
+    const std::vector<std::string> lines = test::lines_of(v.out);
+    ASSERT_GE(lines.size(), 2u) << v.out;
+    const auto playing = nlohmann::json::parse(lines[lines.size() - 2]);
+    EXPECT_EQ(playing["animation"]["playing"], true);
+    EXPECT_GE(playing["animation"]["updates"].get<int>(), 1);
+    EXPECT_EQ(playing["animation"]["method"], "refit");
+    const auto paused = nlohmann::json::parse(lines.back());
+    EXPECT_EQ(paused["animation"]["playing"], false);
+    EXPECT_EQ(paused["animation"]["time"], 2.0);
+    const test::CliResult r =
+        test::run_cli("render builtin:nbody@3k " + std::string(kSmall) + " --time 2 -q -o " + dir + "/r.png");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    expect_same_image(dir + "/v.png", dir + "/r.png");
+}
+
 TEST(ViewerGui, SwitchingStructureAndIntegratorStillMatchesTheCli) {
     SKIP_WITHOUT_GUI();
     const std::string dir = test::temp_dir("viewer_switch");
