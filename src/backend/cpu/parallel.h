@@ -104,15 +104,20 @@ Value reduce(Index begin, Index end, Index grain, Value identity, Body&& body, C
     if (end <= begin) return identity;
     grain = std::max<Index>(grain, Index(1));
     const size_t chunks = (size_t(end - begin) + size_t(grain) - 1) / size_t(grain);
-    std::vector<Value> partial(chunks, identity);
+    // One slot per chunk, wrapped so that vector<bool> cannot pack
+    // neighbouring chunks' results into one word written by two threads.
+    struct Slot {
+        Value value;
+    };
+    std::vector<Slot> partial(chunks, Slot{identity});
     for_range(size_t(0), chunks, size_t(1), [&](size_t lo, size_t hi) {
         for (size_t c = lo; c < hi; ++c) {
             const Index chunk_begin = Index(begin + Index(c) * grain);
-            partial[c] = body(chunk_begin, std::min<Index>(end, Index(chunk_begin + grain)), partial[c]);
+            partial[c].value = body(chunk_begin, std::min<Index>(end, Index(chunk_begin + grain)), partial[c].value);
         }
     });
     Value result = std::move(identity);
-    for (const Value& v : partial) result = combine(std::move(result), v);
+    for (const Slot& s : partial) result = combine(std::move(result), s.value);
     return result;
 }
 
