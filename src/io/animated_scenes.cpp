@@ -42,7 +42,9 @@
 #include <utility>
 
 #include "backend/cpu/parallel.h"
+#include "io/scene_building.h"
 #include "math/random.h"
+#include "scene/animation_eval.h"
 #include "rayforge/core/error.h"
 
 namespace rf {
@@ -124,13 +126,10 @@ Vec4f quat_spin(Vec4f q, Vec3f w, float dt) {
     return quat_normalize(quat_mul(quat_axis_angle(w / speed, speed * dt), q));
 }
 
+// The rotation of unit quaternion q, as Scene::set_time evaluates it.
 Affine3f quat_to_affine(Vec4f q) {
-    const float x = q.x, y = q.y, z = q.z, w = q.w;
-    Affine3f a;
-    a.m[0][0] = 1 - 2 * (y * y + z * z), a.m[0][1] = 2 * (x * y - w * z), a.m[0][2] = 2 * (x * z + w * y);
-    a.m[1][0] = 2 * (x * y + w * z), a.m[1][1] = 1 - 2 * (x * x + z * z), a.m[1][2] = 2 * (y * z - w * x);
-    a.m[2][0] = 2 * (x * z - w * y), a.m[2][1] = 2 * (y * z + w * x), a.m[2][2] = 1 - 2 * (x * x + y * y);
-    return a;
+    const float xyzw[4] = {q.x, q.y, q.z, q.w};
+    return quaternion_matrix(xyzw);
 }
 
 // --- scene pieces ---
@@ -144,15 +143,9 @@ Material diffuse(const std::string& name, Vec3f color, float roughness = 1.0f) {
     return m;
 }
 
-uint32_t add_material(Scene& scene, Material material) {
-    scene.materials.push_back(std::move(material));
-    return uint32_t(scene.materials.size() - 1);
-}
-
-uint32_t add_mesh(Scene& scene, Mesh mesh) {
-    scene.meshes.push_back(std::move(mesh));
-    return uint32_t(scene.meshes.size() - 1);
-}
+using io::add_material;
+using io::add_mesh;
+using io::add_sun_and_sky;
 
 // A square of half-size `half` in y = 0 facing +y, instanced at the identity.
 void add_ground(Scene& scene, float half, Vec3f color) {
@@ -167,16 +160,6 @@ void add_ground(Scene& scene, float half, Vec3f color) {
     scene.instances.push_back({add_mesh(scene, std::move(ground)), Affine3f::identity()});
 }
 
-void add_sun_and_sky(Scene& scene, Vec3f sun_direction) {
-    Light sun;
-    sun.type = LightType::Directional;
-    sun.direction = normalize(sun_direction);
-    sun.color = {1.0f, 0.95f, 0.85f};
-    sun.intensity = 3.0f;
-    scene.lights.push_back(sun);
-    scene.environment.color = {0.5f, 0.65f, 0.9f};
-    scene.environment.strength = 0.5f;
-}
 
 void set_timing(Animation& animation) {
     animation.start = 0.0f;

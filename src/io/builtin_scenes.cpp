@@ -26,6 +26,7 @@
 #include "rayforge/core/error.h"
 #include "io/animated_scenes.h"
 #include "io/procedural_sky.h"
+#include "io/scene_building.h"
 #include "io/skinned_character.h"
 #include "rayforge/io/scene_io.h"
 #include "math/random.h"
@@ -101,15 +102,9 @@ Material diffuse(const std::string& name, Vec3f color) {
     return m;
 }
 
-uint32_t add_material(Scene& scene, Material material) {
-    scene.materials.push_back(std::move(material));
-    return uint32_t(scene.materials.size() - 1);
-}
-
-uint32_t add_mesh(Scene& scene, Mesh mesh) {
-    scene.meshes.push_back(std::move(mesh));
-    return uint32_t(scene.meshes.size() - 1);
-}
+using io::add_material;
+using io::add_mesh;
+using io::add_sun_and_sky;
 
 // The Cornell box in a 2 x 2 x 2 room (x, z in [-1, 1], y in [0, 2]), open
 // towards +z, with the classic colors and light, a rotated tall and short box,
@@ -273,18 +268,6 @@ Mesh make_ground(const std::string& name, float half, float y, uint32_t material
     ground.name = name;
     add_quad(ground, {-half, y, half}, {2 * half, 0, 0}, {0, 0, -2 * half}, material);
     return ground;
-}
-
-// A sun and a dim sky: the lighting the benchmark scenes share.
-void add_sun_and_sky(Scene& scene, Vec3f sun_direction) {
-    Light sun;
-    sun.type = LightType::Directional;
-    sun.direction = normalize(sun_direction);
-    sun.color = {1.0f, 0.95f, 0.85f};
-    sun.intensity = 3.0f;
-    scene.lights.push_back(sun);
-    scene.environment.color = {0.5f, 0.65f, 0.9f};
-    scene.environment.strength = 0.5f;
 }
 
 // Unit vectors t, b with (t, b, n) orthonormal, for a unit n (Duff et al. 2017,
@@ -737,6 +720,17 @@ Scene make_sky_sphere() {
 }
 
 }  // namespace
+
+void io::add_sun_and_sky(Scene& scene, Vec3f sun_direction) {
+    Light sun;
+    sun.type = LightType::Directional;
+    sun.direction = normalize(sun_direction);
+    sun.color = {1.0f, 0.95f, 0.85f};
+    sun.intensity = 3.0f;
+    scene.lights.push_back(sun);
+    scene.environment.color = {0.5f, 0.65f, 0.9f};
+    scene.environment.strength = 0.5f;
+}
 
 std::vector<std::string> builtin_scene_names() {
     return {"cornell",  "spheres", "sphereflake", "terrain",          "instances",
