@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <map>
 #include <random>
+#include <string>
 #include <tuple>
 #include <utility>
 #include <vector>
@@ -101,6 +102,16 @@ inline void append(SceneGeometry& geometry, const Triangle& tri) {
     geometry.material.push_back(0);
     geometry.triangles.push_back(tri);
     geometry.bounds.extend(tri.bounds());
+}
+
+// An rf::Mesh of `m`, every triangle on material 0 (scenes built by hand in tests).
+inline Mesh to_mesh(const IndexedMesh& m, const std::string& name) {
+    Mesh mesh;
+    mesh.name = name;
+    mesh.positions = m.positions;
+    mesh.indices = m.indices;
+    mesh.material_ids.assign(m.indices.size() / 3, 0);
+    return mesh;
 }
 
 inline SceneGeometry to_geometry(const IndexedMesh& mesh, float scale = 1.0f, Vec3f offset = Vec3f(0.0f)) {

@@ -14,14 +14,7 @@
 namespace rf {
 namespace {
 
-Mesh to_mesh(const test::IndexedMesh& m, const std::string& name) {
-    Mesh mesh;
-    mesh.name = name;
-    mesh.positions = m.positions;
-    mesh.indices = m.indices;
-    mesh.material_ids.assign(m.indices.size() / 3, 0);
-    return mesh;
-}
+using test::to_mesh;
 
 // Linear translation + rotation keys for node `node`, sampled at `frames` frames.
 AnimatedNode moving_node(int k, int frames) {

@@ -30,13 +30,7 @@
 namespace rf {
 namespace {
 
-Mesh to_mesh(const test::IndexedMesh& m, const std::string& name) {
-    Mesh mesh;
-    mesh.name = name;
-    mesh.positions = m.positions;
-    mesh.indices = m.indices;
-    return mesh;
-}
+using test::to_mesh;
 
 // An open n x n grid of quads in the z = 0 plane over [-1, 1]^2.
 Mesh make_patch(int n) {
