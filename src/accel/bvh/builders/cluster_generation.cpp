@@ -95,7 +95,7 @@ MeshData mesh_data(std::span<const Vec3f> positions, std::span<const uint32_t> i
         }
     });
     m.normal_area.resize(n);
-    for (uint32_t t = 0; t < n; ++t) m.normal_area[t] = Vec4f(m.normal[t].x, m.normal[t].y, m.normal[t].z, m.area[t]);
+    for (uint32_t t = 0; t < n; ++t) m.normal_area[t] = Vec4f{m.normal[t].x, m.normal[t].y, m.normal[t].z, m.area[t]};
     double sum = 0.0;
     for (float r : radius) sum += r;  // sequential: the same sum for any thread count
     const double r = n ? sum / n : 0.0;
