@@ -9,6 +9,7 @@
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
 #include "rayforge/accel/dynamic_accel.h"
+#include "rayforge/backend/device.h"
 #include "rayforge/core/error.h"
 
 namespace rf {
@@ -175,6 +176,30 @@ TEST(DynamicAccel, OptionErrorsAreOneLine) {
     EXPECT_EQ(to_string(UpdateMethod::Clusters), "clusters");
     EXPECT_FLOAT_EQ(parse_adapt_reading("closing").migrate_threshold, 0.01f);
     EXPECT_FLOAT_EQ(parse_adapt_reading("closing").explode_threshold, 0.05f);
+}
+
+// Which methods a CUDA device runs, and that asking one without a usable
+// device (or a build without the backend) is one line, not a crash.
+TEST(DynamicAccel, DeviceMethodsAndTheirErrors) {
+    EXPECT_TRUE(update_runs_on_device(UpdateMethod::Refit));
+    EXPECT_TRUE(update_runs_on_device(UpdateMethod::Rebuild));
+    EXPECT_TRUE(update_runs_on_device(UpdateMethod::TwoLevel));
+    EXPECT_FALSE(update_runs_on_device(UpdateMethod::Adapt));
+    EXPECT_FALSE(update_runs_on_device(UpdateMethod::Clusters));
+    if (!list_cuda_devices().devices.empty()) GTEST_SKIP() << "a device is present: tests/gpu covers it";
+    Scene scene = make_animated_scene(2, 3);
+    SceneGeometry geometry = SceneGeometry::build(scene);
+    BuildOptions build;
+    build.device = Device{Device::Kind::Cuda, 0};
+    build.gpu_kernel = GpuKernel::Bvh2;
+    for (UpdateMethod method : {UpdateMethod::Refit, UpdateMethod::Rebuild, UpdateMethod::TwoLevel}) {
+        try {
+            (void)build_dynamic_accel(scene, geometry, build, UpdateOptions{method, {}, {}});
+            ADD_FAILURE() << to_string(method) << " built on a device that is not there";
+        } catch (const Error& e) {
+            EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << e.what();
+        }
+    }
 }
 
 }  // namespace

@@ -358,6 +358,24 @@ TEST(TwoLevelDeviceLogic, TracerOverPlainViewsMatchesBruteForce) {
         TwoLevelBvh2Tracer tracer;
     };
     expect_matches_brute_force(TracerAccel(tracer), g, rays, "plain views");
+
+    // The instrumented traversal (the device's count and wavefront kernels
+    // take it) answers the same, and counts both levels' work.
+    RayCounters counts;
+    for (const Ray& ray : rays) {
+        const Hit want = tracer.intersect(ray);
+        const Hit closest = tracer.counted(ray, false, counts);
+        EXPECT_EQ(closest.prim, want.prim);
+        EXPECT_EQ(closest.t, want.t);
+        EXPECT_EQ(tracer.counted(ray, true, counts).found(), tracer.occluded(ray));
+    }
+    RayCounters top_only;  // a ray that misses everything tests the top root alone
+    EXPECT_FALSE(tracer.counted(Ray{g.bounds.hi + Vec3f(10.0f), 0.0f, Vec3f(1, 0, 0), kInfinity}, false, top_only)
+                     .found());
+    EXPECT_EQ(top_only.steps, 1u);
+    EXPECT_EQ(top_only.prim_tests, 0u);
+    EXPECT_GT(counts.steps, 2 * rays.size());  // the top root and a bottom root at least, per query
+    EXPECT_GT(counts.prim_tests, 0u);
 }
 
 // ---------------------------------------------------------------------------

@@ -1,5 +1,9 @@
 #include "accel_options.h"
 
+#include <cstdio>
+
+#include "rayforge/core/error.h"
+
 namespace rf::cli {
 
 void add_accel_options(CLI::App* cmd, AccelArgs& a) {
@@ -53,7 +57,8 @@ void add_update_options(CLI::App* cmd, AccelArgs& a) {
     cmd->add_option("--update", a.update_method,
                     "How the structure follows an animation: refit | adapt (Garanzha 2014 ch. 2: refit, local "
                     "rebuilds, migrations) | rebuild | clusters (ch. 3: builds over precomputed clusters) | "
-                    "two-level (a BVH per mesh, a top level over instances) (default: the scene's, else " +
+                    "two-level (a BVH per mesh, a top level over instances); on --device cuda refit, rebuild "
+                    "and two-level (default: the scene's, else " +
                         to_string(kDefaultUpdateMethod) + ")")
         ->group(group);
     cmd->add_option("--adapt-reading", a.adapt_reading,
@@ -92,10 +97,18 @@ void add_update_options(CLI::App* cmd, AccelArgs& a) {
         ->group(group);
 }
 
-UpdateOptions to_update_options(const AccelArgs& a, const std::string& scene_default) {
+UpdateOptions to_update_options(const AccelArgs& a, const std::string& scene_default, const Device& device) {
     UpdateOptions update = a.update;
     const std::string& method = !a.update_method.empty() ? a.update_method : scene_default;
     update.method = method.empty() ? kDefaultUpdateMethod : parse_update_method(method);
+    if (device.is_cuda() && !update_runs_on_device(update.method) && !a.update_method.empty())
+        throw rf::Error("--update " + a.update_method + " runs on the CPU only; on " + to_string(device) +
+                    " use refit, rebuild or two-level");
+    if (device.is_cuda() && !update_runs_on_device(update.method)) {
+        std::fprintf(stderr, "rayforge: note: the scene's update method %s runs on the CPU only; %s rebuilds\n",
+                     method.c_str(), to_string(device).c_str());
+        update.method = UpdateMethod::Rebuild;
+    }
     if (!a.adapt_reading.empty()) {
         const AdaptOptions reading = parse_adapt_reading(a.adapt_reading);
         update.adapt.migrate_threshold = reading.migrate_threshold;

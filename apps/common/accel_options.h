@@ -27,8 +27,11 @@ void add_update_options(CLI::App* cmd, AccelArgs& args);
 // Parses the names into args.options; throws rf::Error for unknown names.
 BuildOptions to_build_options(const AccelArgs& args, int threads);
 // The update options (--update and the adapt/cluster parameters); `scene_default`
-// is the scene file's update method when it names one. Throws rf::Error for unknown names.
-UpdateOptions to_update_options(const AccelArgs& args, const std::string& scene_default = "");
+// is the scene file's update method when it names one (a CPU-only one
+// becomes rebuild, with a note, on a CUDA `device`, where a CPU-only
+// --update is an error). Throws rf::Error for unknown names.
+UpdateOptions to_update_options(const AccelArgs& args, const std::string& scene_default = "",
+                                const Device& device = {});
 // The update method used when neither the command line nor the scene names one.
 inline constexpr UpdateMethod kDefaultUpdateMethod = UpdateMethod::Rebuild;  // measured: docs/benchmarks.md
 

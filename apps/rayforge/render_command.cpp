@@ -150,8 +150,7 @@ int run_render_frames(const RenderArgs& a, const Device& device, BuildOptions bu
     const FrameRange range = parse_frames(a.frames);
     const bool several = range.count() > 1;
     for (const std::string& output : a.outputs) (void)frame_path(output, range.first, several);  // fail fast
-    UpdateOptions update = to_update_options(a.accel, scene.render_settings.update.value_or(""));
-    if (device.is_cuda()) update.method = UpdateMethod::Rebuild;
+    const UpdateOptions update = to_update_options(a.accel, scene.render_settings.update.value_or(""), device);
 
     scene.set_time(scene.animation.frame_time(range.first));
     SceneGeometry geometry = SceneGeometry::build(scene);
@@ -230,7 +229,7 @@ int run_render(const RenderArgs& a) {
     const Device device = parse_device(a.device);
     require_usable(device, "--device " + a.device);  // before the scene loads: fail fast
     const BuildOptions build = structure_options(a, device);
-    (void)to_update_options(a.accel);  // names and ranges checked before the scene loads
+    (void)to_update_options(a.accel, "", device);  // names, ranges and the device checked before the scene loads
     if (!a.frames.empty()) return run_render_frames(a, device, build);
     Clock::time_point start = Clock::now();
     Scene scene = load_scene(a.scene);

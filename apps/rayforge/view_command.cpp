@@ -114,7 +114,7 @@ int run_view(const ViewArgs& a) {
     config.settings.render = render_options(r, RenderSettings{}, device);
     config.settings.render.spp = r.spp_opt->count() > 0 ? r.spp : kViewerPasses;
     config.settings.tone = tone_mapping(r);
-    config.settings.update = to_update_options(r.accel);
+    config.settings.update = to_update_options(r.accel, "", device);
     config.settings.motion_divisor = a.motion_scale == "auto" ? 0 : std::stoi(a.motion_scale);
     config.prepare = scene_preparation(a, device);
     config.paged = paged_scene_options(r.paged, r.threads);  // a malformed budget fails before the window opens

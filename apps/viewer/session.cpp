@@ -358,7 +358,8 @@ std::string structure_name(const BuildOptions& o) {
 }  // namespace
 
 // A static scene's structure, or an animated scene's copy with a dynamic
-// structure (a CUDA device rebuilds it there each frame).
+// structure (on a CUDA device a CPU-only update method becomes rebuild; the
+// overlay's structure name says which runs).
 Session::Target Session::build_target(std::shared_ptr<const SceneData> data, const BuildOptions& build,
                                       UpdateOptions update, const ProgressCallback& progress) const {
     Target target{data, nullptr, nullptr};
@@ -366,7 +367,7 @@ Session::Target Session::build_target(std::shared_ptr<const SceneData> data, con
         target.accel = build_accel(data->geometry, build, progress);
         return target;
     }
-    if (build.device.is_cuda()) update.method = UpdateMethod::Rebuild;
+    if (build.device.is_cuda() && !update_runs_on_device(update.method)) update.method = UpdateMethod::Rebuild;
     auto animation = std::make_shared<AnimationState>();
     animation->scene = data->scene;
     animation->geometry = data->geometry;

@@ -138,6 +138,10 @@ std::string to_string(KdTraversal traversal) { return name_of(traversal, kKdTrav
 
 namespace rf {
 
+bool update_runs_on_device(UpdateMethod method) {
+    return method == UpdateMethod::Refit || method == UpdateMethod::Rebuild || method == UpdateMethod::TwoLevel;
+}
+
 UpdateMethod parse_update_method(const std::string& name) {
     return parse_name(name, kUpdateMethodNames, "update method");
 }

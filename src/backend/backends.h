@@ -13,6 +13,7 @@
 #include "rayforge/accel/accel.h"
 #include "rayforge/accel/build_report.h"
 #include "rayforge/accel/bvh/bvh.h"
+#include "rayforge/accel/dynamic_accel.h"
 #include "rayforge/backend/device.h"
 #include "rayforge/render/display.h"
 #include "rayforge/render/render.h"
@@ -44,6 +45,10 @@ void require_device(int index);
 std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options);
 // options.builder run by its device builder (rf::Error for a builder without one).
 Bvh build_bvh(std::span<const Triangle> triangles, const BuildOptions& options, BuildReport* report);
+// A structure on device build.device.index kept current over an animation
+// with update.method refit, rebuild or two-level (rf::Error for the others).
+std::unique_ptr<DynamicAccel> build_dynamic_accel(const Scene& scene, const SceneGeometry& geometry,
+                                                  const BuildOptions& build, const UpdateOptions& update);
 // A renderer for an accel from cuda::build_accel.
 std::unique_ptr<Renderer> make_renderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
                                         const Camera& camera, const RenderOptions& options);

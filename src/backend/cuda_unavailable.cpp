@@ -15,6 +15,10 @@ std::unique_ptr<Accel> build_accel(const SceneGeometry&, const BuildOptions& opt
 Bvh build_bvh(std::span<const Triangle>, const BuildOptions& options, BuildReport*) {
     throw Error(to_string(options.device) + ": " + kCudaNotBuilt);
 }
+std::unique_ptr<DynamicAccel> build_dynamic_accel(const Scene&, const SceneGeometry&, const BuildOptions& build,
+                                                  const UpdateOptions&) {
+    throw Error(to_string(build.device) + ": " + kCudaNotBuilt);
+}
 std::unique_ptr<Renderer> make_renderer(const Scene&, const SceneGeometry&, const Accel&, const Camera&,
                                         const RenderOptions& options) {
     throw Error(to_string(options.device) + ": " + kCudaNotBuilt);
@@ -37,5 +41,6 @@ DeviceBvhRefit::~DeviceBvhRefit() = default;
 double DeviceBvhRefit::refit(std::span<const Triangle>) { throw Error(kCudaNotBuilt); }
 void DeviceBvhRefit::download(Bvh&) const { throw Error(kCudaNotBuilt); }
 DeviceRefitArrays DeviceBvhRefit::arrays() const { throw Error(kCudaNotBuilt); }
+size_t DeviceBvhRefit::bytes() const { return 0; }
 
 }  // namespace rf::cuda

@@ -16,6 +16,8 @@
 //   bool occluded(const BlasView&, const Ray&) const;
 // Bvh2Blas (below) is the RF_HD one over BvhView; the CPU accel plugs in
 // the SIMD BVH4/8 traversal (accel/dynamic/two_level_accel.cpp).
+// Bvh2BlasCounted counts the bottom levels' box and triangle tests into the
+// TraversalCounters the top level counts its own box tests into.
 #pragma once
 
 #include <cstdint>
@@ -26,6 +28,7 @@
 #include "rayforge/math/affine.h"
 #include "rayforge/math/ray.h"
 #include "trace/bvh_traversal.h"
+#include "trace/tracers.h"
 
 namespace rf {
 
@@ -50,6 +53,12 @@ struct TwoLevelView {
 struct Bvh2Blas {
     RF_HDI Hit intersect(const BvhView& bvh, const Ray& ray) const { return bvh_intersect(bvh, ray); }
     RF_HDI bool occluded(const BvhView& bvh, const Ray& ray) const { return bvh_occluded(bvh, ray); }
+};
+
+struct Bvh2BlasCounted {
+    TraversalCounters* counters;
+    RF_HDI Hit intersect(const BvhView& bvh, const Ray& ray) const { return bvh_intersect_counted(bvh, ray, *counters); }
+    RF_HDI bool occluded(const BvhView& bvh, const Ray& ray) const { return bvh_occluded_counted(bvh, ray, *counters); }
 };
 
 // The ray in an instance's object space: same tmin and tmax (t is preserved).
@@ -92,14 +101,17 @@ RF_HDI bool two_level_leaf(const TwoLevelView<BlasView>& view, const BvhNode& le
 
 // The top level: nearest child first, far children on a stack with their
 // entry distance (skipped once a closer hit is known), as in bvh_traversal.h.
+// counters (may be null) get the top level's box tests.
 template <bool kAnyHit, class BlasView, class BlasTrace>
-RF_HDI Hit two_level_traverse(const TwoLevelView<BlasView>& view, const Ray& ray, const BlasTrace& trace) {
+RF_HDI Hit two_level_traverse(const TwoLevelView<BlasView>& view, const Ray& ray, const BlasTrace& trace,
+                              TraversalCounters* counters = nullptr) {
     Hit hit;
     if (view.top_node_count == 0) return hit;
     const SlabRay slab = SlabRay::make(ray);
     const float tmin = ray.tmin;
     float tmax = ray.tmax;
     float entry;
+    if (counters) ++counters->nodes_visited;
     if (!slab_test(slab, view.top_nodes[0].bounds, tmin, tmax, entry)) return hit;
 
     StackEntry stack[kBvhMaxDepth];
@@ -113,6 +125,7 @@ RF_HDI Hit two_level_traverse(const TwoLevelView<BlasView>& view, const Ray& ray
             float entry_left, entry_right;
             const bool hit_left = slab_test(slab, view.top_nodes[left].bounds, tmin, tmax, entry_left);
             const bool hit_right = slab_test(slab, view.top_nodes[left + 1].bounds, tmin, tmax, entry_right);
+            if (counters) counters->nodes_visited += 2;
             if (hit_left && hit_right) {
                 const bool left_first = entry_left <= entry_right;
                 current = left_first ? left : left + 1;
@@ -158,6 +171,16 @@ struct TwoLevelBvh2Tracer {
     TwoLevelView<BvhView> view;
     RF_HDI Hit intersect(const Ray& ray) const { return two_level_intersect(view, ray, Bvh2Blas{}); }
     RF_HDI bool occluded(const Ray& ray) const { return two_level_occluded(view, ray, Bvh2Blas{}); }
+    // Box tests of both levels and triangle tests, like Bvh2Tracer::counted.
+    RF_HDI Hit counted(const Ray& ray, bool any_hit, RayCounters& c) const {
+        TraversalCounters t;
+        const Bvh2BlasCounted trace{&t};
+        Hit h;
+        if (any_hit) h.prim = detail::two_level_traverse<true>(view, ray, trace, &t).found() ? 0u : kInvalidId;
+        else h = detail::two_level_traverse<false>(view, ray, trace, &t);
+        add_counts(t, c);
+        return h;
+    }
 };
 
 }  // namespace rf

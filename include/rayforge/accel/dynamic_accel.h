@@ -17,10 +17,14 @@ namespace rf {
 enum class UpdateMethod : uint8_t {
     Refit,     // boxes recomputed bottom-up, topology kept (CPU and device)
     Adapt,     // Garanzha 2014 ch. 2: refit + local rebuild of exploded subtrees + migration
-    Rebuild,   // a full build with BuildOptions::builder every frame
+    Rebuild,   // a full build with BuildOptions::builder every frame (CPU and device)
     Clusters,  // Garanzha 2014 ch. 3: a full build over precomputed clusters' boxes every frame
-    TwoLevel,  // one BVH per mesh (refit only when it deforms) + a top level over instances rebuilt every frame
+    TwoLevel,  // (CPU and device) one BVH per mesh (refit only when it deforms) + a top level over instances rebuilt every frame
 };
+
+// Whether `method` runs on a CUDA device: refit, rebuild and two-level do;
+// adapt and clusters restructure the tree on the host and run on the CPU only.
+bool update_runs_on_device(UpdateMethod method);
 
 // Chapter 2's thresholds. The text gives them twice with dM and dE swapped:
 // `stated()` is the first reading (dM = 0.05, dE = 0.01), `closing()` the
@@ -85,8 +89,9 @@ public:
     // The build when the accel was made (or the last full rebuild).
     [[nodiscard]] virtual double initial_build_ms() const = 0;
     // The structure answering the queries now: this accel on the CPU; on a
-    // CUDA device the accel the last rebuild made there. A renderer on a
-    // device binds to it, so make a new renderer after each update there.
+    // CUDA device the device structure the method keeps current (rebuild
+    // replaces it every frame). A renderer on a device binds to it, so make
+    // a new renderer after each update there.
     [[nodiscard]] virtual const Accel& current() const { return *this; }
 };
 

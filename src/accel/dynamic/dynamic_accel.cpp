@@ -9,10 +9,8 @@
 // node boxes are copied), otherwise it is collapsed again from the new
 // tree. The two-level method is its own accel (two_level_accel.cpp).
 //
-// On a CUDA device only `rebuild` is offered: each frame the device
-// builder (e.g. hlbvh2) builds and lays out the tree there. Device refit is
-// a kernel (backend/cuda/bvh_refit.cu) measured by the bench; wiring it
-// into a device accel is not done.
+// On a CUDA device the backend makes the structure
+// (backend/cuda/device_dynamic_accel.cpp): refit, rebuild and two-level.
 #include <algorithm>
 #include <chrono>
 #include <functional>
@@ -25,6 +23,7 @@
 #include "accel/bvh/refit.h"
 #include "accel/dynamic/bvh_updater.h"
 #include "accel/view_accel.h"
+#include "backend/backends.h"
 #include "backend/cpu/parallel.h"
 #include "backend/cpu/wide_bvh_tracer.h"
 #include "rayforge/core/error.h"
@@ -196,52 +195,6 @@ private:
     double initial_build_ms_ = 0.0;
 };
 
-// Rebuild on a CUDA device: the device builder every frame.
-class DeviceRebuildAccel final : public DynamicAccel {
-public:
-    DeviceRebuildAccel(const SceneGeometry& geometry, const BuildOptions& build) : geometry_(geometry), build_(build) {
-        const auto start = std::chrono::steady_clock::now();
-        accel_ = build_accel(geometry_, build_);
-        initial_build_ms_ = ms_since(start);
-    }
-    UpdateStats update(const GeometryChange& change) override {
-        UpdateStats stats;
-        stats.sah_cost = accel_->stats().sah_cost;
-        if (!change.geometry()) return stats;  // nothing moved: nothing to do
-        const auto start = std::chrono::steady_clock::now();
-        accel_ = build_accel(geometry_, build_);
-        stats.update_ms = ms_since(start);
-        stats.layout_ms = accel_->stats().layout_ms;
-        stats.sah_cost = accel_->stats().sah_cost;
-        return stats;
-    }
-    [[nodiscard]] UpdateMethod method() const override { return UpdateMethod::Rebuild; }
-    [[nodiscard]] double initial_build_ms() const override { return initial_build_ms_; }
-    [[nodiscard]] const Accel& current() const override { return *accel_; }
-    [[nodiscard]] Hit intersect(const Ray& ray) const override { return accel_->intersect(ray); }
-    [[nodiscard]] bool occluded(const Ray& ray) const override { return accel_->occluded(ray); }
-    void intersect(std::span<const Ray> rays, std::span<Hit> hits) const override { accel_->intersect(rays, hits); }
-    void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const override {
-        accel_->occluded(rays, occluded);
-    }
-    [[nodiscard]] AccelStats stats() const override { return accel_->stats(); }
-    [[nodiscard]] Device device() const override { return accel_->device(); }
-    [[nodiscard]] BuildReport build_report() const override { return accel_->build_report(); }
-    bool count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const override {
-        return accel_->count_traversal(rays, any_hit, totals);
-    }
-    std::vector<double> time_traversal(std::span<const Ray> rays, bool any_hit, int runs, std::span<Hit> hits,
-                                       std::span<uint8_t> occluded) const override {
-        return accel_->time_traversal(rays, any_hit, runs, hits, occluded);
-    }
-
-private:
-    const SceneGeometry& geometry_;
-    BuildOptions build_;
-    std::unique_ptr<Accel> accel_;
-    double initial_build_ms_ = 0.0;
-};
-
 }  // namespace
 
 std::unique_ptr<BvhUpdater> make_rebuild_updater(std::span<const Triangle> triangles, const BuildOptions& build) {
@@ -255,13 +208,10 @@ std::unique_ptr<DynamicAccel> build_dynamic_accel(const Scene& scene, const Scen
     validate_update_options(update);
     if (build.structure != Structure::Bvh)
         throw Error("dynamic accel: --update needs the bvh structure, not " + to_string(build.structure));
-    if (build.device.is_cuda() && update.method != UpdateMethod::Rebuild)
-        throw Error("dynamic accel: on a CUDA device only --update rebuild is available (got " +
-                    to_string(update.method) + ")");
     if (progress) progress(0.0);
     std::unique_ptr<DynamicAccel> accel;
     if (build.device.is_cuda()) {
-        accel = std::make_unique<DeviceRebuildAccel>(geometry, build);
+        accel = cuda::build_dynamic_accel(scene, geometry, build, update);
     } else if (update.method == UpdateMethod::TwoLevel) {
         accel = make_two_level_accel(scene, geometry, build);
     } else {

@@ -43,6 +43,7 @@
 #include "accel/bvh/builders/build_bvh.h"
 #include "accel/bvh/layout/wide_bvh.h"
 #include "accel/dynamic/bvh_updater.h"
+#include "accel/dynamic/two_level_accel.h"
 #include "backend/cpu/parallel.h"
 #include "backend/cpu/ray_batches.h"
 #include "backend/cpu/wide_bvh_traversal.h"
@@ -248,7 +249,7 @@ Hit traverse_wide_top(const WideTop& top, const TwoLevelView<View>& view, const 
 }
 
 template <int N>
-class TwoLevelAccel final : public DynamicAccel {
+class TwoLevelAccel final : public TwoLevelHost {
 public:
     TwoLevelAccel(const Scene& scene, const SceneGeometry& geometry, const BuildOptions& build)
         : scene_(scene), geometry_(geometry), build_(build), blas_(scene.meshes.size()),
@@ -320,6 +321,7 @@ public:
         stats.layout_ms = layout_ms_;  // summed by refit_blas
         layout_ms_ = 0.0;
         stats.meshes_updated = meshes.size();
+        updated_ = std::move(meshes);
         rebuild_top();
         stats.sah_cost = sah_cost_;
         stats.update_ms = ms_since(start);
@@ -346,6 +348,15 @@ public:
         s.quality_cost = std::numeric_limits<double>::quiet_NaN();
         return s;
     }
+
+    [[nodiscard]] size_t mesh_count() const override { return blas_.size(); }
+    [[nodiscard]] const Bvh& blas(uint32_t mesh) const override { return blas_.at(mesh).bvh; }
+    [[nodiscard]] std::span<const Triangle> blas_triangles(uint32_t mesh) const override {
+        return blas_.at(mesh).triangles;
+    }
+    [[nodiscard]] std::span<const uint32_t> updated_meshes() const override { return updated_; }
+    [[nodiscard]] const Bvh& top() const override { return top_; }
+    [[nodiscard]] std::span<const TwoLevelInstance> instances() const override { return instances_; }
 
 private:
     void build_blas(uint32_t mesh) {
@@ -418,6 +429,7 @@ private:
     std::vector<typename BlasLayout<N>::View> views_;  // per mesh
     std::vector<uint8_t> used_;                         // per mesh: some instance uses it
     std::vector<TwoLevelInstance> instances_;          // the visible ones
+    std::vector<uint32_t> updated_;                     // the meshes the last update refitted
     Bvh top_;
     WideTop wide_top_;  // the SIMD layouts' top level (N > 2)
     TwoLevelView<typename BlasLayout<N>::View> view_;
@@ -429,12 +441,21 @@ private:
 
 }  // namespace
 
+std::unique_ptr<TwoLevelHost> make_two_level_host(const Scene& scene, const SceneGeometry& geometry,
+                                                  const BuildOptions& build) {
+    BuildOptions host = build;
+    host.device = Device{};
+    host.layout = Layout::Bvh2;
+    validate_build_options(host);
+    return std::make_unique<TwoLevelAccel<2>>(scene, geometry, host);
+}
+
 std::unique_ptr<DynamicAccel> make_two_level_accel(const Scene& scene, const SceneGeometry& geometry,
                                                    const BuildOptions& build) {
     validate_build_options(build);
     if (build.structure != Structure::Bvh) throw Error("two-level accel: the structure must be bvh");
     if (build.device.is_cuda())
-        throw Error("two-level accel: there is no device version yet (use the CPU)");
+        throw Error("two-level accel: this is the CPU version; build_dynamic_accel makes the device one");
     switch (build.layout) {
         case Layout::Bvh2: return std::make_unique<TwoLevelAccel<2>>(scene, geometry, build);
         case Layout::Bvh4: return std::make_unique<TwoLevelAccel<4>>(scene, geometry, build);

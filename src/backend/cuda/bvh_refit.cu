@@ -115,6 +115,12 @@ DeviceRefitArrays DeviceBvhRefit::arrays() const {
             d.triangles.data(), d.arrivals.data(), uint32_t(d.nodes.size()), d.leaf_count};
 }
 
+size_t DeviceBvhRefit::bytes() const {
+    const Impl& d = *impl_;
+    return d.nodes.bytes() + d.slots.bytes() + d.leaves.bytes() + d.parents.bytes() + d.arrivals.bytes() +
+           d.triangles.bytes();
+}
+
 DeviceRefitTimes refit_bvh_on_device(Bvh& bvh, std::span<const Triangle> triangles, int repeats, int device) {
     if (repeats < 1) throw Error("device refit: repeats must be at least 1, got " + std::to_string(repeats));
     DeviceRefitTimes times;

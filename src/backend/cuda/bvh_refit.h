@@ -62,6 +62,8 @@ public:
     // The device arrays, for a device accel that traces the nodes in place
     // or refits from triangles it keeps itself (refit_bvh_on_device).
     [[nodiscard]] DeviceRefitArrays arrays() const;
+    // Device memory held (nodes, slots, leaves, parents, counters, triangles).
+    [[nodiscard]] size_t bytes() const;
 
 private:
     struct Impl;

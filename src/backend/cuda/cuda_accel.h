@@ -5,6 +5,7 @@
 // batches). The CUDA renderer takes its structure from here.
 #pragma once
 
+#include <memory>
 #include <vector>
 
 #include "backend/cuda/device_tracer.h"
@@ -14,7 +15,10 @@ namespace rf::cuda {
 
 class CudaAccel final : public Accel {
 public:
-    CudaAccel(const SceneGeometry& geometry, const BuildOptions& options) : tracer_(geometry, options) {}
+    CudaAccel(const SceneGeometry& geometry, const BuildOptions& options, Refittable refittable = Refittable::No)
+        : tracer_(geometry, options, refittable) {}
+    // Over a two-level structure that its owner keeps current through tracer().two_level().
+    CudaAccel(std::unique_ptr<DeviceTwoLevel> two_level, AccelStats stats) : tracer_(std::move(two_level), std::move(stats)) {}
 
     [[nodiscard]] Hit intersect(const Ray& ray) const override;
     [[nodiscard]] bool occluded(const Ray& ray) const override;
@@ -35,6 +39,7 @@ public:
     }
 
     [[nodiscard]] const DeviceTracer& tracer() const { return tracer_; }
+    [[nodiscard]] DeviceTracer& tracer() { return tracer_; }
 
 private:
     // The resident-ray buffers are scratch space: a const query may reuse them.

@@ -215,22 +215,40 @@ Placed place_cwbvh(DeviceTracer::Impl& impl, const Bvh& bvh, std::span<const Tri
     return {cw.memory_bytes(), layout_ms};
 }
 
+// The canonical tree in the kernel's layout (after its build or a refit).
+Placed place_layout(DeviceTracer::Impl& impl, const Bvh& bvh, std::span<const Triangle> triangles) {
+    if (impl.refitter && impl.kernel == GpuKernel::Bvh2) {  // traced in place, where the refit writes
+        const DeviceRefitArrays a = impl.refitter->arrays();
+        impl.bvh2.bvh = {a.nodes, a.prim_indices, a.triangles, a.node_count};
+        impl.stats.node_count = bvh.nodes.size();
+        return {bvh.memory_bytes(), 0.0};
+    }
+    const Triangle* device_triangles = upload_triangles(impl, triangles);
+    switch (impl.kernel) {
+        case GpuKernel::AilaLaine: return place_aila_laine(impl, bvh, triangles, impl.convert_on_device);
+        case GpuKernel::Cwbvh: return place_cwbvh(impl, bvh, triangles, impl.convert_on_device);
+        default: return place_bvh2(impl, bvh, device_triangles);
+    }
+}
+
 // A BVH from build.builder (on the device where it has a device builder), in the kernel's layout.
-Placed place_bvh(DeviceTracer::Impl& impl, std::span<const Triangle> triangles, const BuildOptions& build) {
+Placed place_bvh(DeviceTracer::Impl& impl, std::span<const Triangle> triangles, const BuildOptions& build,
+                 Refittable refittable) {
     const bool device_build = build.build_on_device && has_device_builder(build.builder);
-    const Bvh bvh = device_build ? build_bvh_on_device(triangles, build, &impl.build_stages, impl.device)
-                                 : build_bvh_on_cpu(triangles, build);
+    Bvh bvh = device_build ? build_bvh_on_device(triangles, build, &impl.build_stages, impl.device)
+                           : build_bvh_on_cpu(triangles, build);
     AccelStats& stats = impl.stats;
     stats.name += "/" + to_string(build.builder);
     stats.sah_cost = bvh.sah_cost(1.0f, 1.0f);
     stats.quality_cost = bvh.quality_cost(2.0);
     stats.leaf_count = bvh.leaf_count();
-    const Triangle* device_triangles = upload_triangles(impl, triangles);
-    switch (impl.kernel) {
-        case GpuKernel::AilaLaine: return place_aila_laine(impl, bvh, triangles, build.build_on_device);
-        case GpuKernel::Cwbvh: return place_cwbvh(impl, bvh, triangles, build.build_on_device);
-        default: return place_bvh2(impl, bvh, device_triangles);
+    impl.convert_on_device = build.build_on_device;
+    if (refittable == Refittable::Yes) {
+        impl.refitter = std::make_unique<DeviceBvhRefit>(bvh, impl.device);
+        (void)impl.refitter->refit(triangles);  // uploads the triangles, recomputes the boxes from them
+        if (impl.kernel != GpuKernel::Bvh2) impl.host_bvh = bvh;
     }
+    return place_layout(impl, bvh, triangles);
 }
 
 // The SAH kd-tree, built on the CPU (it has no device builder).
@@ -274,7 +292,8 @@ Placed place_grid(DeviceTracer::Impl& impl, std::span<const Triangle> triangles,
 
 }  // namespace
 
-DeviceTracer::DeviceTracer(const SceneGeometry& geometry, const BuildOptions& build) : impl_(new Impl) {
+DeviceTracer::DeviceTracer(const SceneGeometry& geometry, const BuildOptions& build, Refittable refittable)
+    : impl_(new Impl) {
     validate_build_options(build);
     Impl& impl = *impl_;
     impl.kernel = build.gpu_kernel;
@@ -291,8 +310,10 @@ DeviceTracer::DeviceTracer(const SceneGeometry& geometry, const BuildOptions& bu
         case Structure::KdTree: placed = place_kdtree(impl, triangles, build); break;
         case Structure::Grid:
         case Structure::ProximityGrid: placed = place_grid(impl, triangles, build); break;
-        default: placed = place_bvh(impl, triangles, build); break;
+        default: placed = place_bvh(impl, triangles, build, refittable); break;
     }
+    if (refittable == Refittable::Yes && !impl.refitter)
+        throw Error("cuda::DeviceTracer: only BVH kernels can be refitted, not " + to_string(impl.kernel));
     RF_CUDA_CHECK(cudaDeviceSynchronize());
     impl.stats.build_ms = ms_since(start);
     impl.stats.layout_ms = placed.layout_ms;
@@ -300,10 +321,39 @@ DeviceTracer::DeviceTracer(const SceneGeometry& geometry, const BuildOptions& bu
     impl.stats.device_bytes = impl.structure_bytes();
 }
 
+DeviceTracer::DeviceTracer(std::unique_ptr<DeviceTwoLevel> two_level, AccelStats stats) : impl_(new Impl) {
+    if (!two_level) throw Error("cuda::DeviceTracer: no two-level structure given");
+    Impl& impl = *impl_;
+    impl.kernel = GpuKernel::Bvh2;
+    impl.device = two_level->device();
+    require_device(impl.device);
+    RF_CUDA_CHECK(cudaSetDevice(impl.device));
+    RF_CUDA_CHECK(cudaDeviceGetAttribute(&impl.multiprocessors, cudaDevAttrMultiProcessorCount, impl.device));
+    impl.two_level = std::move(two_level);
+    impl.stats = std::move(stats);
+    impl.stats.device_bytes = impl.structure_bytes();
+}
+
 DeviceTracer::~DeviceTracer() = default;
 
+double DeviceTracer::refit(std::span<const Triangle> triangles) {
+    Impl& impl = *impl_;
+    if (!impl.refitter) throw Error("cuda::DeviceTracer::refit: this structure was not built refittable");
+    RF_CUDA_CHECK(cudaSetDevice(impl.device));
+    const double kernel_ms = impl.refitter->refit(triangles);
+    if (impl.kernel != GpuKernel::Bvh2) {
+        impl.refitter->download(impl.host_bvh);
+        impl.stats.layout_ms = place_layout(impl, impl.host_bvh, triangles).layout_ms;
+    }
+    RF_CUDA_CHECK(cudaDeviceSynchronize());
+    impl.stats.device_bytes = impl.structure_bytes();
+    return kernel_ms;
+}
+
+DeviceTwoLevel* DeviceTracer::two_level() { return impl_->two_level.get(); }
+
 size_t DeviceTracer::Impl::structure_bytes() const {
-    return triangles.bytes() + bvh_nodes.bytes() + prim_indices.bytes() + aila_laine_nodes.bytes() +
+    return (refitter ? refitter->bytes() : 0) + (two_level ? two_level->bytes() : 0) + triangles.bytes() + bvh_nodes.bytes() + prim_indices.bytes() + aila_laine_nodes.bytes() +
            aila_laine_triangles.bytes() + cwbvh_nodes.bytes() + cwbvh_triangles.bytes() + kd_nodes.bytes() +
            cell_start.bytes() + cell_prims.bytes() + proximity.bytes();
 }
@@ -383,6 +433,7 @@ void DeviceTracer::count_traversal(std::span<const Ray> rays, bool any_hit, Trav
 GpuKernel DeviceTracer::kernel() const { return impl_->kernel; }
 int DeviceTracer::device() const { return impl_->device; }
 AccelStats DeviceTracer::stats() const { return impl_->stats; }
+void DeviceTracer::set_stats(const AccelStats& stats) { impl_->stats = stats; }
 const DeviceBuildStages& DeviceTracer::build_stages() const { return impl_->build_stages; }
 
 

@@ -5,6 +5,11 @@
 // the CPU; then converted to the kernel's layout (node pairs, CWBVH, kd
 // nodes, grid cells) and uploaded with the triangles. The CUDA backend's
 // rf::Accel (cuda_accel.cpp) and renderer (renderer.cu) are built on it.
+//
+// Animated scenes (backend/cuda/device_dynamic_accel.cpp) use two more
+// forms: a BVH made refittable keeps its canonical tree on the device and
+// refit() recomputes its boxes there (bvh_refit.cu); and a tracer over a
+// DeviceTwoLevel traces a two-level structure that its owner updates.
 #pragma once
 
 #include <cstdint>
@@ -12,6 +17,7 @@
 #include <span>
 
 #include "backend/cuda/device_builders.h"
+#include "backend/cuda/two_level_trace.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/math/ray.h"
 #include "rayforge/scene/scene_geometry.h"
@@ -24,10 +30,15 @@ struct KernelTiming {
     uint64_t rays = 0;
 };
 
+// Whether a BVH tracer keeps what refit() needs.
+enum class Refittable : uint8_t { No, Yes };
+
 class DeviceTracer {
 public:
     // options.gpu_kernel over `geometry` on device options.device.index.
-    DeviceTracer(const SceneGeometry& geometry, const BuildOptions& options);
+    DeviceTracer(const SceneGeometry& geometry, const BuildOptions& options, Refittable refittable = Refittable::No);
+    // Traces `two_level` (kernel bvh2 at both levels); stats as given.
+    DeviceTracer(std::unique_ptr<DeviceTwoLevel> two_level, AccelStats stats);
     ~DeviceTracer();
     DeviceTracer(const DeviceTracer&) = delete;
     DeviceTracer& operator=(const DeviceTracer&) = delete;
@@ -42,6 +53,16 @@ public:
     void download_hits(std::span<Hit> hits) const;           // after trace_uploaded(false)
     void download_occluded(std::span<uint8_t> flags) const;  // after trace_uploaded(true)
 
+    // A refittable BVH's boxes recomputed on the device for `triangles` (the
+    // geometry's, same count and order as at construction, new positions),
+    // the topology kept: the bvh2 kernel traces the refitted nodes in place;
+    // node pairs and CWBVH are converted again from them (on the device when
+    // the build was). Returns the refit kernel's milliseconds; rf::Error when
+    // the tracer was not made refittable.
+    double refit(std::span<const Triangle> triangles);
+    // The two-level structure this tracer traces (null for the others).
+    [[nodiscard]] DeviceTwoLevel* two_level();
+
     // Instrumented traversal (node or cell visits, triangle tests, restarts), like Accel::count_traversal.
     void count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const;
 
@@ -50,6 +71,7 @@ public:
     // name "cuda/<kernel>/<builder>", build_ms (build + layout + upload, wall time), layout_ms, nodes,
     // bytes and device_bytes.
     [[nodiscard]] AccelStats stats() const;
+    void set_stats(const AccelStats& stats);
     // The build's stages (on_device false: built on the host, no stages).
     [[nodiscard]] const DeviceBuildStages& build_stages() const;
 

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 
+#include "backend/cuda/bvh_refit.h"
 #include "backend/cuda/device_buffer.h"
 #include "trace/tracers.h"
 #include "backend/cuda/device_builders.h"
@@ -34,6 +35,16 @@ struct DeviceTracer::Impl {
     DeviceBuffer<uint32_t> cell_prims{"grid cell references"};
     DeviceBuffer<uint8_t> proximity{"proximity distances"};
 
+    // A refittable BVH (Refittable::Yes): its canonical tree, slots and
+    // triangles on the device, refitted there; the bvh2 kernel reads them
+    // (bvh_nodes, prim_indices and triangles stay empty), the other layouts
+    // are converted again from host_bvh, the refitted nodes copied back.
+    std::unique_ptr<DeviceBvhRefit> refitter;
+    Bvh host_bvh;
+    bool convert_on_device = false;
+    // A two-level structure (the second constructor), traced instead of the above.
+    std::unique_ptr<DeviceTwoLevel> two_level;
+
     Bvh2Tracer bvh2{};
     AilaLaineTracer aila_laine{};
     CwbvhTracer cwbvh{};
@@ -54,6 +65,7 @@ struct DeviceTracer::Impl {
     // Calls f with the tracer struct of this kernel.
     template <class F>
     decltype(auto) with_tracer(F&& f) const {
+        if (two_level) return f(two_level->tracer());
         switch (kernel) {
             case GpuKernel::Bvh2: return f(bvh2);
             case GpuKernel::AilaLaine: return f(aila_laine);

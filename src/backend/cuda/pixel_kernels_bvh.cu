@@ -1,5 +1,5 @@
 // Instantiations of pixel_kernels.h's per-pixel kernel for the BVH tracers
-// (bvh2, aila-laine, cwbvh), and the dispatch over all tracers.
+// (bvh2, aila-laine, cwbvh, two-level), and the dispatch over all tracers.
 #include "backend/cuda/pixel_kernels.h"
 
 namespace rf::cuda {
@@ -17,6 +17,10 @@ void launch_pixel_kernel(const DeviceTracer::Impl& impl, const PixelPass& p, con
 }
 
 void launch_pixel_kernel_bvh(const DeviceTracer::Impl& impl, const PixelPass& p, const LaunchShape& shape) {
+    if (impl.two_level) {
+        launch_shaped(pixel_kernel<TwoLevelBvh2Tracer>, shape, impl.two_level->tracer(), p);
+        return;
+    }
     switch (impl.kernel) {
         case GpuKernel::Bvh2: launch_shaped(pixel_kernel<Bvh2Tracer>, shape, impl.bvh2, p); break;
         case GpuKernel::AilaLaine: launch_shaped(pixel_kernel<AilaLaineTracer>, shape, impl.aila_laine, p); break;

@@ -19,6 +19,8 @@ namespace rf::cuda {
 
 class DeviceTwoLevel {
 public:
+    // An empty structure (every ray misses) for `mesh_count` meshes on `device`.
+    DeviceTwoLevel(int device, size_t mesh_count);
     // Per mesh its BVH over its object-space triangles (empty for unused
     // meshes); `top` names indices into `instances` (the visible ones).
     DeviceTwoLevel(int device, std::span<const Bvh> blas, std::span<const std::vector<Triangle>> triangles,
@@ -26,6 +28,17 @@ public:
     ~DeviceTwoLevel();
     DeviceTwoLevel(const DeviceTwoLevel&) = delete;
     DeviceTwoLevel& operator=(const DeviceTwoLevel&) = delete;
+
+    // Mesh `mesh`'s bottom level, copied (after a build or a refit).
+    void set_mesh(uint32_t mesh, const Bvh& blas, std::span<const Triangle> triangles);
+    // The top level and its instances, copied (every frame).
+    void set_top(const Bvh& top, std::span<const TwoLevelInstance> instances);
+
+    // What a kernel takes by value; valid until the next set_*.
+    [[nodiscard]] const TwoLevelBvh2Tracer& tracer() const;
+    [[nodiscard]] int device() const;
+    // Device memory of both levels.
+    [[nodiscard]] size_t bytes() const;
 
     // Host rays in, host answers out (upload, one launch, download).
     void intersect(std::span<const Ray> rays, std::span<Hit> hits) const;
