@@ -8,8 +8,10 @@
 #   memcheck | synccheck | racecheck   one compute-sanitizer tool
 #   bench       GPU rays (every kernel, protocol ray sets), path tracing, seed 000's builders
 #   builds      every device builder on the Stanford Dragon and 2 and 15 copies of it
-#   animate     dynamic scenes: the device refit (1M triangles) and two-level tests' timings, and a
-#               per-frame rebuild on the device (hlbvh2, lbvh30, ploc) of builtin:explode (into builds.txt)
+#   animate     dynamic scenes: the device refit (1M triangles) and two-level tests' timings, the
+#               device dynamic accels' tests, render --frames with --update refit (explode) and
+#               two-level (nbody), and a per-frame rebuild on the device (hlbvh2, lbvh30, ploc) of
+#               builtin:explode (into builds.txt)
 #   all         tests sanitizers bench builds animate
 # Every run first checks the runtime (`rayforge info --devices`). Each step
 # prints one line, "gpu-run: STEP: ok|FAIL|UNAVAILABLE[: why]", also kept in
@@ -183,7 +185,7 @@ sanitizer_filter() {
     # Every kernel once (EveryKernelMatchesBruteForce: 72 s under memcheck on
     # an H200); BuildersAndLeafSizesForTheBvhKernels repeats the same kernels
     # on other builders' trees and would not fit the time limit.
-    memcheck) echo "GpuDeviceTracer.*:GpuRenderer.AovsAndCallbacks:GpuRenderer.RaySortingChangesNothing:GpuPagedDevice.HitsEqualPagedEngineWithLargeDevicePools:GpuBvhRefit.SameBoxesAsCpuRefit:GpuTwoLevel.*:$builder_tests:-GpuDeviceTracer.BuildersAndLeafSizesForTheBvhKernels" ;;
+    memcheck) echo "GpuDeviceTracer.*:GpuRenderer.AovsAndCallbacks:GpuRenderer.RaySortingChangesNothing:GpuPagedDevice.HitsEqualPagedEngineWithLargeDevicePools:GpuBvhRefit.SameBoxesAsCpuRefit:GpuTwoLevel.*:GpuDynamicAccel.TwoLevelRenderMatchesTheCpu:$builder_tests:-GpuDeviceTracer.BuildersAndLeafSizesForTheBvhKernels" ;;
     *) echo "$builder_tests" ;;
   esac
 }
@@ -301,8 +303,10 @@ step_builds() {
 }
 
 # Issue 21's device figures: refit and two-level kernels (their tests print
-# kernel ms), and the structure rebuilt on the device every frame of an
-# explosion (render --frames prints each frame's update). Appended to
+# kernel ms), the device dynamic accels' tests, the explosion refitted on the
+# device and the n bodies traced two-level there, and the structure rebuilt
+# on the device every frame of an explosion (render --frames prints each
+# frame's update). Appended to
 # builds.txt: a device call brings back at most 8 files.
 step_animate() {
   if [[ -n "$no_device" ]]; then
@@ -311,8 +315,16 @@ step_animate() {
   fi
   local log="$out/builds.txt" rc=0 builder
   {
-    echo "== animate: device refit and two-level tracer"
-    "$gpu_tests" --gtest_filter='GpuBvhRefit.*:GpuTwoLevel.*' || rc=1
+    echo "== animate: device refit, two-level tracer and the device dynamic accels"
+    "$gpu_tests" --gtest_filter='GpuBvhRefit.*:GpuTwoLevel.*:GpuDynamicAccel.*' || rc=1
+    echo "== animate: builtin:explode refitted on the device every 11th frame (cwbvh converted again; bvh2 in place)"
+    "$rf" render builtin:explode --device cuda --update refit --frames 0:99:11 --res 256x192 -q \
+      -o "$scratch/explode_refit_%03d.png" || rc=1
+    "$rf" render builtin:explode --device cuda --update refit --gpu-kernel bvh2 --frames 0:99:11 --res 256x192 -q \
+      -o "$scratch/explode_refit2_%03d.png" || rc=1
+    echo "== animate: builtin:nbody two-level on the device every 11th frame"
+    "$rf" render builtin:nbody --device cuda --update two-level --frames 0:99:11 --res 256x192 -q \
+      -o "$scratch/nbody_%03d.png" || rc=1
     for builder in hlbvh2 lbvh30 ploc; do
       echo "== animate: builtin:explode rebuilt on the device every 11th frame, $builder"
       "$rf" render builtin:explode --device cuda --update rebuild --builder "$builder" --frames 0:99:11 \
