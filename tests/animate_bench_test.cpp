@@ -300,10 +300,16 @@ TEST(AnimateBench, ClusterTableHasARowPerSizeAndHeuristic) {
         if (row.clusters > 0) {
             EXPECT_LE(row.clusters, table.triangles);
         }
+        EXPECT_GT(row.trace_ratio, 0.0) << row.size;
+        EXPECT_GT(row.steps_per_ray, 0.0) << row.size;  // the BVH8 layouts count their work
+        EXPECT_GT(row.tests_per_ray, 0.0) << row.size;
     }
+    EXPECT_EQ(table.rows[0].trace_ratio, 1.0);
+    // Leaves of up to 32 triangles test more triangles a ray than leaves of up to 4.
+    EXPECT_GT(table.rows[3].tests_per_ray, table.rows[0].tests_per_ray);
     std::ostringstream out;
     bench::print_cluster_tables(out, {table}, 2);
-    for (const char* expected : {"0 (triangles)", "10/10", "50/50", "acc", "naive", "acc+sub", "clustering ms"})
+    for (const char* expected : {"0 (triangles)", "10/10", "50/50", "acc", "naive", "acc+sub", "clustering ms", "tests/ray"})
         EXPECT_NE(out.str().find(expected), std::string::npos) << expected << "\n" << out.str();
 }
 

@@ -699,13 +699,52 @@ std::vector<double> runs_of(int repetitions, F&& f) {
     return runs;
 }
 
+// `candidate` and `base` traced alternately, `repetitions` rounds over
+// every set: the candidate's median per set and the median over rounds of
+// its total time over the base's. Pairing the rounds keeps the ratio from
+// following the machine's load, which drifts between rows minutes apart.
+struct PairedTraces {
+    FrameTraces candidate;
+    double ratio = 1.0;
+};
+
+PairedTraces paired_traces(const Accel& candidate, const Accel& base, const std::vector<RaySet>& sets,
+                           int repetitions, const SetAnswers& reference) {
+    PairedTraces out;
+    std::vector<std::vector<double>> per_set(sets.size());
+    std::vector<double> ratios;
+    for (int r = 0; r < std::max(1, repetitions); ++r) {
+        const FrameTraces c = trace_sets(candidate, sets, 1, &reference, nullptr);
+        const FrameTraces b = trace_sets(base, sets, 1, nullptr, nullptr);
+        double c_total = 0.0, b_total = 0.0;
+        for (size_t s = 0; s < sets.size(); ++s) {
+            per_set[s].push_back(c.trace_ms[s]);
+            c_total += c.trace_ms[s];
+            b_total += b.trace_ms[s];
+        }
+        ratios.push_back(b_total > 0.0 ? c_total / b_total : 1.0);
+        out.candidate.agreement = std::min(out.candidate.agreement, c.agreement);
+    }
+    for (const std::vector<double>& runs : per_set) out.candidate.trace_ms.push_back(median(runs));
+    out.ratio = median(ratios);
+    return out;
+}
+
+// Box and triangle tests per ray of `rays` (closest hit); zeros when the accel does not count.
+void count_work(const Accel& accel, const std::vector<Ray>& rays, ClusterRow& row) {
+    TraversalTotals totals;
+    if (rays.empty() || !accel.count_traversal(rays, false, totals) || totals.rays == 0) return;
+    row.steps_per_ray = double(totals.steps) / double(totals.rays);
+    row.tests_per_ray = double(totals.prim_tests) / double(totals.rays);
+}
+
 // `acc`: the plain Acc row of the same size, whose partition this row's
 // equals (subtrees; Naive merging stops at Acc's count): its cluster count is
 // reused and the setup is timed from the accel's first build, so the
 // 800K-triangle tables cluster once less per row.
 ClusterRow cluster_row(LoadedScene& scene, int size, ClusterHeuristic heuristic, bool subtrees,
                        const ClusterTableConfig& config, const std::vector<RaySet>& sets, const SetAnswers& reference,
-                       const ClusterRow* acc) {
+                       const Accel& base, const ClusterRow* acc) {
     ClusterRow row;
     row.size = size;
     row.heuristic = heuristic;
@@ -738,10 +777,12 @@ ClusterRow cluster_row(LoadedScene& scene, int size, ClusterHeuristic heuristic,
             row.clusters = acc->clusters;
             row.clustering_ms = std::max(0.0, accel->initial_build_ms() - median(canonical));
         }
-        const FrameTraces traces = trace_sets(*accel, sets, config.repetitions, &reference, nullptr);
-        row.primary_ms = traces.trace_ms[0];
-        row.diffuse_ms = traces.trace_ms[1];
-        row.agreement = traces.agreement;
+        const PairedTraces traces = paired_traces(*accel, base, sets, config.repetitions, reference);
+        row.primary_ms = traces.candidate.trace_ms[0];
+        row.diffuse_ms = traces.candidate.trace_ms[1];
+        row.trace_ratio = traces.ratio;
+        row.agreement = traces.candidate.agreement;
+        count_work(*accel, sets[1].rays, row);
         row.ok = true;
     } catch (const std::exception& e) {
         row.error = first_line(e);
@@ -779,6 +820,7 @@ ClusterTable run_cluster_table(LoadedScene& scene, const ClusterTableConfig& con
         none.build_ms = median(builds);
         none.primary_ms = traces.trace_ms[0];
         none.diffuse_ms = traces.trace_ms[1];
+        count_work(*base, sets[1].rays, none);
         for (int size : config.sizes) {
             if (size <= 0) {
                 table.rows.push_back(none);
@@ -791,7 +833,7 @@ ClusterTable run_cluster_table(LoadedScene& scene, const ClusterTableConfig& con
                 const ClusterRow* acc = nullptr;
                 for (const ClusterRow& r : table.rows)
                     if (r.size == size && r.heuristic == ClusterHeuristic::Acc && !r.subtrees) acc = &r;
-                table.rows.push_back(cluster_row(scene, size, heuristic, false, config, sets, reference, acc));
+                table.rows.push_back(cluster_row(scene, size, heuristic, false, config, sets, reference, *base, acc));
             }
             if (size == config.subtree_size) {
                 if (config.progress)
@@ -799,7 +841,7 @@ ClusterTable run_cluster_table(LoadedScene& scene, const ClusterTableConfig& con
                 const ClusterRow* acc = nullptr;
                 for (const ClusterRow& r : table.rows)
                     if (r.size == size && r.heuristic == ClusterHeuristic::Acc && !r.subtrees) acc = &r;
-                table.rows.push_back(cluster_row(scene, size, ClusterHeuristic::Acc, true, config, sets, reference, acc));
+                table.rows.push_back(cluster_row(scene, size, ClusterHeuristic::Acc, true, config, sets, reference, *base, acc));
             }
         }
     });
@@ -813,10 +855,11 @@ void print_cluster_tables(std::ostream& out, const std::vector<ClusterTable>& ta
             << " primary, " << thousands(t.diffuse_rays) << " diffuse rays\n"
             << pad("MaxCount=MaxSize", 17) << pad("heuristic", 10) << pad("clustering ms", 15) << pad("clusters", 11)
             << pad("build ms", 10) << pad("speed-up", 10) << pad("primary ms", 12) << pad("diffuse ms", 12)
-            << pad("vs tris", 9) << pad("agree", 8) << '\n';
+            << pad("vs tris", 9) << pad("steps/ray", 11) << pad("tests/ray", 11) << pad("agree", 8) << '\n';
         const ClusterRow* none = nullptr;
         for (const ClusterRow& row : t.rows)
             if (row.size == 0) none = &row;
+        const auto count_cell = [](double v) { return v > 0.0 ? fmt("%.1f", v) : std::string("-"); };
         for (const ClusterRow& row : t.rows) {
             out << pad(row.size == 0 ? "0 (triangles)" : std::to_string(row.size) + "/" + std::to_string(row.size), 17)
                 << pad(row.size == 0 ? "-" : to_string(row.heuristic) + (row.subtrees ? "+sub" : ""), 10);
@@ -824,20 +867,20 @@ void print_cluster_tables(std::ostream& out, const std::vector<ClusterTable>& ta
                 out << "  n/a (" << row.error << ")\n";
                 continue;
             }
-            const double trace = row.primary_ms + row.diffuse_ms;
             out << pad(fmt("%.1f", row.clustering_ms), 15) << pad(row.clusters ? thousands(row.clusters) : "-", 11)
                 << pad(fmt("%.2f", row.build_ms), 10)
                 << pad(none ? fmt("%.2fx", none->build_ms / row.build_ms) : "-", 10) << pad(fmt("%.1f", row.primary_ms), 12)
                 << pad(fmt("%.1f", row.diffuse_ms), 12)
-                << pad(none ? fmt("%+.1f%%", 100.0 * (trace / (none->primary_ms + none->diffuse_ms) - 1.0)) : "-", 9)
-                << pad(fmt("%.4f", row.agreement), 8) << '\n';
+                << pad(fmt("%+.1f%%", 100.0 * (row.trace_ratio - 1.0)), 9) << pad(count_cell(row.steps_per_ray), 11)
+                << pad(count_cell(row.tests_per_ray), 11) << pad(fmt("%.4f", row.agreement), 8) << '\n';
         }
     }
     if (!tables.empty())
         out << "(clustering ms: the one-time clustering (cluster_scene; for naive and +sub rows, which reuse acc's "
                "partition: the accel's first build less a per-frame build, so +sub includes its subtrees' SAH builds); "
                "+sub: ClusterOptions::cluster_subtrees; build ms: the per-frame build, median; vs tris: primary + diffuse trace time against the "
-               "triangle build's)\n";
+               "triangle build's, the median of per-round ratios with the two traced alternately; steps/ray, tests/ray: "
+               "box and triangle tests per diffuse ray)\n";
 }
 
 }  // namespace rf::bench

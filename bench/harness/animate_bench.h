@@ -145,6 +145,11 @@ struct ClusterRow {
     size_t clusters = 0;
     double build_ms = 0.0;       // the per-frame build (over cluster boxes, or triangles)
     double primary_ms = 0.0, diffuse_ms = 0.0;
+    // Primary + diffuse trace time over the triangle build's, the median of
+    // per-round ratios with the two traced alternately (1 for the triangle row).
+    double trace_ratio = 1.0;
+    // Work per diffuse ray (count_traversal): box tests and triangle tests.
+    double steps_per_ray = 0.0, tests_per_ray = 0.0;
     double agreement = 1.0;      // hits against the triangle build's, min over both sets
 };
 
