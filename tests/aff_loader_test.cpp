@@ -89,6 +89,24 @@ TEST(AffLoader, MirrorAndGlassFromNffMaterials) {
     EXPECT_FLOAT_EQ(scene.materials[mesh.material_ids[2]].ior, 1.0f);
 }
 
+// `am` scales every fm material's ambient color, wherever it appears (the
+// last one counts); f materials have none; no am: no ambient term.
+TEST(AffLoader, AmbientLightTimesFmAmbientColor) {
+    const fs::path dir = test::temp_dir("aff_ambient");
+    write_file(dir / "a.aff",
+               "am 9 9 9\n"
+               "fm 0.2 0.4 0.6  0.5 0.5 0.5  0 0 0  1 0 1\np 3\n0 0 0\n1 0 0\n0 1 0\n"
+               "f 1 1 1 0.5 0 0 0 1\np 3\n0 0 1\n1 0 1\n0 1 1\n"
+               "am 2 1 0.5\n");
+    Scene scene = load_scene((dir / "a.aff").string());
+    const Mesh& mesh = scene.meshes[0];
+    ASSERT_EQ(mesh.material_ids.size(), 2u);
+    expect_near3(scene.materials[mesh.material_ids[0]].ambient, {0.4f, 0.4f, 0.3f});
+    expect_near3(scene.materials[mesh.material_ids[1]].ambient, {0, 0, 0});
+    write_file(dir / "b.aff", "fm 0.2 0.4 0.6  0.5 0.5 0.5  0 0 0  1 0 1\np 3\n0 0 0\n1 0 0\n0 1 0\n");
+    expect_near3(load_scene((dir / "b.aff").string()).materials[0].ambient, {0, 0, 0});
+}
+
 TEST(AffLoader, MeshIncludedTwiceWithStaticTransform) {
     Scene scene = load_scene(aff_fixture("mesh_include.aff"));
     EXPECT_EQ(scene.triangle_count(), 4u);  // each include is expanded again

@@ -10,6 +10,7 @@
 
 #include "rayforge/core/error.h"
 #include "rayforge/scene/scene.h"
+#include "rayforge/scene/scene_geometry.h"
 
 namespace rf {
 namespace {
@@ -391,6 +392,63 @@ TEST(AnimationJson, StepKeysAndErrors) {
         EXPECT_NE(message.find(expected), std::string::npos) << message;
         EXPECT_EQ(message.find('\n'), std::string::npos) << message;
     }
+}
+
+// The flat triangles of `json` at time t against `part` at t placed by
+// `placements` (one per copy, in order): equal vertex for vertex (a hidden
+// triangle collapses to a point in both).
+void expect_placed_copies(Scene& json, Scene& part, float t, const std::vector<Affine3f>& placements,
+                          const std::string& what) {
+    json.set_time(t);
+    part.set_time(t);
+    const SceneGeometry g = SceneGeometry::build(json), p = SceneGeometry::build(part);
+    ASSERT_EQ(g.triangles.size(), p.triangles.size() * placements.size()) << what;
+    for (size_t k = 0; k < placements.size(); ++k)
+        for (size_t i = 0; i < p.triangles.size(); ++i) {
+            const Triangle& got = g.triangles[k * p.triangles.size() + i];
+            const Triangle& want = p.triangles[i];
+            if (want.area() == 0.0f) {
+                EXPECT_EQ(got.area(), 0.0f) << what << " copy " << k << " triangle " << i << " at t = " << t;
+                continue;
+            }
+            const Vec3f a = placements[k].transform_point(want.v0), b = placements[k].transform_point(want.v1);
+            const float tolerance = 1e-4f * std::max(1.0f, max_component(abs(a)));
+            EXPECT_LE(max_component(abs(got.v0 - a)), tolerance) << what << " copy " << k << " triangle " << i << " at t = " << t;
+            EXPECT_LE(max_component(abs(got.v1 - b)), tolerance) << what << " copy " << k << " triangle " << i << " at t = " << t;
+        }
+}
+
+// A referenced file's own animation plays in the JSON scene: BART keys,
+// visibility and an animated triangle placed twice (the second copy also
+// under the entry's keys), and a skinned, morphing glTF figure placed once.
+TEST(AnimationJson, ReferencedFilesKeepTheirAnimations) {
+    const std::string aff = test::data_path("aff/animated.aff");
+    Scene json = load_scene(write_json("placed.json", R"({"meshes": [
+      {"file": ")" + aff + R"(", "transform": {"translate": [10, 0, 0]}},
+      {"file": ")" + aff + R"(", "transform": {"translate": [0, 10, 0]},
+       "animation": {"keys": [{"time": 1, "translate": [0, 0, 0]}, {"time": 3, "translate": [0, 0, 6]}]}}]})"));
+    Scene part = load_scene(aff);
+    EXPECT_FLOAT_EQ(json.animation.start, part.animation.start);
+    EXPECT_FLOAT_EQ(json.animation.end, part.animation.end);
+    EXPECT_FLOAT_EQ(json.animation.frames_per_second, part.animation.frames_per_second);
+    for (float t : {1.0f, 1.6f, 2.2f, 3.0f}) {
+        const Affine3f keys = Affine3f::translation({0.0f, 0.0f, 3.0f * (t - 1.0f)});
+        expect_placed_copies(json, part, t,
+                             {Affine3f::translation({10, 0, 0}), keys * Affine3f::translation({0, 10, 0})}, "animated.aff");
+    }
+
+    Scene skinned_json = load_scene(write_json("skinned.json", R"({"meshes": [
+      {"file": "builtin:skinned", "transform": {"translate": [3, 0, 0], "scale": 2}}]})"));
+    Scene skinned = load_scene("builtin:skinned");
+    ASSERT_FALSE(skinned.animation.skins.empty());
+    for (float t : {0.0f, 0.45f, 1.3f})
+        expect_placed_copies(skinned_json, skinned, t,
+                             {Affine3f::translation({3, 0, 0}) * Affine3f::scale(Vec3f(2.0f))}, "builtin:skinned");
+
+    const std::string twice = test::load_error(write_json("skinned_twice.json", R"({"meshes": [
+      {"file": "builtin:skinned"}, {"file": "builtin:skinned", "transform": {"translate": [3, 0, 0]}}]})"));
+    EXPECT_NE(twice.find("meshes[1].file: a skinned file can be placed once"), std::string::npos) << twice;
+    EXPECT_EQ(twice.find('\n'), std::string::npos) << twice;
 }
 
 }  // namespace

@@ -106,7 +106,8 @@ TEST(JsonScene, SpecularLayerAndEmissionSides) {
             "plain": {"emission": [1, 1, 1]},
             "both": {"emission": [1, 1, 1], "two_sided_emission": true},
             "legacy": {"emission": [1, 1, 1], "double_sided": true},
-            "agreeing": {"two_sided_emission": false, "double_sided": false}
+            "agreeing": {"two_sided_emission": false, "double_sided": false},
+            "ambient": {"ambient": [0.1, 0.2, 0.3]}
         }})");
     Scene scene = load_scene(path);
     auto m = [&](const char* name) { return scene.materials[size_t(material_index(scene, name))]; };
@@ -118,6 +119,14 @@ TEST(JsonScene, SpecularLayerAndEmissionSides) {
     EXPECT_TRUE(m("both").two_sided_emission);
     EXPECT_TRUE(m("legacy").two_sided_emission);
     EXPECT_FALSE(m("agreeing").two_sided_emission);
+    expect_vec(m("ambient").ambient, {0.1f, 0.2f, 0.3f});
+    expect_vec(m("plain").ambient, {0.0f, 0.0f, 0.0f});
+    const std::string negative = write_scene("json_scene_negative_ambient", R"({
+        "meshes": [{"file": "builtin:triangle"}],
+        "materials": {"dark": {"ambient": [0.1, -0.2, 0.3]}}})");
+    const std::string message = load_error(negative);
+    EXPECT_NE(message.find("materials.dark.ambient"), std::string::npos) << message;
+    EXPECT_EQ(message.find('\n'), std::string::npos) << message;
 }
 
 TEST(JsonScene, CameraLightsEnvironmentAndRenderSettings) {

@@ -192,6 +192,26 @@ TEST(PathTracer, LambertPlaneUnderPointLight) {
     EXPECT_NEAR(image.at(1, 1).x, expected, 1e-3f * expected * 10.0f);
 }
 
+// Material::ambient is Whitted's k_a * I_a: with no light at all a Whitted
+// render of a Lambert plane shows exactly its ambient radiance; the
+// physically based path tracer adds no such term.
+TEST(Renderer, WhittedAddsTheAmbientTermThePathTracerDoesNot) {
+    TestScene t;
+    Material floor = lambert(0.5f);
+    floor.ambient = Vec3f(0.25f, 0.5f, 1.0f);
+    t.add_quad(Vec3f(0.0f), {10, 0, 0}, {0, 10, 0}, t.add_material(floor));
+    t.finish();
+    RenderOptions whitted = options_for(IntegratorKind::Whitted, 3, 3);
+    Image image = t.render_with(looking_at({0, 0, 5}, {0, 0, 0}, 0.5f), whitted);
+    for (const Vec3f& p : image.pixels) {
+        EXPECT_FLOAT_EQ(p.x, 0.25f);
+        EXPECT_FLOAT_EQ(p.y, 0.5f);
+        EXPECT_FLOAT_EQ(p.z, 1.0f);
+    }
+    Image path = t.render_with(looking_at({0, 0, 5}, {0, 0, 0}, 0.5f), path_options(3, 3, 2));
+    for (const Vec3f& p : path.pixels) EXPECT_EQ(max_component(p), 0.0f);
+}
+
 // A diffuse floor and a glossy sphere lit by a quad light and a dim
 // environment: light sampling only, BSDF sampling only and their MIS
 // combination estimate the same image.

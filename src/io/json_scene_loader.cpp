@@ -91,7 +91,28 @@ private:
         std::vector<Instance> instances;  // of the part, with mesh indices already offset
         std::vector<Light> lights;
         std::optional<Camera> camera;
+        // The part's own animation (mesh indices offset; node indices the
+        // part's): its nodes are copied at each placement, its deformations
+        // (vertex keyframes, morphs, skins) were merged once with the meshes.
+        std::vector<AnimatedNode> nodes;
+        std::vector<InstanceAnimation> instance_animations;  // instance: index into `instances`
+        std::vector<uint32_t> skin_joints_base;  // per merged skin: where its joints point (the first placement)
+        std::vector<size_t> merged_skins;        // indices into Scene::animation::skins
+        std::vector<uint8_t> skinned;            // per instance: its mesh is skinned (world space already)
+        int placements = 0;
     };
+    void take_part_animation(Scene& part, LoadedPart& loaded, Scene& scene);
+    void place_part_animation(LoadedPart& part, const Affine3f& placement, int32_t keys_node, Scene& scene,
+                              const std::string& where, std::vector<int32_t>& instance_nodes,
+                              std::vector<Affine3f>& instance_locals) const;
+
+    // The time the animation covers: the entries' keys and the referenced files' own ranges.
+    std::optional<std::pair<float, float>> time_range_;
+    bool has_part_animation_ = false;
+    void cover(float start, float end) {
+        time_range_ = time_range_ ? std::make_pair(std::min(time_range_->first, start), std::max(time_range_->second, end))
+                                  : std::make_pair(start, end);
+    }
 
     const std::string path_;
     const fs::path dir_;
@@ -293,7 +314,7 @@ Material JsonSceneReader::material(const std::string& name, const Json& value, c
                  "transmission", "ior", "specular", "specular_color", "two_sided_emission", "double_sided",
                  "alpha_mode", "alpha_cutoff", "normal_scale",
                  "base_color_texture", "metallic_roughness_texture", "normal_texture",
-                 "emission_texture"});
+                 "emission_texture", "ambient"});
     Material m;
     m.name = name;
     auto unit = [&](const char* key, float& out) {
@@ -314,6 +335,10 @@ Material JsonSceneReader::material(const std::string& name, const Json& value, c
             fail(where + ".specular_color", "expected 3 numbers in [0, 1]");
     }
     if (value.contains("emission")) m.emission = vec3(value["emission"], where + ".emission");
+    if (value.contains("ambient")) {
+        m.ambient = vec3(value["ambient"], where + ".ambient");
+        if (min_component(m.ambient) < 0.0f) fail(where + ".ambient", "expected 3 numbers, none negative");
+    }
     if (value.contains("emission_strength")) {
         m.emission_strength = number(value["emission_strength"], where + ".emission_strength");
         if (m.emission_strength < 0.0f) fail(where + ".emission_strength", "must not be negative");
@@ -372,6 +397,81 @@ void merge_into(Scene& scene, Scene&& part, int64_t override_material) {
     }
 }
 
+// A referenced file's animation joins the scene's. Deformations go in once,
+// with the meshes (indices offset), and the meshes go in at rest (the scene
+// evaluates them from there); nodes and instance animations are copied at
+// each placement (place_part_animation). Its camera path is not followed.
+void JsonSceneReader::take_part_animation(Scene& part, LoadedPart& loaded, Scene& scene) {
+    Animation& from = part.animation;
+    Animation& to = scene.animation;
+    const uint32_t offset = loaded.first_mesh;
+    to.rest_positions.resize(offset);
+    to.rest_normals.resize(offset);
+    for (uint32_t m = 0; m < part.meshes.size(); ++m) {
+        const bool rest = m < from.rest_positions.size() && !from.rest_positions[m].empty();
+        to.rest_positions.push_back(rest ? from.rest_positions[m] : std::vector<Vec3f>{});
+        to.rest_normals.push_back(rest && m < from.rest_normals.size() ? from.rest_normals[m] : std::vector<Vec3f>{});
+    }
+    for (VertexKeyframes& k : from.vertex_keyframes) {
+        k.mesh += offset;
+        to.vertex_keyframes.push_back(std::move(k));
+    }
+    for (MorphTargets& m : from.morphs) {
+        m.mesh += offset;
+        to.morphs.push_back(std::move(m));
+    }
+    std::vector<uint8_t> skinned_mesh(part.meshes.size(), 0);
+    for (Skin& s : from.skins) {  // joints are fixed at the first placement
+        if (s.mesh < skinned_mesh.size()) skinned_mesh[s.mesh] = 1;
+        s.mesh += offset;
+        loaded.merged_skins.push_back(to.skins.size());
+        to.skins.push_back(std::move(s));
+    }
+    for (const Instance& inst : part.instances)
+        loaded.skinned.push_back(inst.mesh < skinned_mesh.size() ? skinned_mesh[inst.mesh] : 0);
+    loaded.nodes = from.nodes;
+    loaded.instance_animations = from.instances;
+    if (!has_part_animation_) to.frames_per_second = from.frames_per_second;
+    cover(from.start, from.end);
+    has_part_animation_ = true;
+}
+
+// One placement of an animated part: a node for the placement (under the
+// entry's own keys, when it has some), the part's nodes copied below it, and
+// each instance's node and local transform. A skinned mesh's vertices are in
+// world space already (its joints carry the placement); one mesh cannot be
+// skinned at two placements, so a skinned part is placed once.
+void JsonSceneReader::place_part_animation(LoadedPart& part, const Affine3f& placement, int32_t keys_node,
+                                           Scene& scene, const std::string& where,
+                                           std::vector<int32_t>& instance_nodes,
+                                           std::vector<Affine3f>& instance_locals) const {
+    if (!part.merged_skins.empty() && part.placements > 0)
+        fail(where + ".file", "a skinned file can be placed once (its skin deforms the mesh every placement shares)");
+    Animation& a = scene.animation;
+    AnimatedNode place;
+    place.name = "placement";
+    place.parent = keys_node;
+    place.matrix = placement;
+    const auto place_index = int32_t(a.nodes.size());
+    a.nodes.push_back(place);
+    const auto base = int32_t(a.nodes.size());
+    for (AnimatedNode node : part.nodes) {
+        node.parent = node.parent < 0 ? place_index : node.parent + base;
+        a.nodes.push_back(std::move(node));
+    }
+    for (const InstanceAnimation& ia : part.instance_animations) {
+        if (ia.instance >= instance_nodes.size()) continue;
+        instance_nodes[ia.instance] = int32_t(ia.node) + base;
+        instance_locals[ia.instance] = ia.local;
+    }
+    for (size_t i = 0; i < part.skinned.size(); ++i)
+        if (part.skinned[i]) instance_nodes[i] = -1;
+    if (part.placements == 0)
+        for (size_t k : part.merged_skins)
+            for (uint32_t& joint : a.skins[k].joints) joint += uint32_t(base);
+    ++part.placements;
+}
+
 void JsonSceneReader::read_mesh_entry(const Json& value, const std::string& where, Scene& scene) {
     expect_object(value, where);
     expect_keys(value, where, {"file", "transform", "material", "animation"});
@@ -407,20 +507,33 @@ void JsonSceneReader::read_mesh_entry(const Json& value, const std::string& wher
         for (Instance& instance : loaded.instances) instance.mesh += loaded.first_mesh;
         loaded.lights = part.lights;
         loaded.camera = part.camera;
+        if (part.animated()) take_part_animation(part, loaded, scene);
         merge_into(scene, std::move(part), override_material);
         it = parts_.emplace(key, std::move(loaded)).first;
     }
-    const LoadedPart& part = it->second;
+    LoadedPart& part = it->second;
     int32_t node = -1;
     if (value.contains("animation")) {
         node = int32_t(scene.animation.nodes.size());
         scene.animation.nodes.push_back(animation(value["animation"], where + ".animation"));
+        for (const Track* t : {&scene.animation.nodes.back().translation_track,
+                               &scene.animation.nodes.back().rotation_track, &scene.animation.nodes.back().scale_track})
+            if (!t->empty()) cover(t->times.front(), t->times.back());
     }
-    for (const Instance& instance : part.instances) {
-        if (node >= 0)  // the keys move the placed part: world = keys(t) * transform * the part's own
+    // Per part instance: the node that moves it and the transform below that node (-1: still).
+    std::vector<int32_t> instance_nodes(part.instances.size(), node);
+    std::vector<Affine3f> instance_locals(part.instances.size());
+    for (size_t i = 0; i < part.instances.size(); ++i) instance_locals[i] = placement * part.instances[i].transform;
+    if (!part.nodes.empty() || !part.merged_skins.empty())
+        place_part_animation(part, placement, node, scene, where, instance_nodes, instance_locals);
+    for (size_t i = 0; i < part.instances.size(); ++i) {
+        const Instance& instance = part.instances[i];
+        if (instance_nodes[i] >= 0)  // world = node(t) * local
             scene.animation.instances.push_back(
-                InstanceAnimation{uint32_t(scene.instances.size()), uint32_t(node), placement * instance.transform});
-        scene.instances.push_back({instance.mesh, placement * instance.transform, instance.visible});
+                InstanceAnimation{uint32_t(scene.instances.size()), uint32_t(instance_nodes[i]), instance_locals[i]});
+        const bool skinned = i < part.skinned.size() && part.skinned[i];
+        const Affine3f still = skinned ? instance.transform : placement * instance.transform;
+        scene.instances.push_back({instance.mesh, still, instance.visible});
     }
     for (Light light : part.lights) {
         light.position = placement.transform_point(light.position);
@@ -568,17 +681,11 @@ RenderSettings JsonSceneReader::render_settings(const Json& value, const std::st
     return r;
 }
 
-// The keys' time range; the scene as at its start.
-void start_animation(Scene& scene) {
+// The animation over [start, end]; the scene as at its start.
+void start_animation(Scene& scene, std::pair<float, float> range) {
     Animation& a = scene.animation;
-    bool first = true;
-    for (const AnimatedNode& n : a.nodes)
-        for (const Track* t : {&n.translation_track, &n.rotation_track, &n.scale_track}) {
-            if (t->empty()) continue;
-            a.start = first ? t->times.front() : std::min(a.start, t->times.front());
-            a.end = first ? t->times.back() : std::max(a.end, t->times.back());
-            first = false;
-        }
+    a.start = range.first;
+    a.end = range.second;
     scene.set_time(a.start);
     a.evaluated = false;  // the caller's first set_time reports everything animated
 }
@@ -606,7 +713,7 @@ Scene JsonSceneReader::read(const Json& root) {
     }
     if (root.contains("environment")) read_environment(root["environment"], "environment", scene);
     if (root.contains("render")) scene.render_settings = render_settings(root["render"], "render");
-    if (!scene.animation.nodes.empty()) start_animation(scene);
+    if (time_range_) start_animation(scene, *time_range_);
     return scene;
 }
 

@@ -1,5 +1,6 @@
 #include "render/scene_view.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "backend/cpu/parallel.h"
@@ -70,6 +71,12 @@ SceneTables::SceneTables(const Scene& scene, const SceneGeometry& geometry)
     v.lights = lights_->view();
     for (const ShadingMaterial& m : materials_)
         if (m.alpha_mode != AlphaMode::Opaque) v.transparent_materials = true;
+    const bool any_ambient = std::any_of(scene.materials.begin(), scene.materials.end(),
+                                         [](const Material& m) { return max_component(m.ambient) > 0.0f; });
+    if (any_ambient && scene.materials.size() == materials_.size()) {
+        for (const Material& m : scene.materials) ambient_.push_back(max(m.ambient, Vec3f(0.0f)));
+        v.ambient = ambient_.data();
+    }
     set_scene_scale(geometry, v);
 }
 

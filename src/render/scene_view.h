@@ -35,6 +35,7 @@ struct SceneView {
     float epsilon = 1e-4f;
     float scene_diagonal = 1.0f;
     bool transparent_materials = false;
+    const Vec3f* ambient = nullptr;  // per material, Material::ambient (nullptr: every one is zero)
 
     [[nodiscard]] RF_HDI SurfaceHit surface(const Ray& ray, const Hit& hit) const {
         return shading_surface(shading_triangles[hit.prim], ray, hit);
@@ -44,6 +45,10 @@ struct SceneView {
     [[nodiscard]] RF_HDI const ShadingMaterial& material(uint32_t id) const {
         RF_ASSERT(material_count > 0, "a scene view without its fallback material");
         return materials[id < material_count ? id : 0];
+    }
+    // Material `id`'s ambient radiance (the Whitted integrator's term).
+    [[nodiscard]] RF_HDI Vec3f material_ambient(uint32_t id) const {
+        return ambient != nullptr && id < material_count ? ambient[id] : Vec3f(0.0f);
     }
     // nullptr for kNoTexture or an index out of range.
     [[nodiscard]] RF_HDI const MipTextureView* texture(int32_t id) const {
@@ -87,6 +92,8 @@ public:
     [[nodiscard]] std::span<const ShadingMaterial> materials() const { return materials_; }
     [[nodiscard]] std::span<const ShadingTriangle> shading_triangles() const { return shading_triangles_; }
     [[nodiscard]] std::span<const MipTextureView> textures() const { return textures_; }
+    // Per material its ambient radiance; empty when every one is zero.
+    [[nodiscard]] std::span<const Vec3f> ambient() const { return ambient_; }
     [[nodiscard]] uint32_t triangle_count() const { return triangle_count_; }
 
     // Memory of the mip chains and shading records built for this view.
@@ -96,6 +103,7 @@ public:
 private:
     std::vector<ShadingMaterial> materials_;
     std::vector<ShadingTriangle> shading_triangles_;
+    std::vector<Vec3f> ambient_;
     std::vector<std::unique_ptr<MipChain>> mip_chains_;  // parallel to scene.textures; null for unused textures
     std::vector<MipTextureView> textures_;
     std::unique_ptr<HostLightSet> lights_;  // on the heap: the view points into it

@@ -37,6 +37,11 @@ struct Material {
     // Emission from both faces; otherwise only the front face (counter-
     // clockwise winding seen from outside) emits. glTF: doubleSided.
     bool two_sided_emission = false;
+    // Whitted's ambient term (Whitted 1980: k_a * I_a): radiance a surface
+    // reflects whatever the lights, times its base-color texture where it
+    // has one. BART's AFF scenes set it (am * the material's ambient color);
+    // only the Whitted integrator adds it, the physically based ones do not.
+    Vec3f ambient{0.0f, 0.0f, 0.0f};
 
     [[nodiscard]] Vec3f emitted_radiance() const { return emission * emission_strength; }
     [[nodiscard]] bool is_emissive() const {

@@ -43,6 +43,8 @@ DeviceScene::DeviceScene(const SceneTables& host) {
     const ShadingMaterial fallback{};
     v.materials = materials.empty() ? copy(&fallback, 1, "materials") : copy(materials.data(), materials.size(), "materials");
     v.material_count = materials.empty() ? 1u : uint32_t(materials.size());
+    const std::span<const Vec3f> ambient = host.ambient();
+    v.ambient = ambient.empty() ? nullptr : copy(ambient.data(), ambient.size(), "material ambient");
 
     const std::span<const MipTextureView> textures = host.textures();
     std::vector<MipTextureView> device_textures(textures.begin(), textures.end());

@@ -82,6 +82,7 @@ Scene AffParser::assemble(double t) {
 
 void AffParser::add_materials_and_settings(Scene& scene) {
     scene.materials = std::move(materials_);
+    for (Material& m : scene.materials) m.ambient = m.ambient * ambient_light_;  // k_a * I_a
     if (options_.load_textures) attach_textures(scene);
     if (resolution_) {
         scene.render_settings.width = resolution_->first;

@@ -27,6 +27,7 @@ Vec3f clamp01(Vec3f c) { return {std::clamp(c.x, 0.0f, 1.0f), std::clamp(c.y, 0.
 // that transmission and index (an index < 1 is not one: 1.5).
 void convert_definition(const MaterialDef& d, Material& m) {
     m.base_color = d.diffuse;
+    m.ambient = d.ambient;  // times the am light in add_materials_and_settings
     if (d.transmittance > 0.0f) {
         m.transmission = std::clamp(d.transmittance, 0.0f, 1.0f);
         m.base_color = Vec3f{1, 1, 1};
@@ -64,8 +65,8 @@ void AffParser::parse_nff_material() {
 
 // AFF: fm ambient(rgb) diffuse(rgb) specular(rgb) shine T index_of_refraction
 void AffParser::parse_fm_material() {
-    (void)in().read_vec3("material ambient color");
     MaterialDef def;
+    def.ambient = max(in().read_vec3("material ambient color"), Vec3f(0.0f));
     def.diffuse = clamp01(in().read_vec3("material diffuse color"));
     def.specular = clamp01(in().read_vec3("material specular color"));
     def.shine = in().read_float("material shine");

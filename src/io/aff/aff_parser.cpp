@@ -67,7 +67,7 @@ void AffParser::parse_statements(int depth) {
         if (k == "v") parse_view(line);
         else if (k == "b") background_ = in().read_vec3("background color");
         else if (k == "l") parse_light();
-        else if (k == "am") (void)in().read_vec3("ambient light");  // no ambient term in rayforge
+        else if (k == "am") ambient_light_ = max(in().read_vec3("ambient light"), Vec3f(0.0f));
         else if (k == "a") parse_anim_params(line);
         else if (k == "d") detail_level_ = in().read_int("detail level");
         else if (k == "f") parse_nff_material();

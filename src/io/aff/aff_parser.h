@@ -14,8 +14,9 @@
 //
 // Supported (see docs/scene-format.md for the mapping onto rf::Scene):
 //   comments (# and %, to the end of the line), v (from/at/up/angle/hither/
-//   resolution), b, l (point lights, world space), am (ignored: no ambient
-//   term), a, d (detail level), f and fm materials, p and pp polygons (fan-
+//   resolution), b, l (point lights, world space), am (the ambient light:
+//   fm materials' ambient color times it becomes Material::ambient, the
+//   Whitted integrator's k_a * I_a), a, d (detail level), f and fm materials, p and pp polygons (fan-
 //   triangulated), tt / ttp textured triangles, tpa animated triangles
 //   (linear in time, clamped), m meshes, i includes (relative to the including
 //   file; cycles and nesting deeper than 64 are errors; each occurrence is
@@ -84,11 +85,12 @@ struct Node {  // a transform block; node 0 is the world
 
 struct MaterialDef {  // an f or fm line
     Vec3f diffuse{0.8f, 0.8f, 0.8f}, specular{0, 0, 0};
+    Vec3f ambient{0, 0, 0};  // fm only: k_a (scaled by the am light when the scene is assembled)
     float shine = 0, transmittance = 0, ior = 1.5f;
     bool operator<(const MaterialDef& o) const {
         auto key = [](const MaterialDef& m) {
             return std::make_tuple(m.diffuse.x, m.diffuse.y, m.diffuse.z, m.specular.x, m.specular.y, m.specular.z,
-                                   m.shine, m.transmittance, m.ior);
+                                   m.ambient.x, m.ambient.y, m.ambient.z, m.shine, m.transmittance, m.ior);
         };
         return key(*this) < key(o);
     }
@@ -244,6 +246,7 @@ private:
     std::optional<ViewDef> view_;
     std::optional<std::pair<int, int>> resolution_;
     std::optional<Vec3f> background_;
+    Vec3f ambient_light_{0.0f, 0.0f, 0.0f};  // the last am line (none: no ambient term)
     size_t skipped_polygons_ = 0, skipped_primitives_ = 0, spheres_ = 0, cones_ = 0;
 };
 

@@ -18,8 +18,9 @@
 // Reflections and refractions have separate depth limits (seed 001 traces one
 // reflection and two refractions by default).
 // Light reaches diffuse surfaces only directly (point, spot, directional
-// lights and area_light_samples points on emissive triangles); emission is
-// added where a ray sees an emitter. Shadow rays treat every surface as
+// lights and area_light_samples points on emissive triangles), plus the
+// material's ambient term (Material::ambient, zero unless a scene sets it);
+// emission is added where a ray sees an emitter. Shadow rays treat every surface as
 // opaque, glass included (classic Whitted); alpha BLEND surfaces let
 // (1 - alpha) of the ray continue behind them.
 #pragma once
@@ -232,6 +233,11 @@ RF_HD Vec3f whitted_radiance(const Tracer& tracer, const View& view, const Ray& 
         float transmission = m.transmission * (1.0f - m.metallic);
         float mirror = m.metallic * (1.0f - m.roughness);
         float diffuse = fmaxf(0.0f, 1.0f - transmission - mirror);
+        const Vec3f ambient = view.material_ambient(si.surface.material);
+        if (diffuse > 0.0f && max_component(ambient) > 0.0f) {  // k_a * I_a, the texture's colour where there is one
+            const bool textured = view.material(si.surface.material).base_color_texture != kNoTexture;
+            radiance += weight * ambient * (textured ? m.base_color * diffuse : Vec3f(diffuse));
+        }
         if (diffuse > 0.0f && max_component(m.base_color) > 0.0f) {
             Vec3f highlight;
             Vec3f lighting = direct_lighting(tracer, view, si, -d, rng, settings, highlight);
