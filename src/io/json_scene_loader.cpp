@@ -101,6 +101,11 @@ private:
         std::vector<uint8_t> skinned;            // per instance: its mesh is skinned (world space already)
         int placements = 0;
     };
+    LoadedPart& load_part(const std::string& file_value, const std::string& material_name, int64_t override_material,
+                          const std::string& where, Scene& scene);
+    void place_instances(LoadedPart& part, const Affine3f& placement, int32_t keys_node, Scene& scene,
+                         const std::string& where) const;
+    void place_lights_and_camera(const LoadedPart& part, const Affine3f& placement, Scene& scene) const;
     void take_part_animation(Scene& part, LoadedPart& loaded, Scene& scene);
     void place_part_animation(LoadedPart& part, const Affine3f& placement, int32_t keys_node, Scene& scene,
                               const std::string& where, std::vector<int32_t>& instance_nodes,
@@ -476,9 +481,6 @@ void JsonSceneReader::read_mesh_entry(const Json& value, const std::string& wher
     expect_object(value, where);
     expect_keys(value, where, {"file", "transform", "material", "animation"});
     if (!value.contains("file")) fail(where, "missing \"file\"");
-    const std::string file_value = string(value["file"], where + ".file");
-    const bool builtin = file_value.rfind("builtin:", 0) == 0;
-    const std::string file = builtin ? file_value : resolve(file_value);
     const Affine3f placement = value.contains("transform") ? transform(value["transform"], where + ".transform")
                                                            : Affine3f::identity();
     std::string material_name;
@@ -490,42 +492,56 @@ void JsonSceneReader::read_mesh_entry(const Json& value, const std::string& wher
             fail(where + ".material", "no material named '" + material_name + "' in \"materials\"");
         override_material = it->second;
     }
-
-    auto key = std::make_pair(file, material_name);
-    auto it = parts_.find(key);
-    if (it == parts_.end()) {
-        if (!builtin && !is_regular_file(file)) fail(where + ".file", "'" + file + "' not found");
-        Scene part;
-        try {
-            part = load_scene(file, options_);
-        } catch (const Error& e) {
-            fail(where + ".file", e.what());
-        }
-        LoadedPart loaded;
-        loaded.first_mesh = uint32_t(scene.meshes.size());
-        loaded.instances = part.instances;
-        for (Instance& instance : loaded.instances) instance.mesh += loaded.first_mesh;
-        loaded.lights = part.lights;
-        loaded.camera = part.camera;
-        if (part.animated()) take_part_animation(part, loaded, scene);
-        merge_into(scene, std::move(part), override_material);
-        it = parts_.emplace(key, std::move(loaded)).first;
-    }
-    LoadedPart& part = it->second;
+    LoadedPart& part = load_part(string(value["file"], where + ".file"), material_name, override_material, where, scene);
     int32_t node = -1;
     if (value.contains("animation")) {
         node = int32_t(scene.animation.nodes.size());
         scene.animation.nodes.push_back(animation(value["animation"], where + ".animation"));
-        for (const Track* t : {&scene.animation.nodes.back().translation_track,
-                               &scene.animation.nodes.back().rotation_track, &scene.animation.nodes.back().scale_track})
+        const AnimatedNode& keys = scene.animation.nodes.back();
+        for (const Track* t : {&keys.translation_track, &keys.rotation_track, &keys.scale_track})
             if (!t->empty()) cover(t->times.front(), t->times.back());
     }
+    place_instances(part, placement, node, scene, where);
+    place_lights_and_camera(part, placement, scene);
+}
+
+// The part a file (with a material override) makes, loaded and merged into
+// the scene at its first mention; later mentions place the same meshes again.
+JsonSceneReader::LoadedPart& JsonSceneReader::load_part(const std::string& file_value, const std::string& material_name,
+                                                        int64_t override_material, const std::string& where,
+                                                        Scene& scene) {
+    const bool builtin = file_value.rfind("builtin:", 0) == 0;
+    const std::string file = builtin ? file_value : resolve(file_value);
+    auto it = parts_.find(std::make_pair(file, material_name));
+    if (it != parts_.end()) return it->second;
+    if (!builtin && !is_regular_file(file)) fail(where + ".file", "'" + file + "' not found");
+    Scene part;
+    try {
+        part = load_scene(file, options_);
+    } catch (const Error& e) {
+        fail(where + ".file", e.what());
+    }
+    LoadedPart loaded;
+    loaded.first_mesh = uint32_t(scene.meshes.size());
+    loaded.instances = part.instances;
+    for (Instance& instance : loaded.instances) instance.mesh += loaded.first_mesh;
+    loaded.lights = part.lights;
+    loaded.camera = part.camera;
+    if (part.animated()) take_part_animation(part, loaded, scene);
+    merge_into(scene, std::move(part), override_material);
+    return parts_.emplace(std::make_pair(file, material_name), std::move(loaded)).first->second;
+}
+
+// The part's instances at one placement; `keys_node` (-1: none) is the
+// entry's own keys, which move the placed part: world = keys(t) * placement * the part's own.
+void JsonSceneReader::place_instances(LoadedPart& part, const Affine3f& placement, int32_t keys_node, Scene& scene,
+                                      const std::string& where) const {
     // Per part instance: the node that moves it and the transform below that node (-1: still).
-    std::vector<int32_t> instance_nodes(part.instances.size(), node);
+    std::vector<int32_t> instance_nodes(part.instances.size(), keys_node);
     std::vector<Affine3f> instance_locals(part.instances.size());
     for (size_t i = 0; i < part.instances.size(); ++i) instance_locals[i] = placement * part.instances[i].transform;
     if (!part.nodes.empty() || !part.merged_skins.empty())
-        place_part_animation(part, placement, node, scene, where, instance_nodes, instance_locals);
+        place_part_animation(part, placement, keys_node, scene, where, instance_nodes, instance_locals);
     for (size_t i = 0; i < part.instances.size(); ++i) {
         const Instance& instance = part.instances[i];
         if (instance_nodes[i] >= 0)  // world = node(t) * local
@@ -535,6 +551,9 @@ void JsonSceneReader::read_mesh_entry(const Json& value, const std::string& wher
         const Affine3f still = skinned ? instance.transform : placement * instance.transform;
         scene.instances.push_back({instance.mesh, still, instance.visible});
     }
+}
+
+void JsonSceneReader::place_lights_and_camera(const LoadedPart& part, const Affine3f& placement, Scene& scene) const {
     for (Light light : part.lights) {
         light.position = placement.transform_point(light.position);
         Vec3f d = placement.transform_vector(light.direction);
