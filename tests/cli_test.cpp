@@ -67,6 +67,18 @@ TEST(Cli, InfoPrintsTheCornellBoxContents) {
     EXPECT_GT(lines_of(verbose.out).size(), lines_of(r.out).size());
 }
 
+// --animation names a glTF clip; asked of a scene without glTF clips it
+// would be ignored, so it is an error (one line, exit 1) for info and render.
+TEST(Cli, AnimationClipOfASceneWithoutClipsIsAnError) {
+    for (const char* command : {"info builtin:cornell --animation walk",
+                                "render builtin:cornell --animation walk --res 8x8 -q -o unused.png"}) {
+        CliResult r = run_cli(command);
+        EXPECT_EQ(r.exit_code, 1) << command << "\n" << r.err;
+        EXPECT_NE(r.err.find("--animation walk: builtin:cornell has no glTF animations"), std::string::npos) << r.err;
+        EXPECT_EQ(lines_of(r.err).size(), 1u) << r.err;
+    }
+}
+
 TEST(Cli, RenderWritesThePngAndOneSummaryLine) {
     std::string out = test::temp_dir("cli_render") + "/cornell.png";
     CliResult r = run_cli("render builtin:cornell -o '" + out + "' --res 64x48 --spp 1 --threads 2");

@@ -289,6 +289,50 @@ TEST(GltfAnimation, MalformedSkinsAndMorphsGiveOneLineErrors) {
     expect_error("target_count", [](auto& d) { d["accessors"][6]["count"] = 2; }, "count differs from POSITION count");
 }
 
+// LoadOptions::animation picks the clip by name or index; the scene keeps
+// every clip's name; a clip the file lacks is a one-line error naming the
+// file's clips (and so is any clip asked of a file without animations).
+TEST(GltfAnimation, ClipChosenByNameOrIndex) {
+    const std::string path = write_mutated("two_clips", [](auto& d) {
+        d["animations"][0]["name"] = "full";
+        nlohmann::json second = d["animations"][0];
+        second["name"] = "first channel";
+        second["channels"] = nlohmann::json::array({d["animations"][0]["channels"][0]});
+        d["animations"].push_back(second);
+    });
+    const Scene first = load_gltf(path);
+    EXPECT_EQ(first.animation.clip, "full");
+    EXPECT_EQ(first.animation.clips, std::vector<std::string>({"full", "first channel"}));
+    LoadOptions by_name;
+    by_name.animation = "first channel";
+    const Scene second = load_gltf(path, by_name);
+    EXPECT_EQ(second.animation.clip, "first channel");
+    LoadOptions by_index;
+    by_index.animation = "1";
+    const Scene also_second = load_gltf(path, by_index);
+    EXPECT_EQ(also_second.animation.clip, "first channel");
+    // One channel animates less than the whole clip.
+    size_t full_tracks = 0, one_tracks = 0;
+    for (const AnimatedNode& n : first.animation.nodes)
+        full_tracks += !n.translation_track.empty() + !n.rotation_track.empty() + !n.scale_track.empty();
+    for (const AnimatedNode& n : second.animation.nodes)
+        one_tracks += !n.translation_track.empty() + !n.rotation_track.empty() + !n.scale_track.empty();
+    EXPECT_LT(one_tracks, full_tracks);
+    for (const char* wanted : {"nope", "2"}) {
+        LoadOptions missing;
+        missing.animation = wanted;
+        try {
+            (void)load_gltf(path, missing);
+            ADD_FAILURE() << wanted << " loaded";
+        } catch (const Error& e) {
+            const std::string what = e.what();
+            EXPECT_NE(what.find("no animation '" + std::string(wanted) + "' (the file has 0 'full', 1 'first channel')"),
+                      std::string::npos) << what;
+            EXPECT_EQ(what.find('\n'), std::string::npos) << what;
+        }
+    }
+}
+
 TEST(GltfAnimation, FileWithoutAnimationsStaysStill) {
     const std::string path = write_mutated("still", [](auto& d) {
         d.erase("animations");

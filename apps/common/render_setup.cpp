@@ -70,7 +70,23 @@ void add_animation_options(CLI::App* cmd, RenderArgs& a) {
                                  "Animated scenes: the scene at this time in seconds (default: the animation's start)")
                      ->check(CLI::Range(-1e6f, 1e6f))
                      ->group("Animation: acceleration-structure updates");
+    cmd->add_option("--animation", a.animation,
+                    "glTF scenes with several animations: the one that plays, by name or 0-based index "
+                    "(default: the first)")
+        ->group("Animation: acceleration-structure updates");
     add_update_options(cmd, a.accel);
+}
+
+LoadOptions scene_load_options(const RenderArgs& a) {
+    LoadOptions options;
+    options.animation = a.animation;
+    return options;
+}
+
+void check_animation_option(const std::string& clip, const Scene& scene) {
+    if (!clip.empty() && scene.animation.clips.empty())
+        throw Error("--animation " + clip + ": " + scene.source +
+                    " has no glTF animations to choose from (only glTF files hold several)");
 }
 
 float apply_time_option(const RenderArgs& a, Scene& scene) {

@@ -16,6 +16,7 @@
 #include "device_options.h"
 #include "rayforge/render/render.h"
 #include "rayforge/scene/camera.h"
+#include "rayforge/io/scene_io.h"
 #include "rayforge/scene/scene.h"
 #include "rayforge/scene/scene_geometry.h"
 
@@ -59,6 +60,7 @@ struct RenderArgs {
     PagedReadArgs paged;              // paged scenes: the page caches' budgets
     // Animated scenes.
     float time = 0.0f;                // --time: the scene at this time (seconds)
+    std::string animation;            // --animation: the glTF clip (name or index; "" = the first)
     std::string frames;               // render --frames FIRST:LAST[:STEP]
     CLI::Option* time_opt = nullptr;
     // Options whose presence overrides the scene file's render settings.
@@ -85,6 +87,10 @@ void add_device_options(CLI::App* cmd, RenderArgs& args);
 void add_animation_options(CLI::App* cmd, RenderArgs& args);
 // The scene at --time when given (no change otherwise); returns the time used.
 float apply_time_option(const RenderArgs& args, Scene& scene);
+// How the command line's scene loads (--animation).
+LoadOptions scene_load_options(const RenderArgs& args);
+// rf::Error when --animation `clip` was given for a scene without glTF clips (it would be ignored).
+void check_animation_option(const std::string& clip, const Scene& scene);
 
 // "640x480" -> (640, 480); false when malformed.
 bool parse_resolution(const std::string& text, int& width, int& height);

@@ -25,6 +25,7 @@ struct InfoArgs {
     std::string scene;  // a file or builtin:NAME (e.g. builtin:cornell); optional with --devices
     bool verbose = false;
     bool devices = false;  // list the CUDA devices
+    std::string animation;  // --animation: the glTF clip to describe ("" = the first)
 };
 CLI::App* add_info_command(CLI::App& app, InfoArgs& args);
 int run_info(const InfoArgs& args);

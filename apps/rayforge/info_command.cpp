@@ -51,6 +51,9 @@ CLI::App* add_info_command(CLI::App& app, InfoArgs& args) {
     CLI::App* cmd = app.add_subcommand("info", "Print the contents and memory footprint of a scene");
     cmd->add_option("scene", args.scene, "Scene file (.obj, .gltf, .glb, .ply, .json) or builtin:NAME");
     cmd->add_flag("-v,--verbose", args.verbose, "Also list every material and texture");
+    cmd->add_option("--animation", args.animation,
+                    "glTF scenes with several animations: the one to describe, by name or 0-based index "
+                    "(default: the first)");
     cmd->add_flag("--devices", args.devices,
                   "List the CUDA devices (name, compute capability, SMs, clock, memory, L2, driver and runtime); "
                   "the scene is then optional");
@@ -69,7 +72,10 @@ int run_info(const InfoArgs& args) {
     }
     if (is_paged_scene_file(args.scene)) return run_paged_info(args.scene, args.verbose);
     const auto start = std::chrono::steady_clock::now();
-    Scene scene = load_scene(args.scene);
+    LoadOptions load;
+    load.animation = args.animation;
+    Scene scene = load_scene(args.scene, load);
+    check_animation_option(args.animation, scene);
     const double load_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     SceneGeometry geometry = SceneGeometry::build(scene);
 
@@ -123,6 +129,13 @@ int run_info(const InfoArgs& args) {
                     double(a.start), double(a.end), a.frame_count(), double(a.frames_per_second),
                     a.instances.size(), a.vertex_keyframes.size() + a.morphs.size() + a.skins.size(),
                     a.vertex_keyframes.size(), a.morphs.size(), a.skins.size(), a.camera ? ", camera path" : "");
+        if (a.clips.size() > 1) {
+            std::string names;
+            for (size_t i = 0; i < a.clips.size(); ++i)
+                names += (i ? ", " : "") + std::to_string(i) + " '" + a.clips[i] + "'";
+            std::printf("clips:      playing '%s' of %zu: %s (choose with --animation)\n", a.clip.c_str(),
+                        a.clips.size(), names.c_str());
+        }
     }
     std::printf("memory:     %.2f MiB scene (meshes + textures), %.2f MiB flattened geometry\n",
                 mib(scene.memory_bytes()), mib(geometry.memory_bytes()));

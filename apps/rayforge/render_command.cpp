@@ -144,7 +144,8 @@ std::string update_summary(const UpdateStats& u, UpdateMethod method) {
 // --frames: one image per frame, the structure updated between frames (on a
 // CUDA device rebuilt there, with a new renderer).
 int run_render_frames(const RenderArgs& a, const Device& device, BuildOptions build) {
-    Scene scene = load_scene(a.scene);
+    Scene scene = load_scene(a.scene, scene_load_options(a));
+    check_animation_option(a.animation, scene);
     if (!scene.animated()) std::fprintf(stderr, "rayforge: note: %s is not animated; every frame is the same\n",
                                         a.scene.c_str());
     const FrameRange range = parse_frames(a.frames);
@@ -232,7 +233,8 @@ int run_render(const RenderArgs& a) {
     (void)to_update_options(a.accel, "", device);  // names, ranges and the device checked before the scene loads
     if (!a.frames.empty()) return run_render_frames(a, device, build);
     Clock::time_point start = Clock::now();
-    Scene scene = load_scene(a.scene);
+    Scene scene = load_scene(a.scene, scene_load_options(a));
+    check_animation_option(a.animation, scene);
     apply_time_option(a, scene);
     SceneGeometry geometry = SceneGeometry::build(scene);
     const double load_ms = ms_since(start);

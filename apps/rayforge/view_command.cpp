@@ -117,7 +117,8 @@ int run_view(const ViewArgs& a) {
     config.settings.update = to_update_options(r.accel, "", device);
     config.settings.motion_divisor = a.motion_scale == "auto" ? 0 : std::stoi(a.motion_scale);
     config.prepare = scene_preparation(a, device);
-    config.paged = paged_scene_options(r.paged, r.threads);  // a malformed budget fails before the window opens
+    config.paged = paged_scene_options(r.paged, r.threads);
+    config.first_load = scene_load_options(r);  // a malformed budget fails before the window opens
     if (!a.script.empty()) config.script = viewer::load_script(a.script);  // a typo fails before anything opens
     config.script_timeout_s = a.script_timeout_s;
     if (!a.bookmarks.empty()) config.bookmarks = a.bookmarks;

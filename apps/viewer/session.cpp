@@ -396,7 +396,7 @@ void Session::run_load(const SceneSource& source) {
         if (is_paged_scene_file(source.path)) {
             open_paged(*data, settings);
         } else {
-            data->scene = load_scene(source.path);
+            data->scene = load_scene(source.path, first ? config_.first_load : LoadOptions{});
             data->geometry = SceneGeometry::build(data->scene);
         }
         data->load_ms = ms_since(start);

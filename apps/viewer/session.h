@@ -27,6 +27,7 @@
 
 #include "rayforge/accel/accel.h"
 #include "rayforge/accel/dynamic_accel.h"
+#include "rayforge/io/scene_io.h"
 #include "rayforge/ooc/paged_scene.h"
 #include "rayforge/render/display.h"
 #include "rayforge/render/render.h"
@@ -148,6 +149,8 @@ struct SessionConfig {
     // The page caches' budgets of every paged scene opened (the threads are
     // the settings' when it opens).
     PagedSceneOptions paged;
+    // How the first scene loads (--animation: its glTF clip); later scenes load with the defaults.
+    LoadOptions first_load;
 };
 
 class Session {

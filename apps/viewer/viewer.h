@@ -21,6 +21,7 @@ struct ViewerConfig {
     // Lights, the start camera and the first scene's settings (SessionConfig::prepare).
     std::function<void(SceneData& data, bool first, ViewSettings& settings)> prepare;
     PagedSceneOptions paged;     // the page caches' budgets of paged scenes (--memory-budget, ...)
+    LoadOptions first_load;      // how the first scene loads (--animation)
     std::optional<Script> script;  // --script FILE, parsed: run it, then exit with its verdict
     std::string bookmarks = "rayforge-bookmarks.json";
     int window_width = 0, window_height = 0;  // 0 = the image size

@@ -53,6 +53,7 @@ App::App(const ViewerConfig& config, GlWindow& window)
     session.prepare = config.prepare;
     session.yield_to_window = true;
     session.paged = config.paged;
+    session.first_load = config.first_load;
     session_ = std::make_unique<Session>(std::move(session));
     session_->set_wake([] { GlWindow::wake(); });
     loading_kind_ = kind_of(first);

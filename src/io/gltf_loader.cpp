@@ -9,8 +9,9 @@
 // nodes give Scene::lights. Images are kept encoded by tinygltf and decoded
 // here, so the sRGB/linear choice follows the texture's use.
 //
-// Animation (Scene::animation): the FIRST animation of the file only (files
-// with several usually hold alternative clips: walk, run ...), its
+// Animation (Scene::animation): ONE animation of the file, the first unless
+// LoadOptions::animation names another (files with several usually hold
+// alternative clips: walk, run ...), its
 // translation/rotation/scale channels as node tracks and its weights channels
 // as morph weights; skins (linear blend, the 4 largest of JOINTS_0/1 weights,
 // renormalised) and morph targets (POSITION/NORMAL deltas). Only the nodes
@@ -252,6 +253,8 @@ private:
     };
     enum class TrackKind { Translation, Rotation, Scale, Weights };
     void read_animation();
+    [[nodiscard]] size_t chosen_animation() const;
+    std::vector<std::string> clips_;  // every animation's name, when the file has any
     Track read_track(const tinygltf::Animation& animation, int sampler_index, TrackKind kind, int width,
                      const std::string& where) const;
     int32_t animated_node(int node_index, Scene& scene, int depth = 0);
@@ -858,13 +861,35 @@ size_t GltfReader::morph_target_count(int mesh_index) const {
     return count;
 }
 
+// The clip LoadOptions::animation names (a name first, then an index), or the first.
+size_t GltfReader::chosen_animation() const {
+    const std::string& wanted = options_.animation;
+    if (wanted.empty()) return 0;
+    for (size_t i = 0; i < model_.animations.size(); ++i)
+        if (model_.animations[i].name == wanted) return i;
+    if (!wanted.empty() && wanted.find_first_not_of("0123456789") == std::string::npos && wanted.size() < 10) {
+        const size_t index = std::stoul(wanted);
+        if (index < model_.animations.size()) return index;
+    }
+    std::string names;
+    for (size_t i = 0; i < model_.animations.size(); ++i)
+        names += (i ? ", " : "") + std::to_string(i) + " '" + model_.animations[i].name + "'";
+    fail("no animation '" + wanted + "' (the file has " +
+         (model_.animations.empty() ? std::string("none") : names) + ")");
+}
+
 void GltfReader::read_animation() {
-    if (model_.animations.empty()) return;
-    const tinygltf::Animation& animation = model_.animations[0];  // the first clip (see the top)
+    if (model_.animations.empty()) {
+        (void)chosen_animation();  // a clip asked of a still file is an error too
+        return;
+    }
+    const size_t chosen = chosen_animation();
+    const tinygltf::Animation& animation = model_.animations[chosen];
+    for (const tinygltf::Animation& a : model_.animations) clips_.push_back(a.name);
     std::set<std::pair<int, std::string>> seen;
     for (size_t c = 0; c < animation.channels.size(); ++c) {
         const tinygltf::AnimationChannel& channel = animation.channels[c];
-        const std::string where = "animation 0 channel " + std::to_string(c);
+        const std::string where = "animation " + std::to_string(chosen) + " channel " + std::to_string(c);
         if (channel.target_node < 0) continue;  // targets given by extensions only
         if (size_t(channel.target_node) >= model_.nodes.size())
             fail(where + ": node " + std::to_string(channel.target_node) + " does not exist");
@@ -1144,6 +1169,8 @@ void GltfReader::finish_animation(Scene& scene) const {
         animation.start = key_start_;
         animation.end = key_end_;
     }
+    animation.clips = clips_;
+    animation.clip = clips_.empty() ? std::string() : clips_[chosen_animation()];
 }
 
 Scene GltfReader::read() {

@@ -13,6 +13,10 @@ namespace rf {
 struct LoadOptions {
     bool compute_missing_normals = true;
     bool load_textures = true;
+    // glTF: the animation (clip) that plays, by name or 0-based index; ""
+    // plays the first. A name or index the file lacks is an rf::Error
+    // listing the file's clips. Other formats ignore it.
+    std::string animation;
 };
 
 // Any supported file or builtin name; the result is finalize()d.

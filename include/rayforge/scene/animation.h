@@ -121,6 +121,9 @@ struct Animation {
     std::vector<MorphTargets> morphs;
     std::vector<Skin> skins;
     std::optional<CameraAnimation> camera;
+    // glTF: the clip that plays and the names of all the file's clips ("" for an unnamed one).
+    std::string clip;
+    std::vector<std::string> clips;
     // Object-space rest positions and normals of every mesh that morphs or
     // skinning deform (evaluation starts from them each time); filled by
     // Scene::finalize(). Indexed like Scene::meshes; empty for other meshes.
