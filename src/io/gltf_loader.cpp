@@ -867,7 +867,7 @@ size_t GltfReader::chosen_animation() const {
     if (wanted.empty()) return 0;
     for (size_t i = 0; i < model_.animations.size(); ++i)
         if (model_.animations[i].name == wanted) return i;
-    if (!wanted.empty() && wanted.find_first_not_of("0123456789") == std::string::npos && wanted.size() < 10) {
+    if (wanted.find_first_not_of("0123456789") == std::string::npos && wanted.size() < 10) {
         const size_t index = std::stoul(wanted);
         if (index < model_.animations.size()) return index;
     }

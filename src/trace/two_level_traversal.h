@@ -173,13 +173,12 @@ struct TwoLevelBvh2Tracer {
     RF_HDI bool occluded(const Ray& ray) const { return two_level_occluded(view, ray, Bvh2Blas{}); }
     // Box tests of both levels and triangle tests, like Bvh2Tracer::counted.
     RF_HDI Hit counted(const Ray& ray, bool any_hit, RayCounters& c) const {
-        TraversalCounters t;
-        const Bvh2BlasCounted trace{&t};
-        Hit h;
-        if (any_hit) h.prim = detail::two_level_traverse<true>(view, ray, trace, &t).found() ? 0u : kInvalidId;
-        else h = detail::two_level_traverse<false>(view, ray, trace, &t);
-        add_counts(t, c);
-        return h;
+        return counted_query<TraversalCounters>(
+            any_hit, c,
+            [&](TraversalCounters& t) { return detail::two_level_traverse<false>(view, ray, Bvh2BlasCounted{&t}, &t); },
+            [&](TraversalCounters& t) {
+                return detail::two_level_traverse<true>(view, ray, Bvh2BlasCounted{&t}, &t).found();
+            });
     }
 };
 
