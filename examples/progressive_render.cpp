@@ -15,21 +15,17 @@ int main(int argc, char** argv) {
     const std::string output = argv[1];
     const int passes = argc > 2 ? std::stoi(argv[2]) : 16;
     try {
-        const rf::Scene scene = rf::load_scene("builtin:cornell");
-        const rf::SceneGeometry geometry = rf::SceneGeometry::build(scene);
-        const rf::Device device = rf::parse_device(argc > 3 ? argv[3] : "cpu");
-        rf::BuildOptions build;
-        build.device = device;
-        const auto accel = rf::build_accel(geometry, build);
+        rf::WorldOptions world_options;
+        world_options.device = rf::parse_device(argc > 3 ? argv[3] : "cpu");
+        const auto world = rf::open_world("builtin:cornell", world_options);
 
         rf::RenderOptions options;
-        options.device = device;
         options.width = 160;
         options.height = 120;
         options.integrator = rf::IntegratorKind::Path;
         options.spp = passes / 2 > 0 ? passes / 2 : 1;
-        const rf::Camera camera = scene.camera_or_default();
-        const auto renderer = rf::make_renderer(scene, geometry, *accel, camera, options);
+        const rf::Camera camera = world->camera();
+        const auto renderer = rf::make_renderer(*world, camera, options);
 
         const auto report = [](const rf::Renderer& r) {
             std::printf("pass %d: %.1f ms, %llu rays\n", r.passes(), r.last_pass().pass_ms,

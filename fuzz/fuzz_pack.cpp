@@ -19,13 +19,13 @@
 //      (PackFile::read_page), every geometry page viewed and walked
 //      (view_geometry_page);
 //   2. rf::decode_paged_geometry (every page, in core);
-//   3. rf::open_paged_scene with budgets of one or two slots per manager;
+//   3. rf::open_world with budgets of one or two slots per manager;
 //      a batch of fixed rays (and rays aimed at the scene's bounds) through
 //      accel().intersect / occluded, batched and single; the shading records
 //      of the hits (PagedEngine::fetch_shading); again from cold caches;
 //   4. every texture sampled at a few uvs on every level and at a few
 //      levels of detail;
-//   5. a 4x4 render of one pass (make_paged_renderer);
+//   5. a 4x4 render of one pass (rf::make_renderer of the world);
 //   6. rays from very far away, with NaN and infinite components, with a
 //      denormal direction, one batch each (last, so that a reproducer of an
 //      earlier step does not stop here first).
@@ -53,6 +53,7 @@
 #include "ooc/texture_cache.h"
 #include "rayforge/core/error.h"
 #include "rayforge/ooc/paged_scene.h"
+#include "rayforge/world.h"
 #include "rayforge/render/render.h"
 
 namespace {
@@ -280,7 +281,8 @@ Camera camera_on(const Box3f& bounds) {
 }
 
 // Step 5: a 4x4 render, one pass, with the file's camera or one on the scene's bounds.
-void render(PagedScene& scene, uint8_t mode) {
+void render(World& world, uint8_t mode) {
+    const PagedScene& scene = world.paged_scene();
     RenderOptions options;
     options.width = 4;
     options.height = 4;
@@ -292,7 +294,7 @@ void render(PagedScene& scene, uint8_t mode) {
                                     IntegratorKind::Normals};
     options.integrator = kinds[(mode >> 3) & 3];
     const Camera camera = (mode & kFileCamera) ? scene.camera() : camera_on(scene.info().bounds);
-    const std::unique_ptr<Renderer> renderer = make_paged_renderer(scene, camera, options);
+    const std::unique_ptr<Renderer> renderer = make_renderer(world, camera, options);
     renderer->render_pass();
     g_sink = g_sink + uint32_t(renderer->image().pixels.size());
 }
@@ -315,17 +317,22 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         (void)file->resident_memory_bytes();
         read_every_page(*file);
     });
-    if (!file) return 0;  // open_paged_scene opens the same way; nothing further can open
+    if (!file) return 0;  // open_world opens the same way; nothing further can open
     step("decode_paged_geometry", [&] { (void)decode_paged_geometry(path); });
 
-    std::unique_ptr<PagedScene> scene;
-    step("open_paged_scene", [&] { scene = open_paged_scene(path, scene_options(file.get(), mode)); });
-    if (!scene) return 0;
+    std::unique_ptr<World> world;
+    step("open_world", [&] {
+        WorldOptions options;
+        options.paged = scene_options(file.get(), mode);
+        world = open_world(path, options);
+    });
+    if (!world) return 0;
+    PagedScene* scene = &world->paged_scene();
     auto& impl = dynamic_cast<PagedSceneImpl&>(*scene);
     (void)scene->info();
     step("trace", [&] { trace(*scene, impl, test_rays(impl.file().resident().bounds)); });
     step("sample_textures", [&] { sample_textures(impl); });
-    step("render", [&] { render(*scene, mode); });
+    step("render", [&] { render(*world, mode); });
     for (const Ray& ray : extreme_rays(impl.file().resident().bounds))
         step("trace an extreme ray", [&] { trace(*scene, impl, {ray}); });
     return 0;

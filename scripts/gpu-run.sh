@@ -6,13 +6,17 @@
 #   tests       every gpu test; fails when any test fails or is skipped
 #   sanitizers  memcheck, synccheck and racecheck (each a step of its own)
 #   memcheck | synccheck | racecheck   one compute-sanitizer tool
-#   bench       GPU rays (every kernel, protocol ray sets), path tracing, seed 000's builders
+#   bench       GPU rays (every kernel, protocol ray sets), path tracing, Garanzha 2014's builders
 #   builds      every device builder on the Stanford Dragon and 2 and 15 copies of it
+#   world       worlds on the device: an animated world moved with World::set_time renders, with one
+#               renderer made once, what fresh renderers render each frame (refit, rebuild,
+#               two-level; GpuWorld.*), and render --frames through the CLI's one world path
+#               (into builds.txt)
 #   animate     dynamic scenes: the device refit (1M triangles) and two-level tests' timings, the
 #               device dynamic accels' tests, render --frames with --update refit (explode) and
 #               two-level (nbody), and a per-frame rebuild on the device (hlbvh2, lbvh30, ploc) of
 #               builtin:explode (into builds.txt)
-#   all         tests sanitizers bench builds animate
+#   all         tests sanitizers bench builds world animate
 # Every run first checks the runtime (`rayforge info --devices`). Each step
 # prints one line, "gpu-run: STEP: ok|FAIL|UNAVAILABLE[: why]", also kept in
 # $OUT/summary.txt. RAYFORGE_REQUIRE_GPU=1 is exported: a gpu test that finds
@@ -42,10 +46,10 @@ summary="$out/summary.txt"
 steps=()
 for arg in "${@:-all}"; do
   case "$arg" in
-    all) steps+=(tests memcheck synccheck racecheck bench builds animate) ;;
+    all) steps+=(tests memcheck synccheck racecheck bench builds world animate) ;;
     sanitizers) steps+=(memcheck synccheck racecheck) ;;
-    tests | memcheck | synccheck | racecheck | bench | builds | animate) steps+=("$arg") ;;
-    *) echo "usage: $0 [tests|sanitizers|memcheck|synccheck|racecheck|bench|builds|all]..." >&2; exit 2 ;;
+    tests | memcheck | synccheck | racecheck | bench | builds | world | animate) steps+=("$arg") ;;
+    *) echo "usage: $0 [tests|sanitizers|memcheck|synccheck|racecheck|bench|builds|world|animate|all]..." >&2; exit 2 ;;
   esac
 done
 
@@ -260,8 +264,8 @@ step_bench() {
   {
     echo "== path tracing"
     "$rf" bench "${scenes[@]}" --device cuda --integrator path --max-depth 4 --res 1024x768 --reps 20 || why+=("path")
-    echo "== seed 000's builders"
-    "$rf" bench --preset seed000 "${scenes[@]}" --device cuda --embree none || why+=("seed000")
+    echo "== Garanzha 2014's builders"
+    "$rf" bench --preset garanzha2014 "${scenes[@]}" --device cuda --embree none || why+=("garanzha2014")
   } > "$out/bench-render.txt" 2>&1
   if ((${#why[@]} == 0)); then
     report bench ok "${scenes[*]}"
@@ -270,7 +274,7 @@ step_bench() {
   fi
 }
 
-# Seed 000's table 5.1 sizes: 871K (Dragon), 1.74M (2 dragons; the table's
+# Garanzha 2014's table 5.1 sizes: 871K (Dragon), 1.74M (2 dragons; the table's
 # 1.76M) and 13.1M (15 dragons; the table's 12.7M) triangles.
 step_builds() {
   if [[ -n "$no_device" ]]; then
@@ -302,7 +306,29 @@ step_builds() {
   if ((rc == 0)); then report builds ok "$(grep -c median "$log") timed builds"; else report builds FAIL "$(grep -m1 error "$log")"; fi
 }
 
-# Issue 21's device figures: refit and two-level kernels (their tests print
+# rf::World on the device: one renderer following an animated world through
+# set_time against fresh renderers (the device structure a rebuild replaces
+# is read at the start of each pass), and the CLI's frames through its one
+# world path with each device update method. Appended to builds.txt.
+step_world() {
+  if [[ -n "$no_device" ]]; then
+    report world FAIL "not run: no CUDA device: $no_device"
+    return
+  fi
+  local log="$out/builds.txt" rc=0 method
+  {
+    echo "== world: GpuWorld.* (one renderer across set_time against fresh renderers per frame)"
+    "$gpu_tests" --gtest_filter='GpuWorld.*' || rc=1
+    for method in refit rebuild two-level; do
+      echo "== world: render builtin:nbody --device cuda --update $method --frames 0:99:33"
+      "$rf" render builtin:nbody --device cuda --update "$method" --frames 0:99:33 --res 128x96 -q \
+        -o "$scratch/world_${method}_%03d.png" || rc=1
+    done
+  } >> "$log" 2>&1
+  if ((rc == 0)); then report world ok "GpuWorld.* passed; frames in builds.txt"; else report world FAIL "$(grep -m1 -E 'error|FAILED' "$log")"; fi
+}
+
+# The dynamic scenes' device figures: refit and two-level kernels (their tests print
 # kernel ms), the device dynamic accels' tests, the explosion refitted on the
 # device and the n bodies traced two-level there, and the structure rebuilt
 # on the device every frame of an explosion (render --frames prints each
@@ -343,6 +369,7 @@ if find_binaries; then
       memcheck | synccheck | racecheck) step_sanitizer "$step" ;;
       bench) step_bench ;;
       builds) step_builds ;;
+      world) step_world ;;
       animate) step_animate ;;
     esac
   done

@@ -6,6 +6,7 @@ set -euo pipefail
 
 packages=(
   build-essential cmake pkg-config git python3
+  ccache                         # compiler cache for the Release, sanitizer and fuzz builds
   libtbb-dev                     # task-parallel builds and rendering
   libtinyobjloader-dev           # OBJ + MTL
   libtinygltf-dev                # glTF 2.0 / GLB
@@ -17,7 +18,7 @@ packages=(
   libgtest-dev libgmock-dev      # tests
   libbenchmark-dev               # micro-benchmarks
   libembree-dev                  # optional benchmark peer (Embree 3)
-  libzstd-dev                    # compressed geometry pages (later issues)
+  libzstd-dev                    # compressed geometry pages
   clang libclang-rt-14-dev       # libFuzzer targets and sanitizer runtimes (scripts/fuzz.sh)
   zlib1g-dev                     # tinyexr compiled into the fuzzers needs zlib.h
   python3-matplotlib             # charts of `rayforge bench --json` (scripts/plot-bench.py)

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The viewer's targets (issue 19), measured with its own statistics on Crytek
+# The viewer's targets (docs/viewer.md), measured with its own statistics on Crytek
 # Sponza (../shared/scenes), 640x360, Whitted with the views.json point light,
 # 2 threads, under Xvfb with Mesa's software OpenGL:
 #   still      frames per second at full resolution after 30 passes, and the

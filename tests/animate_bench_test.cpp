@@ -99,7 +99,7 @@ TEST(AnimateBench, FrameRangesParseAndPlayBackwards) {
     EXPECT_EQ(bench::frame_sequence({2, 10, 4}, 100, false), (std::vector<int>{2, 6, 10}));
     EXPECT_EQ(bench::frame_sequence({0, -1, 1}, 4, false), (std::vector<int>{0, 1, 2, 3}));
     EXPECT_EQ(bench::frame_sequence({0, 50, 1}, 3, false), (std::vector<int>{0, 1, 2}));  // clamped to the animation
-    // The seed's 100 -> 1 -> 100, in small.
+    // Garanzha 2014's 100 -> 1 -> 100, in small.
     EXPECT_EQ(bench::frame_sequence({0, 2, 1}, 10, true), (std::vector<int>{0, 1, 2, 1, 0, 1, 2}));
 }
 

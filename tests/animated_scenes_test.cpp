@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "io/animated_scenes.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
@@ -160,7 +160,7 @@ TEST(AnimatedScenes, ExplodeIsDeterministic) { expect_deterministic("explode@20k
 TEST(AnimatedScenes, ClothIsDeterministic) { expect_deterministic("cloth@1k"); }
 TEST(AnimatedScenes, NbodyIsDeterministic) { expect_deterministic("nbody@20k"); }
 
-// The default sizes (the seed's 252K, 92K and 146K), within 3%.
+// The default sizes (Garanzha 2014's 252K, 92K and 146K), within 3%.
 TEST(AnimatedScenes, ExplodeDefaultSize) {
     EXPECT_NEAR(double(default_scene("explode").triangle_count()), double(kExplodeDefaultTriangles),
                 0.03 * double(kExplodeDefaultTriangles));

@@ -17,7 +17,7 @@
 #include "bench_runner.h"
 #include "bench_scenes.h"
 #include "candidates.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "bench_report.h"
 #include "embree_peer.h"
 #include "device_build_report.h"
@@ -432,13 +432,13 @@ std::vector<std::string> labels_of(const std::vector<bench::GpuCandidate>& rows)
 }
 
 TEST(BenchGpuCandidates, PresetStructuresMapToTheirKernels) {
-    const bench::Preset& seed002 = bench::find_preset("seed002");
-    const auto rows002 = bench::gpu_candidates(seed002.gpu_kernels, bench::candidates_by_label(seed002.candidates, nullptr));
+    const bench::Preset& zlatuska = bench::find_preset("zlatuska2009");
+    const auto rows002 = bench::gpu_candidates(zlatuska.gpu_kernels, bench::candidates_by_label(zlatuska.candidates, nullptr));
     EXPECT_EQ(labels_of(rows002),
               (std::vector<std::string>{"grid/uniform-auto/grid", "kdtree/sah/kd-short-stack", "kdtree/sah/kd-restart",
                                         "bvh/binned/aila-laine", "bvh/binned/cwbvh"}));
-    const bench::Preset& seed001 = bench::find_preset("seed001");
-    const auto rows001 = bench::gpu_candidates(seed001.gpu_kernels, bench::candidates_by_label(seed001.candidates, nullptr));
+    const bench::Preset& bogolepov = bench::find_preset("bogolepov");
+    const auto rows001 = bench::gpu_candidates(bogolepov.gpu_kernels, bench::candidates_by_label(bogolepov.candidates, nullptr));
     EXPECT_EQ(labels_of(rows001),
               (std::vector<std::string>{"grid/uniform-32/grid", "grid/uniform-64/grid", "grid/uniform-128/grid",
                                         "grid-proximity/uniform-32/grid-proximity",
@@ -450,8 +450,8 @@ TEST(BenchGpuCandidates, PresetStructuresMapToTheirKernels) {
     EXPECT_EQ(rows001[1].kernel, GpuKernel::Grid);
     EXPECT_EQ(rows001[4].build.options.structure, Structure::ProximityGrid);
     EXPECT_EQ(rows001[4].kernel, GpuKernel::ProximityGrid);
-    const auto rows000 = bench::gpu_candidates(bench::find_preset("seed000").gpu_kernels,
-                                               bench::candidates_by_label(bench::find_preset("seed000").candidates, nullptr));
+    const auto rows000 = bench::gpu_candidates(bench::find_preset("garanzha2014").gpu_kernels,
+                                               bench::candidates_by_label(bench::find_preset("garanzha2014").candidates, nullptr));
     EXPECT_EQ(rows000.size(), 2u * 8u);  // eight builders, each traced by aila-laine and cwbvh
 }
 

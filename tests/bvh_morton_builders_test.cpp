@@ -7,7 +7,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <random>
 #include <set>
 #include <string>
@@ -23,7 +22,8 @@
 #include "accel/bvh/builders/ploc.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
-#include "backend/cpu/parallel.h"
+#include "bvh_invariants.h"
+#include "core/parallel.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
 
@@ -32,74 +32,10 @@ namespace {
 
 // ---------------------------------------------------------------- helpers
 
-bool same_box(const Box3f& a, const Box3f& b) { return a.lo == b.lo && a.hi == b.hi; }
-
-struct TreeShape {
-    int max_depth = 0;  // inner nodes on the longest root-to-leaf path
-    size_t leaves = 0;
-    size_t multi_prim_leaves = 0;
-};
-
-// Every invariant of a canonical BVH over `triangles` (as in bvh_build_test.cpp).
-TreeShape check_bvh(const Bvh& bvh, std::span<const Triangle> triangles, int max_leaf_size) {
-    TreeShape shape;
-    EXPECT_EQ(bvh.prim_indices.size(), triangles.size());
-    if (triangles.empty()) {
-        EXPECT_TRUE(bvh.nodes.empty());
-        return shape;
-    }
-    std::vector<int> slot_seen(bvh.prim_indices.size(), 0);
-    std::vector<int> prim_seen(triangles.size(), 0);
-    auto walk = [&](auto&& self, uint32_t index, uint32_t base, int depth) -> uint32_t {
-        const BvhNode& node = bvh.nodes[index];
-        if (node.is_leaf()) {
-            shape.max_depth = std::max(shape.max_depth, depth);
-            ++shape.leaves;
-            shape.multi_prim_leaves += node.count > 1;
-            EXPECT_LE(node.count, static_cast<uint32_t>(max_leaf_size));
-            EXPECT_LE(size_t{node.first} + node.count, bvh.prim_indices.size());
-            Box3f prims;
-            for (uint32_t slot = node.first; slot < node.first + node.count && slot < slot_seen.size(); ++slot) {
-                ++slot_seen[slot];
-                const uint32_t prim = bvh.prim_indices[slot];
-                if (prim >= triangles.size()) {
-                    ADD_FAILURE() << "prim index out of range: " << prim;
-                    continue;
-                }
-                ++prim_seen[prim];
-                prims.extend(triangles[prim].bounds());
-            }
-            EXPECT_TRUE(same_box(node.bounds, prims)) << "leaf " << index << " box is not its triangles' box";
-            return base;
-        }
-        EXPECT_EQ(node.first, base) << "children of node " << index << " are not in depth-first order";
-        if (node.first != base || size_t{base} + 2 > bvh.nodes.size()) return base;
-        const BvhNode& left = bvh.nodes[base];
-        const BvhNode& right = bvh.nodes[base + 1];
-        EXPECT_TRUE(same_box(node.bounds, merge(left.bounds, right.bounds)));
-        if (depth > 10 * kBvhMaxDepth) {
-            ADD_FAILURE() << "runaway depth";
-            return base;
-        }
-        const uint32_t after_left = self(self, base, base + 2, depth + 1);
-        return self(self, base + 1, after_left, depth + 1);
-    };
-    const uint32_t end = walk(walk, 0, 1, 0);
-    EXPECT_EQ(end, bvh.nodes.size()) << "unreachable nodes";
-    EXPECT_TRUE(std::all_of(slot_seen.begin(), slot_seen.end(), [](int n) { return n == 1; }))
-        << "a leaf slot is used twice or never";
-    EXPECT_TRUE(std::all_of(prim_seen.begin(), prim_seen.end(), [](int n) { return n == 1; }))
-        << "a triangle is in no leaf or in two";
-    EXPECT_LE(shape.max_depth, kBvhMaxDepth);
-    EXPECT_EQ(shape.leaves, bvh.leaf_count());
-    EXPECT_EQ(bvh.nodes.size(), 2 * shape.leaves - 1);
-    return shape;
-}
-
-bool identical(const Bvh& a, const Bvh& b) {
-    return a.nodes.size() == b.nodes.size() && a.prim_indices == b.prim_indices &&
-           std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(BvhNode)) == 0;
-}
+using test::check_bvh;
+using test::identical;
+using test::same_box;
+using test::TreeShape;
 
 // Through the dispatch, which runs the builder on options.threads threads.
 Bvh build_with(Builder builder, std::span<const Triangle> triangles, BuildOptions options) {

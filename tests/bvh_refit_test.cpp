@@ -19,9 +19,10 @@
 #include "accel/bvh/layout/wide_bvh.h"
 #include "accel/bvh/refit.h"
 #include "accel/bvh/refit_steps.h"
-#include "accel/dynamic/bvh_updater.h"
+#include "accel/update/bvh_updater.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
+#include "bvh_invariants.h"
 #include "backend/cpu/wide_bvh_tracer.h"
 #include "rayforge/core/error.h"
 
@@ -53,21 +54,6 @@ bool same_bits(const void* a, const void* b, size_t bytes) { return std::memcmp(
 
 bool same_nodes(const Bvh& a, const Bvh& b) {
     return a.nodes.size() == b.nodes.size() && same_bits(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(BvhNode));
-}
-
-// The union of the triangles under node n; checks on the way that every
-// box is exactly that union (a refit's boxes are tight).
-Box3f check_tight(const Bvh& bvh, std::span<const Triangle> triangles, uint32_t n, size_t& failures) {
-    const BvhNode& node = bvh.nodes[n];
-    Box3f box;
-    if (node.is_leaf()) {
-        for (uint32_t s = node.first; s < node.first + node.count; ++s) box.extend(triangles[bvh.prim_indices[s]].bounds());
-    } else {
-        box = merge(check_tight(bvh, triangles, node.first, failures), check_tight(bvh, triangles, node.first + 1, failures));
-    }
-    const bool equal = box.lo == node.bounds.lo && box.hi == node.bounds.hi;
-    failures += equal ? 0 : 1;
-    return box;
 }
 
 void expect_same_topology(const Bvh& a, const Bvh& b) {
@@ -137,9 +123,9 @@ TEST(BvhRefit, ParallelEqualsSerialAndBoxesAreTight) {
                 refit_bvh_serial(serial, g.triangles);
                 EXPECT_TRUE(same_nodes(parallel, serial));
                 expect_same_topology(parallel, built);
-                size_t failures = 0;
-                check_tight(parallel, g.triangles, 0, failures);
-                EXPECT_EQ(failures, 0u);
+                // Every box the exact union of its subtree's triangles, and the tree still valid.
+                test::check_bvh(parallel, g.triangles, leaf_size,
+                                builder == Builder::Sbvh ? test::Refs::Repeated : test::Refs::Once);
                 EXPECT_EQ(parallel.nodes[0].bounds.lo, g.bounds.lo);
                 EXPECT_EQ(parallel.nodes[0].bounds.hi, g.bounds.hi);
             }
@@ -167,7 +153,7 @@ TEST(BvhRefit, PlanReusedOverFramesAndCountersReturnToZero) {
 
 TEST(BvhRefit, MovedBackGivesTheBuiltBoxes) {
     // The builders' boxes are the exact unions too, so undoing the motion
-    // undoes the refit (the "frame 100 -> 1" direction of the seed's tests).
+    // undoes the refit (the "frame 100 -> 1" direction of Garanzha 2014's tests).
     const SceneGeometry start = test::to_geometry(test::make_icosphere(3));
     const Bvh built = build_bvh_on_cpu(start.triangles, BuildOptions{});
     Bvh bvh = built;

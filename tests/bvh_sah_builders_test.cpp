@@ -9,7 +9,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
 #include <random>
 #include <string>
 #include <vector>
@@ -23,94 +22,18 @@
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
 #include "bvh_hash.h"
-#include "backend/cpu/parallel.h"
+#include "bvh_invariants.h"
+#include "core/parallel.h"
 #include "rayforge/accel/accel.h"
 
 namespace rf {
 namespace {
 
-bool same_box(const Box3f& a, const Box3f& b) { return a.lo == b.lo && a.hi == b.hi; }
-
-bool identical(const Bvh& a, const Bvh& b) {
-    return a.nodes.size() == b.nodes.size() && a.prim_indices == b.prim_indices &&
-           std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(BvhNode)) == 0;
-}
-
-struct TreeShape {
-    int max_depth = 0;  // inner nodes on the longest root-to-leaf path
-    size_t leaves = 0;
-};
-
-// Every invariant of a canonical BVH (bvh_build_test.cpp's check_bvh). With
-// `spatial` (SBVH), a triangle may sit in several leaves, leaf boxes may be
-// clipped (inside the union of their triangles' boxes), and a parent's box
-// need only contain its children's.
-TreeShape check_bvh(const Bvh& bvh, std::span<const Triangle> triangles, int max_leaf_size, bool spatial = false) {
-    TreeShape shape;
-    if (triangles.empty()) {
-        EXPECT_TRUE(bvh.nodes.empty());
-        EXPECT_TRUE(bvh.prim_indices.empty());
-        return shape;
-    }
-    if (spatial) {
-        EXPECT_GE(bvh.prim_indices.size(), triangles.size());
-    } else {
-        EXPECT_EQ(bvh.prim_indices.size(), triangles.size());
-    }
-    std::vector<int> slot_seen(bvh.prim_indices.size(), 0);
-    std::vector<int> prim_seen(triangles.size(), 0);
-    auto walk = [&](auto&& self, uint32_t index, uint32_t base, int depth) -> uint32_t {
-        const BvhNode& node = bvh.nodes[index];
-        if (node.is_leaf()) {
-            shape.max_depth = std::max(shape.max_depth, depth);
-            ++shape.leaves;
-            EXPECT_LE(node.count, static_cast<uint32_t>(max_leaf_size));
-            EXPECT_LE(size_t{node.first} + node.count, bvh.prim_indices.size());
-            Box3f prims;
-            for (uint32_t slot = node.first; slot < node.first + node.count && slot < slot_seen.size(); ++slot) {
-                ++slot_seen[slot];
-                const uint32_t prim = bvh.prim_indices[slot];
-                if (prim >= triangles.size()) {
-                    ADD_FAILURE() << "prim index out of range: " << prim;
-                    continue;
-                }
-                ++prim_seen[prim];
-                prims.extend(triangles[prim].bounds());
-            }
-            if (spatial) {
-                EXPECT_TRUE(prims.contains(node.bounds)) << "leaf " << index << " box is outside its triangles' box";
-                EXPECT_FALSE(node.bounds.is_empty());
-            } else {
-                EXPECT_TRUE(same_box(node.bounds, prims)) << "leaf " << index << " box is not its triangles' box";
-            }
-            return base;
-        }
-        EXPECT_EQ(node.first, base) << "children of node " << index << " are not in depth-first order";
-        if (node.first != base || size_t{base} + 2 > bvh.nodes.size()) return base;
-        const BvhNode& left = bvh.nodes[base];
-        const BvhNode& right = bvh.nodes[base + 1];
-        EXPECT_TRUE(node.bounds.contains(left.bounds));
-        EXPECT_TRUE(node.bounds.contains(right.bounds));
-        if (!spatial) EXPECT_TRUE(same_box(node.bounds, merge(left.bounds, right.bounds)));
-        const uint32_t after_left = self(self, base, base + 2, depth + 1);
-        return self(self, base + 1, after_left, depth + 1);
-    };
-    const uint32_t end = walk(walk, 0, 1, 0);
-    EXPECT_EQ(end, bvh.nodes.size()) << "unreachable nodes";
-    EXPECT_TRUE(std::all_of(slot_seen.begin(), slot_seen.end(), [](int n) { return n == 1; }))
-        << "a leaf slot is used twice or never";
-    if (spatial) {
-        EXPECT_TRUE(std::all_of(prim_seen.begin(), prim_seen.end(), [](int n) { return n >= 1; }))
-            << "a triangle is in no leaf";
-    } else {
-        EXPECT_TRUE(std::all_of(prim_seen.begin(), prim_seen.end(), [](int n) { return n == 1; }))
-            << "a triangle is in no leaf or in two";
-    }
-    EXPECT_LE(shape.max_depth, kBvhMaxDepth);
-    EXPECT_EQ(shape.leaves, bvh.leaf_count());
-    EXPECT_EQ(bvh.nodes.size(), 2 * shape.leaves - 1);
-    return shape;
-}
+using test::check_bvh;
+using test::identical;
+using test::Refs;
+using test::same_box;
+using test::TreeShape;
 
 // SBVH coverage: every point of every triangle lies in the box of at least
 // one leaf that references it (sampled; child boxes lie inside their parents,
@@ -320,7 +243,7 @@ TEST(Sbvh, InvariantsHoldForScenesLeafSizesAndThreads) {
                 const Bvh bvh = build_bvh(scene.geometry.triangles, BuildOptions{.builder = Builder::Sbvh,
                                                                                   .threads = threads,
                                                                                   .max_leaf_size = leaf_size});
-                check_bvh(bvh, scene.geometry.triangles, leaf_size, true);
+                check_bvh(bvh, scene.geometry.triangles, leaf_size, Refs::SpatialSplit);
                 check_coverage(bvh, scene.geometry.triangles, 7);
                 EXPECT_LE(bvh.prim_indices.size(), 2 * scene.geometry.triangles.size());  // the reference budget
                 EXPECT_TRUE(std::isfinite(bvh.sah_cost()));
@@ -334,9 +257,9 @@ TEST(Sbvh, DepthStaysWithinLimitOnPathologicalInput) {
     const SceneGeometry overflow = make_overflowing_soup();
     for (int leaf_size : {1, 4}) {
         const BvhBuildConfig config{.max_leaf_size = leaf_size};
-        check_bvh(build_sbvh(row.triangles, config, SbvhOptions{}), row.triangles, leaf_size, true);
-        const TreeShape shape =
-            check_bvh(build_sbvh(overflow.triangles, config, SbvhOptions{}), overflow.triangles, leaf_size, true);
+        check_bvh(build_sbvh(row.triangles, config, SbvhOptions{}), row.triangles, leaf_size, Refs::SpatialSplit);
+        const TreeShape shape = check_bvh(build_sbvh(overflow.triangles, config, SbvhOptions{}), overflow.triangles,
+                                          leaf_size, Refs::SpatialSplit);
         EXPECT_LE(shape.max_depth, kBvhMaxDepth);
         EXPECT_GT(shape.max_depth, 50);
     }
@@ -365,7 +288,7 @@ TEST(Sbvh, BudgetSharingIsDeterministicAndBounded) {
     const Bvh all = build_bvh(mixed.triangles, BuildOptions{.builder = Builder::Sbvh, .threads = 0});
     EXPECT_TRUE(identical(one, two));
     EXPECT_TRUE(identical(one, all));
-    check_bvh(one, mixed.triangles, 4, true);
+    check_bvh(one, mixed.triangles, 4, Refs::SpatialSplit);
     EXPECT_GT(one.prim_indices.size(), mixed.triangles.size());
     EXPECT_LE(one.prim_indices.size(), 2 * mixed.triangles.size());
     EXPECT_LT(one.sah_cost(), build_sweep_sah(mixed.triangles, BvhBuildConfig{}).sah_cost());
@@ -666,7 +589,7 @@ TEST(Reinsertion, NeverIncreasesSahAndKeepsInvariants) {
             optimize_reinsertion(bvh, tris, config.sah, ReinsertionOptions{});
             EXPECT_LE(bvh.sah_cost(), before);
             EXPECT_EQ(bvh.leaf_count(), leaves);
-            check_bvh(bvh, tris, 2, builder == Builder::Sbvh);
+            check_bvh(bvh, tris, 2, builder == Builder::Sbvh ? Refs::SpatialSplit : Refs::Once);
         }
     }
 }

@@ -22,10 +22,11 @@
 #include "accel/bvh/builders/clusters.h"
 #include "accel/bvh/bvh_accel.h"
 #include "accel/bvh/layout/wide_bvh.h"
-#include "accel/dynamic/bvh_updater.h"
+#include "accel/update/bvh_updater.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
-#include "backend/cpu/parallel.h"
+#include "bvh_invariants.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
 
@@ -311,46 +312,30 @@ TEST(ClustersTest, DegenerateInput) {
     EXPECT_THROW(validate_cluster_options(o), Error);
 }
 
-// Canonical-BVH invariants: each triangle in exactly one leaf, boxes contain
-// their triangles and children, leaf sizes within the L rule.
-// With subtrees, leaves hold at most `leaf` triangles and may split clusters.
+// Canonical-BVH invariants (bvh_invariants.h) and the L rule: leaves hold
+// whole clusters, more than L triangles only as a lone cluster. With
+// subtrees, leaves hold at most `leaf` triangles and may split clusters.
 void check_cluster_bvh(const Bvh& bvh, std::span<const Triangle> tris, const ClusterPartition& clusters, int leaf,
                        bool subtrees = false) {
-    ASSERT_EQ(bvh.prim_indices.size(), tris.size());
+    test::check_bvh(bvh, tris, subtrees ? leaf : int(kMaxClusterTriangles));
+    if (subtrees) return;
     std::vector<uint32_t> cluster_of(tris.size());
     for (size_t c = 0; c < clusters.size(); ++c) {
         for (uint32_t t : clusters.cluster(c)) cluster_of[t] = uint32_t(c);
     }
-    std::vector<int> seen(tris.size(), 0);
-    auto walk = [&](auto&& self, uint32_t n, int depth) -> void {
-        ASSERT_LE(depth, kBvhMaxDepth);
-        const BvhNode& node = bvh.nodes[n];
-        if (!node.is_leaf()) {
-            ASSERT_LT(node.first + 1, bvh.nodes.size());
-            for (uint32_t c = node.first; c <= node.first + 1; ++c) {
-                EXPECT_TRUE(node.bounds.contains(bvh.nodes[c].bounds));
-                self(self, c, depth + 1);
-            }
-            return;
-        }
-        EXPECT_LE(node.count, subtrees ? uint32_t(leaf) : kMaxClusterTriangles);
+    for (const BvhNode& node : bvh.nodes) {  // all reachable, as check_bvh verified
+        if (!node.is_leaf()) continue;
         std::vector<uint32_t> in_leaf;
-        for (uint32_t s = node.first; s < node.first + node.count; ++s) {
-            const uint32_t t = bvh.prim_indices[s];
-            ++seen[t];
-            EXPECT_TRUE(node.bounds.contains(tris[t].bounds()));
-            in_leaf.push_back(cluster_of[t]);
+        for (uint32_t s = node.first; s < node.first + node.count && s < bvh.prim_indices.size(); ++s) {
+            if (bvh.prim_indices[s] < tris.size()) in_leaf.push_back(cluster_of[bvh.prim_indices[s]]);
         }
-        if (subtrees) return;
         std::sort(in_leaf.begin(), in_leaf.end());
         in_leaf.erase(std::unique(in_leaf.begin(), in_leaf.end()), in_leaf.end());
         size_t whole = 0;  // leaves hold whole clusters
         for (uint32_t c : in_leaf) whole += clusters.cluster(c).size();
         EXPECT_EQ(whole, node.count);
         if (node.count > uint32_t(leaf)) EXPECT_EQ(in_leaf.size(), 1u);  // only a lone cluster exceeds L
-    };
-    walk(walk, 0, 0);
-    for (size_t t = 0; t < tris.size(); ++t) ASSERT_EQ(seen[t], 1);
+    }
 }
 
 void expect_brute_force_hits(const SceneGeometry& g, const Bvh& bvh, uint32_t seed) {

@@ -18,6 +18,7 @@
 #include "rayforge/io/image_io.h"
 #include "rayforge/io/scene_io.h"
 #include "rayforge/render/render.h"
+#include "rayforge/world.h"
 #include "rayforge/scene/scene_geometry.h"
 #include "test_paths.h"
 
@@ -64,7 +65,8 @@ Texture load_reference(const std::string& name, int seed) {
     return t;
 }
 
-Image render_seed(const Scene& scene, const SceneGeometry& geometry, const Accel& accel, uint32_t seed) {
+Image render_seed(World& world, uint32_t seed) {
+    const Scene& scene = world.scene();
     RenderOptions o;
     o.integrator = IntegratorKind::Path;
     o.width = *scene.render_settings.width;
@@ -72,16 +74,14 @@ Image render_seed(const Scene& scene, const SceneGeometry& geometry, const Accel
     o.spp = *scene.render_settings.spp;
     o.max_depth = *scene.render_settings.max_depth;
     o.seed = seed;
-    return render(scene, geometry, accel, scene.camera_or_default(), o);
+    return render(world, world.camera(), o);
 }
 
 // Renders `name` and compares it with its Cycles reference; `allowance` is
 // the relative model difference documented for that scene.
 void compare_with_cycles(const std::string& name, double allowance) {
-    const Scene scene = load_scene(test::data_path("cycles/" + name + ".json"));
-    const SceneGeometry geometry = SceneGeometry::build(scene);
-    const auto accel = build_accel(geometry, BuildOptions{});
-    const Image ours[2] = {render_seed(scene, geometry, *accel, 1), render_seed(scene, geometry, *accel, 2)};
+    const std::unique_ptr<World> world = open_world(test::data_path("cycles/" + name + ".json"));
+    const Image ours[2] = {render_seed(*world, 1), render_seed(*world, 2)};
     const Texture theirs[2] = {load_reference(name, 1), load_reference(name, 2)};
     const int w = ours[0].width, h = ours[0].height;
     for (const Texture& t : theirs) ASSERT_TRUE(t.width == w && t.height == h) << name << ": reference size differs";

@@ -1,6 +1,6 @@
 // build_dynamic_accel: every update method, on a scene with rigidly moving
 // instances, a deforming mesh and a hidden instance, answers like brute force
-// at several frames, forwards and backwards in time (the seed's 100 -> 1 -> 100).
+// at several frames, forwards and backwards in time (Garanzha 2014 ch. 2's 100 -> 1 -> 100).
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -14,6 +14,7 @@
 #include "rayforge/io/image_io.h"
 #include "rayforge/io/scene_io.h"
 #include "rayforge/render/render.h"
+#include "rayforge/world.h"
 #include "math/color.h"
 #include "test_paths.h"
 
@@ -56,9 +57,7 @@ Image downsample(const Image& image, int factor) {
 
 void check_against_reference(IntegratorKind integrator, int spp, const std::string& reference_name,
                              int downsample_factor = 1) {
-    Scene scene = load_scene("builtin:cornell");
-    SceneGeometry geometry = SceneGeometry::build(scene);
-    std::unique_ptr<Accel> accel = build_accel(geometry);
+    const std::unique_ptr<World> world = open_world("builtin:cornell");
     RenderOptions options;
     options.width = 160;
     options.height = 120;
@@ -68,7 +67,7 @@ void check_against_reference(IntegratorKind integrator, int spp, const std::stri
     // Clamped samples keep a rare caustic path (the spheres focus the light)
     // from deciding a whole block; the comparison is about everything else.
     if (integrator == IntegratorKind::Path) options.max_sample_value = 4.0f;
-    Image image = render(scene, geometry, *accel, scene.camera_or_default(), options);
+    Image image = render(*world, world->camera(), options);
 
     std::string reference_path = test::data_path("reference/" + reference_name);
     const char* update = std::getenv("RAYFORGE_UPDATE_REFERENCES");

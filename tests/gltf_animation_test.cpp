@@ -1,4 +1,4 @@
-// glTF animations (issue 21): the loader's Animation structures for a
+// glTF animations (docs/animation.md): the loader's Animation structures for a
 // hand-checkable fixture (TRS tracks, a skin, morph targets), the scene after
 // Scene::set_time against hand-computed positions, one-line errors for
 // malformed animation data, and the generated skinned character.

@@ -11,7 +11,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
 #include <map>
 #include <random>
 #include <string>
@@ -25,7 +24,8 @@
 #include "accel/bvh/builders/grid_bvh_sparse_grid.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
-#include "backend/cpu/parallel.h"
+#include "bvh_invariants.h"
+#include "core/parallel.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
@@ -40,82 +40,14 @@ using gridbvh::GridFrame;
 using gridbvh::GridRef;
 using gridbvh::SparseGrid;
 
-bool same_box(const Box3f& a, const Box3f& b) { return a.lo == b.lo && a.hi == b.hi; }
+using test::check_bvh;
+using test::identical;
+using test::Refs;
+using test::same_box;
+using test::TreeShape;
 
-struct TreeShape {
-    int max_depth = 0;  // inner nodes on the longest root-to-leaf path
-    size_t leaves = 0;
-};
-
-// Every invariant of a canonical BVH (as in bvh_build_test.cpp). With
-// `split` (GridBvhSplit) a triangle may be in several leaves (at least one)
-// and a leaf box need only lie inside its triangles' boxes.
-TreeShape check_bvh(const Bvh& bvh, std::span<const Triangle> triangles, int max_leaf_size, bool split = false) {
-    TreeShape shape;
-    if (!split) EXPECT_EQ(bvh.prim_indices.size(), triangles.size());
-    if (triangles.empty()) {
-        EXPECT_TRUE(bvh.nodes.empty());
-        return shape;
-    }
-    std::vector<int> slot_seen(bvh.prim_indices.size(), 0);
-    std::vector<int> prim_seen(triangles.size(), 0);
-    auto walk = [&](auto&& self, uint32_t index, uint32_t base, int depth) -> uint32_t {
-        const BvhNode& node = bvh.nodes[index];
-        if (node.is_leaf()) {
-            shape.max_depth = std::max(shape.max_depth, depth);
-            ++shape.leaves;
-            EXPECT_LE(node.count, static_cast<uint32_t>(max_leaf_size));
-            EXPECT_LE(size_t{node.first} + node.count, bvh.prim_indices.size());
-            Box3f prims;
-            for (uint32_t slot = node.first; slot < node.first + node.count && slot < slot_seen.size(); ++slot) {
-                ++slot_seen[slot];
-                const uint32_t prim = bvh.prim_indices[slot];
-                if (prim >= triangles.size()) {
-                    ADD_FAILURE() << "prim index out of range: " << prim;
-                    continue;
-                }
-                ++prim_seen[prim];
-                prims.extend(triangles[prim].bounds());
-            }
-            if (split) {
-                EXPECT_TRUE(prims.contains(node.bounds)) << "leaf " << index << " box outside its triangles' box";
-                EXPECT_FALSE(node.bounds.is_empty());
-            } else {
-                EXPECT_TRUE(same_box(node.bounds, prims)) << "leaf " << index << " box is not its triangles' box";
-            }
-            return base;
-        }
-        EXPECT_EQ(node.first, base) << "children of node " << index << " are not in depth-first order";
-        if (node.first != base || size_t{base} + 2 > bvh.nodes.size()) return base;
-        const BvhNode& left = bvh.nodes[base];
-        const BvhNode& right = bvh.nodes[base + 1];
-        EXPECT_TRUE(node.bounds.contains(left.bounds));
-        EXPECT_TRUE(node.bounds.contains(right.bounds));
-        EXPECT_TRUE(same_box(node.bounds, merge(left.bounds, right.bounds)));
-        const uint32_t after_left = self(self, base, base + 2, depth + 1);
-        return self(self, base + 1, after_left, depth + 1);
-    };
-    const uint32_t end = walk(walk, 0, 1, 0);
-    EXPECT_EQ(end, bvh.nodes.size()) << "unreachable nodes";
-    EXPECT_TRUE(std::all_of(slot_seen.begin(), slot_seen.end(), [](int n) { return n == 1; }))
-        << "a leaf slot is used twice or never";
-    if (split) {
-        EXPECT_TRUE(std::all_of(prim_seen.begin(), prim_seen.end(), [](int n) { return n >= 1; }))
-            << "a triangle is in no leaf";
-    } else {
-        EXPECT_TRUE(std::all_of(prim_seen.begin(), prim_seen.end(), [](int n) { return n == 1; }))
-            << "a triangle is in no leaf or in two";
-    }
-    EXPECT_LE(shape.max_depth, kBvhMaxDepth);
-    EXPECT_EQ(shape.leaves, bvh.leaf_count());
-    EXPECT_EQ(bvh.nodes.size(), 2 * shape.leaves - 1);
-    return shape;
-}
-
-bool identical(const Bvh& a, const Bvh& b) {
-    return a.nodes.size() == b.nodes.size() && a.prim_indices == b.prim_indices &&
-           std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(BvhNode)) == 0;
-}
+// GridBvhSplit's partial triangles: in one or more leaves, with clipped boxes.
+Refs refs_of(bool split) { return split ? Refs::Partial : Refs::Once; }
 
 SceneGeometry make_geometric_row(int count) {
     SceneGeometry g;
@@ -390,7 +322,7 @@ TEST(GridBvhSplit, InvariantsHoldForScenesLeafSizesAndBudgets) {
                 SCOPED_TRACE(scene.name + " leaf " + std::to_string(leaf_size) + " budget " + std::to_string(budget));
                 const Bvh bvh = build_grid_bvh(scene.geometry.triangles, BvhBuildConfig{.max_leaf_size = leaf_size},
                                                GridBvhOptions{.split_budget = budget}, true);
-                check_bvh(bvh, scene.geometry.triangles, leaf_size, true);
+                check_bvh(bvh, scene.geometry.triangles, leaf_size, Refs::Partial);
                 EXPECT_LE(bvh.prim_indices.size(),
                           size_t(std::floor(double(budget) * double(scene.geometry.size()))) + scene.geometry.size());
             }
@@ -418,9 +350,10 @@ TEST(GridBvh, DepthStaysWithinLimitOnPathologicalInput) {
         for (int leaf_size : {1, 4}) {
             SCOPED_TRACE(std::string(split ? "split" : "plain") + " leaf " + std::to_string(leaf_size));
             const BvhBuildConfig config{.max_leaf_size = leaf_size};
-            check_bvh(build_grid_bvh(row.triangles, config, GridBvhOptions{}, split), row.triangles, leaf_size, split);
+            check_bvh(build_grid_bvh(row.triangles, config, GridBvhOptions{}, split), row.triangles, leaf_size,
+                      refs_of(split));
             const TreeShape shape = check_bvh(build_grid_bvh(same.triangles, config, GridBvhOptions{}, split),
-                                              same.triangles, leaf_size, split);
+                                              same.triangles, leaf_size, refs_of(split));
             EXPECT_LE(shape.max_depth, kBvhMaxDepth);
         }
     }
@@ -438,7 +371,7 @@ TEST(GridBvh, SameTreeForEveryThreadCount) {
         const Bvh all = build_bvh(soup.triangles, BuildOptions{.builder = builder, .threads = 0});
         EXPECT_TRUE(identical(one, two));
         EXPECT_TRUE(identical(one, all));
-        check_bvh(one, soup.triangles, 4, split);
+        check_bvh(one, soup.triangles, 4, refs_of(split));
     }
 }
 
@@ -457,7 +390,7 @@ TEST(GridBvh, SameTreeForEveryThreadCountWithCrowdedCells) {
         const Bvh two = build_bvh(g.triangles, BuildOptions{.builder = builder, .threads = 2});
         EXPECT_GT(stages.large_leaves, 0u);
         EXPECT_TRUE(identical(one, two));
-        check_bvh(one, g.triangles, 4, split);
+        check_bvh(one, g.triangles, 4, refs_of(split));
     }
 }
 

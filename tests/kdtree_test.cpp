@@ -1,4 +1,4 @@
-// The SAH kd-tree of seed 002 (Wald and Havran 2006 build; stack, short-stack,
+// The SAH kd-tree of Zlatuška 2009 (Wald and Havran 2006 build; stack, short-stack,
 // restart and pushdown traversals): every traversal with and without perfect
 // splits against brute force, structural invariants of the built tree,
 // determinism across thread counts, SAH against a median-split tree, and
@@ -19,7 +19,7 @@
 #include "accel/kdtree/polygon_clip.h"
 #include "accel_test_rays.h"
 #include "accel_test_scenes.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"

@@ -37,6 +37,7 @@ struct Uniform {
 
 // A scene built in code that also acts as the View sample_light expects.
 struct TestWorld : TestScene {
+    SceneGeometry geometry;  // the flat triangles the light set is built over (no world here)
     std::vector<ShadingMaterial> materials;
     std::vector<TextureView> textures;
     std::unique_ptr<HostLightSet> light_set;

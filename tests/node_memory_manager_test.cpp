@@ -1,7 +1,7 @@
 // The adapt update's node memory manager (Garanzha 2014 ch. 2, sec. 2.5):
 // allocation takes the free slot nearest the hint, and under random
 // allocate/free sequences no slot is ever lost or handed out twice.
-#include "accel/bvh/update/node_memory_manager.h"
+#include "accel/update/node_memory_manager.h"
 
 #include <gtest/gtest.h>
 

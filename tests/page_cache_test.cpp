@@ -1,6 +1,6 @@
 // The page manager (ooc/page_cache.h) on small hand-written pack files:
 // pages come back byte-exact; the budget bounds the slots and the memory,
-// and the pool is resident only as it fills; the LFU swap of the seed
+// and the pool is resident only as it fills; the LFU swap of Garanzha 2014
 // (Garanzha 2014, §6.2) evicts what hand-computed sequences say, including
 // its stable order among equal keys and the TimeUsed reset every 10th swap;
 // requests beyond the pool are served by later swaps; WasRead, the
@@ -20,7 +20,7 @@
 #include <string>
 #include <vector>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "ooc/pack_file.h"
 #include "ooc/pack_format.h"
 #include "ooc/page_cache.h"

@@ -5,7 +5,7 @@
 // iterations, the scatter's words, the answers), with the stable sort and
 // compaction CUB does. On a paged file of the spheres scene, with device
 // pools of 1, 3 and many slots, host caches smaller than the scene and
-// staging fills of one page or of the seed's 1 MB:
+// staging fills of one page or of Garanzha 2014's 1 MB:
 //   - closest and any hits equal PagedEngine's on the same file, exactly;
 //   - every swap admits min(requested, slots) of the requested pages and
 //     nothing else, so every request is served (the loop ends with every
@@ -13,7 +13,7 @@
 //     bytes, and no slot holds two pages;
 //   - device and host memory stay within their budgets;
 // and: the swap decision equals the host PageCache's (the same algorithm
-// of the seed) descriptor for descriptor on random request sequences; a
+// of Garanzha 2014) descriptor for descriptor on random request sequences; a
 // scatter that drops a word is caught; a corrupted page is an rf::Error
 // that leaves the device pool empty.
 #include <gtest/gtest.h>
@@ -378,7 +378,7 @@ TEST(PagedDeviceLogic, HitsEqualPagedEngineWithLargeDevicePools) {
     }
 }
 
-// The device pool's swap decision is the seed's, as the host manager makes
+// The device pool's swap decision is Garanzha 2014's, as the host manager makes
 // it: the same descriptors after every swap on random request sequences.
 TEST(PagedDeviceLogic, SwapDecisionEqualsTheHostPageCache) {
     const Fixture& f = fixture();

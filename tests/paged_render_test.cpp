@@ -1,4 +1,4 @@
-// Rendering paged scenes (issue 20): images equal the in-core renderer's
+// Rendering paged scenes (docs/paged-scenes.md), opened as worlds: images equal the in-core renderer's
 // within quantisation, are the same bytes whatever the cache budget, the
 // resident set stays within the budget plus the fixed overhead, and the
 // CLI's convert / generate / info / render work on paged files.
@@ -58,10 +58,10 @@ const PagedRenderFixture& fixture() {
 }
 
 Image paged_render(const RenderOptions& options, size_t budget) {
-    PagedSceneOptions o;
-    o.memory_budget = budget;
-    auto scene = open_paged_scene(fixture().path, o);
-    auto renderer = make_paged_renderer(*scene, fixture().camera, options);
+    WorldOptions o;
+    o.paged.memory_budget = budget;
+    auto world = open_world(fixture().path, o);
+    auto renderer = make_renderer(*world, fixture().camera, options);
     render_progressive(*renderer);
     return renderer->image();
 }
@@ -152,12 +152,13 @@ TEST(PagedRender, ResidentSetStaysWithinTheBudgetPlusTheFixedOverhead) {
     const size_t budget = size_t(2) << 20;
     ASSERT_GT(written.file_bytes, 6 * budget);
     const size_t before = resident_set_bytes();
-    PagedSceneOptions o;
-    o.memory_budget = budget;
-    auto scene = open_paged_scene(path, o);
+    WorldOptions o;
+    o.paged.memory_budget = budget;
+    auto world = open_world(path, o);
+    const PagedScene* scene = &world->paged_scene();
     RenderOptions r = options_for(IntegratorKind::Path, 160, 120);
     r.spp = 3;
-    auto renderer = make_paged_renderer(*scene, scene->camera(), r);
+    auto renderer = make_renderer(*world, world->camera(), r);
     render_progressive(*renderer);
     const size_t grown = resident_set_bytes() - std::min(before, resident_set_bytes());
     // Fixed overhead: resident levels + films (4 x 12 bytes a pixel) + wavefront queues (~250 bytes a path).

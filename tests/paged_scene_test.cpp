@@ -1,4 +1,4 @@
-// Paged scenes (issue 20): the file round trip, the out-of-core traversal
+// Paged scenes (docs/paged-scenes.md): the file round trip, the out-of-core traversal
 // against brute force over the same quantised pages, paged against in-core
 // hits, eviction under tiny budgets, corrupted and truncated files.
 #include <gtest/gtest.h>

@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "ooc/pack_file.h"
 #include "ooc/pack_writer.h"
 #include "ooc/paged_texture.h"

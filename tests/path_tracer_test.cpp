@@ -305,7 +305,7 @@ TEST(Renderer, PassesAccumulateAndCallbacksCanStop) {
     TestScene t = furnace_sphere(lambert(0.7f));
     Camera camera = looking_at({0, 0, 3}, {0, 0, 0}, 30.0f);
     RenderOptions o = path_options(16, 16, 8);
-    const auto renderer = make_renderer(t.scene, t.geometry, *t.accel, camera, o);
+    const auto renderer = make_renderer(*t.world, camera, o);
     EXPECT_EQ(renderer->passes(), 0);
     EXPECT_EQ(renderer->device(), Device{});
     int calls = 0;
@@ -321,7 +321,7 @@ TEST(Renderer, PassesAccumulateAndCallbacksCanStop) {
     EXPECT_GT(renderer->last_pass().pass_ms, 0.0);
     // The mean of three passes equals three passes rendered in one go.
     o.spp = 3;
-    Image direct = render(t.scene, t.geometry, *t.accel, camera, o);
+    Image direct = render(*t.world, camera, o);
     EXPECT_EQ(renderer->image().pixels, direct.pixels);
 }
 
@@ -329,7 +329,7 @@ TEST(Renderer, TimeBudgetStopsEarly) {
     TestScene t = furnace_sphere(lambert(0.7f));
     RenderOptions o = path_options(8, 8, 1 << 20);
     o.time_budget_s = 0.05;
-    const auto renderer = make_renderer(t.scene, t.geometry, *t.accel, looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), o);
+    const auto renderer = make_renderer(*t.world, looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), o);
     render_progressive(*renderer);
     EXPECT_GE(renderer->passes(), 1);
     EXPECT_LT(renderer->passes(), 1 << 20);
@@ -346,7 +346,7 @@ TEST(Renderer, AovsDescribeTheFirstHit) {
         o.integrator = k;
         o.aovs = true;
         const auto renderer =
-            make_renderer(t.scene, t.geometry, *t.accel, looking_at({0, 0, 5}, {0, 0, 0}, 1.0f), o);
+            make_renderer(*t.world, looking_at({0, 0, 5}, {0, 0, 0}, 1.0f), o);
         render_progressive(*renderer);
         const Vec3f albedo = renderer->albedo().at(1, 1), normal = renderer->normal().at(1, 1);
         EXPECT_NEAR(albedo.x, 0.25f, 1e-4f);
@@ -355,7 +355,7 @@ TEST(Renderer, AovsDescribeTheFirstHit) {
         EXPECT_NEAR(renderer->depth().at(1, 1).x, 5.0f, 1e-3f);
     }
     RenderOptions o = path_options(3, 3, 1);
-    const auto plain = make_renderer(t.scene, t.geometry, *t.accel, looking_at({0, 0, 5}, {0, 0, 0}, 1.0f), o);
+    const auto plain = make_renderer(*t.world, looking_at({0, 0, 5}, {0, 0, 0}, 1.0f), o);
     plain->render_pass();
     EXPECT_EQ(plain->albedo().width, 0);  // AOVs off: nothing accumulated
 }
@@ -366,23 +366,22 @@ TEST(Renderer, CameraChangeRestartsAccumulation) {
     TestScene t = furnace_sphere(lambert(0.7f));
     const Camera near = looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), far = looking_at({1, 1, 6}, {0, 0, 0}, 40.0f);
     RenderOptions o = path_options(12, 10, 2);
-    const auto renderer = make_renderer(t.scene, t.geometry, *t.accel, near, o);
+    const auto renderer = make_renderer(*t.world, near, o);
     render_progressive(*renderer);
     const Image before = renderer->image();
     renderer->set_camera(far);
     EXPECT_EQ(renderer->passes(), 0);
     EXPECT_EQ(renderer->stats().samples, 0u);
     render_progressive(*renderer);
-    EXPECT_EQ(renderer->image().pixels, render(t.scene, t.geometry, *t.accel, far, o).pixels);
+    EXPECT_EQ(renderer->image().pixels, render(*t.world, far, o).pixels);
     EXPECT_NE(renderer->image().pixels, before.pixels);
 }
 
-// New options (another integrator and resolution) restart with new films;
-// the device cannot change.
+// New options (another integrator and resolution) restart with new films.
 TEST(Renderer, OptionChangesRestartWithNewFilms) {
     TestScene t = furnace_sphere(lambert(0.7f));
     const Camera camera = looking_at({0, 0, 3}, {0, 0, 0}, 30.0f);
-    const auto renderer = make_renderer(t.scene, t.geometry, *t.accel, camera, path_options(8, 8, 2));
+    const auto renderer = make_renderer(*t.world, camera, path_options(8, 8, 2));
     render_progressive(*renderer);
     RenderOptions w = path_options(10, 6, 1);
     w.integrator = IntegratorKind::Whitted;
@@ -392,29 +391,35 @@ TEST(Renderer, OptionChangesRestartWithNewFilms) {
     render_progressive(*renderer);
     EXPECT_EQ(renderer->image().width, 10);
     EXPECT_EQ(renderer->albedo().height, 6);
-    EXPECT_EQ(renderer->image().pixels, render(t.scene, t.geometry, *t.accel, camera, w).pixels);
+    EXPECT_EQ(renderer->image().pixels, render(*t.world, camera, w).pixels);
     RenderOptions bad = w;
     bad.width = 0;
     EXPECT_THROW(renderer->set_options(bad), Error);
-    RenderOptions elsewhere = w;
-    elsewhere.device = parse_device("cuda:0");
-    EXPECT_THROW(renderer->set_options(elsewhere), Error);
 }
 
-// A material changed in place: scene_changed rebuilds the shading tables,
-// and the next passes render the changed scene as a fresh renderer would.
-TEST(Renderer, SceneChangeRebuildsShadingTables) {
+// A material changed in the world: the renderer, told nothing, rebuilds its
+// shading tables at its next pass, restarts, and renders the changed scene
+// as a fresh renderer would.
+TEST(Renderer, FollowsMaterialChangesOfItsWorld) {
     TestScene t = furnace_sphere(lambert(0.7f));
     const Camera camera = looking_at({0, 0, 3}, {0, 0, 0}, 30.0f);
     const RenderOptions o = path_options(8, 8, 2);
-    const auto renderer = make_renderer(t.scene, t.geometry, *t.accel, camera, o);
+    const auto renderer = make_renderer(*t.world, camera, o);
     render_progressive(*renderer);
     const Image grey = renderer->image();
-    for (Material& m : t.scene.materials) m.base_color = Vec3f(0.2f, 0.9f, 0.3f);
-    renderer->scene_changed(SceneChange::Materials);
+    for (Material& m : t.world->scene().materials) m.base_color = Vec3f(0.2f, 0.9f, 0.3f);
+    t.world->materials_changed();
+    EXPECT_EQ(renderer->passes(), 0);  // behind its world: restarted (its tables follow at the next pass)
+    EXPECT_EQ(renderer->stats().samples, 0u);
+    ASSERT_TRUE(renderer->render_pass());
+    EXPECT_EQ(renderer->passes(), 1);  // one pass of the new scene
     render_progressive(*renderer);
     EXPECT_NE(renderer->image().pixels, grey.pixels);
-    EXPECT_EQ(renderer->image().pixels, render(t.scene, t.geometry, *t.accel, camera, o).pixels);
+    EXPECT_EQ(renderer->image().pixels, render(*t.world, camera, o).pixels);
+    // A material index out of range is refused before any renderer sees it.
+    t.world->scene().materials[0].base_color_texture = 7;
+    EXPECT_THROW(t.world->materials_changed(), Error);
+    t.world->scene().materials[0].base_color_texture = kNoTexture;
 }
 
 // A pass stopped by its cancel flag adds nothing: accumulation restarts, and
@@ -426,7 +431,7 @@ TEST(Renderer, CancelledPassRestartsAccumulation) {
         RenderOptions o = path_options(48, 40, 2);  // 9 tiles, one thread: the flag is seen between them
         o.threads = 1;
         o.wavefront = wavefront;
-        const auto renderer = make_renderer(t.scene, t.geometry, *t.accel, camera, o);
+        const auto renderer = make_renderer(*t.world, camera, o);
         ASSERT_TRUE(renderer->render_pass());
         std::atomic<bool> cancel{true};
         EXPECT_FALSE(renderer->render_pass({}, &cancel));  // set before the pass: nothing runs
@@ -444,7 +449,7 @@ TEST(Renderer, CancelledPassRestartsAccumulation) {
         cancel = false;
         EXPECT_TRUE(renderer->render_pass({}, &cancel));
         EXPECT_TRUE(renderer->render_pass({}, &cancel));
-        EXPECT_EQ(renderer->image().pixels, render(t.scene, t.geometry, *t.accel, camera, o).pixels);
+        EXPECT_EQ(renderer->image().pixels, render(*t.world, camera, o).pixels);
     }
 }
 
@@ -453,7 +458,7 @@ TEST(Renderer, CancelledPassRestartsAccumulation) {
 TEST(Renderer, DisplayImageIsTheToneMappedMean) {
     TestScene t = furnace_sphere(lambert(0.7f));
     const auto renderer =
-        make_renderer(t.scene, t.geometry, *t.accel, looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), path_options(12, 10, 2));
+        make_renderer(*t.world, looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), path_options(12, 10, 2));
     const auto display = renderer->make_display_image();
     renderer->update_display(*display, {});
     EXPECT_EQ(display->width(), 12);  // black before the first pass
@@ -477,13 +482,21 @@ TEST(Renderer, DisplayImageIsTheToneMappedMean) {
         }
 }
 
-// A renderer lives on one device, and so must its structure.
-TEST(Renderer, DeviceMustMatchTheStructure) {
+// A renderer runs where its world lives; a world on a device this process
+// cannot use is refused when it is made, in one line.
+TEST(Renderer, RunsWhereItsWorldLives) {
     TestScene t = furnace_sphere(lambert(0.7f));
-    RenderOptions o = path_options(4, 4, 1);
-    o.device = parse_device("cuda:0");
-    EXPECT_THROW((void)make_renderer(t.scene, t.geometry, *t.accel, looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), o),
-                 Error);
+    const auto renderer = make_renderer(*t.world, looking_at({0, 0, 3}, {0, 0, 0}, 30.0f), path_options(4, 4, 1));
+    EXPECT_EQ(renderer->device(), t.world->device());
+    WorldOptions nowhere;
+    nowhere.device = parse_device("cuda:7");
+    try {
+        (void)make_world(t.scene, nowhere);
+        if (!cuda_backend_built()) ADD_FAILURE() << "a CUDA world in a build without the backend";
+    } catch (const Error& e) {
+        EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos);
+        EXPECT_NE(std::string(e.what()).find("cuda:7"), std::string::npos) << e.what();
+    }
 }
 
 }  // namespace

@@ -272,7 +272,7 @@ TEST(Render, ProgressIsReportedUpToCompletion) {
     t.finish();
     std::vector<double> reported;
     RenderOptions o = options_for(IntegratorKind::Normals, 50, 40);  // 4 x 3 tiles
-    (void)render(t.scene, t.geometry, *t.accel, looking_at({0, 0, 5}, {0, 0, 0}), o,
+    (void)render(*t.world, looking_at({0, 0, 5}, {0, 0, 0}), o,
                  [&](double f) { reported.push_back(f); });
     ASSERT_EQ(reported.size(), 12u);
     for (size_t i = 1; i < reported.size(); ++i) EXPECT_GT(reported[i], reported[i - 1]);

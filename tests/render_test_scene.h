@@ -10,16 +10,17 @@
 #include "rayforge/render/render.h"
 #include "rayforge/scene/scene.h"
 #include "rayforge/scene/scene_geometry.h"
+#include "rayforge/world.h"
 
 namespace rf {
 
 inline constexpr float kPiF = 3.14159265358979f;
 
-// A scene under construction plus what render() needs once it is done.
+// A scene under construction (scene) and, once finished, the world made of
+// a copy of it, which renders and answers queries.
 struct TestScene {
     Scene scene;
-    SceneGeometry geometry;
-    std::unique_ptr<Accel> accel;
+    std::unique_ptr<World> world;
 
     uint32_t add_material(const Material& m) {
         scene.materials.push_back(m);
@@ -71,11 +72,14 @@ struct TestScene {
     }
     void finish(Structure structure = Structure::BruteForce) {
         scene.finalize();
-        geometry = SceneGeometry::build(scene);
-        accel = build_accel(geometry, {.structure = structure});
+        WorldOptions options;
+        options.build.structure = structure;
+        world = make_world(scene, options);
     }
+    [[nodiscard]] const SceneGeometry& geometry() const { return world->geometry(); }
+    [[nodiscard]] const Accel& accel() const { return world->accel(); }
     Image render_with(const Camera& camera, const RenderOptions& options) const {
-        return render(scene, geometry, *accel, camera, options);
+        return render(*world, camera, options);
     }
 };
 

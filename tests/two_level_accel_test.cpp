@@ -1,4 +1,4 @@
-// The two-level structure (accel/dynamic/two_level_accel.cpp, traversal
+// The two-level structure (accel/update/two_level_accel.cpp, traversal
 // trace/two_level_traversal.h): hits and occlusion against brute force over
 // the flat SceneGeometry while instances move rigidly (rotation, non-uniform
 // and mirroring scale), a mesh deforms, an instance is hidden; watertight
@@ -17,9 +17,9 @@
 
 #include "accel/brute_force.h"
 #include "accel/bvh/builders/build_bvh.h"
-#include "accel/dynamic/bvh_updater.h"
+#include "accel/update/bvh_updater.h"
 #include "accel_test_scenes.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"

@@ -212,7 +212,7 @@ TEST(UniformGrid, EveryCellOverlappingATriangleHoldsIt) {
 
 TEST(UniformGrid, ResolutionRules) {
     const Box3f cube{Vec3f(-1.0f), Vec3f(1.0f)};
-    // Seed 002: floor(4 * n^(1/4)) cells on the shortest axis, cubic cells.
+    // Zlatuška 2009: floor(4 * n^(1/4)) cells on the shortest axis, cubic cells.
     GridLayout layout = choose_grid_layout(cube, 4000, 0);
     EXPECT_EQ(layout.dims, (std::array<int, 3>{31, 31, 31}));
     const Box3f slab{Vec3f(0.0f, 0.0f, 0.0f), Vec3f(4.0f, 2.0f, 1.0f)};

@@ -331,10 +331,8 @@ std::vector<uint8_t> display_bytes(const Image& image, const ToneMapping& tone) 
 
 // What the engine renders for these settings and camera, as display bytes.
 std::vector<uint8_t> reference(const SceneSource& source, const ViewSettings& s, const Camera& camera) {
-    const Scene scene = load_scene(source.path);
-    const SceneGeometry geometry = SceneGeometry::build(scene);
-    const auto accel = build_accel(geometry, s.build);
-    return display_bytes(render(scene, geometry, *accel, camera, film_options(s, false, 1)), s.tone);
+    const std::unique_ptr<World> world = open_world(source.path, s.world);
+    return display_bytes(render(*world, camera, film_options(s, false, 1)), s.tone);
 }
 
 std::vector<uint8_t> pixels_of(const Frame& frame) { return frame.image->download(); }
@@ -410,12 +408,9 @@ TEST(Session, ScrubsAndPlaysAnAnimation) {
     ASSERT_TRUE(eventually([&] { return session.status().animation.time == 1.5f; }));
     const auto frame = settled_frame(session, 3);
     ASSERT_TRUE(frame);
-    Scene later = load_scene(source.path);
-    later.set_time(1.5f);
-    const SceneGeometry geometry = SceneGeometry::build(later);
-    const auto accel = build_accel(geometry, s.build);
-    EXPECT_EQ(pixels_of(*frame), display_bytes(render(later, geometry, *accel, scene->camera, film_options(s, false, 1)),
-                                               s.tone));
+    const std::unique_ptr<World> later = open_world(source.path, s.world);  // a fresh world at 1.5 s
+    later->set_time(1.5f);
+    EXPECT_EQ(pixels_of(*frame), display_bytes(render(*later, scene->camera, film_options(s, false, 1)), s.tone));
 
     session.play(true);
     ASSERT_TRUE(eventually([&] {
@@ -486,7 +481,7 @@ TEST(Session, AFailedLoadKeepsTheSceneShown) {
 TEST(Session, PrepareSetsTheFirstScenesSettingsAndCamera) {
     SessionConfig config{small_settings(), {}};
     Camera chosen;
-    config.prepare = [&](SceneData& data, bool first, ViewSettings& settings) {
+    config.prepare = [&](World&, SceneData& data, bool first, ViewSettings& settings) {
         if (!first) return;
         settings.render.width = 24;
         settings.render.height = 16;
@@ -541,18 +536,22 @@ const std::string& paged_spheres_path() {
 
 SceneSource paged_spheres() { return {"spheres.rfpack", paged_spheres_path(), {}, {}}; }
 
-SessionConfig paged_config(const ViewSettings& s) {
-    SessionConfig config{s, {}};
-    config.paged = small_budget();
-    return config;
+SessionConfig paged_config(ViewSettings s) {
+    s.world.paged = small_budget();
+    return SessionConfig{s, {}};
 }
 
-// What make_paged_renderer renders for these settings and camera, as display bytes.
+// The paged file as a world of its own (the budgets the session's have).
+std::unique_ptr<World> paged_world() {
+    WorldOptions options;
+    options.paged = small_budget();
+    return open_world(paged_spheres_path(), options);
+}
+
+// What a fresh paged world renders for these settings and camera, as display bytes.
 std::vector<uint8_t> paged_reference(const ViewSettings& s, const Camera& camera) {
-    const std::unique_ptr<PagedScene> scene = open_paged_scene(paged_spheres_path(), small_budget());
-    const std::unique_ptr<Renderer> renderer = make_paged_renderer(*scene, camera, film_options(s, false, 1));
-    render_progressive(*renderer);
-    return display_bytes(renderer->image(), s.tone);
+    const std::unique_ptr<World> world = paged_world();
+    return display_bytes(render(*world, camera, film_options(s, false, 1)), s.tone);
 }
 
 TEST(SessionPaged, ShowsAPagedSceneAsThePagedRendererRendersIt) {
@@ -562,15 +561,15 @@ TEST(SessionPaged, ShowsAPagedSceneAsThePagedRendererRendersIt) {
     const auto frame = settled_frame(session, 3);
     ASSERT_TRUE(frame);
     const auto scene = session.scene();
-    ASSERT_TRUE(scene && scene->paged);
-    EXPECT_EQ(scene->kind(), SceneKind::Paged);
-    EXPECT_EQ(scene->camera.eye, scene->paged->camera().eye);  // the file's camera
+    ASSERT_TRUE(scene && scene->kind == SceneKind::Paged);
+    const std::unique_ptr<World> file = paged_world();
+    EXPECT_EQ(scene->camera.eye, file->camera().eye);  // the file's camera
     EXPECT_EQ(frame->image->width(), 40);
     EXPECT_EQ(pixels_of(*frame), paged_reference(s, scene->camera));
 
     const SessionStatus status = session.status();
     EXPECT_EQ(status.error_count, 0u) << status.error;
-    EXPECT_EQ(status.triangles, scene->paged->info().triangles);
+    EXPECT_EQ(status.triangles, file->paged_scene().info().triangles);
     EXPECT_EQ(status.accel.name, "paged/grid+bvh");
     ASSERT_EQ(status.paged.caches.size(), 3u);
     EXPECT_EQ(status.paged.caches[0].name, "geometry");
@@ -582,7 +581,7 @@ TEST(SessionPaged, ShowsAPagedSceneAsThePagedRendererRendersIt) {
     EXPECT_GT(geometry.requests, 0u);  // the last pass's
     EXPECT_LE(status.paged.budget_bytes, small_budget().memory_budget);
     EXPECT_LE(status.paged.cache_bytes, status.paged.budget_bytes);
-    EXPECT_EQ(status.paged.resident_bytes, scene->paged->info().resident_bytes);
+    EXPECT_EQ(status.paged.resident_bytes, file->paged_scene().info().resident_bytes);
 
     // print-stats carries the same figures.
     const ViewerStats stats;
@@ -628,7 +627,7 @@ TEST(SessionPaged, CameraIntegratorAndExposureChangesWorkAsInCore) {
 
     // A structure change that reaches the session anyway (the table refuses
     // it) builds nothing and still settles on the same image.
-    s.build.builder = Builder::Sbvh;
+    s.world.build.builder = Builder::Sbvh;
     session.set_settings(s);
     frame = settled_frame(session, 3);
     ASSERT_TRUE(frame);
@@ -666,7 +665,7 @@ TEST(SessionPaged, StructureSettingsAndOtherDevicesAreRefused) {
 
     // A paged file asked for on a CUDA device fails its load with a clear error.
     ViewSettings cuda = small_settings();
-    cuda.render.device = cuda.build.device = Device{Device::Kind::Cuda, 0};
+    cuda.world.device = Device{Device::Kind::Cuda, 0};
     Session session(paged_config(cuda));
     session.load(paged_spheres());
     ASSERT_TRUE(eventually([&] { return session.status().error_count == 1 && !session.versions().jobs_pending; }));
@@ -682,7 +681,7 @@ TEST(SessionPaged, SwitchesBetweenInCoreAndPagedScenes) {
     ASSERT_TRUE(settled_frame(session, 3));
 
     session.load(paged_spheres());
-    ASSERT_TRUE(eventually([&] { return session.scene()->paged != nullptr; }));
+    ASSERT_TRUE(eventually([&] { return session.scene()->kind == SceneKind::Paged; }));
     auto frame = settled_frame(session, 3);
     ASSERT_TRUE(frame);
     EXPECT_EQ(pixels_of(*frame), paged_reference(s, session.scene()->camera));
@@ -697,7 +696,7 @@ TEST(SessionPaged, SwitchesBetweenInCoreAndPagedScenes) {
     EXPECT_TRUE(session.status().paged.caches.empty());
 
     session.load(paged_spheres());  // and back, opened afresh
-    ASSERT_TRUE(eventually([&] { return session.scene()->paged != nullptr; }));
+    ASSERT_TRUE(eventually([&] { return session.scene()->kind == SceneKind::Paged; }));
     frame = settled_frame(session, 3);
     ASSERT_TRUE(frame);
     EXPECT_EQ(pixels_of(*frame), paged_reference(s, session.scene()->camera));

@@ -31,9 +31,8 @@ struct Films {
     RenderStats stats;
 };
 
-Films render_films(const Scene& scene, const SceneGeometry& geometry, const Accel& accel, const Camera& camera,
-                   const RenderOptions& options) {
-    const auto renderer = make_renderer(scene, geometry, accel, camera, options);
+Films render_films(World& world, const Camera& camera, const RenderOptions& options) {
+    const auto renderer = make_renderer(world, camera, options);
     render_progressive(*renderer);
     return {renderer->image(), renderer->albedo(), renderer->normal(), renderer->depth(), renderer->stats()};
 }
@@ -62,13 +61,12 @@ constexpr WavefrontVariant kEveryVariant[] = {{1, false}, {1, true}, {2, false},
 // Renders `options` as the megakernel, then as the wavefront in each variant
 // (sorting off and on, 1 and 2 threads), and expects every film and the
 // query counts to agree exactly.
-void expect_wavefront_matches(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
-                              const Camera& camera, RenderOptions options, const std::string& what,
+void expect_wavefront_matches(World& world, const Camera& camera, RenderOptions options, const std::string& what,
                               std::span<const WavefrontVariant> variants = kEveryVariant) {
     options.integrator = IntegratorKind::Path;
     options.aovs = true;
     options.wavefront = false;
-    const Films mega = render_films(scene, geometry, accel, camera, options);
+    const Films mega = render_films(world, camera, options);
     double mean = 0.0;
     for (const Vec3f& p : mega.color.pixels) mean += p.x + p.y + p.z;
     ASSERT_GT(mean, 0.0) << what << ": the scene must be lit for the comparison to mean something";
@@ -78,7 +76,7 @@ void expect_wavefront_matches(const Scene& scene, const SceneGeometry& geometry,
         w.sort_rays = v.sort;
         w.threads = v.threads;
         const std::string label = what + (v.sort ? ", sorted" : ", unsorted") + ", threads " + std::to_string(v.threads);
-        const Films wave = render_films(scene, geometry, accel, camera, w);
+        const Films wave = render_films(world, camera, w);
         expect_same_image(mega.color, wave.color, label + ": colour");
         expect_same_image(mega.albedo, wave.albedo, label + ": albedo");
         expect_same_image(mega.normal, wave.normal, label + ": normal");
@@ -89,19 +87,8 @@ void expect_wavefront_matches(const Scene& scene, const SceneGeometry& geometry,
     }
 }
 
-struct LoadedScene {
-    Scene scene;
-    SceneGeometry geometry;
-    std::unique_ptr<Accel> accel;
-};
-
-LoadedScene load(const std::string& name) {
-    LoadedScene s;
-    s.scene = load_scene(name);
-    s.geometry = SceneGeometry::build(s.scene);
-    s.accel = build_accel(s.geometry);  // the default: BVH8, traced in packets by the batch API
-    return s;
-}
+// The default structure: BVH8, traced in packets by the batch API.
+std::unique_ptr<World> load(const std::string& name) { return open_world(name); }
 
 RenderOptions small_path_options(int w, int h, int passes) {
     RenderOptions o = options_for(IntegratorKind::Path, w, h);
@@ -111,20 +98,20 @@ RenderOptions small_path_options(int w, int h, int passes) {
 }
 
 TEST(WavefrontPath, CornellBoxMatchesTheMegakernelForEveryLightSampling) {
-    const LoadedScene s = load("builtin:cornell");
+    const std::unique_ptr<World> s = load("builtin:cornell");
     for (LightSampling strategy : {LightSampling::Mis, LightSampling::Nee, LightSampling::Bsdf}) {
         RenderOptions o = small_path_options(40, 30, 3);
         o.light_sampling = strategy;
-        expect_wavefront_matches(s.scene, s.geometry, *s.accel, s.scene.camera_or_default(), o,
+        expect_wavefront_matches(*s, s->camera(), o,
                                  "cornell " + to_string(strategy));
     }
 }
 
 TEST(WavefrontPath, EnvironmentLitMaterialSpheresMatchTheMegakernel) {
-    const LoadedScene s = load("builtin:material-spheres");
+    const std::unique_ptr<World> s = load("builtin:material-spheres");
     RenderOptions o = small_path_options(40, 30, 2);
     o.max_sample_value = 8.0f;  // the clamp is applied where the megakernel applies it
-    expect_wavefront_matches(s.scene, s.geometry, *s.accel, s.scene.camera_or_default(), o, "material-spheres");
+    expect_wavefront_matches(*s, s->camera(), o, "material-spheres");
 }
 
 // A floor under a quad light, a point light and a dim sky, seen through a
@@ -178,7 +165,7 @@ TEST(WavefrontPath, CutOutAndBlendedSurfacesMatchTheMegakernel) {
     for (LightSampling strategy : {LightSampling::Mis, LightSampling::Nee, LightSampling::Bsdf}) {
         RenderOptions o = small_path_options(32, 24, 3);
         o.light_sampling = strategy;
-        expect_wavefront_matches(t.scene, t.geometry, *t.accel, camera, o, "transparent " + to_string(strategy));
+        expect_wavefront_matches(*t.world, camera, o, "transparent " + to_string(strategy));
     }
 }
 
@@ -186,19 +173,19 @@ TEST(WavefrontPath, CutOutAndBlendedSurfacesMatchTheMegakernel) {
 // sizes it reports: every pixel's path extended in round 0, the active
 // queue never growing, and the shadow rays counted per round.
 TEST(WavefrontPath, ChunksAndQueueStatistics) {
-    const LoadedScene s = load("builtin:cornell");
+    const std::unique_ptr<World> s = load("builtin:cornell");
     RenderOptions o = small_path_options(260, 256, 1);  // 66560 paths: two chunks
     ASSERT_GT(uint32_t(o.width * o.height), kWavefrontChunkPaths);
     o.max_depth = 2;
     const WavefrontVariant sorted_on_two_threads[] = {{2, true}};
-    expect_wavefront_matches(s.scene, s.geometry, *s.accel, s.scene.camera_or_default(), o, "two chunks",
+    expect_wavefront_matches(*s, s->camera(), o, "two chunks",
                              sorted_on_two_threads);
 
     RenderOptions w = small_path_options(64, 48, 1);
     w.wavefront = true;
     w.sort_rays = true;
     w.max_depth = 4;
-    const auto renderer = make_renderer(s.scene, s.geometry, *s.accel, s.scene.camera_or_default(), w);
+    const auto renderer = make_renderer(*s, s->camera(), w);
     renderer->render_pass();
     const PassStats& stats = renderer->last_pass();
     ASSERT_GE(stats.waves.size(), 2u);

@@ -65,28 +65,23 @@ std::string format_bytes(double bytes) {
     return text;
 }
 
-void add_paged_read_options(CLI::App* cmd, PagedReadArgs& a) {
-    cmd->add_option("--memory-budget", a.memory_budget,
-                    "Paged scenes: memory for the page caches together, e.g. 512M, 2G (default 1G); split "
-                    "geometry 70%, attributes 15%, textures 15% (80/20 without textures)");
-    cmd->add_option("--geometry-budget", a.geometry_budget, "Paged scenes: the geometry cache's budget (overrides its share)");
-    cmd->add_option("--attribute-budget", a.attribute_budget,
-                    "Paged scenes: the surface-attribute cache's budget (overrides its share)");
-    cmd->add_option("--texture-budget", a.texture_budget, "Paged scenes: the texture-tile cache's budget (overrides its share)");
-    cmd->add_option("--batch", a.batch_paths,
+void add_paged_read_options(CLI::App* cmd, PagedSceneOptions& o) {
+    const auto size_option = [cmd](const std::string& name, size_t& field, const std::string& help) {
+        cmd->add_option_function<std::string>(
+            name, [&field, name](const std::string& text) { field = parse_bytes(text, name); }, help);
+    };
+    size_option("--memory-budget", o.memory_budget,
+                "Paged scenes: memory for the page caches together, e.g. 512M, 2G (default 1G); split "
+                "geometry 70%, attributes 15%, textures 15% (80/20 without textures)");
+    size_option("--geometry-budget", o.geometry_budget,
+                "Paged scenes: the geometry cache's budget (overrides its share)");
+    size_option("--attribute-budget", o.attribute_budget,
+                "Paged scenes: the surface-attribute cache's budget (overrides its share)");
+    size_option("--texture-budget", o.texture_budget,
+                "Paged scenes: the texture-tile cache's budget (overrides its share)");
+    cmd->add_option("--batch", o.batch_paths,
                     "Paged scenes: paths traced as one batch (1024..16777216, default 262144; about 250 bytes a path)")
         ->check(CLI::Range(1024u, 16u << 20));
-}
-
-PagedSceneOptions paged_scene_options(const PagedReadArgs& a, int threads) {
-    PagedSceneOptions o;
-    o.memory_budget = parse_bytes(a.memory_budget, "--memory-budget");
-    if (!a.geometry_budget.empty()) o.geometry_budget = parse_bytes(a.geometry_budget, "--geometry-budget");
-    if (!a.attribute_budget.empty()) o.attribute_budget = parse_bytes(a.attribute_budget, "--attribute-budget");
-    if (!a.texture_budget.empty()) o.texture_budget = parse_bytes(a.texture_budget, "--texture-budget");
-    o.threads = threads;
-    o.batch_paths = a.batch_paths;
-    return o;
 }
 
 void add_paged_write_options(CLI::App* cmd, PagedWriteArgs& a) {
@@ -97,7 +92,7 @@ void add_paged_write_options(CLI::App* cmd, PagedWriteArgs& a) {
                   "instead of 64");
     cmd->add_option("--attribute-page", a.attribute_page,
                     "Bytes per surface-attribute page, a power of two from 1K to 1M (default 4K)");
-    cmd->add_option("--page-quads", a.quads_per_page, "Quads per geometry page, 64..4096 (default 4096, the seed's 4K)")
+    cmd->add_option("--page-quads", a.quads_per_page, "Quads per geometry page, 64..4096 (default 4096, Garanzha 2014's 4K)")
         ->check(CLI::Range(64, 4096));
     cmd->add_option("--grid", a.grid, "Top-grid cells on the scene's longest axis, 1..256 (default 32)")
         ->check(CLI::Range(1, 256));

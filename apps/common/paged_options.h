@@ -12,13 +12,9 @@
 
 namespace rf::cli {
 
-struct PagedReadArgs {
-    std::string memory_budget = "1G";  // the caches together
-    std::string geometry_budget, attribute_budget, texture_budget;  // "" = a share of the total
-    uint32_t batch_paths = 1u << 18;
-};
-void add_paged_read_options(CLI::App* cmd, PagedReadArgs& args);
-PagedSceneOptions paged_scene_options(const PagedReadArgs& args, int threads);
+// --memory-budget, --geometry-budget, --attribute-budget, --texture-budget
+// and --batch, bound to `options` (sizes parsed by parse_bytes).
+void add_paged_read_options(CLI::App* cmd, PagedSceneOptions& options);
 
 struct PagedWriteArgs {
     bool zstd = false;

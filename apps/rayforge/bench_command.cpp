@@ -13,6 +13,7 @@
 #include "bench_report.h"
 #include "bench_runner.h"
 #include "commands.h"
+#include "rayforge/world.h"
 #include "paged_bench.h"
 #include "presets.h"
 #include "render_bench.h"
@@ -309,10 +310,19 @@ int run_cluster_table_command(const BenchArgs& a, const std::string& scenes_dir)
 int run_animate_command(const BenchArgs& a, const std::string& command_line, const std::string& scenes_dir) {
     if (!a.paged.empty() || !a.integrators.empty() || !a.preset.empty() || !a.gpu_kernels.empty())
         throw Error("--animate, --cluster-table: not with --paged, --integrator, --preset or --gpu-kernel");
-    for (const std::string& d : split_list(a.devices))
-        if (parse_device(d).is_cuda()) throw Error("--animate, --cluster-table: CPU only for now (--device cpu)");
-    if (a.cluster_table) return run_cluster_table_command(a, scenes_dir);
+    const std::vector<std::string> devices = split_list(a.devices);
+    if (devices.size() > 1) throw Error("--animate, --cluster-table: one --device at a time");
+    const Device device = devices.empty() ? Device{} : parse_device(devices.front());
+    require_usable(device);
+    if (a.cluster_table) {  // the clusters' updater, which the library refuses on a device that cannot run it
+        WorldOptions clusters;
+        clusters.device = device;
+        clusters.update.method = UpdateMethod::Clusters;
+        check_world_options(clusters);
+        return run_cluster_table_command(a, scenes_dir);
+    }
     bench::AnimateConfig config;
+    config.device = device;
     config.build = animate_build(a);
     const std::vector<std::string> updates = split_list(a.updates);
     if (!updates.empty() && updates.front() != "all") {
@@ -382,7 +392,8 @@ CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
     cmd->add_option("--builder", a.builders, "Builders, or all (default: the default builder, binned)");
     cmd->add_option("--layout", a.layouts, "Layouts, or all (default all)");
     cmd->add_option("--embree", a.embree, "Embree peer build qualities: low, medium, high, all, none (default all)");
-    cmd->add_option("--preset", a.preset, "seed001 | seed002 | seed000: reproduce a seed's tables (see --list)");
+    cmd->add_option("--preset", a.preset,
+                    "bogolepov | zlatuska2009 | garanzha2014: reproduce a paper's tables (see --list)");
     cmd->add_option("--threads", a.threads, "Threads for builds and traces (0 = all cores)")
         ->check(CLI::NonNegativeNumber);
     cmd->add_option("--reps", a.repetitions, "Timed traces per ray set, after one warm-up (default 5)")
@@ -415,11 +426,11 @@ CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
                     "Camera rays per pixel of the ray sets, sample 0 at the pixel centre and the others jittered "
                     "(default: 1 for cpu rows, 4 for cuda rows, the protocol's GPU rule)")
         ->check(CLI::Range(1, 64));
-    add_build_on_option(cmd, a.build_on);
+    a.build_on = add_build_on_option(cmd, a.build_on_device);
     cmd->add_flag("--build-stages", a.build_stages,
                   "After the tables, time every builder stage by stage on each scene (dissertation tables 4.1 and "
                   "5.1: the CPU's gridbvh, gridbvh-split and hlbvh2; with --device cuda every device builder, the "
-                  "device uniform grids and the device layout conversions), as the seed000 preset does");
+                  "device uniform grids and the device layout conversions), as the garanzha2014 preset does");
     cmd->add_option("--paged", a.paged,
                     "Paged scene files (.rfpack), comma-separated: instead of the ray-set tables, trace each at every "
                     "--budgets cache size (primary, shadow, 3 diffuse bounces, path tracing) against the same "
@@ -444,7 +455,7 @@ CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
         ->delimiter(',');
     cmd->add_option("--frames", a.frames, "--animate: FIRST:LAST[:STEP] (default every frame; built at FIRST)");
     cmd->add_flag("--backwards", a.backwards,
-                  "--animate: play FIRST..LAST, back to FIRST and forward to LAST again (the seed's 100-1-100)");
+                  "--animate: play FIRST..LAST, back to FIRST and forward to LAST again (Garanzha 2014's 100-1-100)");
     cmd->add_option("--ray-count", a.ray_count, "--animate: diffuse rays per frame (default 1000000; 0 = the --res view's)");
     cmd->add_option("--frame-reps", a.frame_reps, "--animate: timed traces per set and frame, median (default 1)")
         ->check(CLI::Range(1, 100));
@@ -519,7 +530,8 @@ void choose_views(const BenchArgs& a, bench::BenchConfig& config) {
 // The rows: CPU with the Embree peer, and the GPU kernels on one device.
 void choose_devices(const BenchArgs& a, const DeviceSelection& devices, const bench::Preset* preset,
                     bench::BenchConfig& config, bench::RunInfo& info) {
-    const bool build_on_device = parse_build_on(a.build_on, devices.gpu);
+    if (a.build_on->count() > 0 && !devices.gpu) throw Error("--build-on: needs --device cuda");
+    const bool build_on_device = a.build_on_device;
     const std::vector<std::string> embree_names = a.embree.empty() ? std::vector<std::string>{"all"} : split_list(a.embree);
     config.embree = parse_embree(embree_names);
     if (!devices.cpu) config.embree.clear();  // the peer is a CPU column
@@ -602,7 +614,7 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
     info.command = command_line;
     const DeviceSelection devices = parse_devices(a.devices.empty() ? std::vector<std::string>{"cpu"}
                                                                     : split_list(a.devices));
-    if (devices.gpu) require_usable(Device{Device::Kind::Cuda, devices.gpu_index}, "--device " + devices.gpu_text);
+    if (devices.gpu) require_usable(Device{Device::Kind::Cuda, devices.gpu_index});
     if (!devices.gpu && !a.gpu_kernels.empty()) throw Error("--gpu-kernel: needs --device cuda");
     const bench::Preset* preset = choose_work(a, config, info);
     choose_views(a, config);

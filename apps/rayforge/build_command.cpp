@@ -31,13 +31,15 @@ double median(std::vector<double> values) {
     return n % 2 ? values[n / 2] : 0.5 * (values[n / 2 - 1] + values[n / 2]);
 }
 
-// The device build of `options` (a BVH builder, or a uniform grid), and,
-// with `convert`, the layout conversion of the BVH on the device.
+// The device build of `options` (a BVH builder's canonical tree; another
+// structure as build_accel makes it for the device: uniform grids on the
+// device, a kd-tree on the host, uploaded), and, with `convert`, the layout
+// conversion of the BVH on the device.
 bench::DeviceBuildSummary device_build(const SceneGeometry& geometry, BuildOptions options,
                                        const std::string& convert) {
     const bool grid = options.structure == Structure::Grid || options.structure == Structure::ProximityGrid;
-    if (grid || !convert.empty()) {
-        if (!grid) options.gpu_kernel = parse_gpu_kernel(convert);
+    if (options.structure != Structure::Bvh || !convert.empty()) {
+        if (!convert.empty()) options.gpu_kernel = parse_gpu_kernel(convert);
         const std::unique_ptr<Accel> accel = build_accel(geometry, options);
         const AccelStats stats = accel->stats();
         bench::DeviceBuildSummary summary{accel->build_report(), stats.node_count, stats.sah_cost};
@@ -60,12 +62,11 @@ CLI::App* add_build_command(CLI::App& app, BuildArgs& a) {
         "build", "Build a scene's acceleration structure and report the build: time per stage on a CUDA device, "
                  "memory, SAH cost and nodes");
     cmd->add_option("scene", a.scene, "Scene file (.obj, .gltf, .glb, .ply, .aff, .json) or builtin:NAME")->required();
-    add_accel_options(cmd, a.accel);
-    cmd->add_option("--device", a.device, "Where to build: cpu (default), cuda (= cuda:0) or cuda:N")
-        ->check(device_validator());
+    add_accel_options(cmd, a.build);
+    add_device_option(cmd, a.build.device, "Where to build: cpu (default), cuda (= cuda:0) or cuda:N");
     cmd->add_option("--reps", a.repetitions, "Builds, after one warm-up build (default 3)")
         ->check(CLI::Range(1, 1000));
-    cmd->add_option("--threads", a.threads, "CPU threads (0 = all cores)")->check(CLI::NonNegativeNumber);
+    cmd->add_option("--threads", a.build.threads, "CPU threads (0 = all cores)")->check(CLI::NonNegativeNumber);
     cmd->add_option("--convert", a.convert,
                     "With --device cuda and a BVH: also convert it on the device to a GPU layout, aila-laine or "
                     "cwbvh, timed separately")
@@ -74,20 +75,11 @@ CLI::App* add_build_command(CLI::App& app, BuildArgs& a) {
 }
 
 int run_build(const BuildArgs& a) {
-    const Device device = parse_device(a.device);
-    require_usable(device, "--device " + a.device);
-    BuildOptions options = to_build_options(a.accel, a.threads);
+    const Device device = a.build.device;
+    require_usable(device);
     if (!a.convert.empty() && !device.is_cuda()) throw Error("--convert: needs --device cuda");
-    if (!a.convert.empty() && options.structure != Structure::Bvh) throw Error("--convert: needs --accel bvh");
-    if (device.is_cuda() && options.structure != Structure::Bvh && options.structure != Structure::Grid &&
-        options.structure != Structure::ProximityGrid)
-        throw Error("--device " + a.device + ": " + to_string(options.structure) +
-                    " has no device builder (device builders: bvh with lbvh30, lbvh63, hlbvh2, ploc, gridbvh, "
-                    "gridbvh-split; grid; grid-proximity)");
-    options.device = device;
-    if (options.structure == Structure::Grid) options.gpu_kernel = GpuKernel::Grid;
-    if (options.structure == Structure::ProximityGrid) options.gpu_kernel = GpuKernel::ProximityGrid;
-    validate_build_options(options);
+    if (!a.convert.empty() && a.build.structure != Structure::Bvh) throw Error("--convert: needs --accel bvh");
+    const BuildOptions& options = a.build;  // build_accel and build_bvh check them (and match kernel and structure)
 
     const Clock::time_point load_start = Clock::now();
     const SceneGeometry geometry = SceneGeometry::build(load_scene(a.scene));

@@ -33,7 +33,7 @@ int run_info(const InfoArgs& args);
 CLI::App* add_render_command(CLI::App& app, RenderArgs& args);
 int run_render(const RenderArgs& args);
 
-// Paged scenes (paged_commands.cpp): convert, generate, and the paged forms of render and info.
+// Paged scenes (paged_commands.cpp): convert, generate, and the paged form of info.
 struct ConvertArgs {
     std::string scene, output;
     std::string memory_budget = "1G";  // the streaming converter's working memory
@@ -56,7 +56,6 @@ struct GenerateArgs {
 };
 CLI::App* add_generate_command(CLI::App& app, GenerateArgs& args);
 int run_generate(const GenerateArgs& args);
-int run_paged_render(const RenderArgs& args);
 int run_paged_info(const std::string& path, bool verbose);
 
 // `rayforge view`: the render options plus the viewer's own.
@@ -74,10 +73,8 @@ int run_view(const ViewArgs& args);
 
 struct BuildArgs {
     std::string scene;       // a file or builtin:NAME
-    AccelArgs accel;
-    std::string device = "cpu";
+    BuildOptions build;      // the structure, its builder and parameters, the device (--device), the threads
     int repetitions = 3;
-    int threads = 0;
     std::string convert;     // "", aila-laine or cwbvh: the device layout conversion too
 };
 CLI::App* add_build_command(CLI::App& app, BuildArgs& args);
@@ -107,11 +104,12 @@ struct BenchArgs {
     std::vector<std::string> gpu_kernels;  // GPU kernel names or all (default: all, a preset's, or for
                                            // --integrator the default kernel)
     int spp = 0;                           // camera rays per pixel of the sets; 0 = 1 on the CPU, 4 on a GPU
-    std::string build_on;                  // --build-on device|host ("" = device) for the GPU rows
-    bool build_stages = false;             // the stage breakdown tables for every scene, not only seed000's
+    bool build_on_device = true;           // --build-on device|host for the GPU rows
+    const CLI::Option* build_on = nullptr; //   (given or not)
+    bool build_stages = false;             // the stage breakdown tables for every scene, not only garanzha2014's
     // --paged FILES: the paged-scene benchmark instead (bench/harness/paged_bench.h).
     std::vector<std::string> paged;        // .rfpack files
-    std::vector<std::string> budgets;      // cache fractions of the scene, "0.01" or "1/100" ("" = the seed's five)
+    std::vector<std::string> budgets;      // cache fractions of the scene, "0.01" or "1/100" ("" = Garanzha 2014's five)
     int passes = 4;                        // path-tracing passes per budget
     std::string light_dir;                 // "x,y,z": a directional light for the shadow set
     // --animate: per-frame updates over an animation (bench/harness/animate_bench.h).

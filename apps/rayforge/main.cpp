@@ -58,6 +58,9 @@ int main(int argc, char** argv) {
     } catch (const CLI::ParseError& e) {
         app.exit(e);  // prints the usage error
         return 2;
+    } catch (const std::exception& e) {  // an option the engine's parser refused (e.g. --update sideways)
+        std::cerr << "rayforge: error: " << one_line(e.what()) << '\n';
+        return 1;
     }
 
     try {

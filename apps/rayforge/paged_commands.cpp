@@ -1,6 +1,7 @@
 // The paged-scene verbs (docs/paged-scenes.md): `convert` writes a scene as
-// a paged file, `generate` writes a procedural one; `render` and `info` of a
-// paged file come here from their commands.
+// a paged file, `generate` writes a procedural one; `info` of a paged file
+// comes here from its command (`render` and `view` open paged files as
+// worlds, like any scene).
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -48,19 +49,6 @@ double peak_resident_bytes() {
     rusage usage{};
     getrusage(RUSAGE_SELF, &usage);
     return double(usage.ru_maxrss) * 1024.0;  // kilobytes on Linux
-}
-
-// "geometry 93.1% hit, 120 MiB read" for the progress bar and the summary.
-std::string cache_line(const PagedScene& scene) {
-    std::string line;
-    for (const PageCacheReport& c : scene.caches()) {
-        if (c.pages == 0) continue;
-        char part[128];
-        std::snprintf(part, sizeof(part), "%s%s %.1f%% hit, %s read", line.empty() ? "" : "; ", c.name.c_str(),
-                      100.0 * c.hit_rate(), format_bytes(double(c.bytes_read)).c_str());
-        line += part;
-    }
-    return line;
 }
 
 }  // namespace
@@ -142,51 +130,6 @@ int run_generate(const GenerateArgs& a) {
         report = generate_paged_scene(g, a.output, options, progress);
     }
     print_write_report(a.output, report, ms_since(start));
-    return 0;
-}
-
-int run_paged_render(const RenderArgs& a) {
-    const Device device = parse_device(a.device);
-    if (device.is_cuda()) throw Error("paged scenes render on the CPU in this version (--device cpu)");
-    if (!a.lights.empty() || !a.environment.empty() || !a.environment_map.empty())
-        throw Error("--light, --env and --env-map are not applied to paged scenes (their lights are in the file)");
-    const Clock::time_point start = Clock::now();
-    const std::unique_ptr<PagedScene> scene = open_paged_scene(a.scene, paged_scene_options(a.paged, a.threads));
-    const double open_ms = ms_since(start);
-    const RenderOptions options = render_options(a, RenderSettings{}, device);
-    const Camera camera = a.camera.empty() ? scene->camera() : parse_camera(a.camera);
-    const std::unique_ptr<Renderer> renderer = make_paged_renderer(*scene, camera, options);
-    {
-        ProgressBar bar("render");
-        ProgressCallback progress;
-        if (!a.quiet)
-            progress = [&](double f) {
-                bar.set_note("  " + cache_line(*scene));
-                bar.update(f);
-            };
-        render_progressive(*renderer, {}, progress);
-    }
-    const ToneMapping tone = tone_mapping(a);
-    for (const std::string& output : a.outputs) write_image(output, renderer->image(), tone);
-    const RenderStats rs = renderer->stats();
-    const double render_ms = rs.seconds * 1e3;
-    const PagedSceneInfo& info = scene->info();
-    const PagedQueryStats q = scene->query_stats();
-    std::printf("%s: %dx%d %s %d spp, %llu paged triangles | open %.1f ms | render %.1f ms (%.2f Mrays/s, %.1f ms/pass) "
-                "| %llu query iterations | memory: caches %s of budget %s + always-resident levels %s\n",
-                a.outputs.front().c_str(), options.width, options.height, integrator_name(options.integrator).c_str(),
-                renderer->passes(), (unsigned long long)info.triangles, open_ms, render_ms,
-                render_ms > 0.0 ? double(rs.rays()) / (render_ms * 1e3) : 0.0,
-                renderer->passes() ? render_ms / renderer->passes() : 0.0, (unsigned long long)q.iterations,
-                format_bytes(double(scene->memory_bytes() - std::min(scene->memory_bytes(), info.resident_bytes))).c_str(),
-                a.paged.memory_budget.c_str(), format_bytes(double(info.resident_bytes)).c_str());
-    std::printf("%s: caches: %s\n", a.outputs.front().c_str(), cache_line(*scene).c_str());
-    const double per_ray = q.queries ? 1.0 / double(q.queries) : 0.0;
-    std::printf("%s: per query: %.2f iterations, %.1f cells, %.1f middle nodes, %.2f pages searched, %.1f page nodes, "
-                "%.1f quads tested | traversal %.1f ms, sort %.1f ms\n",
-                a.outputs.front().c_str(), double(q.ray_iterations) * per_ray, double(q.cells) * per_ray,
-                double(q.middle_nodes) * per_ray, double(q.pages_searched) * per_ray, double(q.page_nodes) * per_ray,
-                double(q.quads_tested) * per_ray, q.traversal_ms, q.sort_ms);
     return 0;
 }
 

@@ -1,31 +1,25 @@
-// `rayforge render SCENE -o OUT`: load, build the acceleration structure,
-// render, write; one summary line on stdout, progress on stderr. With
-// `--device cuda` the structure and the renderer live on that device, with
-// the same outputs, progress and budgets.
+// `rayforge render SCENE -o OUT`: one path for every scene (a file, a
+// built-in scene, a paged .rfpack) through rf::World: opened on the device,
+// the command line's changes applied, rendered, written; one summary line on
+// stdout, progress on stderr. --frames moves the world through time between
+// images (its structure follows by the update method).
+#include <algorithm>
 #include <cctype>
 #include <chrono>
-#include <cmath>
 #include <cstdio>
-#include <functional>
 #include <memory>
-#include <sstream>
 #include <string>
-#include <type_traits>
 #include <vector>
 
 #include "commands.h"
-#include "elapsed.h"
-#include "render_setup.h"
 #include "device_build_report.h"
+#include "elapsed.h"
 #include "progress_bar.h"
-#include "rayforge/accel/accel.h"
-#include "rayforge/accel/dynamic_accel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/image_io.h"
-#include "rayforge/io/scene_io.h"
-#include "rayforge/ooc/paged_scene.h"
 #include "rayforge/render/render.h"
-#include "rayforge/scene/scene_geometry.h"
+#include "rayforge/world.h"
+#include "render_setup.h"
 
 namespace rf::cli {
 namespace {
@@ -55,23 +49,6 @@ void write_outputs(const RenderArgs& a, const Renderer& renderer, const ToneMapp
     }
 }
 
-// The progressive loop: progress bar, --save-every previews, the final outputs.
-void render_and_write(const RenderArgs& a, Renderer& renderer, const ToneMapping& tone) {
-    {
-        ProgressBar bar("render");
-        ProgressCallback progress;
-        if (!a.quiet) progress = [&bar](double fraction) { bar.update(fraction); };
-        PassCallback after_pass;
-        if (a.save_every > 0)
-            after_pass = [&](const Renderer& r) {
-                if (r.passes() % a.save_every == 0 && r.passes() < r.options().spp) write_outputs(a, r, tone);
-                return true;
-            };
-        render_progressive(renderer, after_pass, progress);
-    }
-    write_outputs(a, renderer, tone);
-}
-
 // The scene, the outputs and the progressive loop.
 void add_output_options(CLI::App* cmd, RenderArgs& a) {
     cmd->add_option("scene", a.scene,
@@ -81,7 +58,7 @@ void add_output_options(CLI::App* cmd, RenderArgs& a) {
                     "Output image; the format follows the extension: .png (tone-mapped 8-bit sRGB), .exr or "
                     ".pfm (linear float). Repeatable, e.g. -o out.png -o out.exr")
         ->required();
-    cmd->add_option("--time-budget", a.time_budget_s,
+    cmd->add_option("--time-budget", a.render.time_budget_s,
                     "Stop after the pass that ends past this many seconds (--spp is then a cap; default: none)")
         ->check(CLI::NonNegativeNumber);
     cmd->add_option("--save-every", a.save_every, "Also write the outputs every N passes (progressive preview)")
@@ -128,79 +105,131 @@ std::string frame_path(const std::string& pattern, int frame, bool several) {
     return pattern.substr(0, pct) + number + pattern.substr(end + 1);
 }
 
-std::string update_summary(const UpdateStats& u, UpdateMethod method) {
+std::string update_summary(const UpdateStats& u, const std::string& method) {
     char line[256];
     int n = std::snprintf(line, sizeof line, "update %.1f ms (%s, layout %.1f ms, SAH %.1f", u.update_ms,
-                          to_string(method).c_str(), u.layout_ms, u.sah_cost);
-    if (method == UpdateMethod::Adapt)
+                          method.c_str(), u.layout_ms, u.sah_cost);
+    if (method == "adapt")
         n += std::snprintf(line + n, sizeof line - size_t(n), ", %llu rebuilt subtrees, %llu migrations",
                            (unsigned long long)u.rebuilt_subtrees, (unsigned long long)u.migrations);
-    if (method == UpdateMethod::TwoLevel)
+    if (method == "two-level")
         n += std::snprintf(line + n, sizeof line - size_t(n), ", %llu meshes", (unsigned long long)u.meshes_updated);
     std::snprintf(line + n, sizeof line - size_t(n), ")");
     return line;
 }
 
-// --frames: one image per frame, the structure updated between frames (on a
-// CUDA device rebuilt there, with a new renderer).
-int run_render_frames(const RenderArgs& a, const Device& device, BuildOptions build) {
-    Scene scene = load_scene(a.scene, scene_load_options(a));
-    check_animation_option(a.animation, scene);
-    if (!scene.animated()) std::fprintf(stderr, "rayforge: note: %s is not animated; every frame is the same\n",
-                                        a.scene.c_str());
+// "geometry 93.1% hit, 120 MiB read" for the progress bar and the summary.
+std::string cache_line(const PagedScene& scene) {
+    std::string line;
+    for (const PageCacheReport& c : scene.caches()) {
+        if (c.pages == 0) continue;
+        char part[128];
+        std::snprintf(part, sizeof(part), "%s%s %.1f%% hit, %s read", line.empty() ? "" : "; ", c.name.c_str(),
+                      100.0 * c.hit_rate(), format_bytes(double(c.bytes_read)).c_str());
+        line += part;
+    }
+    return line;
+}
+
+// A paged world's caches and query loops after the render.
+void print_paged_summary(const RenderArgs& a, const World& world) {
+    const PagedScene& scene = world.paged_scene();
+    const PagedSceneInfo& info = scene.info();
+    const PagedQueryStats q = scene.query_stats();
+    const char* out = a.outputs.front().c_str();
+    std::printf("%s: %llu query iterations | memory: caches %s of budget %s + always-resident levels %s\n", out,
+                (unsigned long long)q.iterations,
+                format_bytes(double(scene.memory_bytes() - std::min(scene.memory_bytes(), info.resident_bytes))).c_str(),
+                format_bytes(double(a.world.paged.memory_budget)).c_str(),
+                format_bytes(double(info.resident_bytes)).c_str());
+    std::printf("%s: caches: %s\n", out, cache_line(scene).c_str());
+    const double per_ray = q.queries ? 1.0 / double(q.queries) : 0.0;
+    std::printf("%s: per query: %.2f iterations, %.1f cells, %.1f middle nodes, %.2f pages searched, %.1f page nodes, "
+                "%.1f quads tested | traversal %.1f ms, sort %.1f ms\n",
+                out, double(q.ray_iterations) * per_ray, double(q.cells) * per_ray, double(q.middle_nodes) * per_ray,
+                double(q.pages_searched) * per_ray, double(q.page_nodes) * per_ray, double(q.quads_tested) * per_ray,
+                q.traversal_ms, q.sort_ms);
+}
+
+// The progress callback: the bar, with a paged world's cache line beside it.
+ProgressCallback progress_of(const RenderArgs& a, ProgressBar& bar, const World& world) {
+    if (a.quiet) return {};
+    if (!world.paged()) return [&bar](double fraction) { bar.update(fraction); };
+    return [&bar, &world](double fraction) {
+        bar.set_note("  " + cache_line(world.paged_scene()));
+        bar.update(fraction);
+    };
+}
+
+// One image: the progressive loop with --save-every previews, the outputs, the summary.
+void render_still(const RenderArgs& a, World& world, Renderer& renderer, const ToneMapping& tone) {
+    {
+        ProgressBar bar("render");
+        PassCallback after_pass;
+        if (a.save_every > 0)
+            after_pass = [&](const Renderer& r) {
+                if (r.passes() % a.save_every == 0 && r.passes() < r.options().spp) write_outputs(a, r, tone);
+                return true;
+            };
+        render_progressive(renderer, after_pass, progress_of(a, bar, world));
+    }
+    write_outputs(a, renderer, tone);
+    const WorldStats ws = world.stats();
+    const RenderOptions& o = renderer.options();
+    const RenderStats rs = renderer.stats();
+    const double render_ms = rs.seconds * 1e3;
+    const std::string accel = ws.accel.name + " on " + to_string(world.device());
+    std::printf("%s: %dx%d %s %d spp, %llu %striangles | load %.1f ms | build %.1f ms (%s) | render %.1f ms "
+                "(%.2f Msamples/s, %.2f Mrays/s, %.1f ms/pass)\n",
+                a.outputs.front().c_str(), o.width, o.height, integrator_name(o.integrator).c_str(), renderer.passes(),
+                (unsigned long long)ws.triangles, world.paged() ? "paged " : "", ws.load_ms,
+                ws.last_commit == CommitKind::None ? 0.0 : ws.commit_ms, accel.c_str(), render_ms,
+                render_ms > 0.0 ? double(rs.samples) / (render_ms * 1e3) : 0.0,
+                render_ms > 0.0 ? double(rs.rays()) / (render_ms * 1e3) : 0.0,
+                renderer.passes() ? render_ms / renderer.passes() : 0.0);
+    if (world.paged()) print_paged_summary(a, world);
+    const BuildReport report = world.accel().build_report();
+    if (report.on_device || report.layout_ms > 0.0)  // the device's stages
+        std::printf("%s: %s\n", accel.c_str(),
+                    bench::format_device_build({report, ws.accel.node_count, ws.accel.sah_cost}).c_str());
+}
+
+// --frames: one image per frame, the world moved to each frame's time (its
+// structure follows by the update method; the renderer follows the world).
+void render_frames(const RenderArgs& a, World& world, Renderer& renderer, const ToneMapping& tone) {
+    if (!world.animated())
+        std::fprintf(stderr, "rayforge: note: %s is not animated; every frame is the same\n", a.scene.c_str());
     const FrameRange range = parse_frames(a.frames);
     const bool several = range.count() > 1;
     for (const std::string& output : a.outputs) (void)frame_path(output, range.first, several);  // fail fast
-    const UpdateOptions update = to_update_options(a.accel, scene.render_settings.update.value_or(""), device);
-
-    scene.set_time(scene.animation.frame_time(range.first));
-    SceneGeometry geometry = SceneGeometry::build(scene);
-    const RenderOptions options = render_options(a, scene.render_settings, device);
-    const ToneMapping tone = tone_mapping(a);
-    const bool camera_follows = a.camera.empty() && scene.animation.camera.has_value();
-    Camera camera = initial_camera(a, scene);
-    apply_light_options(a, scene, geometry);
-    add_headlight_if_unlit(a, options.integrator, camera, scene, geometry);
-
-    const std::unique_ptr<DynamicAccel> accel = build_dynamic_accel(scene, geometry, build, update);
-    std::unique_ptr<Renderer> renderer = make_renderer(scene, geometry, accel->current(), camera, options);
-    std::printf("%s: %d frames, %zu triangles, %s, initial build %.1f ms\n", a.scene.c_str(), range.count(),
-                geometry.size(), accel->stats().name.c_str(), accel->initial_build_ms());
+    const TimeRange time = world.time_range();
+    const bool camera_follows = !a.camera && world.scene().animation.camera.has_value();
+    const WorldStats initial = world.stats();
+    std::printf("%s: %d frames, %llu triangles, %s, initial build %.1f ms\n", a.scene.c_str(), range.count(),
+                (unsigned long long)initial.triangles, initial.accel.name.c_str(), initial.commit_ms);
     double update_total = 0.0, render_total = 0.0;
     for (int k = 0; k < range.count(); ++k) {
         const int frame = range.frame(k);
-        const float t = scene.animation.frame_time(frame);
-        UpdateStats u;
-        if (k > 0) {
-            const GeometryChange change = scene.set_time(t);
-            geometry.update(scene, change);
-            if (device.is_cuda()) renderer.reset();  // it is bound to the structure the update replaces
-            u = accel->update(change);
-            if (camera_follows) camera = scene.camera_or_default();
-            if (device.is_cuda()) {  // the renderer binds to the structure the device rebuilt
-                renderer = make_renderer(scene, geometry, accel->current(), camera, options);
-            } else {
-                renderer->geometry_changed(change);
-                if (camera_follows) renderer->set_camera(camera);
-            }
-        }
+        const float t = time.frame_time(frame);
+        const UpdateStats u = world.set_time(t);
+        if (camera_follows) renderer.set_camera(world.camera());
         const Clock::time_point render_start = Clock::now();
-        render_progressive(*renderer, {}, {});
+        render_progressive(renderer, {}, {});
         const double render_ms = ms_since(render_start);
-        for (const std::string& output : a.outputs) write_image(frame_path(output, frame, several), renderer->image(), tone);
-        update_total += u.update_ms;
+        for (const std::string& output : a.outputs)
+            write_image(frame_path(output, frame, several), renderer.image(), tone);
+        if (k > 0) update_total += u.update_ms;
         render_total += render_ms;
         if (!a.quiet)
             std::printf("  frame %d (t = %.3f s): %s | render %.1f ms\n", frame, double(t),
-                        k == 0 ? "built" : update_summary(u, accel->method()).c_str(), render_ms);
+                        k == 0 ? "built" : update_summary(u, world.stats().update_method).c_str(), render_ms);
     }
-    if (range.last >= scene.animation.frame_count())
+    if (range.last >= time.frame_count())
         std::fprintf(stderr, "rayforge: note: the animation has %d frames; later ones show its last pose\n",
-                     scene.animation.frame_count());
+                     time.frame_count());
     std::printf("%s: %d frames | update %.1f ms a frame | render %.1f ms a frame\n", a.outputs.front().c_str(),
                 range.count(), range.count() > 1 ? update_total / (range.count() - 1) : 0.0,
                 render_total / range.count());
-    return 0;
 }
 
 }  // namespace
@@ -211,10 +240,10 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
     add_frame_options(cmd, a, "Samples per pixel = progressive passes (default 1)");
     add_integrator_options(cmd, a);
     add_tone_options(cmd, a);
-    add_accel_options(cmd, a.accel);
+    add_accel_options(cmd, a.world.build);
     add_light_options(cmd, a);
     add_device_options(cmd, a);
-    add_paged_read_options(cmd, a.paged);
+    add_paged_read_options(cmd, a.world.paged);
     add_animation_options(cmd, a);
     cmd->add_option("--frames", a.frames,
                     "Animated scenes: render frames FIRST:LAST[:STEP] (at the animation's frame rate) into outputs "
@@ -225,45 +254,26 @@ CLI::App* add_render_command(CLI::App& app, RenderArgs& a) {
     return cmd;
 }
 
+// One path for every scene: a world opened (a file, a built-in scene or a
+// paged file) on the device, the command line's changes applied, one
+// renderer; --frames moves the world through time between images.
 int run_render(const RenderArgs& a) {
-    if (is_paged_scene_file(a.scene)) return run_paged_render(a);
-    const Device device = parse_device(a.device);
-    require_usable(device, "--device " + a.device);  // before the scene loads: fail fast
-    const BuildOptions build = structure_options(a, device);
-    (void)to_update_options(a.accel, "", device);  // names, ranges and the device checked before the scene loads
-    if (!a.frames.empty()) return run_render_frames(a, device, build);
-    Clock::time_point start = Clock::now();
-    Scene scene = load_scene(a.scene, scene_load_options(a));
-    check_animation_option(a.animation, scene);
-    apply_time_option(a, scene);
-    SceneGeometry geometry = SceneGeometry::build(scene);
-    const double load_ms = ms_since(start);
-
-    const RenderOptions options = render_options(a, scene.render_settings, device);
-    const ToneMapping tone = tone_mapping(a);
-    const Camera camera = initial_camera(a, scene);
-    apply_light_options(a, scene, geometry);
-    add_headlight_if_unlit(a, options.integrator, camera, scene, geometry);
-
-    const std::unique_ptr<Accel> accel = build_accel(geometry, build);
-    const AccelStats stats = accel->stats();
-    const Clock::time_point setup_start = Clock::now();
-    const std::unique_ptr<Renderer> renderer = make_renderer(scene, geometry, *accel, camera, options);
-    const double setup_ms = ms_since(setup_start);
-    render_and_write(a, *renderer, tone);
-
-    const RenderStats rs = renderer->stats();
-    const double render_ms = rs.seconds * 1e3;
-    const std::string accel_name = device.is_cuda() ? to_string(device) + " " + stats.name : stats.name;
-    std::printf("%s: %dx%d %s %d spp, %zu triangles | load %.1f ms | build %.1f ms (%s) | setup %.1f ms | render %.1f ms "
-                "(%.2f Msamples/s, %.2f Mrays/s)\n",
-                a.outputs.front().c_str(), options.width, options.height, integrator_name(options.integrator).c_str(),
-                renderer->passes(), geometry.size(), load_ms, stats.build_ms, accel_name.c_str(), setup_ms, render_ms,
-                render_ms > 0.0 ? double(rs.samples) / (render_ms * 1e3) : 0.0,
-                render_ms > 0.0 ? double(rs.rays()) / (render_ms * 1e3) : 0.0);
-    if (device.is_cuda())
-        std::printf("%s: %s\n", accel_name.c_str(),
-                    bench::format_device_build({accel->build_report(), stats.node_count, stats.sah_cost}).c_str());
+    require_usable(a.world.device);  // before the scene loads: fail fast, naming the option
+    if (!a.frames.empty()) (void)parse_frames(a.frames);
+    const std::unique_ptr<World> world = open_world(a.scene, a.world, a.load);
+    if (!a.frames.empty()) {  // the first frame's time, before the structure is built
+        const FrameRange range = parse_frames(a.frames);
+        world->set_time(world->time_range().frame_time(range.first));
+    }
+    prepare_world(a, *world);
+    const RenderOptions options = render_options(a, world->scene().render_settings);
+    const Camera camera = initial_camera(a, *world);
+    add_headlight_if_unlit(a, options.integrator, camera, *world);
+    world->commit();
+    for (const std::string& note : world->notes()) std::fprintf(stderr, "rayforge: note: %s\n", note.c_str());
+    const std::unique_ptr<Renderer> renderer = make_renderer(*world, camera, options);
+    if (a.frames.empty()) render_still(a, *world, *renderer, a.tone);
+    else render_frames(a, *world, *renderer, a.tone);
     return 0;
 }
 

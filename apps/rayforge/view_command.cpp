@@ -2,7 +2,8 @@
 // (apps/viewer). The render options mean what they mean for `render`, so a
 // view and a render of the same arguments show the same image; --spp is
 // where accumulation stops (default 4096 passes). A paged scene file
-// (.rfpack) opens with the page caches' budgets of --memory-budget etc.
+// (.rfpack) opens, like any scene, as a world (with the page caches'
+// budgets of --memory-budget etc.).
 #include <cmath>
 #include <cstdio>
 
@@ -17,44 +18,29 @@ namespace {
 
 constexpr int kViewerPasses = 4096;
 
-// Lights and the start camera of every scene the viewer loads, and the
-// first scene's render settings under the command line's. A paged scene
-// has no render settings (its `scene` is empty, as `render` of one uses)
-// and its lights are in its file: nothing is added to it.
-auto scene_preparation(const ViewArgs& a, const Device& device) {
-    return [&a, device](viewer::SceneData& data, bool first, viewer::ViewSettings& settings) {
+// Lights and the start camera of every world the viewer opens, and the
+// first scene's render settings under the command line's. A paged world's
+// lights are in its file: nothing is added to it.
+viewer::PrepareScene scene_preparation(const ViewArgs& a) {
+    return [&a](World& world, viewer::SceneData& data, bool first, viewer::ViewSettings& settings) {
         const RenderArgs& r = a.render;
-        Scene& scene = data.scene;
         if (first) {
-            const RenderOptions from_file = render_options(r, scene.render_settings, device);
-            settings.render = from_file;
-            settings.render.spp = r.spp_opt->count() > 0 ? r.spp : kViewerPasses;
-            if (!r.camera.empty()) data.camera = initial_camera(r, scene);
-            if (r.accel.update_method.empty() && scene.render_settings.update)
-                settings.update.method = parse_update_method(*scene.render_settings.update);
+            settings.render = render_options(r, world.scene().render_settings);
+            settings.render.spp = r.command->count("--spp") > 0 ? r.render.spp : kViewerPasses;
+            prepare_world(r, world);  // --time, the command line's lights
+            data.camera = r.camera ? *r.camera : world.camera();
         }
-        if (data.paged) return;
-        if (first && scene.animated() && r.time_opt->count() > 0) {  // the first scene at --time
-            apply_time_option(r, scene);
-            data.geometry = SceneGeometry::build(scene);
-        }
-        if (first) apply_light_options(r, scene, data.geometry);
-        if (data.source.light && has_no_light(scene, data.geometry)) {  // the views.json light, as the bench uses
+        if (world.paged()) return;
+        if (data.source.light && has_no_light(world)) {  // the views.json light, as the bench uses
             Light light;
             light.position = *data.source.light;
             light.intensity = 0.25f * data.size * data.size;
-            scene.lights.push_back(light);
+            world.scene().lights.push_back(light);
+            world.materials_changed();
         }
         // The integrator can change in the window, so an unlit scene gets its headlight whatever it is now.
-        add_headlight_if_unlit(r, IntegratorKind::Path, data.camera, scene, data.geometry);
+        add_headlight_if_unlit(r, IntegratorKind::Path, data.camera, world);
     };
-}
-
-// What `render` refuses for a paged scene file, refused before a window opens.
-void check_paged_start(const RenderArgs& r, const Device& device) {
-    if (device.is_cuda()) throw Error("paged scenes render on the CPU in this version (--device cpu)");
-    if (!r.lights.empty() || !r.environment.empty() || !r.environment_map.empty())
-        throw Error("--light, --env and --env-map are not applied to paged scenes (their lights are in the file)");
 }
 
 }  // namespace
@@ -69,10 +55,10 @@ CLI::App* add_view_command(CLI::App& app, ViewArgs& a) {
     add_frame_options(cmd, a.render, "Passes to accumulate while the camera rests, then stop (default 4096)");
     add_integrator_options(cmd, a.render);
     add_tone_options(cmd, a.render);
-    add_accel_options(cmd, a.render.accel);
+    add_accel_options(cmd, a.render.world.build);
     add_light_options(cmd, a.render);
     add_device_options(cmd, a.render);
-    add_paged_read_options(cmd, a.render.paged);
+    add_paged_read_options(cmd, a.render.world.paged);
     add_animation_options(cmd, a.render);
     const std::string group = "Viewer";
     cmd->add_option("--script", a.script,
@@ -103,22 +89,18 @@ CLI::App* add_view_command(CLI::App& app, ViewArgs& a) {
 
 int run_view(const ViewArgs& a) {
     const RenderArgs& r = a.render;
-    const Device device = parse_device(r.device);
-    if (is_paged_scene_file(r.scene)) check_paged_start(r, device);
-    require_usable(device, "--device " + r.device);
+    check_world_options(r.world, r.scene);  // what the world would refuse fails before a window opens
     viewer::ViewerConfig config;
     config.launched = launch_time();
     config.scene = r.scene;
     config.scenes_dir = a.scenes_dir;
-    config.settings.build = structure_options(r, device);
-    config.settings.render = render_options(r, RenderSettings{}, device);
-    config.settings.render.spp = r.spp_opt->count() > 0 ? r.spp : kViewerPasses;
-    config.settings.tone = tone_mapping(r);
-    config.settings.update = to_update_options(r.accel, "", device);
+    config.settings.world = r.world;
+    config.settings.render = r.render;
+    config.settings.render.spp = r.command->count("--spp") > 0 ? r.render.spp : kViewerPasses;
+    config.settings.tone = r.tone;
     config.settings.motion_divisor = a.motion_scale == "auto" ? 0 : std::stoi(a.motion_scale);
-    config.prepare = scene_preparation(a, device);
-    config.paged = paged_scene_options(r.paged, r.threads);
-    config.first_load = scene_load_options(r);  // a malformed budget fails before the window opens
+    config.prepare = scene_preparation(a);
+    config.first_load = r.load;
     if (!a.script.empty()) config.script = viewer::load_script(a.script);  // a typo fails before anything opens
     config.script_timeout_s = a.script_timeout_s;
     if (!a.bookmarks.empty()) config.bookmarks = a.bookmarks;

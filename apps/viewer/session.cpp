@@ -64,32 +64,12 @@ PagedStatus paged_status(const PagedScene& scene, const std::vector<PageCacheRep
 
 }  // namespace
 
-// An animated scene's own copy of the scene and its triangles, which the
-// render thread moves through time (the published SceneData stays as
-// loaded), with the structure that follows them.
-struct Session::AnimationState {
-    Scene scene;
-    SceneGeometry geometry;
-    std::unique_ptr<DynamicAccel> accel;
-    double update_ms_sum = 0.0;
-};
-
 struct Session::Target {
     std::shared_ptr<const SceneData> scene;
-    std::shared_ptr<const Accel> accel;  // null for a paged scene, which traces through its own caches
-    std::shared_ptr<AnimationState> animation;  // an animated scene's; accel is then its accel
-
-    // A renderer over the structure, or over the paged scene's caches.
-    [[nodiscard]] std::unique_ptr<Renderer> new_renderer(const Camera& camera, const RenderOptions& options) const {
-        if (scene->paged) return make_paged_renderer(*scene->paged, camera, options);
-        if (animation)
-            return make_renderer(animation->scene, animation->geometry, animation->accel->current(), camera, options);
-        return make_renderer(scene->scene, scene->geometry, *accel, camera, options);
-    }
+    std::shared_ptr<World> world;  // committed: its structure is built
 };
 
-// What the render thread holds. The renderer refers to the target's scene
-// and structure, so it is declared after them and destroyed first.
+// What the render thread holds.
 struct Session::RenderState {
     std::shared_ptr<const Target> target;
     std::unique_ptr<Renderer> renderer;
@@ -113,20 +93,14 @@ struct Session::RenderState {
     uint64_t time_version = 0;
     Clock::time_point last_tick;                 // when the animation's time last advanced
 
-    [[nodiscard]] bool animating() const { return playing && target && target->animation && !halted; }
+    [[nodiscard]] bool animating() const { return playing && target && target->world->animated() && !halted; }
     [[nodiscard]] bool wants_pass() const {
         if (!renderer || halted) return false;
         if (animating()) return true;
         return moving ? !preview_done : renderer->passes() < renderer->options().spp;
     }
-    // The film's options for rendering `on`: its structure's device (the
-    // settings may already name another, whose structure is being built); a
-    // paged scene's is the CPU.
-    [[nodiscard]] RenderOptions film(const Target& on) const {
-        RenderOptions o = film_options(settings, moving, motion_divisor);
-        o.device = on.accel ? on.accel->device() : Device{};
-        return o;
-    }
+    // The film's options (the renderer runs where its world lives).
+    [[nodiscard]] RenderOptions film() const { return film_options(settings, moving, motion_divisor); }
     // A display image no frame holds (the pool's reference is its only one).
     std::shared_ptr<DisplayImage> free_image() {
         for (const auto& image : pool)
@@ -197,12 +171,12 @@ void Session::set_settings(const ViewSettings& settings) {
         ++settings_version_;
         unsigned now = effects & (unsigned(Effect::Restart) | unsigned(Effect::Retone));
         if (effects & unsigned(Effect::Rebuild)) {
-            if (!queued_load_) queued_build_ = settings.build;
+            if (!queued_load_) queued_build_ = settings.world;
             job_cv_.notify_one();
             // A paged scene has no structure to rebuild (the job thread skips
             // it; the settings table refuses such changes for one): its frame
             // only has to show the new settings.
-            if (shown_scene_ && shown_scene_->paged) now |= unsigned(Effect::Retone);
+            if (shown_scene_ && shown_scene_->kind == SceneKind::Paged) now |= unsigned(Effect::Retone);
         }
         if (now) {
             pending_effects_ |= now;
@@ -292,7 +266,7 @@ void Session::job_loop() {
     if (config_.yield_to_window) yield_to_the_window();
     for (;;) {
         std::optional<SceneSource> load;
-        std::optional<BuildOptions> build;
+        std::optional<WorldOptions> build;
         std::shared_ptr<const SceneData> scene;
         {
             std::unique_lock<std::mutex> lock(mutex_);
@@ -307,7 +281,7 @@ void Session::job_loop() {
         const Clock::time_point start = Clock::now();
         try {
             if (load) run_load(*load);
-            else if (scene && !scene->paged) run_build(scene, *build);
+            else if (scene && scene->kind != SceneKind::Paged) run_build(*build);
         } catch (const Error& e) {
             report_error(e.what());
         } catch (const std::bad_alloc&) {
@@ -357,26 +331,6 @@ std::string structure_name(const BuildOptions& o) {
 
 }  // namespace
 
-// A static scene's structure, or an animated scene's copy with a dynamic
-// structure (on a CUDA device a CPU-only update method becomes rebuild; the
-// overlay's structure name says which runs).
-Session::Target Session::build_target(std::shared_ptr<const SceneData> data, const BuildOptions& build,
-                                      UpdateOptions update, const ProgressCallback& progress) const {
-    Target target{data, nullptr, nullptr};
-    if (!data->scene.animated()) {
-        target.accel = build_accel(data->geometry, build, progress);
-        return target;
-    }
-    if (build.device.is_cuda() && !update_runs_on_device(update.method)) update.method = UpdateMethod::Rebuild;
-    auto animation = std::make_shared<AnimationState>();
-    animation->scene = data->scene;
-    animation->geometry = data->geometry;
-    animation->accel = build_dynamic_accel(animation->scene, animation->geometry, build, update, progress);
-    target.accel = std::shared_ptr<const Accel>(animation, animation->accel.get());
-    target.animation = std::move(animation);
-    return target;
-}
-
 void Session::run_load(const SceneSource& source) {
     std::function<void()> wake;
     bool first = false;
@@ -389,26 +343,22 @@ void Session::run_load(const SceneSource& source) {
     }
     auto data = std::make_shared<SceneData>();
     data->source = source;
+    std::shared_ptr<World> world;
     {
         JobProgress progress(mutex_, status_, wake, "loading " + source.name);
         progress(0.0);
-        const Clock::time_point start = Clock::now();
-        if (is_paged_scene_file(source.path)) {
-            open_paged(*data, settings);
-        } else {
-            data->scene = load_scene(source.path, first ? config_.first_load : LoadOptions{});
-            data->geometry = SceneGeometry::build(data->scene);
-        }
-        data->load_ms = ms_since(start);
+        world = open_world(source.path, settings.world, first ? config_.first_load : LoadOptions{});
     }
-    if (data->triangles() == 0) throw Error(source.name + ": the scene has no triangles to show");
-    const Box3f bounds = data->paged ? data->paged->info().bounds : data->geometry.bounds;
-    data->size = length(bounds.extent());
-    const Camera own = data->paged ? data->paged->camera() : data->scene.camera_or_default();
-    data->camera = source.views.empty() ? own : source.views.front();
+    const WorldStats loaded = world->stats();
+    if (loaded.triangles == 0) throw Error(source.name + ": the scene has no triangles to show");
+    data->kind = world->paged() ? SceneKind::Paged : SceneKind::InCore;
+    data->load_ms = loaded.load_ms;
+    data->triangles = size_t(loaded.triangles);
+    data->size = length(world->bounds().extent());
+    data->camera = source.views.empty() ? world->camera() : source.views.front();
     if (config_.prepare) {
         const ViewSettings before = settings;
-        config_.prepare(*data, first, settings);
+        config_.prepare(*world, *data, first, settings);
         if (changes_between(before, settings) != 0) {
             std::lock_guard<std::mutex> lock(mutex_);
             settings_ = settings;
@@ -416,65 +366,59 @@ void Session::run_load(const SceneSource& source) {
             pending_effects_ |= unsigned(Effect::Restart);
         }
     }
-    const BuildOptions build = settings.build;
     {
         std::lock_guard<std::mutex> lock(mutex_);
         data->id = next_scene_id_++;
         first_load_ = false;
     }
-    if (data->paged) {  // its structure came with the file
-        hand_over(Target{std::move(data), nullptr, nullptr});
-        return;
-    }
-    JobProgress progress(mutex_, status_, wake, "building " + structure_name(build) + " for " + source.name);
-    hand_over(build_target(std::move(data), build, settings.update, std::ref(progress)));
+    JobProgress progress(mutex_, status_, wake,
+                         "building " + structure_name(settings.world.build) + " for " + source.name);
+    world->commit(std::ref(progress));  // a paged world's structure came with its file
+    hand_over(Target{std::move(data), std::move(world)});
 }
 
-// Opens a paged scene file with the session's budgets. Its renderer runs on
-// the CPU only: another device fails the load (the shown scene stays).
-void Session::open_paged(SceneData& data, const ViewSettings& settings) const {
-    if (settings.render.device.is_cuda())
-        throw Error(data.source.name + ": paged scenes render on the CPU in this version (set device cpu first)");
-    PagedSceneOptions options = config_.paged;
-    options.threads = settings.render.threads;
-    data.paged = open_paged_scene(data.source.path, options);
-}
-
-void Session::run_build(std::shared_ptr<const SceneData> data, const BuildOptions& options) {
+// The shown world reopened with new options: its scene at the time it
+// shows, another structure, update method or device.
+void Session::run_build(const WorldOptions& options) {
     std::function<void()> wake;
-    UpdateOptions update;
+    std::shared_ptr<const SceneData> data;
+    std::shared_ptr<World> shown;
     {
         std::lock_guard<std::mutex> lock(mutex_);
         wake = wake_;
-        update = settings_.update;
+        data = shown_scene_;
+        shown = shown_world_;
     }
-    JobProgress progress(mutex_, status_, wake, "building " + structure_name(options));
-    Target target = build_target(data, options, update, std::ref(progress));
+    if (!shown) return;
+    JobProgress progress(mutex_, status_, wake, "building " + structure_name(options.build));
+    std::shared_ptr<World> world = shown->reopen(options);
+    world->commit(std::ref(progress));
     {
         std::lock_guard<std::mutex> lock(mutex_);
         // A newer request makes this structure stale before it is shown.
         if (queued_load_ || queued_build_ || shown_scene_ != data) return;
     }
-    hand_over(std::move(target));
+    hand_over(Target{std::move(data), std::move(world)});
 }
 
 void Session::hand_over(Target target) {
     // Outside the lock: a structure may compute its statistics (a kd-tree's
     // SAH cost walks the tree), and the window reads the status every frame.
     std::shared_ptr<const SceneData> data = target.scene;
-    const AccelStats stats = target.accel ? target.accel->stats() : data->paged->accel().stats();
+    const World& world = *target.world;
+    const WorldStats stats = world.stats();
+    const TimeRange range = world.time_range();
     {
         std::lock_guard<std::mutex> lock(mutex_);
-        status_.accel = stats;
+        status_.accel = stats.accel;
         AnimationStatus& a = status_.animation;
-        if (target.animation) {
-            const Animation& anim = target.animation->scene.animation;
-            if (!a.animated || shown_scene_ != data) a.time = target.animation->scene.time;
+        if (world.animated()) {
+            a.time = world.time();
             a.animated = true;
-            a.start = anim.start;
-            a.end = anim.end;
-            a.frames_per_second = anim.frames_per_second;
-            a.method = to_string(target.animation->accel->method());
+            a.start = range.start;
+            a.end = range.end;
+            a.frames_per_second = range.frames_per_second;
+            a.method = stats.update_method;
             a.playing = playing_;
         } else {
             a = AnimationStatus{};
@@ -486,9 +430,10 @@ void Session::hand_over(Target target) {
             camera_time_ = Clock::now();
             ++camera_version_;
             status_.scene_name = data->source.name;
-            status_.triangles = data->triangles();
+            status_.triangles = data->triangles;
             status_.load_ms = data->load_ms;
         }
+        shown_world_ = target.world;
         new_target_ = std::make_shared<const Target>(std::move(target));
         ++target_version_;
         cancel_.store(true);
@@ -573,18 +518,18 @@ bool Session::take_requests(RenderState& st, RenderRequests& r) {
 void Session::apply_requests(RenderState& st, const RenderRequests& r) {
     try {
         if (r.target) {
-            std::unique_ptr<Renderer> renderer = r.target->new_renderer(st.camera, st.film(*r.target));
-            st.renderer = std::move(renderer);  // the old renderer goes before its target
+            std::unique_ptr<Renderer> renderer = make_renderer(*r.target->world, st.camera, st.film());
+            st.renderer = std::move(renderer);
             st.target = r.target;
             st.pool.clear();
-            st.paged = r.target->scene->paged ? paged_status(*r.target->scene->paged, {}) : PagedStatus{};
+            st.paged = r.target->world->paged() ? paged_status(r.target->world->paged_scene(), {}) : PagedStatus{};
             std::lock_guard<std::mutex> lock(mutex_);
             status_.paged = st.paged;
             return;
         }
         if (!st.renderer) return;
         if (r.camera_changed) st.renderer->set_camera(st.camera);
-        const RenderOptions film = st.film(*st.target);
+        const RenderOptions film = st.film();
         if ((r.effects & unsigned(Effect::Restart)) || st.moving != r.was_moving ||
             st.renderer->options().width != film.width || st.renderer->options().height != film.height)
             st.renderer->set_options(film);
@@ -593,40 +538,31 @@ void Session::apply_requests(RenderState& st, const RenderRequests& r) {
     }
 }
 
-// An animated target at the requested time, or, while playing, at the time
-// the wall clock has advanced to (looping at the end): the scene evaluated,
-// its triangles and structure updated, the renderer told what moved.
+// An animated world at the requested time, or, while playing, at the time
+// the wall clock has advanced to (looping at the end); its renderer follows
+// it at the next pass.
 void Session::advance_animation(RenderState& st, bool time_requested) {
-    if (!st.renderer || !st.target || !st.target->animation || st.halted) return;
-    AnimationState& anim = *st.target->animation;
-    const Animation& a = anim.scene.animation;
-    float t = anim.scene.time;
+    if (!st.renderer || !st.target || !st.target->world->animated() || st.halted) return;
+    World& world = *st.target->world;
+    const TimeRange range = world.time_range();
+    float t = world.time();
     if (time_requested) {
-        t = std::clamp(st.requested_time, a.start, a.end);
+        t = std::clamp(st.requested_time, range.start, range.end);
     } else if (st.playing) {
         const Clock::time_point now = Clock::now();
         t += float(std::chrono::duration<double>(now - st.last_tick).count());
         st.last_tick = now;
-        if (t > a.end) t = a.duration() > 0.0f ? a.start + std::fmod(t - a.start, a.duration()) : a.start;
+        const float duration = range.end - range.start;
+        if (t > range.end) t = duration > 0.0f ? range.start + std::fmod(t - range.start, duration) : range.start;
     } else {
         return;
     }
     try {
-        const GeometryChange change = anim.scene.set_time(t);
-        anim.geometry.update(anim.scene, change);
-        const bool rebinds = anim.accel->current().device().is_cuda() && change.geometry();
-        if (rebinds) st.renderer.reset();  // it is bound to the structure the update replaces
-        const UpdateStats u = anim.accel->update(change);
-        if (rebinds) {
-            st.renderer = st.target->new_renderer(st.camera, st.film(*st.target));  // bound to the new structure
-            st.pool.clear();
-        } else {
-            st.renderer->geometry_changed(change);
-        }
+        const UpdateStats u = world.set_time(t);
         std::lock_guard<std::mutex> lock(mutex_);
         AnimationStatus& s = status_.animation;
         s.time = t;
-        if (!change.geometry()) return;
+        if (!u.updated) return;
         s.last = u;
         ++s.updates;
         s.mean_update_ms += (u.update_ms - s.mean_update_ms) / double(s.updates);
@@ -640,7 +576,7 @@ void Session::advance_animation(RenderState& st, bool time_requested) {
 // until the next change).
 bool Session::run_pass(RenderState& st) {
     pass_is_preview_.store(st.moving);
-    PagedScene* paged = st.target->scene->paged.get();
+    PagedScene* paged = st.target->world->paged() ? &st.target->world->paged_scene() : nullptr;
     try {
         if (paged) st.caches_before = paged->caches();
         if (!st.renderer->render_pass({}, &cancel_)) return false;

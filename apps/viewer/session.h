@@ -1,13 +1,16 @@
 // The engine side of the viewer, on two threads of its own so the window
 // never waits for it:
-//  - the job thread loads scenes and builds structures (one job at a time;
-//    a newer request replaces a queued one), reporting progress; until a
-//    new structure is ready the old one keeps rendering;
-//  - the render thread owns the rf::Renderer: it applies the latest camera
-//    and settings, runs passes (cancelling a full-resolution pass the
-//    moment anything changes), renders reduced-resolution previews while
-//    the camera moves, tone-maps each pass into a display image and
-//    publishes it as a Frame.
+//  - the job thread opens scenes as rf::World objects and builds their
+//    structures (one job at a time; a newer request replaces a queued one),
+//    reporting progress; a structure setting changed reopens the shown
+//    world with the new options (World::reopen: its scene at its current
+//    time), and until the new world is built the old one keeps rendering;
+//  - the render thread owns the shown world's rf::Renderer: it applies the
+//    latest camera and settings, moves an animated world through time
+//    (World::set_time; the renderer follows the world by itself), runs
+//    passes (cancelling a full-resolution pass the moment anything
+//    changes), renders reduced-resolution previews while the camera moves,
+//    tone-maps each pass into a display image and publishes it as a Frame.
 // The window's thread only posts requests and reads the latest Frame and
 // Status; every call here returns at once.
 #pragma once
@@ -26,13 +29,11 @@
 #include <vector>
 
 #include "rayforge/accel/accel.h"
-#include "rayforge/accel/dynamic_accel.h"
 #include "rayforge/io/scene_io.h"
 #include "rayforge/ooc/paged_scene.h"
 #include "rayforge/render/display.h"
 #include "rayforge/render/render.h"
-#include "rayforge/scene/scene.h"
-#include "rayforge/scene/scene_geometry.h"
+#include "rayforge/world.h"
 #include "view_settings.h"
 
 namespace rf::viewer {
@@ -48,22 +49,16 @@ struct SceneSource {
     std::optional<Vec3f> light;  // views.json point light, added when the scene has no light
 };
 
-// A loaded scene as the renderers see it; never changed once published.
+// A loaded scene as the window sees it; never changed once published (the
+// world itself lives in the session and moves through time).
 struct SceneData {
     uint64_t id = 0;  // increases with every load
     SceneSource source;
-    Scene scene;
-    SceneGeometry geometry;
-    // A paged scene file (.rfpack) is opened, not loaded: its triangles stay
-    // in the file, `scene` and `geometry` stay empty, and its renderer reads
-    // pages through this scene's caches (which is why it is not const).
-    std::shared_ptr<PagedScene> paged;
+    SceneKind kind = SceneKind::InCore;  // a paged scene file (.rfpack) brings its structure
     Camera camera;          // the start camera
     float size = 1.0f;      // the bounds' diagonal
     double load_ms = 0.0;   // file to flat triangles (a paged scene: opening it)
-
-    [[nodiscard]] SceneKind kind() const { return paged ? SceneKind::Paged : SceneKind::InCore; }
-    [[nodiscard]] size_t triangles() const { return paged ? size_t(paged->info().triangles) : geometry.size(); }
+    size_t triangles = 0;
 };
 
 // One displayed image and what it shows.
@@ -135,20 +130,20 @@ struct SessionStatus {
     AnimationStatus animation;
 };
 
+// Runs on the job thread for every world opened, before its structure is
+// built and it is shown (adds lights, picks the start camera in
+// data.camera); `first` is true for the first scene, whose file may also set
+// `settings` (its render settings: size, integrator, depths). May throw
+// rf::Error, which fails the load.
+using PrepareScene = std::function<void(World& world, SceneData& data, bool first, ViewSettings& settings)>;
+
 struct SessionConfig {
-    ViewSettings settings;
-    // Runs on the job thread for every loaded scene before it is shown (adds
-    // lights, picks the start camera); `first` is true for the first scene,
-    // whose file may also set `settings` (its render settings: size,
-    // integrator, depths). May throw rf::Error, which fails the load.
-    std::function<void(SceneData& data, bool first, ViewSettings& settings)> prepare;
+    ViewSettings settings;  // settings.world: the device, structure, update method and paged budgets
+    PrepareScene prepare;
     // Run the session's threads (and the TBB workers they start) at a lower
     // priority than the caller's, so a window stays responsive while they
     // fill the cores.
     bool yield_to_window = false;
-    // The page caches' budgets of every paged scene opened (the threads are
-    // the settings' when it opens).
-    PagedSceneOptions paged;
     // How the first scene loads (--animation: its glTF clip); later scenes load with the defaults.
     LoadOptions first_load;
 };
@@ -191,8 +186,7 @@ public:
     void set_wake(std::function<void()> wake);
 
 private:
-    struct Target;  // a scene with its structure, ready to render
-    struct AnimationState;
+    struct Target;  // a world built, ready to render
     struct RenderState;
     struct RenderRequests;
 
@@ -203,10 +197,7 @@ private:
     bool run_pass(RenderState& st);
     void publish_frame(RenderState& st);
     void run_load(const SceneSource& source);
-    void open_paged(SceneData& data, const ViewSettings& settings) const;
-    void run_build(std::shared_ptr<const SceneData> data, const BuildOptions& options);
-    Target build_target(std::shared_ptr<const SceneData> data, const BuildOptions& build, UpdateOptions update,
-                        const ProgressCallback& progress) const;
+    void run_build(const WorldOptions& options);
     void hand_over(Target target);
     void advance_animation(RenderState& st, bool time_requested);
     void report_error(const std::string& message);
@@ -219,12 +210,13 @@ private:
 
     // Job thread requests.
     std::optional<SceneSource> queued_load_;
-    std::optional<BuildOptions> queued_build_;
+    std::optional<WorldOptions> queued_build_;
     bool first_load_ = true;
     uint64_t next_scene_id_ = 1;
 
     // Render thread requests (the latest of each kind).
     std::shared_ptr<const SceneData> shown_scene_;   // what the render thread draws or is about to
+    std::shared_ptr<World> shown_world_;             // its world: what a structure change reopens
     std::shared_ptr<const Target> new_target_;
     ViewSettings settings_;
     uint64_t settings_version_ = 0;

@@ -83,13 +83,7 @@ std::vector<std::string> gpu_kernel_names() {
     return names;
 }
 
-void set_device(ViewSettings& s, const std::string& value) {
-    const Device device = parse_device(value);
-    require_device(device);  // a clear error now rather than at the next build
-    s.build.device = device;
-    s.render.device = device;
-    if (device.is_cuda()) s.build.structure = structure_of(s.build.gpu_kernel);
-}
+void set_device(ViewSettings& s, const std::string& value) { s.world.device = parse_device(value); }
 
 void set_resolution(ViewSettings& s, const std::string& value) {
     const size_t x = value.find_first_of("xX");
@@ -104,47 +98,49 @@ constexpr Effect rebuild = Effect::Rebuild, restart = Effect::Restart, retone = 
 void add_structure_settings(std::vector<Setting>& t) {
     t.push_back(enum_setting<Structure>(
         "accel", "structure", rebuild, {"bvh", "grid", "grid-proximity", "kdtree", "brute"}, "acceleration structure",
-        [](ViewSettings& s) -> Structure& { return s.build.structure; },
+        [](ViewSettings& s) -> Structure& { return s.world.build.structure; },
         [](const std::string& v) { return parse_structure(v); }, [](Structure v) { return to_string(v); }));
     t.push_back(enum_setting<Builder>(
         "builder", "structure", rebuild, builder_names(), "BVH builder",
-        [](ViewSettings& s) -> Builder& { return s.build.builder; },
+        [](ViewSettings& s) -> Builder& { return s.world.build.builder; },
         [](const std::string& v) { return parse_builder(v); }, [](Builder v) { return to_string(v); }));
     t.push_back(enum_setting<Layout>(
         "layout", "structure", rebuild, {"bvh2", "bvh4", "bvh8"}, "BVH layout traced on the CPU",
-        [](ViewSettings& s) -> Layout& { return s.build.layout; },
+        [](ViewSettings& s) -> Layout& { return s.world.build.layout; },
         [](const std::string& v) { return parse_layout(v); }, [](Layout v) { return to_string(v); }));
-    t.push_back(enum_setting<UpdateMethod>(
-        "update", "structure", rebuild, {"refit", "adapt", "rebuild", "clusters", "two-level"},
-        "animated scenes: how the structure follows the motion each frame",
-        [](ViewSettings& s) -> UpdateMethod& { return s.update.method; },
-        [](const std::string& v) { return parse_update_method(v); }, [](UpdateMethod v) { return to_string(v); }));
+    t.push_back({{"update", "structure", rebuild, {"scene", "refit", "adapt", "rebuild", "clusters", "two-level"},
+                  "animated scenes: how the structure follows the motion each frame (scene: the scene's own, "
+                  "else " + to_string(kDefaultUpdateMethod) + ")"},
+                 [](const ViewSettings& s) {
+                     return s.world.update.method ? to_string(*s.world.update.method) : std::string("scene");
+                 },
+                 [](ViewSettings& s, const std::string& v) {
+                     s.world.update.method = v == "scene" ? std::nullopt : std::optional(parse_update_method(v));
+                 }});
     t.push_back(bool_setting("optimize", "structure", rebuild, "reinsertion optimizer after the build",
-                             [](ViewSettings& s) -> bool& { return s.build.reinsertion.enabled; }));
+                             [](ViewSettings& s) -> bool& { return s.world.build.reinsertion.enabled; }));
     t.push_back(int_setting("optimize-iterations", "structure", rebuild, 0, 1000, "reinsertion rounds (0 = until no gain)",
-                            [](ViewSettings& s) -> int& { return s.build.reinsertion.iterations; }));
+                            [](ViewSettings& s) -> int& { return s.world.build.reinsertion.iterations; }));
     t.push_back(int_setting("leaf-size", "structure", rebuild, 1, 64, "most triangles per BVH leaf",
-                            [](ViewSettings& s) -> int& { return s.build.max_leaf_size; }));
+                            [](ViewSettings& s) -> int& { return s.world.build.max_leaf_size; }));
     t.push_back(int_setting("bins", "structure", rebuild, 2, 256, "SAH bins per axis (binned builders)",
-                            [](ViewSettings& s) -> int& { return s.build.binned.bin_count; }));
+                            [](ViewSettings& s) -> int& { return s.world.build.binned.bin_count; }));
     t.push_back(float_setting("sbvh-alpha", "structure", rebuild, 0.0, 1.0, "SBVH spatial-split threshold",
-                              [](ViewSettings& s) -> float& { return s.build.sbvh.alpha; }));
+                              [](ViewSettings& s) -> float& { return s.world.build.sbvh.alpha; }));
     t.push_back(int_setting("ploc-radius", "structure", rebuild, 1, 256, "PLOC search radius",
-                            [](ViewSettings& s) -> int& { return s.build.ploc.radius; }));
+                            [](ViewSettings& s) -> int& { return s.world.build.ploc.radius; }));
     t.push_back(float_setting("split-budget", "structure", rebuild, 0.0, 4.0, "GridBvhSplit partial-triangle budget",
-                              [](ViewSettings& s) -> float& { return s.build.grid_bvh.split_budget; }));
+                              [](ViewSettings& s) -> float& { return s.world.build.grid_bvh.split_budget; }));
     t.push_back(int_setting("grid-res", "structure", rebuild, 0, 2048, "grid cells on the longest axis (0 = auto)",
-                            [](ViewSettings& s) -> int& { return s.build.grid.resolution; }));
+                            [](ViewSettings& s) -> int& { return s.world.build.grid.resolution; }));
     t.push_back(enum_setting<KdTraversal>(
         "kd-traversal", "structure", rebuild, {"stack", "short-stack", "restart", "pushdown"}, "kd-tree traversal",
-        [](ViewSettings& s) -> KdTraversal& { return s.build.kdtree.traversal; },
+        [](ViewSettings& s) -> KdTraversal& { return s.world.build.kdtree.traversal; },
         [](const std::string& v) { return parse_kd_traversal(v); }, [](KdTraversal v) { return to_string(v); }));
-    t.push_back({{"gpu-kernel", "structure", rebuild, gpu_kernel_names(), "GPU traversal kernel (CUDA device)"},
-                 [](const ViewSettings& s) { return to_string(s.build.gpu_kernel); },
-                 [](ViewSettings& s, const std::string& v) {
-                     s.build.gpu_kernel = parse_gpu_kernel(v);
-                     if (s.build.device.is_cuda()) s.build.structure = structure_of(s.build.gpu_kernel);
-                 }});
+    t.push_back(enum_setting<GpuKernel>(
+        "gpu-kernel", "structure", rebuild, gpu_kernel_names(), "GPU traversal kernel (CUDA device)",
+        [](ViewSettings& s) -> GpuKernel& { return s.world.build.gpu_kernel; },
+        [](const std::string& v) { return parse_gpu_kernel(v); }, [](GpuKernel v) { return to_string(v); }));
 }
 
 // The integrators' settings: a change restarts the accumulation.
@@ -207,12 +203,12 @@ void add_image_display_and_device_settings(std::vector<Setting>& t) {
                               [](ViewSettings& s) -> float& { return s.tone.exposure; }));
 
     t.push_back({{"device", "device", rebuild, {}, "cpu, cuda or cuda:N"},
-                 [](const ViewSettings& s) { return to_string(s.build.device); }, set_device});
+                 [](const ViewSettings& s) { return to_string(s.world.device); }, set_device});
     t.push_back({{"threads", "device", restart, {}, "worker threads (0 = all cores)"},
                  [](const ViewSettings& s) { return std::to_string(s.render.threads); },
                  [](ViewSettings& s, const std::string& v) {
                      s.render.threads = parse_int(v, 0, 4096);
-                     s.build.threads = s.render.threads;
+                     s.world.build.threads = s.world.paged.threads = s.render.threads;
                  }});
 }
 
@@ -229,13 +225,11 @@ const std::vector<Setting>& settings_table() {
     return table;
 }
 
-// A paged scene's structure is in its file and its renderer runs on the
-// CPU: refuse what would not apply rather than accept and ignore it.
-void check_paged(const SettingInfo& info, const ViewSettings& changed) {
+// A paged scene's structure is in its file: refuse what would not apply
+// rather than accept and ignore it.
+void check_paged(const SettingInfo& info) {
     if (!applies_to(info, SceneKind::Paged))
         throw Error("structure settings do not apply to a paged scene (its structure is in the file)");
-    if (changed.render.device.is_cuda())
-        throw Error("paged scenes render on the CPU in this version (device cpu)");
 }
 
 const Setting& setting_or_throw(const std::string& key) {
@@ -276,8 +270,8 @@ void set_setting(ViewSettings& settings, const std::string& key, const std::stri
     ViewSettings changed = settings;
     try {
         setting.set(changed, value);
-        if (scene == SceneKind::Paged) check_paged(setting.info, changed);
-        validate_build_options(changed.build);
+        if (scene == SceneKind::Paged) check_paged(setting.info);
+        check_world_options(changed.world);
         validate_render_options(film_options(changed, false, 1));
     } catch (const Error& e) {
         throw Error("set " + key + " " + value + ": " + e.what());

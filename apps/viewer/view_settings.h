@@ -10,17 +10,17 @@
 #include <string>
 #include <vector>
 
-#include "rayforge/accel/accel.h"
-#include "rayforge/accel/dynamic_accel.h"
 #include "rayforge/render/render.h"
 #include "rayforge/render/tone_mapping.h"
+#include "rayforge/world.h"
 
 namespace rf::viewer {
 
 struct ViewSettings {
-    BuildOptions build;     // structure, builder, layout, optimizer, parameters; device and threads
-    UpdateOptions update{UpdateMethod::Rebuild, {}, {}};  // animated scenes: how the structure follows the motion
-    RenderOptions render;   // integrator and its settings, full resolution, passes (spp); device and threads
+    // The device; the structure (builder, layout, optimizer, parameters, threads); how it follows an
+    // animation (unset: the scene's own method); the page caches' budgets of paged scenes.
+    WorldOptions world;
+    RenderOptions render;   // integrator and its settings, full resolution, passes (spp), threads
     ToneMapping tone;
     float resolution_scale = 1.0f;  // the film is render.width x render.height times this
     int motion_divisor = 0;         // while the camera moves, each side divided by this; 0 = chosen per scene
@@ -36,9 +36,9 @@ struct SettingInfo {
     std::string help;
 };
 
-// What the settings are for. A paged scene (rf::open_paged_scene) brings
-// its structure in its file and renders on the CPU only, so the structure
-// settings and a CUDA device do not apply to it.
+// What the settings are for. A paged scene brings its structure in its
+// file, so the structure settings do not apply to it (what a device can do
+// with it is the world's rule: a refused device fails the rebuild).
 enum class SceneKind : uint8_t { InCore, Paged };
 
 // Every setting, in panel order.
@@ -53,9 +53,10 @@ bool applies_to(const SettingInfo& info, SceneKind scene);
 // reads back the same).
 std::string get_setting(const ViewSettings& settings, const std::string& key);
 // Parses and applies `value`; the result is checked with the engine's own
-// option checks. Throws rf::Error naming the key for an unknown key, a bad
-// value, or a setting the shown scene's kind does not take (a structure
-// setting or a CUDA device for a paged scene), leaving `settings` unchanged.
+// option checks (check_world_options: ranges, the device, an update method
+// the device cannot run). Throws rf::Error naming the key for an unknown
+// key, a bad value, or a setting the shown scene's kind does not take (a
+// structure setting for a paged scene), leaving `settings` unchanged.
 void set_setting(ViewSettings& settings, const std::string& key, const std::string& value,
                  SceneKind scene = SceneKind::InCore);
 

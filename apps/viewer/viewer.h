@@ -19,8 +19,7 @@ struct ViewerConfig {
     std::string scenes_dir;      // --scenes-dir ("" = search for ../shared/scenes)
     ViewSettings settings;       // from the render options on the command line
     // Lights, the start camera and the first scene's settings (SessionConfig::prepare).
-    std::function<void(SceneData& data, bool first, ViewSettings& settings)> prepare;
-    PagedSceneOptions paged;     // the page caches' budgets of paged scenes (--memory-budget, ...)
+    PrepareScene prepare;
     LoadOptions first_load;      // how the first scene loads (--animation)
     std::optional<Script> script;  // --script FILE, parsed: run it, then exit with its verdict
     std::string bookmarks = "rayforge-bookmarks.json";

@@ -52,7 +52,6 @@ App::App(const ViewerConfig& config, GlWindow& window)
     session.settings = settings_;
     session.prepare = config.prepare;
     session.yield_to_window = true;
-    session.paged = config.paged;
     session.first_load = config.first_load;
     session_ = std::make_unique<Session>(std::move(session));
     session_->set_wake([] { GlWindow::wake(); });
@@ -198,7 +197,7 @@ void App::set(const std::string& key, const std::string& value) {
 SceneKind App::scene_kind() const {
     if (loading_kind_) return *loading_kind_;
     const std::shared_ptr<const SceneData> scene = session_->scene();
-    return scene ? scene->kind() : SceneKind::InCore;
+    return scene ? scene->kind : SceneKind::InCore;
 }
 
 void App::load(const std::string& name_or_path) {

@@ -41,17 +41,17 @@ bool relevant(const SettingInfo& info, const ViewSettings& s, SceneKind scene) {
     if (!applies_to(info, scene)) return false;
     const std::string& key = info.key;
     if (scene == SceneKind::Paged && key == "wavefront") return false;
-    const bool bvh = s.build.structure == Structure::Bvh;
-    const Builder b = s.build.builder;
+    const bool bvh = s.world.build.structure == Structure::Bvh;
+    const Builder b = s.world.build.builder;
     if (key == "builder" || key == "layout" || key == "optimize" || key == "leaf-size") return bvh;
-    if (key == "optimize-iterations") return bvh && s.build.reinsertion.enabled;
-    if (key == "bins") return (bvh && b == Builder::BinnedSah) || s.build.structure == Structure::KdTree;
+    if (key == "optimize-iterations") return bvh && s.world.build.reinsertion.enabled;
+    if (key == "bins") return (bvh && b == Builder::BinnedSah) || s.world.build.structure == Structure::KdTree;
     if (key == "sbvh-alpha") return bvh && b == Builder::Sbvh;
     if (key == "ploc-radius") return bvh && b == Builder::Ploc;
     if (key == "split-budget") return bvh && b == Builder::GridBvhSplit;
-    if (key == "grid-res") return s.build.structure == Structure::Grid || s.build.structure == Structure::ProximityGrid;
-    if (key == "kd-traversal") return s.build.structure == Structure::KdTree;
-    if (key == "gpu-kernel") return s.build.device.is_cuda();
+    if (key == "grid-res") return s.world.build.structure == Structure::Grid || s.world.build.structure == Structure::ProximityGrid;
+    if (key == "kd-traversal") return s.world.build.structure == Structure::KdTree;
+    if (key == "gpu-kernel") return s.world.device.is_cuda();
     const IntegratorKind i = s.render.integrator;
     if (key == "max-depth" || key == "rr-depth" || key == "light-sampling" || key == "clamp" || key == "wavefront")
         return i == IntegratorKind::Path;

@@ -1,15 +1,17 @@
-// `rayforge bench --animate` and `--cluster-table` (issue 21).
+// `rayforge bench --animate` and `--cluster-table` (docs/animation.md).
 //
 // Papers: Garanzha 2014 ch. 2 (BVH update from the previous frame's BVH;
 // the per-frame figures of Figs. 2.7-2.10: update time against a full
 // rebuild, trace speed of the updated tree against the rebuilt one, counts of
 // refits, rebuilt subtrees and migrations) and ch. 3 (Table 3.1: BVHs over
 // clusters of connected triangles, Acc(k) against Naive(k)).
-// Data: the scene is evaluated in place (Scene::set_time, then
-// SceneGeometry::update); every DynamicAccel and the Embree dynamic peer
-// refer to the one triangle array (Embree to its copy of it). Each frame's
-// ray sets come from a full rebuild of that frame (the reference) and are
-// traced unchanged by every structure.
+// Data: each update method is a World over its own copy of the scene,
+// moved frame by frame with World::set_time (the scene evaluated, its
+// triangles and structure updated, as render --frames and the viewer move
+// theirs); the bench's own copy is evaluated the same way (Scene::set_time,
+// SceneGeometry::update) for the reference rebuild and the Embree dynamic
+// peer (over its copy of those triangles). Each frame's ray sets come from
+// the rebuild of that frame and are traced unchanged by every structure.
 // Parallelism: builds, updates and traces run inside one TBB arena of
 // `threads` threads; Embree gets its own device of as many threads.
 // Determinism: the rays are a function of the frame's geometry and camera;
@@ -28,10 +30,11 @@
 #include <nlohmann/json.hpp>
 
 #include "accel/bvh/builders/cluster_generation.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "bench_report.h"
 #include "bench_runner.h"
 #include "rayforge/core/error.h"
+#include "rayforge/world.h"
 
 namespace rf::bench {
 namespace {
@@ -165,7 +168,7 @@ std::string first_line(const std::exception& e) {
 // --- the animation ---
 
 struct Built {
-    std::vector<std::unique_ptr<DynamicAccel>> accels;    // null where the method failed
+    std::vector<std::unique_ptr<World>> worlds;           // one per method; null where it failed
     std::vector<std::unique_ptr<EmbreeDynamicPeer>> peers;
 };
 
@@ -175,15 +178,18 @@ Built build_structures(LoadedScene& scene, const AnimateConfig& config, AnimateR
     for (UpdateMethod method : config.methods) {
         MethodColumn column;
         column.method = method;
-        UpdateOptions update = config.update;
-        update.method = method;
+        WorldOptions options;
+        options.device = config.device;
+        options.build = config.build;
+        options.update = config.update;
+        options.update.method = method;
         say("  building " + to_string(method));
         try {
-            built.accels.push_back(build_dynamic_accel(scene.scene, scene.geometry, config.build, update));
-            column.initial_build_ms = built.accels.back()->initial_build_ms();
+            built.worlds.push_back(make_world(scene.scene, options));  // the scene at the build frame
+            column.initial_build_ms = built.worlds.back()->commit().commit_ms;
             column.ok = true;
         } catch (const std::exception& e) {
-            built.accels.push_back(nullptr);
+            built.worlds.push_back(nullptr);
             column.error = first_line(e);
         }
         result.methods.push_back(column);
@@ -205,27 +211,28 @@ Built build_structures(LoadedScene& scene, const AnimateConfig& config, AnimateR
     return built;
 }
 
-// Every method updated and traced; one that throws is dropped for the rest.
-void update_methods(Built& built, const GeometryChange& change, const std::vector<RaySet>& sets,
-                    const SetAnswers& reference, const AnimateConfig& config, AnimateFrame& frame) {
-    for (std::unique_ptr<DynamicAccel>& accel : built.accels) {
+// Every method's world moved to the frame and traced; one that throws is
+// dropped for the rest. The update time is the structure's own (the
+// scene's evaluation is the same for every method: AnimateFrame::scene_ms).
+void update_methods(Built& built, const std::vector<RaySet>& sets, const SetAnswers& reference,
+                    const AnimateConfig& config, AnimateFrame& frame) {
+    for (std::unique_ptr<World>& world : built.worlds) {
         MethodFrame m;
-        if (!accel) {
+        if (!world) {
             m.error = "not built";
             frame.methods.push_back(m);
             continue;
         }
         try {
-            const auto start = Clock::now();
-            m.stats = accel->update(change);
-            m.update_ms = ms_since(start);
+            m.stats = world->set_time(frame.time);
+            m.update_ms = m.stats.update_ms;
             // A frame where nothing moved leaves the tree (and reports no cost).
-            if (!(m.stats.sah_cost > 0.0)) m.stats.sah_cost = accel->stats().sah_cost;
-            m.traces = trace_sets(*accel, sets, config.repetitions, &reference, nullptr);
+            if (!(m.stats.sah_cost > 0.0)) m.stats.sah_cost = world->accel().stats().sah_cost;
+            m.traces = trace_sets(*world, sets, config.repetitions, &reference, nullptr);
             m.ok = true;
         } catch (const std::exception& e) {
             m.error = "failed at frame " + std::to_string(frame.frame) + ": " + first_line(e);
-            accel.reset();
+            world.reset();
         }
         frame.methods.push_back(m);
     }
@@ -274,7 +281,7 @@ AnimateFrame run_frame(LoadedScene& scene, int index, Built& built, ViewSetup& v
     for (const RaySet& set : sets) frame.rays.push_back(set.rays.size());
     SetAnswers reference;
     frame.rebuild_trace_ms = trace_sets(*rebuilt, sets, config.repetitions, nullptr, &reference).trace_ms;
-    update_methods(built, change, sets, reference, config, frame);
+    update_methods(built, sets, reference, config, frame);
     update_peers(built, scene.geometry, sets, reference, config, frame);
     return frame;
 }

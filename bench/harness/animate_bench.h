@@ -1,5 +1,5 @@
 // `rayforge bench --animate`: per-frame acceleration maintenance over an
-// animated scene (issue 21; Garanzha 2014 ch. 2, Figs. 2.7-2.10). Per frame:
+// animated scene (Garanzha 2014 ch. 2, Figs. 2.7-2.10; docs/animation.md). Per frame:
 // Scene::set_time, SceneGeometry::update, then every update method's
 // DynamicAccel::update timed, a full rebuild of the same frame with the same
 // builder, and the Embree dynamic peer (refit, LOW and MEDIUM rebuilds) on
@@ -28,12 +28,13 @@ struct FrameRange {
 // "A:B" or "A:B:S"; throws rf::Error.
 FrameRange parse_frame_range(const std::string& text);
 // The frames played: first..last, and with `backwards` then back to first and
-// forward to last again (the seed's 100 -> 1 -> 100). `frame_count` clamps last.
+// forward to last again (Garanzha 2014's 100 -> 1 -> 100). `frame_count` clamps last.
 std::vector<int> frame_sequence(const FrameRange& range, int frame_count, bool backwards);
 
 struct AnimateConfig {
     std::vector<UpdateMethod> methods{UpdateMethod::Refit, UpdateMethod::Adapt, UpdateMethod::Rebuild,
                                       UpdateMethod::Clusters, UpdateMethod::TwoLevel};
+    Device device;                     // where the methods' worlds live (the rebuild and Embree: the CPU)
     BuildOptions build;                // builder and layout of every method and of the per-frame rebuild
     UpdateOptions update;              // adapt and cluster options (method is set per row)
     FrameRange frames;
@@ -57,7 +58,7 @@ struct FrameTraces {
 struct MethodFrame {
     bool ok = false;
     std::string error;        // why not, when !ok
-    double update_ms = 0.0;   // wall time of DynamicAccel::update
+    double update_ms = 0.0;   // the structure's update in World::set_time (UpdateStats::update_ms)
     UpdateStats stats;
     FrameTraces traces;
 };

@@ -200,7 +200,7 @@ void print_configuration_table(std::ostream& out, const std::vector<BenchRecord>
         s.tests[column] = rec.has_counts ? rec.prims_per_ray : NAN;
     }
     out << "\nframe times (ms; P = primary, PS = + shadow, PSR = + reflection) and, per newly added ray type, "
-           "steps / primitive tests per ray (seed 002, tables 5.9-5.11)\n";
+           "steps / primitive tests per ray (Zlatuška 2009, tables 5.9-5.11)\n";
     out << pad("scene res structure", 44, true) << pad("P", 9) << pad("PS", 9) << pad("PSR", 9) << pad("steps P", 9)
         << pad("PS", 8) << pad("PSR", 8) << pad("tests P", 9) << pad("PS", 8) << pad("PSR", 8) << '\n';
     for (const std::string& key : order) {

@@ -24,7 +24,7 @@ MachineInfo machine_info();
 void print_scene_tables(std::ostream& out, const std::vector<BenchRecord>& records, int threads, int repetitions,
                         int build_repetitions);
 
-// Seeds 001/002 configurations: per (scene, resolution, candidate) the summed
+// Bogolepov et al. / Zlatuška 2009 configurations: per (scene, resolution, candidate) the summed
 // trace time of P (primary), PS (+ shadow) and PSR (+ reflection).
 void print_configuration_table(std::ostream& out, const std::vector<BenchRecord>& records);
 

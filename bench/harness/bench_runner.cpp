@@ -6,7 +6,7 @@
 #include <memory>
 #include <ostream>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf::bench {

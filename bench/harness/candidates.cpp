@@ -11,7 +11,7 @@ namespace rf::bench {
 namespace {
 
 // What rayforge implements so far: a candidate runs when every part of it is
-// here. Flip entries on as structures land (issue 4).
+// here. Flip entries on as structures land.
 bool builder_implemented(const std::string& builder) {
     static const std::set<std::string> names = {"binned",  "sweep",   "sbvh",          "lbvh30", "lbvh63",
                                                 "hlbvh2",  "gridbvh", "gridbvh-split", "ploc",   "+opt"};
@@ -50,9 +50,9 @@ std::vector<Candidate> make_catalogue() {
         {"sbvh", Builder::Sbvh, "Stich et al. 2009, spatial splits"},
         {"lbvh30", Builder::Lbvh30, "Karras 2012, 30-bit Morton codes"},
         {"lbvh63", Builder::Lbvh63, "Karras 2012, 63-bit Morton codes"},
-        {"hlbvh2", Builder::Hlbvh2, "seed 000 ch. 5 (HLBVH2)"},
-        {"gridbvh", Builder::GridBvh, "seed 000 ch. 4 (GridBvh)"},
-        {"gridbvh-split", Builder::GridBvhSplit, "seed 000 ch. 4 (GridBvhSplit, partial triangles)"},
+        {"hlbvh2", Builder::Hlbvh2, "Garanzha 2014, ch. 5 (HLBVH2)"},
+        {"gridbvh", Builder::GridBvh, "Garanzha 2014, ch. 4 (GridBvh)"},
+        {"gridbvh-split", Builder::GridBvhSplit, "Garanzha 2014, ch. 4 (GridBvhSplit, partial triangles)"},
         {"ploc", Builder::Ploc, "Meister and Bittner 2018"},
     };
     const std::pair<const char*, Layout> layouts[] = {
@@ -86,8 +86,8 @@ std::vector<Candidate> make_catalogue() {
 
     for (const auto& [res_name, res] : {std::pair{"32", 32}, {"64", 64}, {"128", 128}, {"auto", 0}}) {
         for (const auto& [structure_name, structure, source] :
-             {std::tuple{"grid", Structure::Grid, "seeds 001/002, 3D-DDA"},
-              {"grid-proximity", Structure::ProximityGrid, "seed 001, proximity clouds"}}) {
+             {std::tuple{"grid", Structure::Grid, "Bogolepov et al., Zlatuška 2009, 3D-DDA"},
+              {"grid-proximity", Structure::ProximityGrid, "Bogolepov et al., proximity clouds"}}) {
             BuildOptions options;
             options.structure = structure;
             options.grid.resolution = res;
@@ -102,7 +102,7 @@ std::vector<Candidate> make_catalogue() {
         BuildOptions options;
         options.structure = Structure::KdTree;
         options.kdtree.traversal = traversal;
-        Candidate c = make("kdtree", "sah", traversal_name, "seed 002, Wald and Havran 2006", options);
+        Candidate c = make("kdtree", "sah", traversal_name, "Zlatuška 2009, Wald and Havran 2006", options);
         c.implemented = structure_implemented("kdtree");
         all.push_back(c);
     }

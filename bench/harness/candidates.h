@@ -1,5 +1,5 @@
 // The catalogue of (structure, builder, layout) combinations the bench knows:
-// every one the seed documents and the issues name, with a flag saying
+// every one the three papers and docs/accel.md name, with a flag saying
 // whether rayforge implements it yet, so presets can run what exists and
 // name what does not.
 #pragma once

@@ -7,7 +7,7 @@
 #include <chrono>
 #include <string>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf::bench {

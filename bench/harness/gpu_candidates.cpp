@@ -11,7 +11,7 @@ namespace {
 std::string default_builder(const std::string& structure) {
     if (structure == "bvh") return to_string(BuildOptions{}.builder);
     if (structure == "kdtree") return "sah";
-    return "uniform-auto";  // grid, grid-proximity: seed 002's resolution rule
+    return "uniform-auto";  // grid, grid-proximity: Zlatuška 2009's resolution rule
 }
 
 }  // namespace

@@ -1,5 +1,5 @@
 // `rayforge bench --paged`: a paged scene traced from budgeted page caches
-// against the same quantised geometry in core (the seed's §6.7.2-6.7.4,
+// against the same quantised geometry in core (Garanzha 2014, §6.7.2-6.7.4,
 // tables 6.3/6.4). Per file:
 //   1. the caches' sizes: two probe opens measure each manager's fixed
 //      tables and bytes per slot, so that a fraction f of the scene becomes
@@ -14,7 +14,7 @@
 //      (paged primitive ids) and the in-core structure freed;
 //   3. per budget, a fresh PagedScene: each ray set traced once from empty
 //      caches (cold), once more to warm up, then --reps times warm (a
-//      running renderer's caches are warm: the seed measures its
+//      running renderer's caches are warm: Garanzha 2014 measures its
 //      iterations), with the caches' and query loop's counts as deltas
 //      around the runs; then the paged path tracer (3 bounces) from empty
 //      caches, pass by pass (the first pass cold).
@@ -42,6 +42,7 @@
 #include "ray_sets.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
+#include "rayforge/world.h"
 
 namespace rf::bench {
 namespace {
@@ -290,15 +291,17 @@ struct Budgets {
     size_t bytes[3] = {0, 0, 0};  // geometry, attributes, textures
 };
 
-std::unique_ptr<PagedScene> open_with(const std::string& path, const Budgets& b, int threads) {
-    PagedSceneOptions options;
+// A paged world with these cache budgets (the path tracer renders worlds).
+std::unique_ptr<World> open_with(const std::string& path, const Budgets& b, int threads) {
+    WorldOptions world;
+    PagedSceneOptions& options = world.paged;
     options.geometry_budget = std::max<size_t>(b.bytes[0], 1);
     options.attribute_budget = std::max<size_t>(b.bytes[1], 1);
     options.texture_budget = std::max<size_t>(b.bytes[2], 1);
     options.memory_budget = options.geometry_budget + options.attribute_budget + options.texture_budget;
     options.threads = threads;
     try {
-        return open_paged_scene(path, options);
+        return open_world(path, world);
     } catch (const std::bad_alloc&) {
         throw Error(path + ": page caches of " + megabytes(double(options.memory_budget)) +
                     " could not be allocated (use smaller --budgets)");
@@ -364,7 +367,7 @@ FileProbe probe_file(const std::string& path, int threads) {
         half.bytes[k] = c.slots >= 4 && fewer < c.slots ? c.memory_bytes - size_t(c.slots - fewer) * c.slot_bytes
                                                         : c.budget_bytes;
     }
-    const std::vector<PageCacheReport> second = open_with(path, half, threads)->caches();
+    const std::vector<PageCacheReport> second = open_with(path, half, threads)->paged_scene().caches();
     for (size_t k = 0; k < 3; ++k) {
         const PageCacheReport &a = first[k], &b = second[k];
         ManagerModel& m = probe.models[k];
@@ -385,15 +388,15 @@ uint32_t target_slots(const ManagerModel& m, double f, bool* clamped) {
 // started from an upper bound): at most two smaller opens, each kept only
 // when it still holds the target.
 void tighten_textures(const std::string& path, const ManagerModel& m, uint32_t target, int threads, Budgets& budgets,
-                      std::unique_ptr<PagedScene>& scene) {
+                      std::unique_ptr<World>& scene) {
     for (int step = 0; step < 2; ++step) {
-        const uint32_t slots = scene->caches()[2].slots;
+        const uint32_t slots = scene->paged_scene().caches()[2].slots;
         if (slots <= target) return;
         Budgets trial = budgets;
         trial.bytes[2] -= std::min(trial.bytes[2] - 1, size_t(slots - target) * m.slot_bytes);
         try {
-            std::unique_ptr<PagedScene> smaller = open_with(path, trial, threads);
-            if (smaller->caches()[2].slots < target) return;
+            std::unique_ptr<World> smaller = open_with(path, trial, threads);
+            if (smaller->paged_scene().caches()[2].slots < target) return;
             scene = std::move(smaller);
             budgets = trial;
         } catch (const Error&) {
@@ -405,8 +408,8 @@ void tighten_textures(const std::string& path, const ManagerModel& m, uint32_t t
 // Opens `path` with caches of f of the scene: per manager the model's budget
 // for round(f * pages) slots, raised and reopened (at most twice) where a
 // manager made fewer slots, the textures' tightened where they made more.
-std::unique_ptr<PagedScene> open_at_fraction(const std::string& path, const std::vector<ManagerModel>& models,
-                                             double f, int threads, std::vector<PagedCacheFigures>& figures) {
+std::unique_ptr<World> open_at_fraction(const std::string& path, const std::vector<ManagerModel>& models, double f,
+                                        int threads, std::vector<PagedCacheFigures>& figures) {
     Budgets budgets;
     uint32_t targets[3] = {0, 0, 0};
     figures.assign(3, {});
@@ -415,10 +418,10 @@ std::unique_ptr<PagedScene> open_at_fraction(const std::string& path, const std:
         targets[k] = target_slots(models[k], f, &figures[k].clamped);
         budgets.bytes[k] = models[k].bytes_for(targets[k]);
     }
-    std::unique_ptr<PagedScene> scene;
+    std::unique_ptr<World> scene;
     for (int attempt = 0; attempt < 3; ++attempt) {
         scene = open_with(path, budgets, threads);
-        const std::vector<PageCacheReport> caches = scene->caches();
+        const std::vector<PageCacheReport> caches = scene->paged_scene().caches();
         bool short_of_slots = false;
         for (size_t k = 0; k < 3; ++k) {
             if (caches[k].slots >= targets[k]) continue;
@@ -428,7 +431,7 @@ std::unique_ptr<PagedScene> open_at_fraction(const std::string& path, const std:
         if (!short_of_slots) break;
     }
     if (!models[2].linear) tighten_textures(path, models[2], targets[2], threads, budgets, scene);
-    const std::vector<PageCacheReport> caches = scene->caches();
+    const std::vector<PageCacheReport> caches = scene->paged_scene().caches();
     for (size_t k = 0; k < 3; ++k) {
         figures[k].pages = caches[k].pages;
         figures[k].slots = caches[k].slots;
@@ -530,7 +533,8 @@ PagedBenchRow run_ray_set(PagedScene& scene, const TracedSet& set, double budget
 
 // The paged path tracer at one budget from empty caches: the first pass
 // cold, the others warm (slowdown against f = 1 is filled in later).
-PagedBenchRow run_path_tracing(PagedScene& scene, const Camera& camera, double budget, const PagedBenchConfig& config) {
+PagedBenchRow run_path_tracing(World& world, const Camera& camera, double budget, const PagedBenchConfig& config) {
+    PagedScene& scene = world.paged_scene();
     RenderOptions options;
     options.width = config.width;
     options.height = config.height;
@@ -540,7 +544,7 @@ PagedBenchRow run_path_tracing(PagedScene& scene, const Camera& camera, double b
     options.threads = config.threads;
     scene.clear_caches();
     scene.reset_stats();
-    const std::unique_ptr<Renderer> renderer = make_paged_renderer(scene, camera, options);
+    const std::unique_ptr<Renderer> renderer = make_renderer(world, camera, options);
     PagedBenchRow row;
     row.file = scene.info().path;
     row.workload = "path";
@@ -630,12 +634,12 @@ PagedFileResult run_paged_bench(const std::string& path, const PagedBenchConfig&
 
     for (double f : config.budgets) {
         std::vector<PagedCacheFigures> figures;
-        const std::unique_ptr<PagedScene> scene = open_at_fraction(path, models, f, config.threads, figures);
+        const std::unique_ptr<World> scene = open_at_fraction(path, models, f, config.threads, figures);
         summary.budgets.emplace_back(f, figures);
         for (const TracedSet& set : sets) {
             log << "paged bench: " << path << ": cache " << budget_label(f) << ": " << set.name << " ("
                 << thousands(set.rays.size()) << " rays)\n";
-            result.rows.push_back(run_ray_set(*scene, set, f, config));
+            result.rows.push_back(run_ray_set(scene->paged_scene(), set, f, config));
         }
         log << "paged bench: " << path << ": cache " << budget_label(f) << ": path tracing, " << config.passes
             << " passes\n";

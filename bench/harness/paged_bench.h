@@ -25,7 +25,7 @@ struct PagedBenchConfig {
     int width = 1024, height = 768;  // one camera ray per pixel centre, from the file's camera
     int repetitions = 5;             // timed traces per (budget, ray set) after the cold one and a warm-up; medians
     int passes = 4;                  // path-tracing passes per budget (the first is the cold one)
-    int max_depth = 3;               // path bounces (the seed's 3)
+    int max_depth = 3;               // path bounces (Garanzha 2014's 3)
     int threads = 0;                 // 0 = all cores
     // The shadow set's light; unset: the file's first light (PagedScene
     // lights), and no shadow set when there is none.

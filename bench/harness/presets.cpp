@@ -9,7 +9,7 @@ std::vector<Preset> make_presets() {
     std::vector<Preset> all;
     {
         Preset p;
-        p.name = "seed001";
+        p.name = "bogolepov";
         p.description = "uniform grid vs proximity-cloud grid at 32^3/64^3/128^3, direct only (P+S) and with "
                         "secondary rays (P+S+R); the paper's Lexus (~325k triangles, 512x512) is replaced by "
                         "scenes of similar size";
@@ -24,12 +24,13 @@ std::vector<Preset> make_presets() {
         p.candidates.push_back("bvh/binned/bvh2");  // the reference every table is anchored to
         p.gpu_kernels = {GpuKernel::Grid, GpuKernel::ProximityGrid, GpuKernel::AilaLaine, GpuKernel::Cwbvh};
         p.configuration_table = true;
-        p.notes = {"seed001 reports frames per second as direct / direct+secondary; here: P+S and P+S+R trace ms"};
+        p.notes = {"Bogolepov et al. report frames per second as direct / direct+secondary; here: P+S and P+S+R "
+                   "trace ms"};
         all.push_back(p);
     }
     {
         Preset p;
-        p.name = "seed002";
+        p.name = "zlatuska2009";
         p.description = "grid vs kd-tree vs BVH for P, PS, PSR at 256^2, 512^2, 1024^2 with steps and tests per "
                         "ray, build times and memory";
         p.scenes = {"bunny", "dragon", "buddha-res3", "conference", "bart-robots", "bart-museum", "bart-kitchen"};
@@ -48,7 +49,7 @@ std::vector<Preset> make_presets() {
     }
     {
         Preset p;
-        p.name = "seed000";
+        p.name = "garanzha2014";
         p.description = "BVH builders: build time, SAH and formula-4.2 quality, trace speed on primary and "
                         "diffuse rays (dissertation tables 4.1, 4.2, 5.1, 5.2)";
         p.scenes = {"conference", "dragon", "sponza"};

@@ -1,12 +1,12 @@
-// Named configurations that reproduce the seed documents' tables with
+// Named configurations that reproduce the three papers' tables with
 // whatever rayforge implements so far (../shared/docs/seeds/):
-//  seed001: uniform grid vs proximity grid at 32^3, 64^3, 128^3, direct only
-//           (primary + shadow) and with secondary (reflection) rays;
-//  seed002: grid vs kd-tree vs BVH for P, PS, PSR at 256^2 .. 1024^2, with
-//           steps and primitive tests per ray (tables 5.9-5.11) and build
-//           time and memory (tables 5.3-5.6);
-//  seed000: BVH builders' build time and quality (formula 4.2) on the
-//           dissertation's scenes (tables 4.1, 5.1).
+//  bogolepov: uniform grid vs proximity grid at 32^3, 64^3, 128^3, direct only
+//             (primary + shadow) and with secondary (reflection) rays;
+//  zlatuska2009 (Zlatuška 2009): grid vs kd-tree vs BVH for P, PS, PSR at
+//             256^2 .. 1024^2, with steps and primitive tests per ray
+//             (tables 5.9-5.11) and build time and memory (tables 5.3-5.6);
+//  garanzha2014 (Garanzha 2014): BVH builders' build time and quality
+//             (formula 4.2) on the dissertation's scenes (tables 4.1, 5.1).
 // With `--device cuda` each preset's structures are also traced by the GPU
 // kernels of the same structures (grid -> grid, grid-proximity ->
 // grid-proximity, kdtree -> kd-short-stack and kd-restart, bvh -> aila-laine

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "math/random.h"
 #include "render/sampling.h"

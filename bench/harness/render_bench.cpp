@@ -6,10 +6,11 @@
 #include <iomanip>
 
 #include "bench_runner.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/io/scene_io.h"
 #include "ray_sets.h"
 #include "rayforge/core/error.h"
+#include "rayforge/world.h"
 
 namespace rf::bench {
 namespace {
@@ -90,14 +91,13 @@ void gpu_rows(const LoadedScene& loaded, const Scene& scene, const ViewSetup& vi
         progress << "render bench: " << loaded.spec.name << ' ' << integrator << ' ' << config.width << 'x'
                  << config.height << " depth " << config.max_depth << " on " << to_string(device) << ' '
                  << candidate.label() << '\n';
-        BuildOptions build = candidate.build.options;
-        build.threads = config.threads;
-        build.device = device;
-        build.gpu_kernel = candidate.kernel;
-        const std::unique_ptr<Accel> accel = build_accel(loaded.geometry, build);
-        RenderOptions options = base;
-        options.device = device;
-        const std::unique_ptr<Renderer> renderer = make_renderer(scene, loaded.geometry, *accel, view.camera, options);
+        WorldOptions world_options;
+        world_options.device = device;
+        world_options.build = candidate.build.options;
+        world_options.build.threads = config.threads;
+        world_options.build.gpu_kernel = candidate.kernel;
+        const std::unique_ptr<World> world = make_world(scene, world_options);
+        const std::unique_ptr<Renderer> renderer = make_renderer(*world, view.camera, base);
         renderer->render_pass();  // warm-up
         std::vector<double> pass_ms;
         uint64_t rays = 0;
@@ -107,7 +107,7 @@ void gpu_rows(const LoadedScene& loaded, const Scene& scene, const ViewSetup& vi
             rays += renderer->last_pass().closest_rays + renderer->last_pass().shadow_rays;
         }
         RenderBenchRecord rec = new_record(loaded, integrator, config);
-        rec.accel = accel->stats().name;
+        rec.accel = world->accel().stats().name;
         rec.device = to_string(device);
         rec.gpu = gpu_device_name(config.gpu_device);
         rec.pass_ms = median(pass_ms);
@@ -120,10 +120,10 @@ void gpu_rows(const LoadedScene& loaded, const Scene& scene, const ViewSetup& vi
 }
 
 // The CPU row: a recorded warm-up pass whose queries are replayed without shading.
-RenderBenchRecord cpu_row(const LoadedScene& loaded, const Scene& scene, const ViewSetup& view, const Accel& accel,
-                          const std::string& integrator, const RenderOptions& options,
-                          const RenderBenchConfig& config) {
-    const std::unique_ptr<Renderer> renderer = make_renderer(scene, loaded.geometry, accel, view.camera, options);
+RenderBenchRecord cpu_row(const LoadedScene& loaded, World& world, const ViewSetup& view, const std::string& integrator,
+                          const RenderOptions& options, const RenderBenchConfig& config) {
+    const std::unique_ptr<Renderer> renderer = make_renderer(world, view.camera, options);
+    const Accel& accel = world.accel();
     std::vector<TracedRay> rays;
     renderer->render_pass_recorded(rays);
     std::vector<double> pass_ms, trace_ms, batch_ms;
@@ -157,11 +157,12 @@ std::vector<RenderBenchRecord> run_render_bench(const LoadedScene& loaded, const
     std::vector<RenderBenchRecord> records;
     const ViewSetup view = make_view_setup(loaded, 0, config.width, config.height);
     const Scene scene = lit_scene(loaded, view, config.add_sky);
-    std::unique_ptr<Accel> accel;
+    std::unique_ptr<World> world;
     if (config.cpu) {
-        BuildOptions build = config.build;
-        build.threads = config.threads;
-        accel = build_accel(loaded.geometry, build);
+        WorldOptions options;
+        options.build = config.build;
+        options.build.threads = config.threads;
+        world = make_world(scene, options);
     }
     for (const std::string& integrator : config.integrators) {
         RenderOptions options;
@@ -175,7 +176,7 @@ std::vector<RenderBenchRecord> run_render_bench(const LoadedScene& loaded, const
         if (!config.cpu) continue;
         progress << "render bench: " << loaded.spec.name << ' ' << integrator << ' ' << config.width << 'x'
                  << config.height << " depth " << config.max_depth << '\n';
-        records.push_back(cpu_row(loaded, scene, view, *accel, integrator, options, config));
+        records.push_back(cpu_row(loaded, *world, view, integrator, options, config));
     }
     return records;
 }

@@ -8,7 +8,7 @@
 
 #include "accel/bvh/builders/grid_bvh.h"
 #include "accel/bvh/builders/hlbvh2.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "device_build_report.h"
 
 namespace rf::bench {

@@ -1,7 +1,7 @@
 // Build-stage breakdowns of the dissertation's GPU builders run on the CPU:
 // GridBvh / GridBvhSplit (its table 4.1) and HLBVH2 (its table 5.1), and of
 // the builders that run on a CUDA device (--device cuda). Printed by the
-// seed000 preset after its main tables.
+// garanzha2014 preset after its main tables.
 #pragma once
 
 #include <iosfwd>
@@ -26,7 +26,7 @@ struct StageBreakdown {
 // `threads` threads (0 = all cores) and keeps the build with the median total.
 std::vector<StageBreakdown> measure_stage_breakdowns(const LoadedScene& scene, int threads, int repetitions);
 
-// The device builders (issue 7: lbvh30, lbvh63, hlbvh2, ploc, gridbvh,
+// The device builders (lbvh30, lbvh63, hlbvh2, ploc, gridbvh,
 // gridbvh-split, the uniform grid with and without proximity clouds) and the
 // device layout conversions of the default BVH (aila-laine, cwbvh) on CUDA
 // device `device`, each the build with the median device time of

@@ -1,10 +1,13 @@
 // Umbrella header: the public C++ API of rayforge, everything a program
-// needs to load a scene, build a structure on a device (rf::Device: the CPU
-// or a CUDA device), trace rays, render progressively and write images.
+// needs to open a scene as a world on a device (rf::World, rf::Device: the
+// CPU or a CUDA device), move it through time, trace rays, render
+// progressively and write images; and the lower floors: structures built
+// over flat triangles (rf::build_accel, rf::build_bvh) and paged files.
 #pragma once
 
 #include "rayforge/accel/accel.h"
 #include "rayforge/accel/build_report.h"
+#include "rayforge/accel/dynamic_accel.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/backend/device.h"
 #include "rayforge/core/error.h"
@@ -21,3 +24,4 @@
 #include "rayforge/scene/camera.h"
 #include "rayforge/scene/scene.h"
 #include "rayforge/scene/scene_geometry.h"
+#include "rayforge/world.h"

@@ -2,7 +2,7 @@
 // Accel inherits. (The options, their checks and names: build_options.cpp.)
 #include "backend/cpu/ray_batches.h"
 #include "rayforge/accel/accel.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 
 #include <cmath>
 #include <utility>
@@ -11,6 +11,7 @@
 
 #include "accel/accel_factories.h"
 #include "accel/brute_force.h"
+#include "accel/device_structure.h"
 #include "backend/backends.h"
 #include "accel/bvh/builders/build_bvh.h"
 #include "accel/bvh/bvh_accel.h"
@@ -55,8 +56,9 @@ std::unique_ptr<Accel> cpu::build_accel(const SceneGeometry& geometry, const Bui
     throw Error("build options: unknown structure");
 }
 
-std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options,
+std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& requested,
                                    const ProgressCallback& progress) {
+    const BuildOptions options = with_device_structure(requested);
     validate_build_options(options);
     if (progress) progress(0.0);
     std::unique_ptr<Accel> accel = options.device.is_cuda() ? cuda::build_accel(geometry, options)

@@ -9,6 +9,7 @@
 
 #include "rayforge/accel/accel.h"
 #include "rayforge/accel/dynamic_accel.h"
+#include "accel/device_structure.h"
 #include "rayforge/core/error.h"
 
 namespace rf {
@@ -63,6 +64,29 @@ void validate_build_options(const BuildOptions& options) {
         throw Error("build options: the GPU kernel " + to_string(options.gpu_kernel) + " traverses a " +
                     to_string(structure_of(options.gpu_kernel)) + ", not a " + to_string(options.structure));
     }
+}
+
+BuildOptions with_device_structure(BuildOptions options) {
+    if (!options.device.is_cuda()) return options;
+    const Structure traversed = structure_of(options.gpu_kernel);
+    if (traversed == options.structure) return options;
+    if (options.structure == Structure::Bvh) {  // the default structure: the kernel decides
+        options.structure = traversed;
+        return options;
+    }
+    if (options.gpu_kernel == kDefaultGpuKernel) {  // the default kernel: the structure's own
+        switch (options.structure) {
+            case Structure::Grid: options.gpu_kernel = GpuKernel::Grid; return options;
+            case Structure::ProximityGrid: options.gpu_kernel = GpuKernel::ProximityGrid; return options;
+            case Structure::KdTree: options.gpu_kernel = GpuKernel::KdShortStack; return options;
+            case Structure::BruteForce:
+                throw Error("build options: no GPU kernel traverses brute force (" + to_string(options.device) +
+                            ": choose bvh, kdtree, grid or grid-proximity)");
+            case Structure::Bvh: break;
+        }
+    }
+    throw Error("build options: the GPU kernel " + to_string(options.gpu_kernel) + " traverses a " +
+                to_string(traversed) + ", not a " + to_string(options.structure));
 }
 
 Structure structure_of(GpuKernel kernel) {

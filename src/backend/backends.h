@@ -17,6 +17,7 @@
 #include "rayforge/backend/device.h"
 #include "rayforge/render/display.h"
 #include "rayforge/render/render.h"
+#include "rayforge/world.h"
 
 namespace rf {
 
@@ -30,8 +31,12 @@ namespace cpu {
 // count references placed in leaves); other structures report nothing.
 std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOptions& options,
                                    const ProgressCallback& progress = {});
-std::unique_ptr<Renderer> make_renderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
-                                        const Camera& camera, const RenderOptions& options);
+// A renderer for an in-core world on the CPU.
+std::unique_ptr<Renderer> make_renderer(std::shared_ptr<WorldCore> world, const Camera& camera,
+                                        const RenderOptions& options);
+// A renderer for a paged world (ooc/paged_renderer.cpp).
+std::unique_ptr<Renderer> make_paged_renderer(std::shared_ptr<WorldCore> world, const Camera& camera,
+                                              const RenderOptions& options);
 
 }  // namespace cpu
 
@@ -49,9 +54,9 @@ Bvh build_bvh(std::span<const Triangle> triangles, const BuildOptions& options, 
 // with update.method refit, rebuild or two-level (rf::Error for the others).
 std::unique_ptr<DynamicAccel> build_dynamic_accel(const Scene& scene, const SceneGeometry& geometry,
                                                   const BuildOptions& build, const UpdateOptions& update);
-// A renderer for an accel from cuda::build_accel.
-std::unique_ptr<Renderer> make_renderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
-                                        const Camera& camera, const RenderOptions& options);
+// A renderer for an in-core world on a CUDA device (its structures are cuda::build_accel's).
+std::unique_ptr<Renderer> make_renderer(std::shared_ptr<WorldCore> world, const Camera& camera,
+                                        const RenderOptions& options);
 // OpenGL buffer `gl_buffer` of the current context registered on device `index`.
 std::unique_ptr<GlPixelBuffer> register_gl_pixel_buffer(int index, unsigned int gl_buffer);
 

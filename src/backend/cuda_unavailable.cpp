@@ -8,7 +8,7 @@ namespace rf::cuda {
 
 bool backend_built() { return false; }
 DeviceListing list_devices() { return {{}, kCudaNotBuilt}; }
-void require_device(int) { throw Error(kCudaNotBuilt); }
+void require_device(int index) { throw Error("cuda:" + std::to_string(index) + ": " + kCudaNotBuilt); }
 std::unique_ptr<Accel> build_accel(const SceneGeometry&, const BuildOptions& options) {
     throw Error(to_string(options.device) + ": " + kCudaNotBuilt);
 }
@@ -19,9 +19,8 @@ std::unique_ptr<DynamicAccel> build_dynamic_accel(const Scene&, const SceneGeome
                                                   const UpdateOptions&) {
     throw Error(to_string(build.device) + ": " + kCudaNotBuilt);
 }
-std::unique_ptr<Renderer> make_renderer(const Scene&, const SceneGeometry&, const Accel&, const Camera&,
-                                        const RenderOptions& options) {
-    throw Error(to_string(options.device) + ": " + kCudaNotBuilt);
+std::unique_ptr<Renderer> make_renderer(std::shared_ptr<WorldCore>, const Camera&, const RenderOptions&) {
+    throw Error(kCudaNotBuilt);
 }
 
 std::unique_ptr<GlPixelBuffer> register_gl_pixel_buffer(int index, unsigned int) {

@@ -1,5 +1,5 @@
 // Procedural animated scenes: analogues of the UNC dynamic benchmarks that
-// seed 000 measures its BVH update (ch. 2) and cluster builds (ch. 3) on
+// Garanzha 2014 measures its BVH update (ch. 2) and cluster builds (ch. 3) on
 // (Exploding Dragon 252K, Cloth on ball 92K, Colliding N bodies 146K
 // triangles; 3.33 s, 100 frames). No Stanford models, no downloads.
 //
@@ -41,7 +41,7 @@
 #include <unordered_map>
 #include <utility>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "io/scene_building.h"
 #include "math/random.h"
 #include "scene/animation_eval.h"

@@ -1,5 +1,5 @@
-// Procedural animated scenes (issue 21), analogues of the UNC dynamic
-// benchmarks the seed measures (3.33 s, 100 frames at 30 fps): "explode" (a
+// Procedural animated scenes (docs/animation.md), analogues of the UNC dynamic
+// benchmarks Garanzha 2014 measures (3.33 s, 100 frames at 30 fps): "explode" (a
 // noise-displaced rock cut into connected fragments that fly apart and spin),
 // "cloth" (a cloth grid draping over a ball, simulated at load time) and
 // "nbody" (small rigid bodies bursting out of one dense heap in a box). Each
@@ -22,7 +22,7 @@
 
 namespace rf {
 
-inline constexpr size_t kExplodeDefaultTriangles = 250000;  // the seed's Exploding Dragon: 252K
+inline constexpr size_t kExplodeDefaultTriangles = 250000;  // Garanzha 2014's Exploding Dragon: 252K
 inline constexpr size_t kClothDefaultTriangles = 92000;     // Cloth on ball: 92K
 inline constexpr size_t kNbodyDefaultTriangles = 146000;    // Colliding N bodies: 146K
 inline constexpr uint32_t kAnimatedSceneDefaultSeed = 2101u;

@@ -2,7 +2,7 @@
 
 #include <iostream>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/image_io.h"
 

@@ -1,5 +1,5 @@
 // The GPU's geometry page manager and query loop for a paged scene
-// (Garanzha 2014, §6.2 and Listing 6.1; the seed's §2.2, 2.3 and 2.6),
+// (Garanzha 2014, §6.2, Listing 6.1 and §6.3.3),
 // written once for the CUDA backend (backend/cuda/paged_device.cu) and its
 // CPU replay (tests/paged_device_logic_test.cpp): two levels, host memory ->
 // device memory, with the host level itself a PageCache filled from disk.
@@ -8,7 +8,7 @@
 //     (fresh state, sort key), its iteration (paged_iteration itself), its
 //     result, and the scatter of one 16-byte word of a staged page into its
 //     slot;
-//   - DevicePoolPlanner (host): the seed's swap decision for the device pool
+//   - DevicePoolPlanner (host): the dissertation's swap decision for the device pool
 //     over a host mirror of the device's descriptors: uses counted into
 //     TimeUsed (reset every 10th call), free slots first while the pool
 //     fills, else the stable sort by the LFU key (cached: TimeUsed,
@@ -23,10 +23,10 @@
 //     launches and copies (see there).
 //
 // Why the decision runs on the host: the device's descriptors are copied to
-// the host anyway to find the requested pages (the seed's "array of
-// requested page indices"), and the host level must be asked for them; the
-// seed sorts on the GPU, at the cost of a radix sort per swap. One pass over
-// the page ids here is a counting sort, as cheap as the copy.
+// the host anyway to find the requested pages (the dissertation's "array
+// of requested page indices"), and the host level must be asked for them;
+// the dissertation sorts on the GPU, at the cost of a radix sort per swap.
+// One pass over the page ids here is a counting sort, as cheap as the copy.
 #pragma once
 
 #include <algorithm>
@@ -117,7 +117,7 @@ struct StagingLayout {
     [[nodiscard]] uint64_t bytes() const { return table_bytes() + uint64_t(max_pages) * slot_bytes; }
 };
 
-// The seed's gather array: 1 MB, or one page when pages are larger.
+// Garanzha 2014's gather array: 1 MB, or one page when pages are larger.
 inline constexpr uint64_t kDefaultStagingBytes = uint64_t(1) << 20;
 
 [[nodiscard]] inline StagingLayout staging_layout(uint64_t staging_bytes, uint64_t slot_bytes) {
@@ -186,7 +186,7 @@ struct DevicePoolStats {
 
 // The LFU key of a descriptor (Fig. 6.2), as a bucket of the counting sort:
 // TimeUsed 0-31 for a cached page, 32 for a requested missing one, 33 (the
-// seed's 64) for the others.
+// dissertation's 64) for the others.
 [[nodiscard]] RF_HDI uint32_t lfu_bucket(uint32_t d) {
     if (!(d & kOutOfCore)) return (d & kTimeMask) >> kTimeShift;
     return (d & kRequested) ? kTimeMax + 1 : kTimeMax + 2;
@@ -204,7 +204,7 @@ inline constexpr uint32_t kLfuBuckets = kTimeMax + 3;
 // Between swaps the mirror and the device agree.
 class DevicePoolPlanner {
 public:
-    static constexpr uint32_t kTimeResetPeriod = 10;  // swaps between TimeUsed resets (the seed's example)
+    static constexpr uint32_t kTimeResetPeriod = 10;  // swaps between TimeUsed resets (Garanzha 2014's example)
     static constexpr uint32_t kNoPage = 0xFFFFFFFFu;
 
     DevicePoolPlanner(uint32_t page_count, uint32_t slot_count) : slot_count_(slot_count) {
@@ -314,7 +314,7 @@ private:
         page_ids_.swap(sorted_);
     }
 
-    // The seed's LFU swap: after the stable sort the page ids are [cached,
+    // Garanzha 2014's LFU swap: after the stable sort the page ids are [cached,
     // least used first | requested | others]; the first k requested take
     // the free slots and the slots of the `evicted` least used pages
     // (pageIDs[0, evicted) swapped with pageIDs[cached, cached + evicted)),

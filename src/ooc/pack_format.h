@@ -31,7 +31,7 @@ namespace rf::pack {
 inline constexpr char kMagic[8] = {'R', 'F', 'P', 'A', 'C', 'K', '\r', '\n'};
 inline constexpr uint32_t kVersion = 1;
 
-// The seed's parameters (§6.3, §6.7.1).
+// Garanzha 2014's parameters (§6.3, §6.7.1).
 inline constexpr uint32_t kQuadsPerPage = 4096;      // NP
 inline constexpr uint32_t kBranchQuads = 65536;      // NB, the SAH-branch limit
 inline constexpr uint32_t kPageLeafQuads = 15;       // bottom-BVH leaves

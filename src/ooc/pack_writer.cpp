@@ -12,7 +12,7 @@
 #include <cstring>
 #include <vector>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "ooc/page_builder.h"
 #include "ooc/quad_pairing.h"
 #include "ooc/top_grid.h"

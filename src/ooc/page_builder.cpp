@@ -133,8 +133,8 @@ std::vector<uint32_t> build_page_bvh(const std::vector<Quad>& quads, std::vector
     BuildOptions options;
     options.builder = Builder::BinnedSah;
     options.max_leaf_size = int(kPageLeafQuads);
-    // Leaves of several quads: 35 bytes a quad with the structure (31 at cost 4, the
-    // seed's 29; 47 at cost 1) for 2% slower tracing than cost 1 (docs/paged-scenes.md).
+    // Leaves of several quads: 35 bytes a quad with the structure (31 at cost 4,
+    // Garanzha 2014's 29; 47 at cost 1) for 2% slower tracing than cost 1 (docs/paged-scenes.md).
     options.sah.traversal = kPageNodeCost;
     options.threads = 0;  // already inside the writer's parallel loop over pages
     Bvh bvh = build_bvh(boxes, options);

@@ -7,7 +7,7 @@
 // 64 unrequested pages with one OR; the TimeUsed reset and the WasRead
 // marks touch only the cached pages (a missing page's descriptor holds
 // nothing but its OOC and Requested bits). The sort is needed only once the
-// pool is full, and it is the seed's stable sort by key done as the keys
+// pool is full, and it is Garanzha 2014's stable sort by key done as the keys
 // allow: the cached pages lie in the prefix of the page ids, so a counting
 // sort over the 32 TimeUsed values orders them; the missing pages only
 // split into requested (32) and not (64), a stable partition that tests a
@@ -33,7 +33,7 @@
 #include <mutex>
 #include <span>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "core/assert.h"
 #include "rayforge/core/error.h"
 
@@ -42,7 +42,7 @@ namespace rf::pack {
 namespace {
 
 constexpr uint32_t kNoPage = 0xFFFFFFFFu;
-constexpr uint32_t kTimeResetPeriod = 10;  // swaps between TimeUsed resets (the seed's example)
+constexpr uint32_t kTimeResetPeriod = 10;  // swaps between TimeUsed resets (Garanzha 2014's example)
 constexpr uint32_t kScanBlock = 64;        // descriptors tested at once for a request
 constexpr uint32_t kPrefetchAhead = 16;    // page ids, in the sort's gather of TimeUsed
 
@@ -213,7 +213,7 @@ void PageCache::admit_to_free_slots(uint32_t missing) {
     }
 }
 
-// Step 2 with a full pool (or too few free slots): the seed's LFU swap.
+// Step 2 with a full pool (or too few free slots): Garanzha 2014's LFU swap.
 // After the sort, page_ids_ is [cached by TimeUsed | requested | the rest];
 // the first `admitted` requested pages take the free slots and the slots of
 // the `evicted` least used cached pages, the others are deferred, and the
@@ -230,7 +230,7 @@ void PageCache::admit_least_used_out(uint32_t missing) {
         Admission& a = admissions_[i];
         a = {page_ids_[cached + i], 0, false};
         if (i < evicted) {
-            a.slot = descriptors_[page_ids_[i]] & kSlotMask;  // the seed's pairwise swap
+            a.slot = descriptors_[page_ids_[i]] & kSlotMask;  // Garanzha 2014's pairwise swap
             evict(page_ids_[i]);
         } else {
             a.slot = free_slots_.back();

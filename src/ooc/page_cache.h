@@ -14,7 +14,7 @@
 //      requested: 32; missing: 64) with a stable counting sort, and admits
 //      the first min(requested, slots) requested pages in that order, into
 //      the free slots and the slots of as many least used cached pages
-//      (the seed's swap of pageIDs[0, k) with pageIDs[cached, cached + k));
+//      (Garanzha 2014's swap of pageIDs[0, k) with pageIDs[cached, cached + k));
 //      pages beyond the pool are deferred: their rays ask again;
 //   3. reads the admitted pages (in parallel), verifies them, updates the
 //      descriptors (a new page: its slot, TimeUsed 0, WasRead 0); clears
@@ -22,7 +22,7 @@
 // After a swap the cached prefix of the page ids lists the admitted pages
 // first (in the order above), then the cached pages that stayed, in their
 // (sorted) order, so that among equal keys the pages admitted last are
-// evicted first, as with the seed's swap. A page that fails to read
+// evicted first, as with Garanzha 2014's swap. A page that fails to read
 // (rf::Error, thrown after the bookkeeping, the other pages of the call
 // loaded) stays out of core and its slot becomes free.
 // It returns how many pages it loaded; 0 with requests pending cannot

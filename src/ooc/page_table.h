@@ -12,7 +12,7 @@
 // A ray marks a page it uses or needs with one atomic OR of Requested (only
 // when the bit is not yet set, so a popular page costs one read); TimeUsed is
 // counted from Requested by the manager between iterations, not by the
-// rays (the safe reading of §6.2, see the digest's note 4). Written once for
+// rays (the safe reading of Garanzha 2014, §6.2). Written once for
 // both backends (host atomics / CUDA atomics).
 #pragma once
 

@@ -4,7 +4,7 @@
 #include <chrono>
 
 #include "backend/cpu/cpu_wavefront.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "ooc/attribute_records.h"
 #include "rayforge/core/error.h"
 #include "render/ray_sort_key.h"

@@ -1,4 +1,4 @@
-// The CPU renderer of paged scenes (rf::make_paged_renderer): the in-core
+// The CPU renderer of paged worlds (cpu::make_paged_renderer): the in-core
 // renderer's integrators over a view whose shading records and textures
 // come through the page managers (Garanzha 2014, §6.4-6.5).
 //
@@ -22,9 +22,11 @@
 #include <atomic>
 #include <vector>
 
+#include "backend/backends.h"
 #include "backend/cpu/cpu_wavefront.h"
 #include "backend/cpu/host_film_renderer.h"
-#include "backend/cpu/parallel.h"
+#include "core/assert.h"
+#include "core/parallel.h"
 #include "ooc/paged_scene_impl.h"
 #include "rayforge/core/error.h"
 #include "render/pixel_sample.h"
@@ -40,20 +42,6 @@ struct PagedShadingView : SceneView {
     uint32_t paged_texture_count = 0;
     [[nodiscard]] const PagedTexture* texture(int32_t id) const {
         return (id >= 0 && uint32_t(id) < paged_texture_count) ? &paged_textures[id] : nullptr;
-    }
-};
-
-// The scene the renderer base sees: lights, environment and a bounds-only
-// geometry (no triangles, so no emitters: paged emissive surfaces shine
-// when hit but are not sampled as lights).
-struct PagedShell {
-    Scene scene;
-    SceneGeometry geometry;
-    explicit PagedShell(const pack::PackFile& file) {
-        scene.lights.assign(file.lights().begin(), file.lights().end());
-        scene.environment = file.environment();
-        scene.materials.push_back(Material{});
-        geometry.bounds = file.resident().bounds;
     }
 };
 
@@ -89,15 +77,15 @@ struct ReplayTracer {
     }
 };
 
-class PagedRenderer final : private PagedShell, public cpu::HostFilmRenderer {
+// The world's scene is the file's shell (world/world.cpp): lights,
+// environment and a bounds-only geometry (no triangles, so no emitters:
+// paged emissive surfaces shine when hit but are not sampled as lights).
+class PagedRenderer final : public cpu::HostFilmRenderer {
 public:
-    PagedRenderer(pack::PagedSceneImpl& paged, const Camera& camera, const RenderOptions& options)
-        : PagedShell(paged.file()),
-          HostFilmRenderer(PagedShell::scene, PagedShell::geometry, paged.accel(), camera, options),
-          paged_(paged) {
-        if (options.device.is_cuda())
-            throw Error("paged scenes render on the CPU (the GPU page manager is not built yet)");
-        reset();
+    PagedRenderer(std::shared_ptr<WorldCore> world, pack::PagedSceneImpl& paged, const Camera& camera,
+                  const RenderOptions& options)
+        : HostFilmRenderer(std::move(world), camera, options), paged_(paged) {
+        start();
     }
 
     void render_pass_recorded(std::vector<TracedRay>&) override {
@@ -257,10 +245,11 @@ bool PagedRenderer::replay_chunk(uint32_t first, uint32_t count, const std::atom
 
 }  // namespace
 
-std::unique_ptr<Renderer> make_paged_renderer(PagedScene& scene, const Camera& camera, const RenderOptions& options) {
-    auto* paged = dynamic_cast<pack::PagedSceneImpl*>(&scene);
-    if (!paged) throw Error("make_paged_renderer: the scene was not opened by rf::open_paged_scene");
-    return std::make_unique<PagedRenderer>(*paged, camera, options);
+std::unique_ptr<Renderer> cpu::make_paged_renderer(std::shared_ptr<WorldCore> world, const Camera& camera,
+                                                   const RenderOptions& options) {
+    auto* paged = dynamic_cast<pack::PagedSceneImpl*>(world->paged.get());
+    RF_ASSERT(paged, "a paged world not opened by open_paged_scene");
+    return std::make_unique<PagedRenderer>(std::move(world), *paged, camera, options);
 }
 
 }  // namespace rf

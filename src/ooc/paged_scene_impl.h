@@ -37,6 +37,7 @@ public:
     [[nodiscard]] const PagedSceneInfo& info() const override { return info_; }
     [[nodiscard]] Camera camera() const override;
     [[nodiscard]] std::vector<Light> lights() const override { return {file_->lights().begin(), file_->lights().end()}; }
+    [[nodiscard]] Environment environment() const override { return file_->environment(); }
     [[nodiscard]] const Accel& accel() const override { return *accel_; }
     [[nodiscard]] std::vector<PageCacheReport> caches() const override;
     [[nodiscard]] PagedQueryStats query_stats() const override;

@@ -53,7 +53,7 @@ struct PagedSceneView {
 inline constexpr uint32_t kRayFinished = 0xFFFFFFFFu;
 inline constexpr uint32_t kRayNotStarted = 0xFFFFFFFEu;
 
-// What a ray keeps between iterations (the seed's restart record).
+// What a ray keeps between iterations (Garanzha 2014's restart record).
 struct PagedRayState {
     Hit hit;                          // nearest so far; hit.t starts at ray.tmax
     uint32_t restart = kRayNotStarted; // cell to resume in, or kRayNotStarted / kRayFinished

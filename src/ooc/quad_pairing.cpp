@@ -1,6 +1,6 @@
 #include "ooc/quad_pairing.h"
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 
 #include <algorithm>
 

@@ -11,7 +11,7 @@
 // miss also reads the tile under the lock, which holds up only the threads
 // that want the same shard.
 //
-// Eviction: the seed's manager (§6.2) keeps a 5-bit use count per page,
+// Eviction: Garanzha 2014's manager (§6.2) keeps a 5-bit use count per page,
 // zeroes the counts every 10th swap and evicts the least used after a sort
 // of all page ids. Here a victim is needed at every miss, by one thread
 // under one shard's lock, so there is no swap to sort at: instead the
@@ -19,7 +19,7 @@
 // counts. A use adds 1 (saturating at 31, the loading use included); the
 // hand evicts the first slot whose count is 0 and halves the counts of the
 // slots it passes. So counts age at the pace of the shard's misses, as the
-// seed's periodic reset ages them at the pace of its swaps, and a tile used
+// dissertation's periodic reset ages them at the pace of its swaps, and a tile used
 // n times survives about log2(n) + 1 sweeps, an approximate LFU that favours
 // recent use, found in O(1) amortised steps (a sweep ends within 6 turns).
 //
@@ -43,7 +43,7 @@ namespace {
 
 constexpr uint32_t kNoTile = 0xFFFFFFFFu;
 constexpr uint32_t kEmptyEntry = 0xFFFFFFFFu;
-constexpr uint8_t kMaxUses = 31;              // 5-bit counts, as the seed's TimeUsed
+constexpr uint8_t kMaxUses = 31;              // 5-bit counts, as Garanzha 2014's TimeUsed
 constexpr uint32_t kMinSlotsPerShard = 8;     // fewer shards rather than shards of a few slots
 constexpr uint32_t kMaxSlots = 0x7FFFFFFFu;
 

@@ -7,7 +7,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "math/color.h"
 #include "render/sampling.h"
 #include "render/texture_mip.h"

@@ -1,7 +1,7 @@
-// The public face of rendering (rayforge/render/render.h): make_renderer
-// (the backend chosen by options.device), the progressive loop and the
-// one-shot render, the same for every backend. (The options' checks and
-// names: render_options.cpp.)
+// The public face of rendering (rayforge/render/render.h, rayforge/world.h):
+// make_renderer (the backend chosen by the world: paged, or in core on its
+// device), the progressive loop and the one-shot render, the same for every
+// backend. (The options' checks and names: render_options.cpp.)
 
 #include <algorithm>
 #include <chrono>
@@ -9,6 +9,8 @@
 #include "rayforge/core/error.h"
 #include "backend/backends.h"
 #include "rayforge/render/render.h"
+#include "rayforge/world.h"
+#include "world/world_core.h"
 
 namespace rf {
 namespace {
@@ -17,10 +19,12 @@ using Clock = std::chrono::steady_clock;
 
 }  // namespace
 
-std::unique_ptr<Renderer> make_renderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
-                                        const Camera& camera, const RenderOptions& options) {
-    if (options.device.is_cuda()) return cuda::make_renderer(scene, geometry, accel, camera, options);
-    return cpu::make_renderer(scene, geometry, accel, camera, options);
+std::unique_ptr<Renderer> make_renderer(World& world, const Camera& camera, const RenderOptions& options) {
+    std::shared_ptr<WorldCore> core = core_of(world);
+    core->commit({});
+    if (core->paged) return cpu::make_paged_renderer(std::move(core), camera, options);
+    if (core->device.is_cuda()) return cuda::make_renderer(std::move(core), camera, options);
+    return cpu::make_renderer(std::move(core), camera, options);
 }
 
 void render_progressive(Renderer& renderer, const PassCallback& after_pass, const ProgressCallback& progress) {
@@ -51,9 +55,8 @@ void render_progressive(Renderer& renderer, const PassCallback& after_pass, cons
     if (progress && reported < 1.0) progress(1.0);  // stopped early by the budget or the callback
 }
 
-Image render(const Scene& scene, const SceneGeometry& geometry, const Accel& accel, const Camera& camera,
-             const RenderOptions& options, const ProgressCallback& progress) {
-    const std::unique_ptr<Renderer> renderer = make_renderer(scene, geometry, accel, camera, options);
+Image render(World& world, const Camera& camera, const RenderOptions& options, const ProgressCallback& progress) {
+    const std::unique_ptr<Renderer> renderer = make_renderer(world, camera, options);
     render_progressive(*renderer, {}, progress);
     return renderer->image();
 }

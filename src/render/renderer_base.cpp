@@ -8,19 +8,27 @@ namespace rf {
 
 using Clock = std::chrono::steady_clock;
 
-RendererBase::RendererBase(const Scene& scene, const SceneGeometry& geometry, const Accel& accel, const Camera& camera,
-                           const RenderOptions& options)
-    : scene_(scene), geometry_(geometry), accel_(accel), camera_(camera), options_(options) {
+RendererBase::RendererBase(std::shared_ptr<WorldCore> world, const Camera& camera, const RenderOptions& options)
+    : world_(std::move(world)), camera_(camera), options_(options) {
     validate_render_options(options);
-    if (!(accel.device() == options.device))
-        throw Error("render on " + to_string(options.device) + ": the acceleration structure was built for " +
-                    to_string(accel.device()) + " (BuildOptions::device)");
 }
 
-void RendererBase::reset() {
-    tables_ = std::make_unique<SceneTables>(scene_, geometry_);
+void RendererBase::start() {
+    const WorldCore::FrameReading frame(*world_);
+    follow(frame);
+}
+
+void RendererBase::follow(const WorldCore::FrameReading& frame) {
+    if (frame.version() == version_) return;
+    scene_ = &frame.scene();
+    geometry_ = &frame.geometry();
+    accel_ = &frame.accel();
+    version_ = frame.version();
+    bounds_ = geometry_->bounds;
+    structure_changed();
+    tables_ = std::make_unique<SceneTables>(*scene_, *geometry_);
     tables_changed();
-    settings_ = make_integrator_settings(options_, camera_, tables_->view(), geometry_.bounds);
+    settings_ = make_integrator_settings(options_, camera_, tables_->view(), bounds_);
     reset_films();
     restart();
 }
@@ -32,6 +40,8 @@ void RendererBase::restart() {
 }
 
 bool RendererBase::render_pass(const ProgressCallback& progress, const std::atomic<bool>* cancel) {
+    const WorldCore::FrameReading frame(*world_);
+    follow(frame);
     const Clock::time_point start = Clock::now();
     PassStats pass;
     if (!run_pass(progress, nullptr, cancel, pass)) {
@@ -45,6 +55,8 @@ bool RendererBase::render_pass(const ProgressCallback& progress, const std::atom
 }
 
 void RendererBase::run_recorded_pass(std::vector<TracedRay>& log) {
+    const WorldCore::FrameReading frame(*world_);
+    follow(frame);
     const Clock::time_point start = Clock::now();
     PassStats pass;
     run_pass({}, &log, nullptr, pass);
@@ -53,7 +65,7 @@ void RendererBase::run_recorded_pass(std::vector<TracedRay>& log) {
 }
 
 void RendererBase::render_pass_recorded(std::vector<TracedRay>&) {
-    throw Error("render_pass_recorded: the renderer on " + to_string(options_.device) + " does not record its rays");
+    throw Error("render_pass_recorded: the renderer on " + to_string(device()) + " does not record its rays");
 }
 
 void RendererBase::finish_pass(PassStats& pass) {
@@ -67,33 +79,27 @@ void RendererBase::finish_pass(PassStats& pass) {
 
 Image RendererBase::film_mean(Film film) const {
     Image image = film_sums(film);
-    const float scale = passes_ > 0 ? 1.0f / float(passes_) : 0.0f;
+    const float scale = passes() > 0 ? 1.0f / float(passes()) : 0.0f;
     for (Vec3f& p : image.pixels) p = p * scale;
     return image;
 }
 
+// The tables are the renderer's own and the bounds those of the frame last
+// followed, so neither needs the world; a newer frame redoes the settings at
+// the next pass.
 void RendererBase::set_camera(const Camera& camera) {
     camera_ = camera;
-    settings_ = make_integrator_settings(options_, camera_, tables_->view(), geometry_.bounds);
+    settings_ = make_integrator_settings(options_, camera_, tables_->view(), bounds_);
     reset_films();
     restart();
 }
 
 void RendererBase::set_options(const RenderOptions& options) {
     validate_render_options(options);
-    if (!(options.device == options_.device))
-        throw Error("set_options: a renderer on " + to_string(options_.device) + " cannot move to " +
-                    to_string(options.device) + "; make a new one");
     options_ = options;
-    settings_ = make_integrator_settings(options_, camera_, tables_->view(), geometry_.bounds);
+    settings_ = make_integrator_settings(options_, camera_, tables_->view(), bounds_);
     reset_films();
     restart();
-}
-
-void RendererBase::scene_changed(SceneChange) {
-    // Materials and geometry both feed the shading records, the emitter
-    // tables and the scene's scale: every table is rebuilt either way.
-    reset();
 }
 
 }  // namespace rf

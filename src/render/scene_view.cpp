@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 
 namespace rf {
 namespace {

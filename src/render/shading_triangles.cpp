@@ -1,6 +1,6 @@
 #include "render/shading_triangles.h"
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/memory_budget.h"
 
 namespace rf {

@@ -24,7 +24,7 @@
 #include <cstring>
 #include <limits>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/scene/scene.h"
 
@@ -490,7 +490,9 @@ GeometryChange Scene::set_time(float t) {
     return change;
 }
 
-int Animation::frame_count() const {
+int Animation::frame_count() const { return animation_frame_count(start, end, frames_per_second); }
+
+int animation_frame_count(float start, float end, float frames_per_second) {
     const double frames = (double(end) - double(start)) * double(frames_per_second);
     if (!(frames > 0.0)) return 1;
     return int(std::min(std::floor(frames + 1e-3) + 1.0, double(std::numeric_limits<int>::max())));

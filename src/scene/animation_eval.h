@@ -24,6 +24,9 @@ Affine3f node_local_transform(const AnimatedNode& node, float t);
 // Its own visibility at time t (not its parents').
 bool node_visible(const AnimatedNode& node, float t);
 
+// Frames from start to end inclusive at `fps` (Animation::frame_count, TimeRange::frame_count).
+int animation_frame_count(float start, float end, float fps);
+
 // Scene::finalize's part: validates the animation (one-line rf::Error
 // "animation: ...") and fills the rest positions, normals and camera.
 void finalize_animation(Scene& scene);

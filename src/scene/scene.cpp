@@ -50,25 +50,12 @@ Camera Scene::framing(const Box3f& b) {
     return cam;
 }
 
-void Scene::finalize() {
-    if (materials.empty()) {
-        Material m;
-        m.name = "default";
-        materials.push_back(m);
-    }
-    if (instances.empty())
-        for (uint32_t i = 0; i < meshes.size(); ++i) instances.push_back({i, Affine3f::identity()});
-    for (Mesh& mesh : meshes) {
-        if (mesh.material_ids.empty()) mesh.material_ids.assign(mesh.triangle_count(), 0);
-        mesh.validate();
+void Scene::validate_materials() const {
+    for (const Mesh& mesh : meshes)
         for (uint32_t id : mesh.material_ids)
             if (id >= materials.size())
                 throw Error("mesh '" + mesh.name + "': material " + std::to_string(id) + " of " +
                             std::to_string(materials.size()));
-    }
-    for (const Instance& inst : instances)
-        if (inst.mesh >= meshes.size())
-            throw Error("instance references mesh " + std::to_string(inst.mesh) + " of " + std::to_string(meshes.size()));
     auto check_texture = [&](int32_t t, const std::string& what, const std::string& material) {
         if (t != kNoTexture && (t < 0 || size_t(t) >= textures.size()))
             throw Error("material '" + material + "': " + what + " texture " + std::to_string(t) + " of " +
@@ -82,6 +69,24 @@ void Scene::finalize() {
     }
     if (environment.texture != -1 && (environment.texture < 0 || size_t(environment.texture) >= textures.size()))
         throw Error("environment texture " + std::to_string(environment.texture) + " of " + std::to_string(textures.size()));
+}
+
+void Scene::finalize() {
+    if (materials.empty()) {
+        Material m;
+        m.name = "default";
+        materials.push_back(m);
+    }
+    if (instances.empty())
+        for (uint32_t i = 0; i < meshes.size(); ++i) instances.push_back({i, Affine3f::identity()});
+    for (Mesh& mesh : meshes) {
+        if (mesh.material_ids.empty()) mesh.material_ids.assign(mesh.triangle_count(), 0);
+        mesh.validate();
+    }
+    for (const Instance& inst : instances)
+        if (inst.mesh >= meshes.size())
+            throw Error("instance references mesh " + std::to_string(inst.mesh) + " of " + std::to_string(meshes.size()));
+    validate_materials();
     finalize_animation(*this);  // src/scene/animation.cpp: validation, rest positions and camera
 }
 

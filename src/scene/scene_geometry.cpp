@@ -4,7 +4,7 @@
 #include <cmath>
 #include <string>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 

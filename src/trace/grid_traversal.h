@@ -1,17 +1,18 @@
 // Closest-hit and any-hit traversal of a uniform grid: the 3D-DDA of
 // Amanatides and Woo, "A Fast Voxel Traversal Algorithm for Ray Tracing"
-// (1987), as used by seeds 001 (§2.1.3) and 002 (§4.3.1.1), plus the
-// proximity-cloud skipping of seed 001 (§2.1.5). Written once for the host
-// and the CUDA backend: the grid is passed as raw pointers (GridView).
+// (1987), as used by Bogolepov et al. (§2.1.3) and Zlatuška 2009 (§4.3.1.1),
+// plus the proximity-cloud skipping of Bogolepov et al. (§2.1.5). Written
+// once for the host and the CUDA backend: the grid is passed as raw pointers
+// (GridView).
 //
-// Robustness choices (why the code differs from the seeds' pseudocode):
+// Robustness choices (why the code differs from the papers' pseudocode):
 //  - Cell boundaries are the float planes origin + i * cell_size, and every
 //    crossing distance is recomputed from its plane, (plane - org) / dir,
 //    instead of accumulating t += delta: no drift over thousands of cells,
 //    and the start cell is chosen to agree with those same plane distances.
 //    The build inflates every cell by a margin, so a triangle within rounding
 //    of a boundary is in the cells on both sides.
-//  - Seed 002's false-hit rule (a hit outside the current cell must not end
+//  - Zlatuška 2009's false-hit rule (a hit outside the current cell must not end
 //    the walk) is kept in its stronger form: the closest hit found so far is
 //    remembered and shrinks the ray's interval; the walk stops only once the
 //    next cell starts beyond it (with a few ulps of slack). A hit beyond the

@@ -1,4 +1,4 @@
-// Single-ray kd-tree traversals of seed 002 (Zlatuska 2009, sec. 4.3.1.2),
+// Single-ray kd-tree traversals of Zlatuška 2009 (sec. 4.3.1.2),
 // written once for the host and the CUDA backend on a plain view struct:
 //  - Stack:      the classic recursive (near child first) traversal with a
 //                full stack of far children;
@@ -13,7 +13,7 @@
 // the finished leaf's tmax and pick children by comparing distances; leaves
 // that share one distance (zero-thickness cells from planar geometry or
 // perfect splits, rays through cell corners) are then either revisited
-// forever or skipped (the flaw the seed notes). Here the descent that follows a
+// forever or skipped (the flaw Zlatuška 2009 notes). Here the descent that follows a
 // finished leaf is told where to go by a trail, one bit per depth ("the near
 // child of the branch at this depth is finished": the role tmin plays in
 // kd-restart, but exact). The next leaf is the far child of the deepest branch

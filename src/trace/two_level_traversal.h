@@ -15,7 +15,7 @@
 //   Hit intersect(const BlasView&, const Ray&) const;
 //   bool occluded(const BlasView&, const Ray&) const;
 // Bvh2Blas (below) is the RF_HD one over BvhView; the CPU accel plugs in
-// the SIMD BVH4/8 traversal (accel/dynamic/two_level_accel.cpp).
+// the SIMD BVH4/8 traversal (accel/update/two_level_accel.cpp).
 // Bvh2BlasCounted counts the bottom levels' box and triangle tests into the
 // TraversalCounters the top level counts its own box tests into.
 #pragma once

@@ -75,7 +75,7 @@ TEST(GpuBvhRefit, FrameAfterFrameOnTheDevice) {
     EXPECT_EQ(device.arrays().leaf_count, cpu.leaf_count());
     Bvh gpu = cpu;
     for (uint32_t frame = 0; frame < 5; ++frame) {
-        // Forwards, then back to frame 1 (the seed's 100 -> 1 -> 100).
+        // Forwards, then back to frame 1 (Garanzha 2014 ch. 2's 100 -> 1 -> 100).
         const uint32_t t = frame < 3 ? frame : 4 - frame;
         const SceneGeometry g = moved(start, t, 0.4f * float(1 + t));
         refit_bvh(cpu, g.triangles);

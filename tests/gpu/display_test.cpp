@@ -12,24 +12,22 @@
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
 #include "rayforge/render/render.h"
+#include "rayforge/world.h"
 
 namespace rf {
 namespace {
 
 TEST(GpuDisplay, DeviceImageHoldsThePngCodesOfTheMean) {
     RF_REQUIRE_DEVICE();
-    const Scene scene = make_builtin_scene("cornell");
-    const SceneGeometry g = SceneGeometry::build(scene);
-    const auto accel = build_accel(g, gpu_test::on_device(GpuKernel::Cwbvh));
+    const auto world = open_world("builtin:cornell", gpu_test::world_on_device(GpuKernel::Cwbvh));
     RenderOptions o;
     o.width = 64;
     o.height = 48;
     o.spp = 3;
     o.integrator = IntegratorKind::Path;
-    o.device = accel->device();
-    const auto renderer = make_renderer(scene, g, *accel, scene.camera_or_default(), o);
+    const auto renderer = make_renderer(*world, world->camera(), o);
     const auto display = renderer->make_display_image();
-    EXPECT_EQ(display->device(), o.device);
+    EXPECT_EQ(display->device(), world->device());
     render_progressive(*renderer);
     const Image mean = renderer->image();
     for (ToneCurve curve : {ToneCurve::Clamp, ToneCurve::Aces}) {
@@ -54,10 +52,8 @@ TEST(GpuDisplay, DeviceImageHoldsThePngCodesOfTheMean) {
         EXPECT_LE(off_by_one, mean.pixels.size() * 3 / 100) << "the encodings should rarely disagree";
     }
     // A CPU display image is not one of this renderer's.
-    const auto cpu_accel = build_accel(g);
-    RenderOptions on_cpu = o;
-    on_cpu.device = {};
-    const auto cpu = make_renderer(scene, g, *cpu_accel, scene.camera_or_default(), on_cpu);
+    const auto cpu_world = open_world("builtin:cornell");
+    const auto cpu = make_renderer(*cpu_world, cpu_world->camera(), o);
     EXPECT_THROW(renderer->update_display(*cpu->make_display_image(), {}), Error);
 }
 

@@ -16,6 +16,7 @@
 
 #include "gpu_test_device.h"
 #include "rayforge/accel/dynamic_accel.h"
+#include "rayforge/world.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
 #include "rayforge/render/render.h"
@@ -98,27 +99,24 @@ TEST(GpuDynamicAccel, EveryDeviceMethodFollowsTheAnimationBothWays) {
 
 TEST(GpuDynamicAccel, TwoLevelRenderMatchesTheCpu) {
     RF_REQUIRE_DEVICE();
-    Scene scene = load_scene("builtin:nbody@40k");
-    scene.set_time(scene.animation.frame_time(0));
-    SceneGeometry g = SceneGeometry::build(scene);
-    BuildOptions build = gpu_test::on_device(GpuKernel::Bvh2);
-    const auto device = build_dynamic_accel(scene, g, build, UpdateOptions{UpdateMethod::TwoLevel, {}, {}});
-    const GeometryChange change = scene.set_time(scene.animation.frame_time(50));
-    g.update(scene, change);
-    device->update(change);
-    const auto cpu_accel = build_accel(g);
+    WorldOptions two_level = gpu_test::world_on_device(GpuKernel::Bvh2);
+    two_level.update.method = UpdateMethod::TwoLevel;
+    const auto device = open_world("builtin:nbody@40k", two_level);
+    device->commit();
+    const float t = device->time_range().frame_time(50);
+    device->set_time(t);
+    const auto on_cpu = open_world("builtin:nbody@40k");
+    on_cpu->set_time(t);
 
     RenderOptions o;
     o.width = 96;
     o.height = 72;
     o.spp = 1;
     o.integrator = IntegratorKind::Normals;
-    const Camera camera = scene.camera_or_default();
-    const auto cpu = make_renderer(scene, g, *cpu_accel, camera, o);
+    const Camera camera = on_cpu->camera();
+    const auto cpu = make_renderer(*on_cpu, camera, o);
     render_progressive(*cpu);
-    RenderOptions on_device = o;
-    on_device.device = device->current().device();
-    const auto gpu = make_renderer(scene, g, device->current(), camera, on_device);
+    const auto gpu = make_renderer(*device, camera, o);
     render_progressive(*gpu);
     size_t close = 0;
     const Image a = cpu->image(), b = gpu->image();

@@ -13,6 +13,7 @@
 
 #include "rayforge/accel/accel.h"
 #include "rayforge/backend/device.h"
+#include "rayforge/world.h"
 
 namespace rf::gpu_test {
 
@@ -27,6 +28,14 @@ inline BuildOptions on_device(GpuKernel kernel, BuildOptions options = {}, int i
     options.device = Device{Device::Kind::Cuda, index};
     options.gpu_kernel = kernel;
     options.structure = structure_of(kernel);
+    return options;
+}
+
+// A world's options for `kernel` on cuda:N (the world builds the kernel's structure there).
+inline WorldOptions world_on_device(GpuKernel kernel, int index = 0) {
+    WorldOptions options;
+    options.device = Device{Device::Kind::Cuda, index};
+    options.build.gpu_kernel = kernel;
     return options;
 }
 

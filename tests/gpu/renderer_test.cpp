@@ -16,16 +16,15 @@
 #include "rayforge/io/scene_io.h"
 #include "rayforge/core/error.h"
 #include "rayforge/render/render.h"
+#include "rayforge/world.h"
 
 namespace rf {
 namespace {
 
-// A renderer on cuda:0 over a CWBVH built there; `accel` keeps the structure alive.
-std::unique_ptr<Renderer> device_renderer(const Scene& scene, const SceneGeometry& g, RenderOptions o,
-                                          std::unique_ptr<Accel>& accel) {
-    accel = build_accel(g, gpu_test::on_device(GpuKernel::Cwbvh));
-    o.device = accel->device();
-    return make_renderer(scene, g, *accel, scene.camera_or_default(), o);
+// A renderer of `scene` on cuda:0 over a CWBVH built there; `world` keeps the world alive.
+std::unique_ptr<Renderer> device_renderer(const Scene& scene, const RenderOptions& o, std::unique_ptr<World>& world) {
+    world = make_world(scene, gpu_test::world_on_device(GpuKernel::Cwbvh));
+    return make_renderer(*world, world->camera(), o);
 }
 
 struct Rendered {
@@ -34,15 +33,11 @@ struct Rendered {
 };
 
 Rendered render_both(const std::string& scene_name, const RenderOptions& options, GpuKernel kernel) {
-    const Scene scene = make_builtin_scene(scene_name);
-    const SceneGeometry g = SceneGeometry::build(scene);
-    const auto accel = build_accel(g);
-    const auto cpu = make_renderer(scene, g, *accel, scene.camera_or_default(), options);
+    const auto on_cpu = open_world("builtin:" + scene_name);
+    const auto cpu = make_renderer(*on_cpu, on_cpu->camera(), options);
     render_progressive(*cpu);
-    const auto device_accel = build_accel(g, gpu_test::on_device(kernel));
-    RenderOptions on_device = options;
-    on_device.device = device_accel->device();
-    const auto gpu = make_renderer(scene, g, *device_accel, scene.camera_or_default(), on_device);
+    const auto on_device = open_world("builtin:" + scene_name, gpu_test::world_on_device(kernel));
+    const auto gpu = make_renderer(*on_device, on_device->camera(), options);
     render_progressive(*gpu);
     EXPECT_EQ(gpu->passes(), options.spp);
     return {cpu->image(), gpu->image(), cpu->stats(), gpu->stats()};
@@ -118,17 +113,16 @@ TEST(GpuRenderer, PathTracedMeanAgreesWithTheCpu) {
 TEST(GpuRenderer, RaySortingChangesNothing) {
     RF_REQUIRE_DEVICE();
     const Scene scene = make_builtin_scene("cornell");
-    const SceneGeometry g = SceneGeometry::build(scene);
     RenderOptions o;
     o.width = 64;
     o.height = 48;
     o.spp = 4;
     o.integrator = IntegratorKind::Path;
-    std::unique_ptr<Accel> accel_a, accel_b;
-    const auto plain = device_renderer(scene, g, o, accel_a);
+    std::unique_ptr<World> world_a, world_b;
+    const auto plain = device_renderer(scene, o, world_a);
     render_progressive(*plain);
     o.sort_rays = true;
-    const auto sorted = device_renderer(scene, g, o, accel_b);
+    const auto sorted = device_renderer(scene, o, world_b);
     render_progressive(*sorted);
     const Image a = plain->image(), b = sorted->image();
     // Sorting only permutes independent paths. A path's hits do not depend on
@@ -145,7 +139,6 @@ TEST(GpuRenderer, RaySortingChangesNothing) {
 TEST(GpuRenderer, WhiteFurnaceRendersOne) {
     RF_REQUIRE_DEVICE();
     const Scene scene = make_builtin_scene("furnace");
-    const SceneGeometry g = SceneGeometry::build(scene);
     RenderOptions o;
     o.width = 32;
     o.height = 32;
@@ -153,8 +146,8 @@ TEST(GpuRenderer, WhiteFurnaceRendersOne) {
     o.integrator = IntegratorKind::Path;
     o.max_depth = 64;
     o.rr_depth = 64;
-    std::unique_ptr<Accel> accel;
-    const auto gpu = device_renderer(scene, g, o, accel);
+    std::unique_ptr<World> world;
+    const auto gpu = device_renderer(scene, o, world);
     render_progressive(*gpu);
     const Image image = gpu->image();
     double sum = 0.0;
@@ -165,15 +158,14 @@ TEST(GpuRenderer, WhiteFurnaceRendersOne) {
 TEST(GpuRenderer, AovsAndCallbacks) {
     RF_REQUIRE_DEVICE();
     const Scene scene = make_builtin_scene("cornell");
-    const SceneGeometry g = SceneGeometry::build(scene);
     RenderOptions o;
     o.width = 32;
     o.height = 24;
     o.spp = 10;
     o.integrator = IntegratorKind::Path;
     o.aovs = true;
-    std::unique_ptr<Accel> accel;
-    const auto gpu = device_renderer(scene, g, o, accel);
+    std::unique_ptr<World> world;
+    const auto gpu = device_renderer(scene, o, world);
     int calls = 0;
     render_progressive(*gpu, [&](const Renderer& r) { return ++calls < 3 && r.passes() > 0; });
     EXPECT_EQ(calls, 3);

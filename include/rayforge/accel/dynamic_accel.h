@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "rayforge/accel/accel.h"
@@ -58,18 +59,28 @@ struct ClusterOptions {
     bool cluster_subtrees = false;
 };
 
+// The method used when neither the caller nor the scene file names one:
+// measured as fast as adapt on these scenes, with a full build's quality
+// (docs/benchmarks.md).
+inline constexpr UpdateMethod kDefaultUpdateMethod = UpdateMethod::Rebuild;
+
 struct UpdateOptions {
-    UpdateMethod method = UpdateMethod::Refit;
+    // Unset: the scene file's own method (Scene::render_settings.update),
+    // else kDefaultUpdateMethod. A world refuses a method its device cannot
+    // run when it is set here, and replaces it, with a note, when it comes
+    // from the file.
+    std::optional<UpdateMethod> method;
     AdaptOptions adapt;
     ClusterOptions clusters;
 };
 
 // One update's work and result.
 struct UpdateStats {
+    bool updated = false;     // World::set_time and geometry_replaced: the structure was updated (something moved)
     double update_ms = 0.0;   // the tree (or trees) brought up to date
     double layout_ms = 0.0;   // the traversal layout refitted or re-collapsed (included in update_ms)
     double sah_cost = 0.0;    // of the canonical tree after the update (C_trav = C_int = 1)
-    // Adapt only (the seed's Figs. 2.7-2.10): nodes refitted, subtrees
+    // Adapt only (Garanzha 2014, Figs. 2.7-2.10): nodes refitted, subtrees
     // rebuilt (and their nodes), subtrees migrated.
     uint64_t refitted_nodes = 0;
     uint64_t rebuilt_subtrees = 0;

@@ -31,8 +31,8 @@ struct PagedWriteOptions {
     int zstd_level = 3;                  // 1..19
     bool compact_attributes = false;     // 32-byte shading records (half-float uvs, no normal-map tangents) instead of 64
     uint32_t attribute_page_bytes = 4096;  // a power of two, 1 KB .. 1 MB
-    uint32_t quads_per_page = 4096;        // 64 .. 4096 (the seed's NP = 4K)
-    int grid_resolution = 32;              // top-grid cells on the longest axis, 1 .. 256 (the seed's 32^3)
+    uint32_t quads_per_page = 4096;        // 64 .. 4096 (Garanzha 2014's NP = 4K)
+    int grid_resolution = 32;              // top-grid cells on the longest axis, 1 .. 256 (Garanzha 2014's 32^3)
     int threads = 0;                       // 0 = all cores
 };
 
@@ -93,7 +93,7 @@ struct PagedSceneOptions {
     size_t texture_budget = 0;
     int threads = 0;  // 0 = all cores
     // Rendering: paths (or pixels) traced as one batch of query loops; larger
-    // batches amortise page loads (the seed: up to 16M rays) and cost about
+    // batches amortise page loads (Garanzha 2014: up to 16M rays) and cost about
     // 250 bytes a path. 1024 .. 16M.
     uint32_t batch_paths = 1u << 18;
 };
@@ -133,6 +133,7 @@ public:
     [[nodiscard]] virtual const PagedSceneInfo& info() const = 0;
     [[nodiscard]] virtual Camera camera() const = 0;  // the file's camera
     [[nodiscard]] virtual std::vector<Light> lights() const = 0;  // the file's lights
+    [[nodiscard]] virtual Environment environment() const = 0;    // the file's environment
     // Ray queries through the geometry cache (batches run the re-entrant
     // query loop; a single ray is a batch of one). Hit::prim identifies a
     // paged triangle (page * 8192 + slot), not an input triangle.
@@ -151,13 +152,6 @@ bool is_paged_scene_file(const std::string& path);
 // Opens and checks a paged scene file; rf::Error for a missing, truncated or
 // corrupted file or budgets that hold no page.
 std::unique_ptr<PagedScene> open_paged_scene(const std::string& path, const PagedSceneOptions& options = {});
-
-// A progressive renderer (CPU) for a paged scene, with the same integrators
-// and options as make_renderer: the path tracer runs as a wavefront whose
-// extensions and shadow rays are batched query loops, the other integrators
-// run per pixel, replaying each pixel until all its queries are answered.
-// `scene` must outlive it.
-std::unique_ptr<Renderer> make_paged_renderer(PagedScene& scene, const Camera& camera, const RenderOptions& options);
 
 // Every page of a paged file decoded into world-space triangles, in page
 // order (triangle i of the result is paged triangle

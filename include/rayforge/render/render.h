@@ -1,7 +1,8 @@
-// Rendering a scene through an acceleration structure, on the CPU or a CUDA
-// device: one-shot (rf::render) or progressive (rf::Renderer, one sample per
-// pixel per pass accumulated into float films, with a callback after each
-// pass, and a camera, options or scene that may change between passes).
+// Rendering a world (rayforge/world.h), on the device it lives on:
+// one-shot (rf::render) or progressive (rf::Renderer, one sample per pixel
+// per pass accumulated into float films, with a callback after each pass,
+// and a camera, options or world that may change between passes).
+// Renderers are made by rf::make_renderer(World&, ...).
 #pragma once
 
 #include <atomic>
@@ -24,7 +25,6 @@
 namespace rf {
 
 struct RenderOptions {
-    Device device;               // where to render: cpu (default), cuda, cuda:N; the accel must be built there
     int width = 640;
     int height = 480;
     int spp = 1;                 // samples per pixel = progressive passes (1 = pixel centre for whitted/normals)
@@ -84,18 +84,15 @@ struct PassStats {
     double sort_ms = 0.0;               // wavefront ray sorting (sort_rays)
 };
 
-// What changed in the scene a renderer draws (its Scene and SceneGeometry,
-// changed in place by the caller, who also rebuilds or refits the Accel).
-enum class SceneChange : uint8_t {
-    Materials,  // materials, textures, lights or the environment
-    Geometry,   // triangles (and so shading records and emitters); includes Materials
-};
-
-// Progressive rendering on one device: each pass adds one sample per pixel
-// to float films (colour and, with options.aovs, the first-hit albedo,
-// normal and depth); the image is their mean. Made by make_renderer. Both
-// backends run the same per-sample code, so a CPU and a CUDA render of the
-// same options agree (docs/gpu.md says how closely).
+// Progressive rendering of a world on its device: each pass adds one sample
+// per pixel to float films (colour and, with options.aovs, the first-hit
+// albedo, normal and depth); the image is their mean. Made by
+// make_renderer(World&, ...). Each pass holds the world shared and starts
+// by reading its structure and scene: after World::set_time,
+// materials_changed or geometry_replaced the next pass rebuilds the shading
+// tables and restarts accumulation. Both backends run the same per-sample
+// code, so a CPU and a CUDA render of the same options agree (docs/gpu.md
+// says how closely).
 class Renderer {
 public:
     virtual ~Renderer() = default;
@@ -112,7 +109,7 @@ public:
     virtual void render_pass_recorded(std::vector<TracedRay>& rays) = 0;
     [[nodiscard]] virtual int passes() const = 0;
     [[nodiscard]] virtual const RenderOptions& options() const = 0;
-    [[nodiscard]] virtual Device device() const = 0;
+    [[nodiscard]] virtual Device device() const = 0;  // its world's
     // Summed over the passes since the last restart.
     [[nodiscard]] virtual RenderStats stats() const = 0;
     [[nodiscard]] virtual const PassStats& last_pass() const = 0;
@@ -138,25 +135,10 @@ public:
     // Each of these restarts accumulation (no passes, no stats, black films).
     // The camera moved:
     virtual void set_camera(const Camera& camera) = 0;
-    // New options (integrator, depths, resolution, samples, seed, ...); the
-    // device cannot change. Throws rf::Error for invalid options.
+    // New options (integrator, depths, resolution, samples, seed, ...).
+    // Throws rf::Error for invalid options.
     virtual void set_options(const RenderOptions& options) = 0;
-    // The scene changed in place: shading tables (and their device copies) rebuilt.
-    virtual void scene_changed(SceneChange what) = 0;
-    // An animated scene moved (Scene::set_time, then SceneGeometry::update and
-    // the accel's update): `change` names the meshes and instances that moved.
-    // The shading records of those instances are refreshed and accumulation restarts.
-    virtual void geometry_changed(const GeometryChange& change) {
-        if (change.geometry()) scene_changed(SceneChange::Geometry);
-    }
 };
-
-// A renderer on options.device for `accel`, which must live on that device
-// (BuildOptions::device). Everything passed must outlive the renderer.
-// Throws rf::Error for invalid options, a device that cannot be used or an
-// accel built for another device.
-std::unique_ptr<Renderer> make_renderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
-                                        const Camera& camera, const RenderOptions& options);
 
 // Called after each pass with the renderer; return false to stop early.
 using PassCallback = std::function<bool(const Renderer& renderer)>;
@@ -165,9 +147,6 @@ using PassCallback = std::function<bool(const Renderer& renderer)>;
 // (or `after_pass` returns false); `progress` sees the fraction of the spp.
 void render_progressive(Renderer& renderer, const PassCallback& after_pass = {},
                         const ProgressCallback& progress = {});
-// make_renderer, render_progressive, and the mean image.
-Image render(const Scene& scene, const SceneGeometry& geometry, const Accel& accel, const Camera& camera,
-             const RenderOptions& options, const ProgressCallback& progress = {});
 
 // Throws rf::Error naming the first option out of its range (sizes, spp,
 // depths, budgets); every renderer, CPU or GPU, checks its options with it.

@@ -54,6 +54,9 @@ struct Scene {
     // Adds a default material when there is none, instances each mesh once when
     // there are no instances, and validates every mesh and index; throws rf::Error.
     void finalize();
+    // Every mesh's material ids, and every texture index of the materials and
+    // the environment, in range; throws rf::Error (finalize() calls it).
+    void validate_materials() const;
     // Evaluates the animation at time t (seconds) in place: instance
     // transforms and visibility, deformed meshes' positions and normals, and
     // the camera when it is animated. Returns what moved since the last

@@ -9,7 +9,7 @@
 // counter per node (refit_steps.h resets each counter when its second child
 // arrives, so the plan needs no clearing between frames).
 //
-// Parallelism (TBB via backend/cpu/parallel.h): the parents in a loop over
+// Parallelism (TBB via core/parallel.h): the parents in a loop over
 // nodes; the refit in a loop over leaves, each leaf climbing until it is the
 // first of two children to reach a node, exactly the CUDA kernel's schedule
 // (backend/cuda/bvh_refit.cu). The wide layouts (BVH4/8) are refitted by a
@@ -26,10 +26,8 @@
 #include <string>
 #include <vector>
 
-#include "accel/bvh/builders/build_bvh.h"
 #include "accel/bvh/refit_steps.h"
-#include "accel/dynamic/bvh_updater.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf {
@@ -193,43 +191,5 @@ void refit_wide_bvh(WideBvh<N>& wide, std::span<const Triangle> triangles) {
 
 template void refit_wide_bvh<4>(WideBvh<4>&, std::span<const Triangle>);
 template void refit_wide_bvh<8>(WideBvh<8>&, std::span<const Triangle>);
-
-// ---------------------------------------------------------------------------
-// UpdateMethod::Refit: one build, then a refit per frame.
-
-namespace {
-
-class RefitUpdater final : public BvhUpdater {
-public:
-    RefitUpdater(std::span<const Triangle> triangles, const BuildOptions& build)
-        : threads_(build.threads), triangle_count_(triangles.size()) {
-        bvh_ = build_bvh_on_cpu(triangles, build);
-        plan_ = parallel::with_threads(threads_, [&] { return make_refit_plan(bvh_); });
-    }
-
-    [[nodiscard]] const Bvh& bvh() const override { return bvh_; }
-
-    bool update(std::span<const Triangle> triangles, UpdateStats& stats) override {
-        if (triangles.size() != triangle_count_) {
-            throw Error("refit update: " + std::to_string(triangles.size()) + " triangles, the tree was built over " +
-                        std::to_string(triangle_count_));
-        }
-        parallel::with_threads(threads_, [&] { refit_bvh(bvh_, triangles, plan_); });
-        stats.refitted_nodes = bvh_.nodes.size();
-        return false;  // only boxes changed
-    }
-
-private:
-    int threads_;
-    size_t triangle_count_;
-    Bvh bvh_;
-    RefitPlan plan_;
-};
-
-}  // namespace
-
-std::unique_ptr<BvhUpdater> make_refit_updater(std::span<const Triangle> triangles, const BuildOptions& build) {
-    return std::make_unique<RefitUpdater>(triangles, build);
-}
 
 }  // namespace rf

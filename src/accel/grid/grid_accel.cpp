@@ -6,7 +6,7 @@
 #include <string>
 
 #include "accel/accel_factories.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf {

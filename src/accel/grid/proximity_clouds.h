@@ -1,9 +1,9 @@
-// Proximity clouds (seed 001, §2.1.4, after Karlsson and Ljungstedt 2004):
+// Proximity clouds (Bogolepov et al., §2.1.4, after Karlsson and Ljungstedt 2004):
 // for every empty grid cell, the Chebyshev (L-inf, chessboard) distance in
 // cells to the nearest non-empty cell, so that traversal can skip the cube of
 // cells around it that is known to be empty.
 //
-// The seed's reference for the distance map is missing; we use the linear-time
+// Bogolepov et al.'s reference for the distance map is missing; we use the linear-time
 // separable transform of Meijster, Roerdink and Hesselink, "A General
 // Algorithm for Computing Distance Transforms in Linear Time" (2000), whose
 // per-line lower-envelope pass works for the L-inf metric: because

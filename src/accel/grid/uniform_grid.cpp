@@ -1,8 +1,9 @@
-// Uniform grid build (seeds 001 §2.1.2 and 002 §4.2.1): layout by seed 002's
-// resolution rule, exact triangle/cell overlap by Akenine-Möller's SAT test
-// (seed 001), compact per-cell lists built in parallel by a count pass, a
-// prefix sum and a fill pass. The per-triangle cell enumeration lives in
-// uniform_grid_steps.h, shared with the sort-based device build.
+// Uniform grid build (Bogolepov et al., §2.1.2; Zlatuška 2009, §4.2.1): layout
+// by Zlatuška 2009's resolution rule, exact triangle/cell overlap by
+// Akenine-Möller's SAT test (Bogolepov et al.), compact per-cell lists built
+// in parallel by a count pass, a prefix sum and a fill pass. The
+// per-triangle cell enumeration lives in uniform_grid_steps.h, shared with the
+// sort-based device build.
 #include "accel/grid/uniform_grid.h"
 
 #include <algorithm>
@@ -13,7 +14,7 @@
 
 #include "accel/grid/proximity_clouds.h"
 #include "accel/grid/uniform_grid_steps.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 
@@ -24,7 +25,7 @@ constexpr size_t kTriangleGrain = 256;
 constexpr size_t kCellGrain = size_t(1) << 14;
 // The largest cell count: indices and the +1 offset stay 32-bit.
 constexpr double kMaxCells = 4294967294.0;
-// Seed 002's rule, capped at this many times the cells of a cubic scene.
+// Zlatuška 2009's rule, capped at this many times the cells of a cubic scene.
 constexpr double kAutoCellFactor = 8.0;
 
 double max_abs_coordinate(const Box3f& b) {

@@ -1,14 +1,14 @@
-// Uniform grid over triangles (seeds 001 §2.1.2 and 002 §4.2.1): cubic cells,
-// each cell's triangle list stored compactly as offsets into one flat array
-// of triangle indices (seed 002's "count and offset" per cell; a triangle in
-// several cells is referenced several times).
+// Uniform grid over triangles (Bogolepov et al., §2.1.2; Zlatuška 2009,
+// §4.2.1): cubic cells, each cell's triangle list stored compactly as offsets
+// into one flat array of triangle indices (Zlatuška 2009's "count and offset"
+// per cell; a triangle in several cells is referenced several times).
 //
-// Resolution: `resolution` cells on the longest axis, or seed 002's rule
+// Resolution: `resolution` cells on the longest axis, or Zlatuška 2009's rule
 // (after Purcell) for resolution 0: floor(4 * n^(1/4)) cells on the shortest
 // axis of non-zero extent, cubic cells. The automatic rule is capped at 8 times
 // the cell count of a cubic scene, so that a long thin scene does not explode.
 // Triangles go into every cell they overlap by Akenine-Möller's SAT test
-// (seed 001), with cells inflated by a small margin (see grid_traversal.h).
+// (Bogolepov et al.), with cells inflated by a small margin (see grid_traversal.h).
 #pragma once
 
 #include <array>
@@ -34,7 +34,7 @@ struct GridLayout {
 };
 
 // Chooses the layout over `bounds` (the triangles' bounds) for `triangle_count`
-// triangles; resolution 0 = seed 002's rule. The grid box contains `bounds`
+// triangles; resolution 0 = Zlatuška 2009's rule. The grid box contains `bounds`
 // with a margin on every side. Throws rf::Error for non-finite bounds or more
 // cells than 32-bit cell indices allow.
 GridLayout choose_grid_layout(const Box3f& bounds, size_t triangle_count, int resolution);

@@ -4,7 +4,7 @@
 // exactly the same cells:
 //
 //  - triangle_overlaps_cell_box(): Akenine-Möller's SAT triangle/box test
-//    (seed 001 §2.1.2), in double.
+//    (Bogolepov et al., §2.1.2), in double.
 //  - for_each_overlapped_cell(): the cells a triangle overlaps, cells
 //    inflated by the build's margin: its bounds' cell range, then the SAT
 //    test per cell; large well-shaped triangles walk columns along their
@@ -19,7 +19,7 @@
 //    written in triangle order, so each cell's triangles stay ascending:
 //    the CPU builder's lists.
 //  - chessboard_line_pass(): one cell of a 1D pass of the proximity-cloud
-//    distance transform (seed 001 §2.1.4), the device's variant of
+//    distance transform (Bogolepov et al., §2.1.4), the device's variant of
 //    proximity_clouds.cpp (see the function's comment).
 //
 // Products go through dmul_rn() (core/rounded_arithmetic.h): nvcc would

@@ -1,4 +1,4 @@
-// Queries on the kd-tree of seed 002: leaf walks with cells, depth, and the
+// Queries on the kd-tree of Zlatuška 2009: leaf walks with cells, depth, and the
 // SAH cost (Wald and Havran 2006, eq. 1) the builder minimises greedily.
 #include "accel/kdtree/kdtree.h"
 

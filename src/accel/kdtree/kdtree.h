@@ -1,4 +1,4 @@
-// The SAH kd-tree of seed 002 (Zlatuska 2009, after Wald and Havran 2006):
+// The SAH kd-tree of Zlatuška 2009 (after Wald and Havran 2006):
 // compact 8-byte nodes in the classic layout (split position, axis or leaf
 // flag, child or primitive offset), children stored next to each other.
 #pragma once

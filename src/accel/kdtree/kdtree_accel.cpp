@@ -8,7 +8,7 @@
 
 #include "accel/accel_factories.h"
 #include "accel/kdtree/kdtree_build.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 
 namespace rf {
 namespace {

@@ -1,4 +1,4 @@
-// SAH kd-tree build of seed 002 (Zlatuska 2009, sec. 4.2.2): binned SAH with
+// SAH kd-tree build of Zlatuška 2009 (sec. 4.2.2): binned SAH with
 // min-max bins in the upper levels (Shevtsov, Soupikov and Kapustin 2007),
 // the exact O(N log N) event sweep of Wald and Havran 2006 below
 // kKdExactSweepThreshold references. Optional perfect splits clip straddling
@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "accel/kdtree/polygon_clip.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 

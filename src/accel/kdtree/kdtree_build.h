@@ -1,4 +1,4 @@
-// SAH kd-tree builder of seed 002: binned SAH (min-max bins, Shevtsov et al.
+// SAH kd-tree builder of Zlatuška 2009: binned SAH (min-max bins, Shevtsov et al.
 // 2007) in the upper levels, below them the exact O(N log N) event sweep of
 // Wald and Havran 2006 ("On building fast kd-trees for ray tracing, and on
 // doing that in O(N log N)"), with optional perfect splits and the

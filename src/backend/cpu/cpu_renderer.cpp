@@ -16,7 +16,7 @@
 #include "backend/cpu/accel_tracer.h"
 #include "backend/cpu/cpu_wavefront.h"
 #include "backend/cpu/host_film_renderer.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "core/assert.h"
 #include "rayforge/core/error.h"
 #include "render/counting_tracer.h"
@@ -60,10 +60,9 @@ constexpr int kTileSize = 16;
 
 class CpuRenderer final : public HostFilmRenderer {
 public:
-    CpuRenderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel, const Camera& camera,
-                const RenderOptions& options)
-        : HostFilmRenderer(scene, geometry, accel, camera, options) {
-        reset();
+    CpuRenderer(std::shared_ptr<WorldCore> world, const Camera& camera, const RenderOptions& options)
+        : HostFilmRenderer(std::move(world), camera, options) {
+        start();
     }
 
     void render_pass_recorded(std::vector<TracedRay>& rays) override {
@@ -153,9 +152,9 @@ bool CpuRenderer::wavefront_pass(const ProgressCallback& progress, const std::at
 
 }  // namespace
 
-std::unique_ptr<Renderer> make_renderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
-                                        const Camera& camera, const RenderOptions& options) {
-    return std::make_unique<CpuRenderer>(scene, geometry, accel, camera, options);
+std::unique_ptr<Renderer> make_renderer(std::shared_ptr<WorldCore> world, const Camera& camera,
+                                        const RenderOptions& options) {
+    return std::make_unique<CpuRenderer>(std::move(world), camera, options);
 }
 
 }  // namespace cpu

@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "backend/cpu/accel_tracer.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/accel/accel.h"
 #include "render/counting_tracer.h"
 #include "render/pixel_sample.h"

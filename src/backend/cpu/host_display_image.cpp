@@ -1,6 +1,6 @@
 #include "backend/cpu/host_display_image.h"
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "render/tone_map.h"
 
 namespace rf::cpu {

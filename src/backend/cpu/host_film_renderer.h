@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "backend/cpu/host_display_image.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "render/pixel_sample.h"
 #include "render/renderer_base.h"

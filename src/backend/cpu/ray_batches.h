@@ -8,7 +8,7 @@
 #include <string>
 #include <string_view>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/math/ray.h"

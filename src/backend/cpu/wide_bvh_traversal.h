@@ -21,7 +21,7 @@
 #include "accel/bvh/layout/wide_bvh.h"
 #include "rayforge/math/ray.h"
 #include "trace/bvh_traversal.h"
-#include "backend/cpu/simd.h"
+#include "core/simd.h"
 #include "trace/triangle_intersect.h"
 
 namespace rf {

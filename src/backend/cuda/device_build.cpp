@@ -6,7 +6,7 @@
 
 #include "accel/bvh/optimize/reinsertion.h"
 #include "backend/backends.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "backend/cuda/device_builders.h"
 #include "backend/cuda/device_bvh_builders.h"
 #include "rayforge/core/error.h"

@@ -8,7 +8,7 @@
 //              leaf climbing with arrival counters); the bvh2 kernel traces
 //              the refitted nodes in place, node pairs and CWBVH are
 //              converted again from them (DeviceTracer::refit);
-//   two-level  the host's two-level structure (accel/dynamic/two_level_accel.cpp:
+//   two-level  the host's two-level structure (accel/update/two_level_accel.cpp:
 //              bottom levels refitted where a mesh deformed, the top level
 //              rebuilt over the instances' world boxes) copied each frame, the
 //              changed meshes and the top level only, and traced on the device
@@ -18,7 +18,7 @@
 #include <limits>
 #include <utility>
 
-#include "accel/dynamic/two_level_accel.h"
+#include "accel/update/two_level_accel.h"
 #include "backend/backends.h"
 #include "backend/cuda/cuda_accel.h"
 #include "rayforge/core/error.h"
@@ -158,14 +158,15 @@ private:
 std::unique_ptr<DynamicAccel> build_dynamic_accel(const Scene& scene, const SceneGeometry& geometry,
                                                   const BuildOptions& build, const UpdateOptions& update) {
     require_device(build.device.index);
-    switch (update.method) {
+    const UpdateMethod method = update.method.value_or(kDefaultUpdateMethod);
+    switch (method) {
         case UpdateMethod::Rebuild: return std::make_unique<DeviceRebuildAccel>(geometry, build);
         case UpdateMethod::Refit: return std::make_unique<DeviceRefitAccel>(geometry, build);
         case UpdateMethod::TwoLevel: return std::make_unique<DeviceTwoLevelAccel>(scene, geometry, build);
         case UpdateMethod::Adapt:
         case UpdateMethod::Clusters: break;
     }
-    throw Error("dynamic accel: --update " + to_string(update.method) +
+    throw Error("dynamic accel: update method " + to_string(method) +
                 " runs on the CPU only; on a CUDA device use refit, rebuild or two-level");
 }
 

@@ -1,5 +1,5 @@
-// Conversions of the canonical BVH to the GPU traversal layouts on the device
-// (issue 7 item 5), giving exactly the CPU's arrays:
+// Conversions of the canonical BVH to the GPU traversal layouts on the device,
+// giving exactly the CPU's arrays:
 //
 // Aila and Laine 2009 node pairs (aila_laine_steps.h; the CPU's
 // convert_to_aila_laine walks depth first):

@@ -1,8 +1,8 @@
 // Out-of-core ray queries with the geometry cache in device memory: the
 // dissertation's OOC-IRT data manager and query loop (Garanzha 2014, §6.2,
-// Listing 6.1, Fig. 6.1, §6.3.3; the seed's §2.2, 2.3, 2.6), with the host
-// level a PageCache (disk -> host memory, as on the CPU) instead of the
-// seed's whole scene in host memory.
+// Listing 6.1, Fig. 6.1, §6.3.3), with the host level a PageCache (disk ->
+// host memory, as on the CPU) instead of the dissertation's whole scene in
+// host memory.
 //
 // What runs where, per iteration of run_device_query_loop
 // (ooc/device_page_cache_steps.h, the loop and steps the CPU test replays):
@@ -11,12 +11,12 @@
 //           sums of the counters; the pending queue compacted by CUB
 //           (DeviceSelect::Flagged keeps the sorted order);
 //   copy    the descriptors device -> host (the requests);
-//   host    WasRead for the cached pages, the seed's LFU swap decision
+//   host    WasRead for the cached pages, the dissertation's LFU swap decision
 //           (DevicePoolPlanner), the admitted pages taken from the host
 //           cache (read from the file when missing there) into a pinned
 //           staging fill;
 //   copy    one cudaMemcpyAsync per fill (the page table of the fill and
-//           its pages, the seed's 1 MB gather), while the host gathers the
+//           its pages, the dissertation's 1 MB gather), while the host gathers the
 //           next fill into the other pinned buffer;
 //   device  one block per staged page scatters its 16-byte words to its slot;
 //   copy    the descriptors host -> device.

@@ -1,5 +1,5 @@
 // Ray queries on a paged scene with the geometry cache in device memory
-// (Garanzha 2014, ch. 6; backend/cuda/paged_device.cu): the seed's two
+// (Garanzha 2014, ch. 6; backend/cuda/paged_device.cu): the dissertation's two
 // levels, host memory -> device memory, with the host level a PageCache
 // filled from the file (disk -> host memory, as on the CPU). Hits are
 // PagedEngine's (same file, any budgets): the same paged_iteration runs per
@@ -27,7 +27,7 @@ struct DevicePagedBudgets {
     size_t device_bytes = size_t(1) << 30;
     // The host level: a PageCache of the geometry pages (its own accounting).
     size_t host_bytes = size_t(1) << 30;
-    // One staging fill (the seed's 1 MB gather array): at least one page.
+    // One staging fill (Garanzha 2014's 1 MB gather array): at least one page.
     size_t staging_bytes = size_t(pack::kDefaultStagingBytes);
 };
 

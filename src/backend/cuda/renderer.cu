@@ -203,15 +203,14 @@ const DeviceTracer& device_tracer_of(const Accel& accel) {
 
 class CudaRenderer final : public RendererBase {
 public:
-    CudaRenderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel, const Camera& camera,
-                 const RenderOptions& options)
-        : RendererBase(scene, geometry, accel, camera, options), tracer_(device_tracer_of(accel)) {
-        RF_CUDA_CHECK(cudaSetDevice(tracer_.device()));
-        reset();
+    CudaRenderer(std::shared_ptr<WorldCore> world, const Camera& camera, const RenderOptions& options)
+        : RendererBase(std::move(world), camera, options) {
+        RF_CUDA_CHECK(cudaSetDevice(device().index));
+        start();
     }
 
     [[nodiscard]] std::unique_ptr<DisplayImage> make_display_image() const override {
-        return std::make_unique<DeviceDisplayImage>(tracer_.device());
+        return std::make_unique<DeviceDisplayImage>(device().index);
     }
 
     void update_display(DisplayImage& display, const ToneMapping& tone) const override {
@@ -228,7 +227,7 @@ private:
     bool run_pass(const ProgressCallback&, std::vector<TracedRay>*, const std::atomic<bool>* cancel,
                   PassStats& stats) override {
         if (cancel && cancel->load(std::memory_order_relaxed)) return false;
-        RF_CUDA_CHECK(cudaSetDevice(tracer_.device()));
+        RF_CUDA_CHECK(cudaSetDevice(device().index));
         if (options().integrator == IntegratorKind::Path) path_pass(stats);
         else pixel_pass(stats);
         RF_CUDA_CHECK(cudaDeviceSynchronize());
@@ -237,7 +236,7 @@ private:
 
     void path_pass(PassStats& stats) {
         const uint32_t pixels = uint32_t(options().width) * uint32_t(options().height);
-        DeviceWavefront wavefront(tracer_.impl(), scene_->view(), settings(), uint32_t(passes()), films(),
+        DeviceWavefront wavefront(tracer_->impl(), scene_->view(), settings(), uint32_t(passes()), films(),
                                   wavefront_);
         run_wavefront(wavefront, settings(), pixels, stats.waves);
         stats.closest_rays = wavefront.closest_rays;
@@ -248,7 +247,7 @@ private:
         ray_counts_.reserve(2);
         RF_CUDA_CHECK(cudaMemset(ray_counts_.data(), 0, 2 * sizeof(unsigned long long)));
         const PixelPass p{scene_->view(), settings(), uint32_t(passes()), films(), ray_counts_.data()};
-        launch_pixel_kernel(tracer_.impl(), p, render_shape(uint32_t(options().width) * uint32_t(options().height)));
+        launch_pixel_kernel(tracer_->impl(), p, render_shape(uint32_t(options().width) * uint32_t(options().height)));
         unsigned long long counted[2] = {0, 0};
         RF_CUDA_CHECK(cudaMemcpy(counted, ray_counts_.data(), sizeof(counted), cudaMemcpyDeviceToHost));
         stats.closest_rays = counted[0];
@@ -283,8 +282,10 @@ private:
     }
 
     void tables_changed() override { scene_ = std::make_unique<DeviceScene>(tables()); }
+    // The world's structure after an update or a device rebuild.
+    void structure_changed() override { tracer_ = &device_tracer_of(accel()); }
 
-    const DeviceTracer& tracer_;
+    const DeviceTracer* tracer_ = nullptr;
     std::unique_ptr<DeviceScene> scene_;
     DeviceBuffer<Vec3f> color_{"film"}, albedo_{"albedo film"}, normal_{"normal film"}, depth_{"depth film"};
     WavefrontBuffers wavefront_;
@@ -293,10 +294,10 @@ private:
 
 }  // namespace
 
-std::unique_ptr<Renderer> make_renderer(const Scene& scene, const SceneGeometry& geometry, const Accel& accel,
-                                        const Camera& camera, const RenderOptions& options) {
-    require_device(options.device.index);
-    return std::make_unique<CudaRenderer>(scene, geometry, accel, camera, options);
+std::unique_ptr<Renderer> make_renderer(std::shared_ptr<WorldCore> world, const Camera& camera,
+                                        const RenderOptions& options) {
+    require_device(world->device.index);
+    return std::make_unique<CudaRenderer>(std::move(world), camera, options);
 }
 
 }  // namespace rf::cuda

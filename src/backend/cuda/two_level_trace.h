@@ -1,4 +1,4 @@
-// The two-level structure (accel/dynamic/two_level_accel.cpp) on a CUDA
+// The two-level structure (accel/update/two_level_accel.cpp) on a CUDA
 // device: binary bottom levels in object space, the binary top level over
 // instance world boxes and the instances' inverse transforms, copied there
 // as they are; traced one thread per ray by trace/two_level_traversal.h's

@@ -1,5 +1,5 @@
 // Procedural massive scenes of unique geometry, streamed object by object
-// (issue 20, item 2): test scenes from a few thousand to billions of
+// (docs/paged-scenes.md): test scenes from a few thousand to billions of
 // triangles without downloads, for the paged format and its caches.
 //
 // Layout: a square terrain of side W (growing with the square root of the

@@ -1,4 +1,4 @@
-// Procedural massive scenes of unique geometry (issue 20, item 2), streamed
+// Procedural massive scenes of unique geometry (docs/paged-scenes.md), streamed
 // object by object to a sink so that no more than one object is ever held:
 // `rayforge generate` writes them straight into the paged format.
 //

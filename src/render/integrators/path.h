@@ -1,7 +1,7 @@
 // Unidirectional path tracing (Kajiya 1986, "The Rendering Equation") with
 // next-event estimation and multiple importance sampling (Veach and Guibas
 // 1995, "Optimally Combining Sampling Techniques for Monte Carlo Rendering",
-// power heuristic with beta = 2), as in seed 000's CentiLeo renderer (eq. 1.2
+// power heuristic with beta = 2), as in Garanzha 2014's CentiLeo renderer (eq. 1.2
 // with explicit light connections, combined by MIS).
 //
 // At every vertex: emission seen by the previous BSDF sample is weighted

@@ -15,7 +15,7 @@
 // mix(0.04, base_color, metallic) and exponent 2 / alpha^2 - 2 (alpha =
 // roughness^2; Walter et al. 2007's Beckmann-Phong correspondence, halved for
 // Phong's reflected-vector form).
-// Reflections and refractions have separate depth limits (seed 001 traces one
+// Reflections and refractions have separate depth limits (Bogolepov et al. trace one
 // reflection and two refractions by default).
 // Light reaches diffuse surfaces only directly (point, spot, directional
 // lights and area_light_samples points on emissive triangles), plus the

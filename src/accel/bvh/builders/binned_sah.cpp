@@ -12,7 +12,7 @@
 // Data layout: every primitive's box is computed once into a 32-byte,
 // 32-byte aligned record (lo, triangle index, hi, padding), so binning and
 // partitioning load it as two float4 and grow boxes with SIMD min/max
-// (backend/cpu/simd.h). A node's bins are swept over the non-empty bins only
+// (core/simd.h). A node's bins are swept over the non-empty bins only
 // (a boundary inside a run of empty bins costs the same as the first one,
 // which is the one chosen), found from a bit mask. Scratch arrays are left
 // uninitialised, and large ones are asked for transparent huge pages, as
@@ -28,7 +28,7 @@
 // these give exactly the splits, the primitive order and the bounds of the
 // plain algorithm.
 //
-// Parallelism (TBB, through backend/cpu/parallel.h): large nodes bin their
+// Parallelism (TBB, through core/parallel.h): large nodes bin their
 // primitives in parallel; the skeleton builds subtrees above a size
 // threshold as separate tasks and copies the task-ordered tree into
 // depth-first order. Every decision depends only on the primitives of a
@@ -46,8 +46,8 @@
 
 #include "accel/bvh/builders/sweep_common.h"
 #include "accel/bvh/builders/top_down_sah.h"
-#include "backend/cpu/parallel.h"
-#include "backend/cpu/simd.h"
+#include "core/parallel.h"
+#include "core/simd.h"
 #include "rayforge/core/memory_budget.h"
 
 namespace rf {

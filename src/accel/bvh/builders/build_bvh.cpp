@@ -9,7 +9,7 @@
 #include "accel/bvh/builders/sbvh.h"
 #include "accel/bvh/builders/sweep_sah.h"
 #include "accel/bvh/optimize/reinsertion.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf {

@@ -34,7 +34,7 @@
 // compressed ClusterPartition of cluster_generation.h.
 //
 // Parallelism: per-triangle data, the dual graph and the initial edge keys
-// are computed by parallel loops (backend/cpu/parallel.h); meshes are
+// are computed by parallel loops (core/parallel.h); meshes are
 // clustered in parallel. Merging and growing are sequential.
 //
 // Determinism: every parallel loop writes its own slots; the sequential
@@ -50,7 +50,7 @@
 #include <random>
 #include <string>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf {

@@ -1,7 +1,7 @@
 // BVH builds over precomputed clusters of connected triangles (Garanzha
 // 2014 ch. 3): any BVH builder runs over the clusters' boxes, and the
 // canonical BVH's leaves list the clusters' triangles. The updater of
-// UpdateMethod::Clusters (make_cluster_updater, accel/dynamic/bvh_updater.h)
+// UpdateMethod::Clusters (make_cluster_updater, accel/update/bvh_updater.h)
 // rebuilds it every frame over the frame-1 clusters.
 #pragma once
 

@@ -61,7 +61,7 @@
 #include "accel/bvh/builders/grid_bvh_finish_steps.h"
 #include "accel/bvh/builders/grid_bvh_partial_triangles.h"
 #include "accel/bvh/builders/grid_bvh_sparse_grid.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 

@@ -24,7 +24,7 @@
 #include <cmath>
 #include <cstdint>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/memory_budget.h"
 
 namespace rf::gridbvh {

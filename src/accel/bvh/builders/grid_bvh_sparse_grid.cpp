@@ -20,7 +20,7 @@
 #include <chrono>
 #include <cmath>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/memory_budget.h"
 
 namespace rf::gridbvh {

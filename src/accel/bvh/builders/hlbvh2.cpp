@@ -1,6 +1,6 @@
 // HLBVH2 builder (Garanzha 2014, dissertation ch. 5, "BVH construction with
 // binary search and work queues"; Garanzha, Pantaleoni and McAllister,
-// HPG 2011). Parameters from the seed digest (000-dissertation-ch5-6.md, 1.3-1.4):
+// HPG 2011). Parameters as in Garanzha 2014, ch. 5:
 //
 //  1. 30-bit Morton codes (n = 10 bits per axis) of the triangles' box
 //     centres in the centroid bounds.
@@ -42,7 +42,7 @@
 #include "accel/bvh/builders/hlbvh2_top_steps.h"
 #include "accel/bvh/builders/morton_radix_sort.h"
 #include "accel/bvh/builders/morton_tree.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 

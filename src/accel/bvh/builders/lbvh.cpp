@@ -35,7 +35,7 @@
 #include "accel/bvh/builders/karras_tree_steps.h"
 #include "accel/bvh/builders/lbvh_emit.h"
 #include "accel/bvh/builders/morton_tree.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 

@@ -14,7 +14,7 @@
 #include <memory>
 
 #include "accel/bvh/builders/morton_buffer.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 

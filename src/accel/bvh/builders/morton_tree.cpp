@@ -11,7 +11,7 @@
 
 #include "accel/bvh/builders/morton_code.h"
 #include "accel/bvh/builders/morton_radix_sort.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 

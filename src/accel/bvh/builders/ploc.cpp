@@ -31,7 +31,7 @@
 #include "accel/bvh/builders/morton_tree.h"
 #include "accel/bvh/builders/ploc_emit.h"
 #include "accel/bvh/builders/ploc_steps.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 

@@ -33,7 +33,7 @@
 // skeleton's carry). Neither depends on the order in which tasks run, so
 // neither does the tree.
 //
-// Parallelism (TBB via backend/cpu/parallel.h): the skeleton builds subtrees
+// Parallelism (TBB via core/parallel.h): the skeleton builds subtrees
 // above a size threshold as tasks, and large nodes evaluate the three axes
 // as tasks. Leaf slots come from a shared counter in task order; the
 // depth-first copy renumbers them, so the output is the same for every
@@ -49,7 +49,7 @@
 
 #include "accel/bvh/builders/sweep_common.h"
 #include "accel/bvh/builders/top_down_sah.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/memory_budget.h"
 

@@ -8,7 +8,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/core/memory_budget.h"
 
@@ -38,7 +38,7 @@ inline uint64_t sort_key(float value, uint32_t index) {
     return (uint64_t{sortable_key(value)} << 32) | index;
 }
 
-// Merge sort of data[0, n) on TBB tasks (via backend/cpu/parallel.h); tmp has room
+// Merge sort of data[0, n) on TBB tasks (via core/parallel.h); tmp has room
 // for n values. Small ranges fall back to std::sort.
 inline void parallel_sort(uint64_t* data, uint64_t* tmp, size_t n) {
     constexpr size_t kSerialSize = 32 * 1024;

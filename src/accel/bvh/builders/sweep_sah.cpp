@@ -14,7 +14,7 @@
 // where the depth limit is near), the node allocation, subtree tasks and the
 // depth-first copy; this file sweeps and partitions.
 //
-// Parallelism (TBB via backend/cpu/parallel.h): the three initial sorts run at once,
+// Parallelism (TBB via core/parallel.h): the three initial sorts run at once,
 // each a parallel merge sort; large nodes sweep and partition their three axes
 // as separate tasks; the skeleton builds subtrees above a size threshold as
 // separate tasks. Every decision depends only on the node's primitives, so
@@ -27,7 +27,7 @@
 
 #include "accel/bvh/builders/sweep_common.h"
 #include "accel/bvh/builders/top_down_sah.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/memory_budget.h"
 
 namespace rf {

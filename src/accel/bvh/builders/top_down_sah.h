@@ -33,7 +33,7 @@
 #include <type_traits>
 
 #include "accel/bvh/builders/bvh_build_config.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "core/assert.h"
 #include "core/huge_pages.h"
 #include "rayforge/accel/bvh/bvh.h"

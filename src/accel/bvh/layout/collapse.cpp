@@ -29,7 +29,7 @@
 
 #include "accel/bvh/layout/wide_bvh.h"
 #include "core/huge_pages.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 
 namespace rf {

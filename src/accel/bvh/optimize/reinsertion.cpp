@@ -25,7 +25,7 @@
 #include <vector>
 
 #include "accel/bvh/builders/sweep_common.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/memory_budget.h"
 
 namespace rf {

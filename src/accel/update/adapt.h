@@ -3,7 +3,7 @@
 // exploded subtrees, migration of coherently moving subtrees by recursive
 // SAH insertion, over nodes kept local by the node memory manager. The
 // algorithm and its choices are described at the top of adapt.cpp.
-// make_adapt_updater (accel/dynamic/bvh_updater.h) returns an AdaptBvh; the
+// make_adapt_updater (accel/update/bvh_updater.h) returns an AdaptBvh; the
 // tests also reach its internal tree through the accessors below.
 #pragma once
 
@@ -12,8 +12,8 @@
 #include <span>
 #include <vector>
 
-#include "accel/bvh/update/node_memory_manager.h"
-#include "accel/dynamic/bvh_updater.h"
+#include "accel/update/node_memory_manager.h"
+#include "accel/update/bvh_updater.h"
 
 namespace rf {
 

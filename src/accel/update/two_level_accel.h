@@ -1,4 +1,4 @@
-// The two-level structure's host state (accel/dynamic/two_level_accel.cpp),
+// The two-level structure's host state (accel/update/two_level_accel.cpp),
 // read by its device copy (backend/cuda/device_dynamic_accel.cpp): after
 // construction and after each update(), the bottom levels the update
 // refitted, the top level rebuilt over the visible instances, and the

@@ -1,6 +1,6 @@
 // The two-level structure for animated scenes (instancing in the manner of
 // Wald, Benthin and Slusallek 2003, "Distributed Interactive Ray Tracing of
-// Dynamic Scenes"; the two-level method of issue 21): one bottom-level BVH
+// Dynamic Scenes"; the two-level method of docs/animation.md): one bottom-level BVH
 // per mesh in the mesh's object space, and a top-level BVH over the world
 // boxes of the visible instances, rebuilt every frame.
 //
@@ -42,9 +42,9 @@
 #include "accel/bvh/builders/binned_sah.h"
 #include "accel/bvh/builders/build_bvh.h"
 #include "accel/bvh/layout/wide_bvh.h"
-#include "accel/dynamic/bvh_updater.h"
-#include "accel/dynamic/two_level_accel.h"
-#include "backend/cpu/parallel.h"
+#include "accel/update/bvh_updater.h"
+#include "accel/update/two_level_accel.h"
+#include "core/parallel.h"
 #include "backend/cpu/ray_batches.h"
 #include "backend/cpu/wide_bvh_traversal.h"
 #include "rayforge/core/error.h"

@@ -1,13 +1,16 @@
-// The seam between build_dynamic_accel (dynamic_accel.cpp) and the update
-// methods over flat triangles: each keeps a canonical BVH current for the
-// triangles' new positions; the dynamic accel turns it into the traversal
-// layout (refitting that layout in place when only boxes changed,
-// re-collapsing it when the topology changed). One method per file:
-//   refit     accel/bvh/refit.cpp           (parallel bottom-up)
-//   rebuild   accel/dynamic/dynamic_accel.cpp (build_bvh_on_cpu every frame)
-//   adapt     accel/bvh/update/adapt.cpp    (Garanzha 2014 ch. 2)
-//   clusters  accel/bvh/builders/clusters.cpp (Garanzha 2014 ch. 3)
-// The two-level method is an accel of its own (accel/dynamic/two_level_accel.cpp).
+// The per-frame updates of rf::DynamicAccel, one method per file in this
+// folder, all behind DynamicAccel::update(change):
+//   refit     refit_updater.cpp    one build, then the boxes refitted bottom-up (accel/bvh/refit.h)
+//   rebuild   rebuild_updater.cpp  BuildOptions::builder from scratch
+//   adapt     adapt.cpp            Garanzha 2014 ch. 2: refit, local rebuilds, migrations
+//   clusters  cluster_updater.cpp  Garanzha 2014 ch. 3: a build over precomputed clusters' boxes
+//   two-level two_level_accel.cpp  a BVH per mesh, a top level over instances
+// The first four keep a canonical BVH current through the BvhUpdater seam
+// below; dynamic_accel.cpp turns it into the traversal layout (refitting
+// that layout in place when only boxes changed, re-collapsing it when the
+// topology changed). The two-level method is an accel of its own. On a
+// CUDA device backend/cuda/device_dynamic_accel.cpp makes refit, rebuild
+// and two-level.
 #pragma once
 
 #include <memory>

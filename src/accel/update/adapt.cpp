@@ -30,7 +30,7 @@
 //     updated on the way down. Each inserted subtree ends in one merge, so
 //     the nodes freed equal the nodes created.
 //
-// The text's inconsistencies, resolved (seed digest sec. 8):
+// The text's inconsistencies (Garanzha 2014, ch. 2), resolved:
 //  - dM/dE readings: AdaptOptions::stated() and ::closing() (both tested).
 //  - MigrateBuffer is filled in post-order but "processed from the end so
 //    lower levels go first": the buffer is sorted by depth, deepest first
@@ -76,7 +76,7 @@
 // Vec3f's min/max, whose fminf/fmaxf library calls (not inlined) were about
 // a tenth of the update's profile.
 //
-// Parallelism (TBB via backend/cpu/parallel.h): stage 1 recurses into the
+// Parallelism (TBB via core/parallel.h): stage 1 recurses into the
 // two children of large subtrees as tasks, each with its own buffers,
 // appended left then right (the serial post-order); stage 2 collects and
 // builds every region in parallel, large region nodes bound and bin their
@@ -96,7 +96,7 @@
 // Determinism: buffers, region builds and the order of every allocation
 // are independent of the schedule, so the tree is the same for any thread
 // count.
-#include "accel/bvh/update/adapt.h"
+#include "accel/update/adapt.h"
 
 #include <algorithm>
 #include <bit>
@@ -106,7 +106,7 @@
 
 #include "accel/bvh/builders/binned_sah.h"
 #include "accel/bvh/builders/build_bvh.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "rayforge/core/error.h"
 
 

@@ -15,7 +15,7 @@
 //
 // Parallelism: none (the adapt update allocates from one thread).
 // Determinism: the result depends only on the sequence of calls.
-#include "accel/bvh/update/node_memory_manager.h"
+#include "accel/update/node_memory_manager.h"
 
 #include <algorithm>
 #include <string>

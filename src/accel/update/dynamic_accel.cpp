@@ -1,7 +1,8 @@
 // build_dynamic_accel: an rf::Accel kept current over an animation.
 //
-// The triangle-BVH methods (refit, adapt, rebuild, clusters) keep a
-// canonical BVH current (accel/dynamic/bvh_updater.h) and this file keeps
+// The triangle-BVH methods (refit, adapt, rebuild, clusters: one file each
+// in this folder) keep a canonical BVH current (accel/update/bvh_updater.h)
+// and this file keeps
 // the traversal layout current over it: when an update kept the topology
 // (refit; adapt and clusters frames where nothing was restructured) the
 // layout is refitted in place (BVH8/BVH4: accel/bvh/refit.h's
@@ -21,10 +22,10 @@
 #include "accel/bvh/bvh_accel.h"
 #include "accel/bvh/layout/wide_bvh.h"
 #include "accel/bvh/refit.h"
-#include "accel/dynamic/bvh_updater.h"
+#include "accel/update/bvh_updater.h"
 #include "accel/view_accel.h"
 #include "backend/backends.h"
-#include "backend/cpu/parallel.h"
+#include "core/parallel.h"
 #include "backend/cpu/wide_bvh_tracer.h"
 #include "rayforge/core/error.h"
 
@@ -35,22 +36,6 @@ namespace {
 double ms_since(std::chrono::steady_clock::time_point start) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
-
-// Rebuild: the builder from scratch every frame.
-class RebuildUpdater final : public BvhUpdater {
-public:
-    RebuildUpdater(std::span<const Triangle> triangles, const BuildOptions& build)
-        : build_(build), bvh_(build_bvh_on_cpu(triangles, build)) {}
-    [[nodiscard]] const Bvh& bvh() const override { return bvh_; }
-    bool update(std::span<const Triangle> triangles, UpdateStats&) override {
-        bvh_ = build_bvh_on_cpu(triangles, build_);
-        return true;
-    }
-
-private:
-    BuildOptions build_;
-    Bvh bvh_;
-};
 
 // The traversal layout over a canonical tree, and how to refit it in place.
 struct TracedLayout {
@@ -108,7 +93,7 @@ class DynamicBvhAccel final : public DynamicAccel {
 public:
     DynamicBvhAccel(const Scene& scene, const SceneGeometry& geometry, const BuildOptions& build,
                     const UpdateOptions& update)
-        : geometry_(geometry), build_(build), method_(update.method) {
+        : geometry_(geometry), build_(build), method_(update.method.value_or(kDefaultUpdateMethod)) {
         const auto start = std::chrono::steady_clock::now();
         parallel::with_threads(build.threads, [&] { updater_ = make_updater(scene, update); });
         initial_build_ms_ = ms_since(start);
@@ -165,14 +150,14 @@ public:
 private:
     std::unique_ptr<BvhUpdater> make_updater(const Scene& scene, const UpdateOptions& update) {
         const std::span<const Triangle> triangles = geometry_.triangles;
-        switch (update.method) {
+        switch (method_) {
             case UpdateMethod::Refit: return make_refit_updater(triangles, build_);
             case UpdateMethod::Rebuild: return make_rebuild_updater(triangles, build_);
             case UpdateMethod::Adapt: return make_adapt_updater(triangles, build_, update.adapt);
             case UpdateMethod::Clusters: return make_cluster_updater(scene, geometry_, build_, update.clusters);
             case UpdateMethod::TwoLevel: break;
         }
-        throw Error("dynamic accel: " + to_string(update.method) + " is not a triangle-BVH method");
+        throw Error("dynamic accel: " + to_string(method_) + " is not a triangle-BVH method");
     }
 
     [[nodiscard]] AccelStats stats_named(double build_ms, double layout_ms) const {
@@ -197,10 +182,6 @@ private:
 
 }  // namespace
 
-std::unique_ptr<BvhUpdater> make_rebuild_updater(std::span<const Triangle> triangles, const BuildOptions& build) {
-    return std::make_unique<RebuildUpdater>(triangles, build);
-}
-
 std::unique_ptr<DynamicAccel> build_dynamic_accel(const Scene& scene, const SceneGeometry& geometry,
                                                   const BuildOptions& build, const UpdateOptions& update,
                                                   const ProgressCallback& progress) {
@@ -212,7 +193,7 @@ std::unique_ptr<DynamicAccel> build_dynamic_accel(const Scene& scene, const Scen
     std::unique_ptr<DynamicAccel> accel;
     if (build.device.is_cuda()) {
         accel = cuda::build_dynamic_accel(scene, geometry, build, update);
-    } else if (update.method == UpdateMethod::TwoLevel) {
+    } else if (update.method.value_or(kDefaultUpdateMethod) == UpdateMethod::TwoLevel) {
         accel = make_two_level_accel(scene, geometry, build);
     } else {
         accel = std::make_unique<DynamicBvhAccel>(scene, geometry, build, update);
