@@ -269,7 +269,7 @@ TEST(Cli, RenderOnCudaNamesWhyItCannot) {
                   std::string::npos)
             << r.err;
     } else {
-        EXPECT_NE(r.err.find("--device cuda: "), std::string::npos) << r.err;
+        EXPECT_NE(r.err.find("--device cuda:0: "), std::string::npos) << r.err;
         EXPECT_EQ(r.err.find("built without"), std::string::npos) << r.err;
     }
     // Validated and then given up on before anything is written.

@@ -660,6 +660,12 @@ TEST(SessionPaged, StructureSettingsAndOtherDevicesAreRefused) {
     }
     EXPECT_EQ(changes_between(before, s), 0u);
     EXPECT_NO_THROW(set_setting(s, "device", "cpu", SceneKind::Paged));
+    try {
+        set_setting(s, "device", "cuda", SceneKind::Paged);
+        ADD_FAILURE() << "accepted set device cuda for a paged scene";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("paged scenes render on the CPU"), std::string::npos) << e.what();
+    }
     EXPECT_NO_THROW(set_setting(s, "threads", "1", SceneKind::Paged));
     EXPECT_NO_THROW(set_setting(s, "builder", "sbvh", SceneKind::InCore));
 

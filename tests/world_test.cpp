@@ -376,11 +376,15 @@ TEST(WorldThreads, RenderThreadAndUpdatingThread) {
     EXPECT_EQ(renderer->image().pixels, fresh->image().pixels);
 }
 
-// Changing the world from inside one of its passes would wait for itself:
-// it is an error instead.
+// Changing the world from inside one of its passes (a progress callback, on
+// whichever of the pass's threads it runs) would wait for itself: it is an
+// error instead, and a query from there is answered. Between passes the
+// world is free.
 TEST(WorldThreads, ChangingTheWorldFromInsideAPassIsAnError) {
     const std::unique_ptr<World> world = open_world(kAnimated);
-    const std::unique_ptr<Renderer> renderer = make_renderer(*world, world->camera(), small_options());
+    RenderOptions o = small_options();
+    o.spp = 2;
+    const std::unique_ptr<Renderer> renderer = make_renderer(*world, world->camera(), o);
     bool refused = false;
     renderer->render_pass([&](double) {
         if (refused) return;
@@ -391,8 +395,15 @@ TEST(WorldThreads, ChangingTheWorldFromInsideAPassIsAnError) {
         }
     });
     EXPECT_TRUE(refused);
-    std::vector<Hit> hits(4);  // a query from inside a pass is fine (the world is already held)
+    std::vector<Hit> hits(4);  // (progress callbacks run one at a time: core/progress.h)
     renderer->render_pass([&](double) { world->intersect(test::make_rays(world->geometry(), 4, 1), hits); });
+    int moved = 0;
+    renderer->set_camera(world->camera());  // restarted: render_progressive has passes to run
+    render_progressive(*renderer, [&](const Renderer&) {  // between passes
+        moved += world->set_time(0.1f * float(moved + 1)).updated ? 1 : 0;
+        return moved < 3;  // every move restarts the renderer: stop after three
+    });
+    EXPECT_EQ(moved, 3);
 }
 
 }  // namespace

@@ -162,7 +162,8 @@ ProgressCallback progress_of(const RenderArgs& a, ProgressBar& bar, const World&
 }
 
 // One image: the progressive loop with --save-every previews, the outputs, the summary.
-void render_still(const RenderArgs& a, World& world, Renderer& renderer, const ToneMapping& tone) {
+void render_still(const RenderArgs& a, World& world, Renderer& renderer, double setup_ms) {
+    const ToneMapping& tone = a.tone;
     {
         ProgressBar bar("render");
         PassCallback after_pass;
@@ -179,11 +180,11 @@ void render_still(const RenderArgs& a, World& world, Renderer& renderer, const T
     const RenderStats rs = renderer.stats();
     const double render_ms = rs.seconds * 1e3;
     const std::string accel = ws.accel.name + " on " + to_string(world.device());
-    std::printf("%s: %dx%d %s %d spp, %llu %striangles | load %.1f ms | build %.1f ms (%s) | render %.1f ms "
-                "(%.2f Msamples/s, %.2f Mrays/s, %.1f ms/pass)\n",
+    std::printf("%s: %dx%d %s %d spp, %llu %striangles | load %.1f ms | build %.1f ms (%s) | setup %.1f ms | "
+                "render %.1f ms (%.2f Msamples/s, %.2f Mrays/s, %.1f ms/pass)\n",
                 a.outputs.front().c_str(), o.width, o.height, integrator_name(o.integrator).c_str(), renderer.passes(),
                 (unsigned long long)ws.triangles, world.paged() ? "paged " : "", ws.load_ms,
-                ws.last_commit == CommitKind::None ? 0.0 : ws.commit_ms, accel.c_str(), render_ms,
+                ws.last_commit == CommitKind::None ? 0.0 : ws.commit_ms, accel.c_str(), setup_ms, render_ms,
                 render_ms > 0.0 ? double(rs.samples) / (render_ms * 1e3) : 0.0,
                 render_ms > 0.0 ? double(rs.rays()) / (render_ms * 1e3) : 0.0,
                 renderer.passes() ? render_ms / renderer.passes() : 0.0);
@@ -196,7 +197,7 @@ void render_still(const RenderArgs& a, World& world, Renderer& renderer, const T
 
 // --frames: one image per frame, the world moved to each frame's time (its
 // structure follows by the update method; the renderer follows the world).
-void render_frames(const RenderArgs& a, World& world, Renderer& renderer, const ToneMapping& tone) {
+void render_frames(const RenderArgs& a, World& world, Renderer& renderer) {
     if (!world.animated())
         std::fprintf(stderr, "rayforge: note: %s is not animated; every frame is the same\n", a.scene.c_str());
     const FrameRange range = parse_frames(a.frames);
@@ -205,6 +206,7 @@ void render_frames(const RenderArgs& a, World& world, Renderer& renderer, const 
     const TimeRange time = world.time_range();
     const bool camera_follows = !a.camera && world.scene().animation.camera.has_value();
     const WorldStats initial = world.stats();
+    const std::string& method = initial.update_method;
     std::printf("%s: %d frames, %llu triangles, %s, initial build %.1f ms\n", a.scene.c_str(), range.count(),
                 (unsigned long long)initial.triangles, initial.accel.name.c_str(), initial.commit_ms);
     double update_total = 0.0, render_total = 0.0;
@@ -217,12 +219,12 @@ void render_frames(const RenderArgs& a, World& world, Renderer& renderer, const 
         render_progressive(renderer, {}, {});
         const double render_ms = ms_since(render_start);
         for (const std::string& output : a.outputs)
-            write_image(frame_path(output, frame, several), renderer.image(), tone);
+            write_image(frame_path(output, frame, several), renderer.image(), a.tone);
         if (k > 0) update_total += u.update_ms;
         render_total += render_ms;
         if (!a.quiet)
             std::printf("  frame %d (t = %.3f s): %s | render %.1f ms\n", frame, double(t),
-                        k == 0 ? "built" : update_summary(u, world.stats().update_method).c_str(), render_ms);
+                        k == 0 ? "built" : update_summary(u, method).c_str(), render_ms);
     }
     if (range.last >= time.frame_count())
         std::fprintf(stderr, "rayforge: note: the animation has %d frames; later ones show its last pose\n",
@@ -271,9 +273,11 @@ int run_render(const RenderArgs& a) {
     add_headlight_if_unlit(a, options.integrator, camera, *world);
     world->commit();
     for (const std::string& note : world->notes()) std::fprintf(stderr, "rayforge: note: %s\n", note.c_str());
-    const std::unique_ptr<Renderer> renderer = make_renderer(*world, camera, options);
-    if (a.frames.empty()) render_still(a, *world, *renderer, a.tone);
-    else render_frames(a, *world, *renderer, a.tone);
+    const Clock::time_point setup_start = Clock::now();
+    const std::unique_ptr<Renderer> renderer = make_renderer(*world, camera, options);  // shading tables, films
+    const double setup_ms = ms_since(setup_start);
+    if (a.frames.empty()) render_still(a, *world, *renderer, setup_ms);
+    else render_frames(a, *world, *renderer);
     return 0;
 }
 

@@ -225,11 +225,14 @@ const std::vector<Setting>& settings_table() {
     return table;
 }
 
-// A paged scene's structure is in its file: refuse what would not apply
-// rather than accept and ignore it.
-void check_paged(const SettingInfo& info) {
+// A paged scene's structure is in its file, and the library says which
+// devices render one: refuse what would not apply rather than accept and
+// ignore it.
+void check_paged(const SettingInfo& info, const ViewSettings& changed) {
     if (!applies_to(info, SceneKind::Paged))
         throw Error("structure settings do not apply to a paged scene (its structure is in the file)");
+    if (!renders_paged_scenes(changed.world.device))
+        throw Error("paged scenes render on the CPU in this version (device cpu)");
 }
 
 const Setting& setting_or_throw(const std::string& key) {
@@ -270,7 +273,7 @@ void set_setting(ViewSettings& settings, const std::string& key, const std::stri
     ViewSettings changed = settings;
     try {
         setting.set(changed, value);
-        if (scene == SceneKind::Paged) check_paged(setting.info);
+        if (scene == SceneKind::Paged) check_paged(setting.info, changed);
         check_world_options(changed.world);
         validate_render_options(film_options(changed, false, 1));
     } catch (const Error& e) {

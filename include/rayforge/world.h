@@ -17,8 +17,11 @@
 // materials_changed and commit hold it exclusively, so they wait for passes
 // and queries in flight to finish (a pass that starts after them sees the new
 // frame), and passes that would start meanwhile wait for them. Calling one of
-// them from inside a pass of the same world (e.g. from a progress callback)
-// is an rf::Error, not a deadlock. Scene objects reached through scene() may
+// them from inside a pass of the same world (its progress callback, on
+// whichever of the pass's threads it runs) is an rf::Error, not a deadlock;
+// a query from there is answered under the pass's hold. Between passes (a
+// PassCallback of render_progressive) the world is free. Scene objects
+// reached through scene() may
 // only be changed while no pass runs (between passes of the only render
 // thread, or with the renderers idle).
 //
@@ -100,6 +103,9 @@ std::unique_ptr<World> make_world(Scene scene, const WorldOptions& options = {})
 // that kind of scene (a paged file on a device that cannot render one).
 // Throws rf::Error naming the option.
 void check_world_options(const WorldOptions& options, const std::string& path_or_builtin = "");
+// Whether a paged world (an .rfpack file) can live on `device`: the CPU only
+// in this version (the rule check_world_options applies to paged files).
+bool renders_paged_scenes(const Device& device);
 
 struct WorldCore;    // the state a World shares with its renderers (library internal)
 struct WorldAccess;  // (library internal)

@@ -42,9 +42,18 @@ void RendererBase::restart() {
 bool RendererBase::render_pass(const ProgressCallback& progress, const std::atomic<bool>* cancel) {
     const WorldCore::FrameReading frame(*world_);
     follow(frame);
+    // The callback may run on the pass's worker threads: there it works for
+    // this reading (a query takes no lock; a change is an error, not a wait
+    // for this very pass).
+    ProgressCallback on_behalf;
+    if (progress)
+        on_behalf = [&](double fraction) {
+            const WorldCore::OnBehalfOfReading mark(*world_);
+            progress(fraction);
+        };
     const Clock::time_point start = Clock::now();
     PassStats pass;
-    if (!run_pass(progress, nullptr, cancel, pass)) {
+    if (!run_pass(on_behalf, nullptr, cancel, pass)) {
         reset_films();  // part of a pass was added: start over, as set_camera does
         restart();
         return false;

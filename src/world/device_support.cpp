@@ -28,8 +28,10 @@ std::string unserved_method(UpdateMethod method, const BuildOptions& build) {
 
 }  // namespace
 
+bool renders_paged_scenes(const Device& device) { return !device.is_cuda(); }
+
 WorldPlan plan_world(const WorldOptions& options, WorldKind kind, const std::optional<std::string>& scene_update) {
-    if (kind == WorldKind::Paged && options.device.is_cuda())
+    if (kind == WorldKind::Paged && !renders_paged_scenes(options.device))
         throw Error("paged scenes render on the CPU in this version (device cpu, not " + to_string(options.device) +
                     ")");
     check_single_device(options);

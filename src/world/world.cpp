@@ -136,6 +136,12 @@ WorldCore::FrameReading::~FrameReading() {
     core_.lock.unlock_shared();
 }
 
+WorldCore::OnBehalfOfReading::OnBehalfOfReading(const WorldCore& core) : core_(core) { t_reading.push_back(&core); }
+
+WorldCore::OnBehalfOfReading::~OnBehalfOfReading() {
+    t_reading.erase(std::find(t_reading.begin(), t_reading.end(), &core_));
+}
+
 WorldCore::FrameWriting::FrameWriting(WorldCore& core, const char* what) : core_(core) {
     if (reading_on_this_thread(&core))
         throw Error(std::string(what) + ": called from inside a render pass or query of the same world, which "

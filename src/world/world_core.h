@@ -48,6 +48,21 @@ struct WorldCore {
         bool locked_ = false;
     };
 
+    // This thread works for a reading another thread holds (a pass's
+    // progress callback on one of the pass's worker threads): readings
+    // nested in it take no lock, and changes are refused as on the reading's
+    // own thread.
+    class OnBehalfOfReading {
+    public:
+        explicit OnBehalfOfReading(const WorldCore& core);
+        ~OnBehalfOfReading();
+        OnBehalfOfReading(const OnBehalfOfReading&) = delete;
+        OnBehalfOfReading& operator=(const OnBehalfOfReading&) = delete;
+
+    private:
+        const WorldCore& core_;
+    };
+
     // The world held exclusively; rf::Error when this thread is inside a
     // pass or a query of the same world (it would wait for itself).
     class FrameWriting {
