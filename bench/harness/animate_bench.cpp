@@ -604,7 +604,8 @@ void print_summary(std::ostream& out, const AnimateResult& r) {
             << fmt("%.0f", double(t.counts.rebuilt_nodes) / n) << " nodes), "
             << fmt("%.1f", double(t.counts.migrations) / n) << " migrations\n";
     }
-    out << "(update ms: wall time of DynamicAccel::update, or Embree's commits; vs rebuild: the full rebuild's "
+    out << "(update ms: the structure's update in World::set_time (UpdateStats::update_ms: refit, restructure "
+           "and layout, without the SAH reporting), or Embree's commits; vs rebuild: the full rebuild's "
            "time over it; SAH: mean drift against the rebuilt tree; trace: the rebuilt tree's trace time over "
            "this one's, all sets; +diffuse ms: update + the diffuse set; vs refit / wins: Embree refit's update + "
            "diffuse over ours, frames where ours is faster)\n";

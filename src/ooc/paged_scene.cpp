@@ -3,7 +3,6 @@
 #include "rayforge/ooc/paged_scene.h"
 
 #include <cstring>
-#include <fstream>
 
 #include "ooc/paged_scene_impl.h"
 #include "rayforge/core/error.h"
@@ -168,12 +167,6 @@ size_t PagedSceneImpl::memory_bytes() const {
 }
 
 }  // namespace pack
-
-bool is_paged_scene_file(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    char magic[sizeof(pack::kMagic)] = {};
-    return in.read(magic, sizeof(magic)) && std::memcmp(magic, pack::kMagic, sizeof(magic)) == 0;
-}
 
 std::unique_ptr<PagedScene> open_paged_scene(const std::string& path, const PagedSceneOptions& options) {
     if (options.memory_budget == 0 && (!options.geometry_budget || !options.attribute_budget))
