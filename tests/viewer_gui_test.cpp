@@ -242,6 +242,9 @@ TEST(ViewerGui, PagedSceneMatchesTheRenderCommand) {
     v = test::run_cli("view " + pack + " " + std::string(kSmall) + " --memory-budget lots");
     EXPECT_EQ(v.exit_code, 1);
     EXPECT_NE(v.err.find("--memory-budget"), std::string::npos) << v.err;
+    v = test::run_cli("view " + pack + " " + std::string(kSmall) + " --light 1,2,3");
+    EXPECT_EQ(v.exit_code, 1);
+    EXPECT_NE(v.err.find("not applied to paged scenes"), std::string::npos) << v.err;
     SKIP_WITHOUT_GUI();
     v = view(dir, pack, paged,
              "wait-passes 4\nscreenshot " + dir + "/a.png\nprint-stats\norbit 30 10\nwait-passes 4\nscreenshot " + dir +

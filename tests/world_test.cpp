@@ -226,6 +226,16 @@ TEST(World, GeometryReplacedMovesTrianglesAndStructure) {
     EXPECT_EQ(world.stats().last_commit, CommitKind::Build);
     expect_brute_force_hits(world, 6, "a triangle added");
 
+    // Material ids changed in place: the triangles' materials follow.
+    const uint32_t red = uint32_t(world.scene().materials.size());
+    world.scene().materials.push_back(diffuse({0.8f, 0.1f, 0.1f}));
+    world.scene().meshes[1].material_ids.assign(world.scene().meshes[1].material_ids.size(), red);
+    world.materials_changed();
+    EXPECT_EQ(world.geometry().material[world.intersect(down).prim], red);
+    world.scene().meshes[1].material_ids.push_back(red);  // one id too many: an error, nothing written
+    EXPECT_THROW(world.materials_changed(), Error);
+    world.scene().meshes[1].material_ids.pop_back();
+
     EXPECT_THROW(world.geometry_replaced(GeometryChange{{9}, {}, false}), Error);
     world.scene().meshes[1].positions[0].x = std::nanf("");
     try {

@@ -235,16 +235,20 @@ void check_animation_option(const std::string& clip, const Scene& scene) {
                     " has no glTF animations to choose from (only glTF files hold several)");
 }
 
-void prepare_world(const RenderArgs& a, World& world) {
-    check_animation_option(a.load.animation, world.scene());
-    if (a.time) world.set_time(*a.time);
+void check_light_options(const RenderArgs& a, bool paged_scene) {
     const bool lights = !a.lights.empty() || !a.environment.empty() || !a.environment_map.empty() ||
                         a.environment_strength.has_value();
-    if (!lights) return;
-    if (world.paged())
+    if (lights && paged_scene)
         throw Error("--light, --env, --env-map and --env-strength are not applied to paged scenes (their lights are "
                     "in the file)");
-    apply_light_options(a, world);
+}
+
+void prepare_world(const RenderArgs& a, World& world) {
+    check_animation_option(a.load.animation, world.scene());
+    check_light_options(a, world.paged());
+    if (a.time) world.set_time(*a.time);
+    if (!a.lights.empty() || !a.environment.empty() || !a.environment_map.empty() || a.environment_strength)
+        apply_light_options(a, world);
 }
 
 // Many OBJ/PLY files carry no light; a black image helps nobody. A

@@ -77,6 +77,9 @@ Camera initial_camera(const RenderArgs& args, const World& world);
 // in-core world's scene (rf::Error for a paged world, whose lights are in
 // its file); rf::Error when --animation names a clip of a scene without glTF clips.
 void prepare_world(const RenderArgs& args, World& world);
+// rf::Error when --light, --env, --env-map or --env-strength was given for a
+// paged scene (its lights are in its file: they would be ignored).
+void check_light_options(const RenderArgs& args, bool paged_scene);
 // rf::Error when --animation `clip` was given for a scene without glTF clips (it would be ignored).
 void check_animation_option(const std::string& clip, const Scene& scene);
 // Nothing lights the world: no lights, a black environment, and no emitting

@@ -90,6 +90,7 @@ CLI::App* add_view_command(CLI::App& app, ViewArgs& a) {
 int run_view(const ViewArgs& a) {
     const RenderArgs& r = a.render;
     check_world_options(r.world, r.scene);  // what the world would refuse fails before a window opens
+    check_light_options(r, is_paged_scene_file(r.scene));
     viewer::ViewerConfig config;
     config.launched = launch_time();
     config.scene = r.scene;

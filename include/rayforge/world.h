@@ -152,8 +152,10 @@ public:
     // only records t. Returns the update's work (empty before the first
     // commit and when nothing moved).
     UpdateStats set_time(float t);
-    // The materials, lights, textures or environment changed in place:
-    // renderers rebuild their shading tables at their next pass.
+    // The materials, lights, textures, environment or meshes' material ids
+    // changed in place: indices are checked (rf::Error), the triangles'
+    // materials and the emitters found again, and renderers rebuild their
+    // shading tables at their next pass.
     void materials_changed();
     // Meshes' positions (or instance transforms and visibility) changed in
     // place, as `change` names them (instances of a named mesh are added):

@@ -46,6 +46,25 @@ Box3f checked_bounds(std::span<const Triangle> triangles, size_t base) {
 
 }  // namespace
 
+void SceneGeometry::update_materials(const Scene& scene) {
+    if (instance_first_triangle.size() != scene.instances.size() + 1)
+        throw Error("scene geometry: " + std::to_string(scene.instances.size()) + " instances, flattened with " +
+                    std::to_string(instance_first_triangle.size() - 1) + " (the triangles changed: flatten again)");
+    const auto ids_of = [&](uint32_t inst_id) -> const std::vector<uint32_t>& {
+        return scene.meshes[scene.instances[inst_id].mesh].material_ids;
+    };
+    for (uint32_t inst_id = 0; inst_id < scene.instances.size(); ++inst_id) {  // all checked before any is written
+        const size_t flattened = instance_first_triangle[inst_id + 1] - instance_first_triangle[inst_id];
+        if (ids_of(inst_id).size() != flattened)
+            throw Error("mesh '" + scene.meshes[scene.instances[inst_id].mesh].name + "': " +
+                        std::to_string(ids_of(inst_id).size()) + " material ids for " + std::to_string(flattened) +
+                        " flattened triangles (the triangles changed: flatten again)");
+    }
+    for (uint32_t inst_id = 0; inst_id < scene.instances.size(); ++inst_id)
+        std::copy(ids_of(inst_id).begin(), ids_of(inst_id).end(), material.begin() + instance_first_triangle[inst_id]);
+    find_emitters(scene);
+}
+
 SceneGeometry SceneGeometry::build(const Scene& scene) {
     SceneGeometry g;
     const size_t total = scene.triangle_count();

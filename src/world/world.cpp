@@ -251,7 +251,7 @@ void WorldCore::materials_changed() {
     const FrameWriting writing(*this, "materials_changed");
     if (kind != WorldKind::Paged) {
         scene.validate_materials();
-        geometry.find_emitters(scene);
+        geometry.update_materials(scene);  // mesh material ids may have changed too
     }
     ++version;
 }

@@ -44,6 +44,9 @@ struct SceneGeometry {
     void update(const Scene& scene, const GeometryChange& change);
     // emissive_triangles from the materials and the current triangles (those of zero area never emit).
     void find_emitters(const Scene& scene);
+    // The per-triangle materials from the meshes' material ids (after they
+    // changed in place), then the emitters; the triangles stay.
+    void update_materials(const Scene& scene);
     [[nodiscard]] size_t size() const { return triangles.size(); }
     [[nodiscard]] size_t memory_bytes() const;
 };
