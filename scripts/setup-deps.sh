@@ -26,6 +26,10 @@ packages=(
   libimgui-dev                   # its controls panel (Dear ImGui 1.86 with the GLFW and OpenGL 3 backends)
   xvfb xauth libgl1-mesa-dri     # headless viewer tests: a virtual X server and Mesa's software OpenGL,
   xdotool                        #   and real mouse and key events sent to the window
+  python3-dev pybind11-dev       # the Python module (`import rayforge`), built against /usr/bin/python3
+  python3-numpy                  # its arrays
+  python3-pytest python3-hypothesis   # its tests, randomized arguments included
+  python3-venv python3-pip python3-setuptools python3-wheel   # `pip install .` into a virtual environment (install test)
 )
 
 missing=()

@@ -8,6 +8,7 @@
 #include "rayforge/accel/accel.h"
 #include "rayforge/accel/build_report.h"
 #include "rayforge/accel/dynamic_accel.h"
+#include "rayforge/accel/mesh_queries.h"
 #include "rayforge/accel/bvh/bvh.h"
 #include "rayforge/backend/device.h"
 #include "rayforge/core/error.h"

@@ -81,7 +81,7 @@ struct WorldStats {
     double commit_ms = 0.0;      // the last commit's build or update
     uint64_t commits = 0;        // builds and updates so far
     AccelStats accel;            // the structure answering now (empty before the first commit)
-    std::string update_method;   // an animated world's method ("" for a still world)
+    std::string update_method;   // the method that follows time and edits ("" for a still world whose edits rebuild)
 };
 
 class World;
@@ -159,9 +159,10 @@ public:
     void materials_changed();
     // Meshes' positions (or instance transforms and visibility) changed in
     // place, as `change` names them (instances of a named mesh are added):
-    // the triangles and the structure follow (by the update method of an
-    // animated world, a rebuild otherwise). A mesh whose triangle count
-    // changed makes the world flatten and build again.
+    // the triangles and the structure follow, by the update method of an
+    // animated world or of a still world made with WorldOptions::update.method
+    // set (e.g. refit for moving vertices), by a rebuild otherwise. A mesh
+    // whose triangle count changed makes the world flatten and build again.
     UpdateStats geometry_replaced(const GeometryChange& change);
 
     // A new world over this one's scene as it is now (a copy, at the current

@@ -54,7 +54,10 @@ WorldPlan plan_world(const WorldOptions& options, WorldKind kind, const std::opt
                                  " instead");
     }
     if (!plan.update.method) plan.update.method = kDefaultUpdateMethod;
-    plan.dynamic_bvh = kind == WorldKind::Animated && plan.build.structure == Structure::Bvh;
+    // An animated BVH follows the motion by its method; a still one named a
+    // method follows geometry_replaced by it (e.g. refit for moving vertices).
+    const bool follows = kind == WorldKind::Animated || (kind == WorldKind::Still && options.update.method);
+    plan.dynamic_bvh = follows && plan.build.structure == Structure::Bvh;
     return plan;
 }
 

@@ -25,7 +25,8 @@ enum class WorldKind : uint8_t { Still, Animated, Paged };
 struct WorldPlan {
     BuildOptions build;               // build.device = the world's device
     UpdateOptions update;             // update.method always set (animated worlds)
-    bool dynamic_bvh = false;         // an animated BVH: a DynamicAccel follows the motion; otherwise rebuilds
+    bool dynamic_bvh = false;         // a DynamicAccel follows the motion (an animated BVH, or a still one
+                                      // given a method); otherwise a change rebuilds
     std::vector<std::string> notes;   // defaults replaced, one line each
 };
 

@@ -263,7 +263,7 @@ WorldStats WorldCore::stats() const {
     s.last_commit = last_commit;
     s.commit_ms = commit_ms;
     s.commits = commits;
-    if (kind == WorldKind::Animated) s.update_method = to_string(*plan.update.method);
+    if (kind == WorldKind::Animated || plan.dynamic_bvh) s.update_method = to_string(*plan.update.method);
     if (paged) {
         s.triangles = paged->info().triangles;
         s.host_bytes = paged->memory_bytes();

@@ -1,0 +1,41 @@
+// The pieces of the module `rayforge._rayforge`, one function per file that
+// adds its classes and functions, and the argument parsing they share.
+#pragma once
+
+#include <pybind11/pybind11.h>
+
+#include <optional>
+#include <string>
+
+#include "rayforge/core/error.h"
+#include "rayforge/world.h"
+
+namespace rf::py {
+
+namespace pyb = pybind11;
+
+void bind_camera(pyb::module_& m);             // world_bindings.cpp
+void bind_world(pyb::module_& m);              // world_bindings.cpp
+void bind_render(pyb::module_& m);             // render_bindings.cpp
+void bind_raycasting_scene(pyb::module_& m);   // raycasting_scene.cpp
+
+// An engine name parsed for argument `arg`: its rf::Error becomes a
+// ValueError naming the argument.
+template <class F>
+auto parsed(const char* arg, F&& parse) {
+    try {
+        return parse();
+    } catch (const Error& e) {
+        throw pyb::value_error(std::string(arg) + ": " + e.what());
+    }
+}
+
+// The world options of the keyword arguments every world-making call takes
+// (device, structure, builder, layout, gpu_kernel, update, threads,
+// memory_budget); names are the CLI's.
+WorldOptions world_options(const std::string& device, const std::string& structure, const std::string& builder,
+                           const std::string& layout, const std::optional<std::string>& gpu_kernel,
+                           const std::optional<std::string>& update, int threads,
+                           const std::optional<std::string>& memory_budget);
+
+}  // namespace rf::py
