@@ -14,7 +14,7 @@ import rayforge  # noqa: E402
 from conftest import icosphere  # noqa: E402
 
 EXPECTED = (ValueError, TypeError, rayforge.Error, OverflowError)
-SETTINGS = settings(max_examples=150, deadline=None, derandomize=True,
+SETTINGS = settings(max_examples=150, deadline=None, derandomize=True, database=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 
 dtypes = st.sampled_from([np.float32, np.float64, np.float16, np.int32, np.int64, np.uint32, np.uint8, np.bool_,
