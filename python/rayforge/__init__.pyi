@@ -106,6 +106,9 @@ def make_world(
 ) -> World:
     """A World of one mesh from numpy arrays (vertices (n, 3) float32, triangles (m, 3) integers)."""
 
+def load_mesh(path: str) -> Tuple[np.ndarray, np.ndarray]:
+    """A scene file or builtin:NAME as one world-space mesh: (vertices (n, 3) float32, triangles (m, 3) uint32)."""
+
 def build_bvh(
     vertices: npt.ArrayLike, triangles: npt.ArrayLike, *, builder: str = "binned", leaf_size: int = 4, threads: int = 0
 ) -> Dict[str, Any]:

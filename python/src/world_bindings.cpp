@@ -336,6 +336,43 @@ void bind_world(pyb::module_& m) {
         "emission, metallic, roughness, transmission, ior), and a constant environment colour.");
 
     m.def(
+        "load_mesh",
+        [](const std::string& path) {
+            Scene scene;
+            {
+                pyb::gil_scoped_release release;
+                scene = load_scene(path);
+            }
+            size_t vertex_count = 0, index_count = 0;
+            for (const Instance& inst : scene.instances) {
+                vertex_count += scene.meshes[inst.mesh].positions.size();
+                index_count += scene.meshes[inst.mesh].indices.size();
+            }
+            if (vertex_count > size_t(UINT32_MAX))
+                throw Error("load_mesh: " + path + " has " + std::to_string(vertex_count) +
+                            " vertices over its instances, more than uint32 indices address");
+            auto vertices = output<float>({pyb::ssize_t(vertex_count)}, {3});
+            auto triangles = output<uint32_t>({pyb::ssize_t(index_count / 3)}, {3});
+            float* v = vertices.mutable_data();
+            uint32_t* t = triangles.mutable_data();
+            uint32_t base = 0;
+            for (const Instance& inst : scene.instances) {
+                const Mesh& mesh = scene.meshes[inst.mesh];
+                for (const Vec3f& p : mesh.positions) {
+                    const Vec3f w = inst.transform.transform_point(p);
+                    *v++ = w.x, *v++ = w.y, *v++ = w.z;
+                }
+                for (const uint32_t i : mesh.indices) *t++ = base + i;
+                base += uint32_t(mesh.positions.size());
+            }
+            return pyb::make_tuple(vertices, triangles);
+        },
+        pyb::arg("path"),
+        "Loads a scene file (.obj, .ply, .gltf, .glb, .aff, .json) or builtin:NAME as one triangle mesh in world "
+        "space: (vertices (n, 3) float32, triangles (m, 3) uint32), every instance's triangles (hidden ones "
+        "included) in instance order; for RaycastingScene.add_triangles or make_world.");
+
+    m.def(
         "build_bvh",
         [](const pyb::handle& vertices, const pyb::handle& triangles, const std::string& builder, int leaf_size,
            int threads) {
