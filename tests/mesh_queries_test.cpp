@@ -19,6 +19,8 @@
 #include <vector>
 
 #include "accel_test_rays.h"
+#include "accel/bvh/builders/build_bvh.h"
+#include "accel/query/closest_point_wide.h"
 #include "accel_test_scenes.h"
 #include "core/parallel.h"
 #include "rayforge/core/error.h"
@@ -387,6 +389,45 @@ TEST(MeshQueries, ClosestPointsMatchBruteForce) {
             }
             expect_closest_points(mesh.tris, *queries, points, mesh.name);
         }
+    }
+}
+
+// The 8-wide query (4-triangle packs, SIMD) answers exactly as the binary
+// reference: the same prim, point and barycentrics, bit for bit, seeded or
+// not, on a soup with zero-area triangles, slivers and duplicates.
+TEST(MeshQueries, WideQueryEqualsTheBinaryReference) {
+    std::vector<Triangle> tris = test::make_triangle_soup(3000, 17, Box3f{Vec3f(-2.0f), Vec3f(2.0f)}, 0.3f).triangles;
+    std::mt19937 rng(5);
+    for (int i = 0; i < 200; ++i) {
+        const Vec3f a = test::random_in_box(rng, Box3f{Vec3f(-2.0f), Vec3f(2.0f)});
+        const Vec3f d = test::random_direction(rng) * 0.3f;
+        tris.push_back({a, a + d, a + d * 2.0f});                    // zero area: collinear
+        tris.push_back({a, a + d, a + d + Vec3f(1e-7f, 0.0f, 0.0f)});  // a sliver
+        tris.push_back(tris[size_t(i) * 7]);                         // a duplicate (a tie)
+    }
+    BuildOptions options;
+    const Bvh bvh = build_bvh_on_cpu(tris, options);
+    std::vector<query::SlotTriangle> slots;
+    query::fill_slot_triangles(bvh, tris, slots);
+    const WideBvh<8> wide = collapse_bvh<8>(bvh, tris);
+    std::vector<uint32_t> slot_of_prim(tris.size(), kInvalidId);
+    for (uint32_t s = uint32_t(slots.size()); s-- > 0;) slot_of_prim[slots[s].prim()] = s;
+    const query::QueryView binary{bvh.nodes.data(), slots.data(), uint32_t(bvh.nodes.size())};
+    const query::WidePointView view{wide.nodes.data(), wide.packs.data(), binary, slot_of_prim.data()};
+    const std::vector<Vec3f> points = random_points(Box3f{Vec3f(-2.5f), Vec3f(2.5f)}, 5000, 12);
+    uint32_t seed = kInvalidId;
+    for (const Vec3f& p : points) {
+        const query::PointQueryResult a = query::closest_point_query(binary, p);
+        const query::PointQueryResult b = query::wide_closest_point_query(view, p);
+        const query::PointQueryResult c = query::wide_closest_point_query(view, p, seed);
+        for (const query::PointQueryResult* r : {&b, &c}) {
+            ASSERT_EQ(r->prim, a.prim);
+            EXPECT_EQ(r->distance_squared, a.distance_squared);
+            EXPECT_EQ(r->point.point, a.point.point);
+            EXPECT_EQ(r->point.u, a.point.u);
+            EXPECT_EQ(r->point.v, a.point.v);
+        }
+        seed = c.slot;
     }
 }
 

@@ -42,8 +42,8 @@ FloatRows float_rows(const pyb::handle& value, int last, const char* name) {
     return rows;
 }
 
-std::vector<Ray> to_rays(const FloatRows& rays, float tnear, float tfar) {
-    std::vector<Ray> out(rays.rows);
+RawArray<Ray> to_rays(const FloatRows& rays, float tnear, float tfar) {
+    RawArray<Ray> out(rays.rows);
     const float* in = rays.data();
     parallel::for_range(size_t(0), rays.rows, size_t(4096), [&](size_t lo, size_t hi) {
         for (size_t i = lo; i < hi; ++i) {

@@ -101,7 +101,7 @@ public:
             pyb::gil_scoped_release release;
             const std::shared_lock<std::shared_mutex> lock = ready();
             r.run([&] {
-                std::vector<Hit> hits(rows.rows);
+                RawArray<Hit> hits(rows.rows);
                 world_->intersect(to_rays(rows, 0.0f, kInfinity), hits);
                 fill_hits(hits, out);
             });
@@ -118,14 +118,12 @@ public:
     pyb::array test_occlusions(const pyb::handle& rays, float tnear, float tfar, int nthreads) {
         const FloatRows rows = float_rows(rays, 6, "rays");
         auto out = output<bool>(rows.leading);
-        bool* o = out.mutable_data();
+        const std::span<uint8_t> blocked = bool_bytes(out);  // written in place
         const Reading r = read(nthreads, false);
         {
             pyb::gil_scoped_release release;
             const std::shared_lock<std::shared_mutex> lock = ready();
-            std::vector<uint8_t> blocked(rows.rows);
             r.run([&] { world_->occluded(to_rays(rows, tnear, tfar), blocked); });
-            std::copy(blocked.begin(), blocked.end(), o);
         }
         return out;
     }
@@ -290,7 +288,7 @@ private:
 
     // Per-hit outputs from flat hits (t, geometry and primitive ids, uvs, unit
     // geometric normals), held shared by the caller.
-    void fill_hits(const std::vector<Hit>& hits, const HitOutputs& out) const {
+    void fill_hits(std::span<const Hit> hits, const HitOutputs& out) const {
         const SceneGeometry& g = world_->geometry();
         parallel::for_range(size_t(0), hits.size(), size_t(4096), [&](size_t lo, size_t hi) {
             for (size_t i = lo; i < hi; ++i) {

@@ -23,7 +23,7 @@ std::array<float, 3> array3(Vec3f v) { return {v.x, v.y, v.z}; }
 // A paged world's hits carry the paged triangle id (page * 8192 + slot) and
 // no geometry in memory to map it back: its instance and mesh triangle ids
 // are kInvalidId and its normals NaN (documented in docs/python.md).
-pyb::dict hit_dict(const World& world, const std::vector<Hit>& hits, const std::vector<pyb::ssize_t>& leading) {
+pyb::dict hit_dict(const World& world, std::span<const Hit> hits, const std::vector<pyb::ssize_t>& leading) {
     auto t_hit = output<float>(leading), uvs = output<float>(leading, {2}), normals = output<float>(leading, {3});
     auto triangle_ids = output<uint32_t>(leading), instance_ids = output<uint32_t>(leading),
          primitive_ids = output<uint32_t>(leading);
@@ -254,10 +254,10 @@ void bind_world(pyb::module_& m) {
         .def("trace",
              [](const World& w, const pyb::handle& rays, float tnear, float tfar) {
                  const FloatRows rows = float_rows(rays, 6, "rays");
-                 std::vector<Hit> hits(rows.rows);
+                 RawArray<Hit> hits(rows.rows);
                  {
                      pyb::gil_scoped_release release;
-                     const std::vector<Ray> r = to_rays(rows, tnear, tfar);
+                     const RawArray<Ray> r = to_rays(rows, tnear, tfar);
                      w.intersect(r, hits);
                  }
                  return hit_dict(w, hits, rows.leading);
@@ -269,13 +269,10 @@ void bind_world(pyb::module_& m) {
              [](const World& w, const pyb::handle& rays, float tnear, float tfar) {
                  const FloatRows rows = float_rows(rays, 6, "rays");
                  auto out = output<bool>(rows.leading);
-                 bool* o = out.mutable_data();
+                 const std::span<uint8_t> blocked = bool_bytes(out);  // written in place
                  {
                      pyb::gil_scoped_release release;
-                     const std::vector<Ray> r = to_rays(rows, tnear, tfar);
-                     std::vector<uint8_t> blocked(r.size());
-                     w.occluded(r, blocked);
-                     std::copy(blocked.begin(), blocked.end(), o);
+                     w.occluded(to_rays(rows, tnear, tfar), blocked);
                  }
                  return out;
              },

@@ -113,11 +113,16 @@ RF_HDI TrianglePoint closest_point_on_slot(Vec3f p, const SlotTriangle& s) {
     return s.zero_area() ? closest_point_on_flat_triangle(p, s.tri) : closest_point_on_triangle(p, s.tri);
 }
 
-// Squared distance from p to the box (0 inside).
+// Squared distance from p to the box (0 inside). Comparisons, not fmaxf:
+// GCC calls libm's fmaxf (NaN rules) instead of one max instruction, and
+// p and the box are finite here.
 RF_HDI float box_distance_squared(Vec3f p, const Box3f& b) {
-    const float dx = fmaxf(fmaxf(b.lo.x - p.x, p.x - b.hi.x), 0.0f);
-    const float dy = fmaxf(fmaxf(b.lo.y - p.y, p.y - b.hi.y), 0.0f);
-    const float dz = fmaxf(fmaxf(b.lo.z - p.z, p.z - b.hi.z), 0.0f);
+    auto gap = [](float lo, float x, float hi) {
+        const float below = lo - x, above = x - hi;
+        const float d = below > above ? below : above;
+        return d > 0.0f ? d : 0.0f;
+    };
+    const float dx = gap(b.lo.x, p.x, b.hi.x), dy = gap(b.lo.y, p.y, b.hi.y), dz = gap(b.lo.z, p.z, b.hi.z);
     return dx * dx + dy * dy + dz * dz;
 }
 

@@ -7,9 +7,11 @@
 //    trace/bvh_traversal.h) without the shrinking interval; the hits of one
 //    ray sorted by (t, prim), then merge_shared_hits() keeps one hit per
 //    crossing of a shared edge or vertex.
-//  - Closest point: a BVH point query (closest_point.h): nearest child
-//    first, pruned by the best squared distance so far; per triangle
-//    Ericson, "Real-Time Collision Detection" (2005), 5.1.5. A batch is
+//  - Closest point: a BVH point query over the BVH collapsed to 8-wide
+//    nodes and 4-triangle packs (closest_point_wide.h; closest_point.h has
+//    the binary reference): nearest children first, pruned by the best
+//    squared distance so far; per triangle Ericson, "Real-Time Collision
+//    Detection" (2005), 5.1.5, four at a time. A batch is
 //    answered in the Morton order of its points (spatial_order), each query
 //    seeded with the previous one's triangle: a random batch over a large
 //    mesh otherwise misses the cache at nearly every node (measured on the
@@ -21,7 +23,8 @@
 // Data layout: the canonical Bvh (its prim_indices index the caller's
 // triangles) and a copy of the triangles in leaf-slot order with their
 // index and a zero-area flag (query_mesh.h, 40 bytes each), so leaves read
-// contiguous memory; a 112-byte WindingNode per BVH node; one weight per
+// contiguous memory; the 8-wide BVH (wide_bvh.h: 256-byte nodes, 160-byte
+// packs of four triangles); a 112-byte WindingNode per BVH node; one weight per
 // slot only where a builder with spatial splits (sbvh, gridbvh-split)
 // referenced a triangle from several leaves (1 / its references, so the
 // winding number counts it once). The caller's triangles are not kept.
@@ -51,6 +54,7 @@
 #include "accel/bvh/refit.h"
 #include "accel/query/all_hits.h"
 #include "accel/query/closest_point.h"
+#include "accel/query/closest_point_wide.h"
 #include "accel/query/query_mesh.h"
 #include "accel/query/winding_number.h"
 #include "core/parallel.h"
@@ -232,7 +236,8 @@ public:
 
     void closest_points(std::span<const Vec3f> queries, std::span<ClosestPoint> out) const override {
         check_sizes(queries, out, "closest_points");
-        const query::QueryView view = this->view();
+        const query::WidePointView wide_view{wide_.nodes.empty() ? nullptr : wide_.nodes.data(), wide_.packs.data(),
+                                             view(), slot_of_prim_.data()};
         const std::vector<uint32_t> order = spatial_order(queries);
         parallel::for_range(size_t(0), queries.size(), kPointGrain, [&](size_t lo, size_t hi) {
             uint32_t seed = kInvalidId;
@@ -241,7 +246,7 @@ public:
                 ClosestPoint& c = out[i];
                 const Vec3f q = queries[i];
                 const query::PointQueryResult r =
-                    is_finite(q) ? query::closest_point_query(view, q, seed) : query::PointQueryResult{};
+                    is_finite(q) ? query::wide_closest_point_query(wide_view, q, seed) : query::PointQueryResult{};
                 seed = r.slot;
                 if (r.prim == kInvalidId) {
                     c = ClosestPoint{Vec3f(std::numeric_limits<float>::quiet_NaN()), kInvalidId, 0.0f, 0.0f};
@@ -288,9 +293,15 @@ private:
         return {bvh_.nodes.data(), slots_.data(), uint32_t(bvh_.nodes.size())};
     }
 
-    // The slot copy and the winding expansions of the current triangles.
+    // The slot copy, the 8-wide BVH of the point queries and the winding
+    // expansions of the current triangles.
     void update_derived(std::span<const Triangle> triangles) {
         query::fill_slot_triangles(bvh_, triangles, slots_);
+        wide_ = collapse_bvh<8>(bvh_, std::vector<Triangle>(triangles.begin(), triangles.end()));
+        if (slot_of_prim_.empty()) {
+            slot_of_prim_.assign(size_, kInvalidId);
+            for (uint32_t s = uint32_t(slots_.size()); s-- > 0;) slot_of_prim_[slots_[s].prim()] = s;
+        }
         query::compute_winding_nodes(bvh_, slots_, weights_, winding_);
     }
 
@@ -306,6 +317,8 @@ private:
     Bvh bvh_;
     RefitPlan plan_;
     std::vector<SlotTriangle> slots_;
+    WideBvh<8> wide_;                      // closest points: collapsed from bvh_ (its topology fixed by refit too)
+    std::vector<uint32_t> slot_of_prim_;   // a slot of each triangle (the packs' scalar fallback)
     std::vector<float> weights_;  // per slot, empty when every triangle has one reference
     std::vector<query::WindingNode> winding_;
 };
