@@ -189,7 +189,7 @@ sanitizer_filter() {
     # Every kernel once (EveryKernelMatchesBruteForce: 72 s under memcheck on
     # an H200); BuildersAndLeafSizesForTheBvhKernels repeats the same kernels
     # on other builders' trees and would not fit the time limit.
-    memcheck) echo "GpuDeviceTracer.*:GpuRenderer.AovsAndCallbacks:GpuRenderer.RaySortingChangesNothing:GpuPagedDevice.HitsEqualPagedEngineWithLargeDevicePools:GpuBvhRefit.SameBoxesAsCpuRefit:GpuTwoLevel.*:GpuDynamicAccel.TwoLevelRenderMatchesTheCpu:$builder_tests:-GpuDeviceTracer.BuildersAndLeafSizesForTheBvhKernels" ;;
+    memcheck) echo "GpuDeviceTracer.*:GpuRenderer.AovsAndCallbacks:GpuRenderer.RaySortingChangesNothing:GpuPagedDevice.HitsEqualPagedEngineWithLargeDevicePools:GpuBvhRefit.SameBoxesAsCpuRefit:GpuTwoLevel.*:GpuDynamicAccel.TwoLevelRenderMatchesTheCpu:GpuDeviceBatch.*:$builder_tests:-GpuDeviceTracer.BuildersAndLeafSizesForTheBvhKernels" ;;
     *) echo "$builder_tests" ;;
   esac
 }

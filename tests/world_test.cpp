@@ -278,6 +278,22 @@ TEST(World, ReopenKeepsTheSceneAtItsTime) {
     EXPECT_EQ(render(*reopened, world->camera(), o).pixels, render(*world, world->camera(), o).pixels);
 }
 
+// Device-resident batches need a world on a CUDA device: on the CPU they are
+// one clear error (tests/gpu/device_batch_test.cpp checks them on a device).
+TEST(World, DeviceBatchesOnTheCpuAreOneError) {
+    const std::unique_ptr<World> world = open_world("builtin:cornell");
+    Ray ray{Vec3f(0.0f, 1.0f, 3.0f), 0.0f, Vec3f(0.0f, 0.0f, -1.0f), kInfinity};
+    Hit hit;
+    uint8_t blocked = 0;
+    try {
+        world->intersect_on_device(&ray, &hit, 1);
+        ADD_FAILURE() << "a CPU world traced device rays";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("runs on the CPU"), std::string::npos) << e.what();
+    }
+    EXPECT_THROW(world->occluded_on_device(&ray, &blocked, 1), Error);
+}
+
 TEST(World, PagedWorldRendersFromItsFile) {
     const std::string path = test::temp_dir("world_paged") + "/cornell.rfpack";
     Scene cornell = load_scene("builtin:cornell");

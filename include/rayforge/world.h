@@ -177,6 +177,9 @@ public:
     [[nodiscard]] bool occluded(const Ray& ray) const;
     void intersect(std::span<const Ray> rays, std::span<Hit> hits) const;
     void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const;
+    // Rays and answers in the world's CUDA device memory (Accel::intersect_on_device).
+    void intersect_on_device(const Ray* rays, Hit* hits, size_t count, void* stream = nullptr) const;
+    void occluded_on_device(const Ray* rays, uint8_t* occluded, size_t count, void* stream = nullptr) const;
 
 private:
     friend struct WorldAccess;  // the library's own door to the core

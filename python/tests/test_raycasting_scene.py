@@ -198,9 +198,17 @@ def test_results_do_not_depend_on_the_thread_count(rng):
                                   scene.compute_signed_distance(points, nthreads=2))
 
 
-def test_queries_from_several_python_threads(rng):
+def cuda_available():
+    return rayforge.cuda_backend_built() and any(d.startswith("cuda") for d in rayforge.devices())
+
+
+@pytest.mark.parametrize("device", ["cpu", "cuda"])
+def test_queries_from_several_python_threads(rng, device):
+    # On CUDA each host batch has its own device buffers and stream (concurrent calls share none).
+    if device == "cuda" and not cuda_available():
+        pytest.skip("no CUDA device")
     vertices, triangles = icosphere(3)
-    scene = rayforge.RaycastingScene()
+    scene = rayforge.RaycastingScene(device=device)
     scene.add_triangles(vertices, triangles)
     rays = random_rays(rng, 4000)
     points = rays[:, :3].copy()
@@ -262,10 +270,21 @@ def test_errors_name_the_argument():
     assert np.isfinite(got["t_hit"][0]) and np.isinf(got["t_hit"][1])
 
 
-def test_cuda_device_is_refused_or_used():
-    if rayforge.cuda_backend_built() and any(d.startswith("cuda") for d in rayforge.devices()):
+def test_cuda_device_is_refused_or_used(rng):
+    if cuda_available():
+        vertices, triangles = icosphere(3)
         scene = rayforge.RaycastingScene(device="cuda")
         assert scene.device == "cuda:0"
+        scene.add_triangles(vertices, triangles)
+        on_cpu = rayforge.RaycastingScene()
+        on_cpu.add_triangles(vertices, triangles)
+        rays = random_rays(rng, 20000)
+        a, b = scene.cast_rays(rays), on_cpu.cast_rays(rays)
+        hit = np.isfinite(b["t_hit"])
+        assert (np.isfinite(a["t_hit"]) == hit).mean() > 0.999
+        both = hit & np.isfinite(a["t_hit"])
+        np.testing.assert_allclose(a["t_hit"][both], b["t_hit"][both], rtol=1e-5)
+        assert (scene.test_occlusions(rays) == on_cpu.test_occlusions(rays)).mean() > 0.999
         return
     with pytest.raises(rayforge.Error):
         rayforge.RaycastingScene(device="cuda")

@@ -105,6 +105,21 @@ void Accel::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
 
 bool Accel::count_traversal(std::span<const Ray>, bool, TraversalTotals&) const { return false; }
 
+namespace {
+[[noreturn]] void throw_not_on_a_device(const Accel& accel, const char* call) {
+    throw Error(std::string(call) + ": " + accel.stats().name + " runs on the CPU; batches of device-resident rays "
+                "need an accel on a CUDA device (use the span batches here)");
+}
+}  // namespace
+
+void Accel::intersect_on_device(const Ray*, Hit*, size_t, void*) const {
+    throw_not_on_a_device(*this, "Accel::intersect_on_device");
+}
+
+void Accel::occluded_on_device(const Ray*, uint8_t*, size_t, void*) const {
+    throw_not_on_a_device(*this, "Accel::occluded_on_device");
+}
+
 void Accel::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const {
     check_batch_sizes("Accel::occluded", rays.size(), occluded.size());
     parallel::for_range(size_t(0), rays.size(), kRayGrainSize, [&](size_t lo, size_t hi) {

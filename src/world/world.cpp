@@ -364,6 +364,16 @@ void World::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) con
     frame.accel().occluded(rays, occluded);
 }
 
+void World::intersect_on_device(const Ray* rays, Hit* hits, size_t count, void* stream) const {
+    const WorldCore::FrameReading frame(*core_);
+    frame.accel().intersect_on_device(rays, hits, count, stream);
+}
+
+void World::occluded_on_device(const Ray* rays, uint8_t* occluded, size_t count, void* stream) const {
+    const WorldCore::FrameReading frame(*core_);
+    frame.accel().occluded_on_device(rays, occluded, count, stream);
+}
+
 // ---- making worlds
 
 std::unique_ptr<World> open_world(const std::string& path, const WorldOptions& options, const LoadOptions& load) {

@@ -150,6 +150,15 @@ public:
     // Batches (parallel over rays); hits.size() == rays.size().
     virtual void intersect(std::span<const Ray> rays, std::span<Hit> hits) const;
     virtual void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const;
+    // Batches whose rays and answers live in the memory of the accel's CUDA
+    // device (cudaMalloc'd, managed, or a DLPack / __cuda_array_interface__
+    // array's pointer): traced on `stream` (a cudaStream_t; nullptr: the
+    // default stream) without a copy through the host; returns once the
+    // answers are written. Concurrent calls are safe: each call has its own
+    // scratch. Throws rf::Error for an accel on the CPU (use the span
+    // batches) and for pointers that are not memory of the accel's device.
+    virtual void intersect_on_device(const Ray* rays, Hit* hits, size_t count, void* stream = nullptr) const;
+    virtual void occluded_on_device(const Ray* rays, uint8_t* occluded, size_t count, void* stream = nullptr) const;
     [[nodiscard]] virtual AccelStats stats() const = 0;
     // Where the structure lives and its queries run: the CPU, or a CUDA device.
     [[nodiscard]] virtual Device device() const { return {}; }

@@ -2,7 +2,8 @@
 // traversal kernel on one device) behind the interface every structure
 // answers through. Batches of host rays are copied to the device and the
 // answers back; a single ray is a batch of one (correct, but a GPU is for
-// batches). The CUDA renderer takes its structure from here.
+// batches); batches already in device memory are traced in place. The CUDA
+// renderer takes its structure from here.
 #pragma once
 
 #include <memory>
@@ -26,6 +27,12 @@ public:
     void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const override {
         tracer_.occluded(rays, occluded);
     }
+    void intersect_on_device(const Ray* rays, Hit* hits, size_t count, void* stream) const override {
+        tracer_.trace_on_device(rays, hits, nullptr, count, stream);
+    }
+    void occluded_on_device(const Ray* rays, uint8_t* occluded, size_t count, void* stream) const override {
+        tracer_.trace_on_device(rays, nullptr, occluded, count, stream);
+    }
     bool count_traversal(std::span<const Ray> rays, bool any_hit, TraversalTotals& totals) const override {
         tracer_.count_traversal(rays, any_hit, totals);
         return true;
@@ -42,7 +49,8 @@ public:
     [[nodiscard]] DeviceTracer& tracer() { return tracer_; }
 
 private:
-    // The resident-ray buffers are scratch space: a const query may reuse them.
+    // time_traversal's resident-ray buffers are scratch space a const query
+    // may reuse (the bench runs it alone); the batches have their own scratch.
     mutable DeviceTracer tracer_;
 };
 

@@ -114,45 +114,79 @@ double ms_since(std::chrono::steady_clock::time_point start) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-// Work done before the timed launch, so that it is not timed: the
-// persistent kernel's ray counter is reset and its grid size (enough warps
-// to fill every multiprocessor) is queried once.
-void prepare_trace(DeviceTracer::Impl& impl, bool any_hit) {
+// The persistent kernel's grid sizes (enough warps to fill every
+// multiprocessor), closest and any hit, queried once whatever thread asks.
+void query_persistent_blocks(DeviceTracer::Impl& impl) {
+    if (impl.kernel != GpuKernel::AilaLaine) return;
+    std::call_once(impl.persistent_once, [&] {
+        int per_sm[2] = {0, 0};
+        RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm[0], aila_laine_persistent_kernel<false>,
+                                                                   kTraceBlock, 0));
+        RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm[1], aila_laine_persistent_kernel<true>,
+                                                                   kTraceBlock, 0));
+        for (int i = 0; i < 2; ++i) impl.persistent_blocks[i] = std::max(1, per_sm[i]) * impl.multiprocessors;
+    });
+}
+
+// Work done before the bench's timed launch, so that it is not timed: the
+// persistent kernel's ray counter is reset and its grid size known.
+void prepare_trace(DeviceTracer::Impl& impl) {
     if (impl.kernel != GpuKernel::AilaLaine) return;
     impl.work_counter.reserve(1);
     RF_CUDA_CHECK(cudaMemset(impl.work_counter.data(), 0, sizeof(uint32_t)));
-    int& blocks = impl.persistent_blocks[any_hit ? 1 : 0];
-    if (blocks != 0) return;
-    int per_sm = 0;
-    if (any_hit)
-        RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, aila_laine_persistent_kernel<true>,
-                                                                   kTraceBlock, 0));
-    else
-        RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm, aila_laine_persistent_kernel<false>,
-                                                                   kTraceBlock, 0));
-    blocks = std::max(1, per_sm) * impl.multiprocessors;
+    query_persistent_blocks(impl);
 }
 
-// Launches the trace of `count` resident rays with the kernel's scheduling
-// (after prepare_trace).
-void launch_trace(DeviceTracer::Impl& impl, bool any_hit, uint32_t count) {
+// Where one trace reads and writes: device rays, the answers (hits for
+// the closest hit, flags for any hit), the persistent kernel's ray counter
+// (reset to 0 before the launch), the stream.
+struct TraceTarget {
+    const Ray* rays = nullptr;
+    Hit* hits = nullptr;
+    uint8_t* flags = nullptr;
+    uint32_t* counter = nullptr;
+    cudaStream_t stream = nullptr;
+};
+
+// Launches the trace of `count` rays with the kernel's scheduling (the
+// persistent grid size known).
+void launch_trace(const DeviceTracer::Impl& impl, bool any_hit, uint32_t count, const TraceTarget& t) {
     if (impl.kernel == GpuKernel::AilaLaine) {
         const LaunchShape persistent{uint32_t(impl.persistent_blocks[any_hit ? 1 : 0]), kTraceBlock};
         if (any_hit)
-            launch_shaped(aila_laine_persistent_kernel<true>, persistent, impl.aila_laine.bvh, impl.rays.data(),
-                          nullptr, impl.flags.data(), count, impl.work_counter.data());
+            launch_shaped_on(t.stream, aila_laine_persistent_kernel<true>, persistent, impl.aila_laine.bvh, t.rays,
+                             nullptr, t.flags, count, t.counter);
         else
-            launch_shaped(aila_laine_persistent_kernel<false>, persistent, impl.aila_laine.bvh, impl.rays.data(),
-                          impl.hits.data(), nullptr, count, impl.work_counter.data());
+            launch_shaped_on(t.stream, aila_laine_persistent_kernel<false>, persistent, impl.aila_laine.bvh, t.rays,
+                             t.hits, nullptr, count, t.counter);
         return;
     }
     impl.with_tracer([&](const auto& tracer) {
         using Tracer = std::decay_t<decltype(tracer)>;
         if (any_hit)
-            launch_shaped(occluded_kernel<Tracer>, trace_shape(count), tracer, impl.rays.data(), impl.flags.data(), count);
+            launch_shaped_on(t.stream, occluded_kernel<Tracer>, trace_shape(count), tracer, t.rays, t.flags, count);
         else
-            launch_shaped(intersect_kernel<Tracer>, trace_shape(count), tracer, impl.rays.data(), impl.hits.data(), count);
+            launch_shaped_on(t.stream, intersect_kernel<Tracer>, trace_shape(count), tracer, t.rays, t.hits, count);
     });
+}
+
+// rf::Error unless `pointer` is memory `device` can address as its own
+// (device memory of that device, or managed memory).
+void check_device_pointer(const void* pointer, int device, const char* what) {
+    cudaPointerAttributes attributes{};
+    const cudaError_t status = cudaPointerGetAttributes(&attributes, pointer);
+    if (status != cudaSuccess) {
+        (void)cudaGetLastError();
+        throw Error(std::string("cuda::DeviceTracer::trace_on_device: ") + what + " is not CUDA memory (" +
+                    cudaGetErrorString(status) + ")");
+    }
+    const bool managed = attributes.type == cudaMemoryTypeManaged;
+    if (!managed && (attributes.type != cudaMemoryTypeDevice || attributes.device != device)) {
+        throw Error(std::string("cuda::DeviceTracer::trace_on_device: ") + what + " is not memory of device cuda:" +
+                    std::to_string(device) + (attributes.type == cudaMemoryTypeDevice
+                                                  ? " (it is on cuda:" + std::to_string(attributes.device) + ")"
+                                                  : " (it is host memory)"));
+    }
 }
 
 uint32_t checked_ray_count(size_t count) {
@@ -358,22 +392,69 @@ size_t DeviceTracer::Impl::structure_bytes() const {
            cell_start.bytes() + cell_prims.bytes() + proximity.bytes();
 }
 
+BatchScratch::BatchScratch(int device) {
+    RF_CUDA_CHECK(cudaSetDevice(device));
+    RF_CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
+}
+
+BatchScratch::~BatchScratch() {
+    if (stream) cudaStreamDestroy(stream);
+}
+
+namespace {
+
+// A batch of host rays on a scratch of its own: uploaded, traced and
+// downloaded on the scratch's stream (hits for the closest hit, else flags).
+void trace_host_batch(DeviceTracer::Impl& impl, std::span<const Ray> rays, Hit* hits, uint8_t* flags) {
+    const uint32_t count = checked_ray_count(rays.size());
+    RF_CUDA_CHECK(cudaSetDevice(impl.device));
+    query_persistent_blocks(impl);
+    const BatchScratchLease scratch(impl.batch_scratch, impl.device);
+    const bool any_hit = hits == nullptr;
+    scratch->rays.reserve(count);
+    if (any_hit) scratch->flags.reserve(count);
+    else scratch->hits.reserve(count);
+    const cudaStream_t stream = scratch->stream;
+    RF_CUDA_CHECK(cudaMemcpyAsync(scratch->rays.data(), rays.data(), rays.size_bytes(), cudaMemcpyHostToDevice, stream));
+    RF_CUDA_CHECK(cudaMemsetAsync(scratch->counter.data(), 0, sizeof(uint32_t), stream));
+    launch_trace(impl, any_hit, count,
+                 {scratch->rays.data(), scratch->hits.data(), scratch->flags.data(), scratch->counter.data(), stream});
+    if (any_hit)
+        RF_CUDA_CHECK(cudaMemcpyAsync(flags, scratch->flags.data(), count * sizeof(uint8_t), cudaMemcpyDeviceToHost, stream));
+    else
+        RF_CUDA_CHECK(cudaMemcpyAsync(hits, scratch->hits.data(), count * sizeof(Hit), cudaMemcpyDeviceToHost, stream));
+    RF_CUDA_CHECK(cudaStreamSynchronize(stream));
+}
+
+}  // namespace
+
 void DeviceTracer::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
     if (rays.size() != hits.size()) throw Error("cuda::DeviceTracer::intersect: rays and hits differ in size");
     if (rays.empty()) return;
-    auto& self = const_cast<DeviceTracer&>(*this);  // the ray buffers are scratch space
-    self.upload_rays(rays);
-    (void)self.trace_uploaded(false);
-    download_hits(hits);
+    trace_host_batch(*impl_, rays, hits.data(), nullptr);
 }
 
 void DeviceTracer::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const {
     if (rays.size() != occluded.size()) throw Error("cuda::DeviceTracer::occluded: rays and flags differ in size");
     if (rays.empty()) return;
-    auto& self = const_cast<DeviceTracer&>(*this);
-    self.upload_rays(rays);
-    (void)self.trace_uploaded(true);
-    download_occluded(occluded);
+    trace_host_batch(*impl_, rays, nullptr, occluded.data());
+}
+
+void DeviceTracer::trace_on_device(const Ray* rays, Hit* hits, uint8_t* occluded, size_t count, void* stream) const {
+    if (count == 0) return;
+    const uint32_t n = checked_ray_count(count);
+    Impl& impl = *impl_;
+    RF_CUDA_CHECK(cudaSetDevice(impl.device));
+    check_device_pointer(rays, impl.device, "the rays");
+    const bool any_hit = hits == nullptr;
+    check_device_pointer(any_hit ? static_cast<const void*>(occluded) : static_cast<const void*>(hits), impl.device,
+                         any_hit ? "the occlusion flags" : "the hits");
+    query_persistent_blocks(impl);
+    const BatchScratchLease scratch(impl.batch_scratch, impl.device);  // the ray counter, this call's own
+    const cudaStream_t s = static_cast<cudaStream_t>(stream);
+    RF_CUDA_CHECK(cudaMemsetAsync(scratch->counter.data(), 0, sizeof(uint32_t), s));
+    launch_trace(impl, any_hit, n, {rays, hits, occluded, scratch->counter.data(), s});
+    RF_CUDA_CHECK(cudaStreamSynchronize(s));
 }
 
 void DeviceTracer::upload_rays(std::span<const Ray> rays) {
@@ -391,10 +472,10 @@ KernelTiming DeviceTracer::trace_uploaded(bool any_hit) {
     if (count == 0) return timing;
     if (any_hit) impl.flags.reserve(count);
     else impl.hits.reserve(count);
-    prepare_trace(impl, any_hit);
+    prepare_trace(impl);
     EventTimer timer;
     timer.start();
-    launch_trace(impl, any_hit, count);
+    launch_trace(impl, any_hit, count, {impl.rays.data(), impl.hits.data(), impl.flags.data(), impl.work_counter.data()});
     timing.kernel_ms = timer.stop_ms();
     return timing;
 }

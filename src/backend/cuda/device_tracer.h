@@ -43,11 +43,18 @@ public:
     DeviceTracer(const DeviceTracer&) = delete;
     DeviceTracer& operator=(const DeviceTracer&) = delete;
 
-    // Host rays in, host answers out (uploads, one launch, downloads).
+    // Host rays in, host answers out (uploads, one launch, downloads), on a
+    // stream and buffers of the call's own: concurrent calls are safe.
     void intersect(std::span<const Ray> rays, std::span<Hit> hits) const;
     void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const;
+    // Rays and answers in this device's memory (hits for the closest hit,
+    // else occluded), traced on `stream` (a cudaStream_t, nullptr: the
+    // default stream); returns when the stream has finished. rf::Error for a
+    // pointer that is not memory of this device. Concurrent calls are safe.
+    void trace_on_device(const Ray* rays, Hit* hits, uint8_t* occluded, size_t count, void* stream) const;
 
-    // Rays resident on the device, so that a launch measures traversal alone.
+    // Rays resident on the device, so that a launch measures traversal alone
+    // (the bench: one caller at a time).
     void upload_rays(std::span<const Ray> rays);
     KernelTiming trace_uploaded(bool any_hit);
     void download_hits(std::span<Hit> hits) const;           // after trace_uploaded(false)

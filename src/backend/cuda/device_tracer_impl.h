@@ -4,7 +4,12 @@
 // (trace/tracers.h, the CPU's own).
 #pragma once
 
+#include <cuda_runtime.h>
+
 #include <cstdint>
+#include <memory>
+#include <mutex>
+#include <vector>
 
 #include "backend/cuda/bvh_refit.h"
 #include "backend/cuda/device_buffer.h"
@@ -14,13 +19,66 @@
 
 namespace rf::cuda {
 
+// One batch call's device memory and stream: DeviceTracer's batches take
+// one from the pool for the call and give it back (BatchScratchLease), so
+// concurrent calls never share a buffer, a ray counter or a stream.
+struct BatchScratch {
+    explicit BatchScratch(int device);
+    ~BatchScratch();
+    BatchScratch(const BatchScratch&) = delete;
+    BatchScratch& operator=(const BatchScratch&) = delete;
+    DeviceBuffer<Ray> rays{"batch rays"};
+    DeviceBuffer<Hit> hits{"batch hits"};
+    DeviceBuffer<uint8_t> flags{"batch occlusion flags"};
+    DeviceBuffer<uint32_t> counter{"batch ray counter", 1};  // the persistent kernel's
+    cudaStream_t stream = nullptr;                           // non-blocking, of this scratch
+};
+
+class BatchScratchPool {
+public:
+    std::unique_ptr<BatchScratch> take(int device) {
+        {
+            const std::lock_guard<std::mutex> lock(mutex_);
+            if (!free_.empty()) {
+                std::unique_ptr<BatchScratch> s = std::move(free_.back());
+                free_.pop_back();
+                return s;
+            }
+        }
+        return std::make_unique<BatchScratch>(device);
+    }
+    void give_back(std::unique_ptr<BatchScratch> s) {
+        const std::lock_guard<std::mutex> lock(mutex_);
+        free_.push_back(std::move(s));
+    }
+
+private:
+    std::mutex mutex_;
+    std::vector<std::unique_ptr<BatchScratch>> free_;
+};
+
+class BatchScratchLease {
+public:
+    BatchScratchLease(BatchScratchPool& pool, int device) : pool_(pool), scratch_(pool.take(device)) {}
+    ~BatchScratchLease() { pool_.give_back(std::move(scratch_)); }
+    BatchScratchLease(const BatchScratchLease&) = delete;
+    BatchScratchLease& operator=(const BatchScratchLease&) = delete;
+    BatchScratch& operator*() const { return *scratch_; }
+    BatchScratch* operator->() const { return scratch_.get(); }
+
+private:
+    BatchScratchPool& pool_;
+    std::unique_ptr<BatchScratch> scratch_;
+};
+
 struct DeviceTracer::Impl {
     GpuKernel kernel = GpuKernel::Bvh2;
     int device = 0;
     AccelStats stats;
     DeviceBuildStages build_stages;  // of the structure's build and layout conversion (on_device: where)
     int multiprocessors = 1;
-    int persistent_blocks[2] = {0, 0};  // Aila-Laine grid size, closest / any hit (0: not yet queried)
+    int persistent_blocks[2] = {0, 0};  // Aila-Laine grid size, closest / any hit (set once, under persistent_once)
+    std::once_flag persistent_once;
 
     DeviceBuffer<Triangle> triangles{"triangles"};
     // The arrays of whichever structure the kernel reads.
@@ -52,6 +110,8 @@ struct DeviceTracer::Impl {
     KdTracer<KdTraversal::Restart> kd_restart{};
     GridTracer grid{};
 
+    // The batches' scratch (intersect, occluded, trace_on_device).
+    BatchScratchPool batch_scratch;
     // Rays resident on the device (the bench) and the answers.
     DeviceBuffer<Ray> rays{"rays"};
     DeviceBuffer<Hit> hits{"hits"};

@@ -59,14 +59,20 @@ struct LaunchShape {
     throw_cuda_error(status, call.c_str(), __FILE__, __LINE__);
 }
 
-// Launches `kernel` with `shape` on the default stream and checks the
-// launch; a shape without blocks launches nothing (there is no item).
+// Launches `kernel` with `shape` on `stream` and checks the launch; a
+// shape without blocks launches nothing (there is no item).
 template <class... Params, class... Args>
-void launch_shaped(void (*kernel)(Params...), LaunchShape shape, Args&&... args) {
+void launch_shaped_on(cudaStream_t stream, void (*kernel)(Params...), LaunchShape shape, Args&&... args) {
     if (shape.blocks == 0) return;
-    kernel<<<shape.blocks, shape.threads, shape.shared_bytes>>>(std::forward<Args>(args)...);
+    kernel<<<shape.blocks, shape.threads, shape.shared_bytes, stream>>>(std::forward<Args>(args)...);
     const cudaError_t status = cudaGetLastError();
     if (status != cudaSuccess) throw_launch_error(status, reinterpret_cast<const void*>(kernel), shape);
+}
+
+// launch_shaped_on the default stream.
+template <class... Params, class... Args>
+void launch_shaped(void (*kernel)(Params...), LaunchShape shape, Args&&... args) {
+    launch_shaped_on(cudaStream_t{}, kernel, shape, std::forward<Args>(args)...);
 }
 
 // One thread per item: blocks_for(count) blocks of kBlockSize threads.

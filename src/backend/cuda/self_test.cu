@@ -32,4 +32,25 @@ std::vector<uint32_t> add_on_device(const std::vector<uint32_t>& values, uint32_
     return result;
 }
 
+DeviceBytes::DeviceBytes(size_t bytes, int device) {
+    RF_CUDA_CHECK(cudaSetDevice(device));
+    RF_CUDA_CHECK(cudaMalloc(&data_, bytes));
+    cudaStream_t stream = nullptr;
+    RF_CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
+    stream_ = stream;
+}
+
+DeviceBytes::~DeviceBytes() {
+    if (stream_) cudaStreamDestroy(static_cast<cudaStream_t>(stream_));
+    if (data_) cudaFree(data_);
+}
+
+void DeviceBytes::upload(const void* host, size_t bytes) {
+    RF_CUDA_CHECK(cudaMemcpy(data_, host, bytes, cudaMemcpyHostToDevice));
+}
+
+void DeviceBytes::download(void* host, size_t bytes) const {
+    RF_CUDA_CHECK(cudaMemcpy(host, data_, bytes, cudaMemcpyDeviceToHost));
+}
+
 }  // namespace rf::cuda::self_test

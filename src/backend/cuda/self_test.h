@@ -23,4 +23,23 @@ void launch_invalid_kernel();
 // a memory error of ours.
 std::vector<uint32_t> add_on_device(const std::vector<uint32_t>& values, uint32_t delta);
 
+// Memory of a device, as a program's own cudaMalloc (or a DLPack array)
+// hands it to the device batches (Accel::intersect_on_device), and a
+// stream of its own; freed by the destructor.
+class DeviceBytes {
+public:
+    DeviceBytes(size_t bytes, int device);
+    ~DeviceBytes();
+    DeviceBytes(const DeviceBytes&) = delete;
+    DeviceBytes& operator=(const DeviceBytes&) = delete;
+    [[nodiscard]] void* data() const { return data_; }
+    [[nodiscard]] void* stream() const { return stream_; }  // a cudaStream_t
+    void upload(const void* host, size_t bytes);
+    void download(void* host, size_t bytes) const;
+
+private:
+    void* data_ = nullptr;
+    void* stream_ = nullptr;
+};
+
 }  // namespace rf::cuda::self_test
