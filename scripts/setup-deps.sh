@@ -28,6 +28,7 @@ packages=(
   xdotool                        #   and real mouse and key events sent to the window
   python3-dev pybind11-dev       # the Python module (`import rayforge`), built against /usr/bin/python3
   python3-numpy                  # its arrays
+  libdlpack-dev                  # its CUDA arrays by DLPack (__dlpack__), with __cuda_array_interface__
   python3-pytest python3-hypothesis   # its tests, randomized arguments included
   python3-venv python3-pip python3-setuptools python3-wheel   # `pip install .` into a virtual environment (install test)
 )

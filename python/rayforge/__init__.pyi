@@ -71,6 +71,11 @@ class World:
         """Closest hits of (..., 6) rays: t_hit, geometry_ids, primitive_ids, primitive_uvs, primitive_normals, triangle_ids."""
     def occluded(self, rays: npt.ArrayLike, tnear: float = 0.0, tfar: float = ...) -> np.ndarray:
         """Whether anything lies on each ray between tnear and tfar (bool, the rays' leading shape)."""
+    def trace_on_device(self, rays: Any, hits: Any, *, stream: Optional[int] = None) -> None:
+        """Closest hits of CUDA-resident rays (n, 8) float32 [ox, oy, oz, tmin, dx, dy, dz, tmax] written into
+        CUDA-resident hits (n, 4) [t, u, v, prim as uint32 bits]: objects with __cuda_array_interface__ or __dlpack__."""
+    def occluded_on_device(self, rays: Any, occluded: Any, *, stream: Optional[int] = None) -> None:
+        """Any hits of CUDA-resident rays into CUDA-resident occluded (n,) uint8 or bool."""
 
 def open_world(
     path: str,
@@ -158,7 +163,12 @@ class RaycastingScene:
     def test_occlusions(
         self, rays: npt.ArrayLike, tnear: float = 0.0, tfar: float = ..., nthreads: int = 0
     ) -> np.ndarray: ...
-    def count_intersections(self, rays: npt.ArrayLike, nthreads: int = 0) -> np.ndarray: ...
+    def cast_rays_on_device(self, rays: Any, hits: Any, *, stream: Optional[int] = None) -> None:
+        """Beyond Open3D: World.trace_on_device for a scene made with device='cuda'."""
+    def test_occlusions_on_device(self, rays: Any, occluded: Any, *, stream: Optional[int] = None) -> None:
+        """Beyond Open3D: World.occluded_on_device for a scene made with device='cuda'."""
+    def count_intersections(self, rays: npt.ArrayLike, nthreads: int = 0) -> np.ndarray:
+        """int32: hits along each ray (a crossing of a shared edge or vertex counted once)."""
     def list_intersections(self, rays: npt.ArrayLike, nthreads: int = 0) -> Dict[str, np.ndarray]:
         """ray_splits, ray_ids, t_hit, geometry_ids, primitive_ids, primitive_uvs of every hit, sorted by t per ray."""
     def compute_closest_points(self, query_points: npt.ArrayLike, nthreads: int = 0) -> Dict[str, np.ndarray]:

@@ -7,6 +7,7 @@
 #include <pybind11/stl.h>
 
 #include "bindings.h"
+#include "device_arrays.h"
 #include "rayforge/backend/device.h"
 
 namespace pyb = pybind11;
@@ -30,4 +31,5 @@ PYBIND11_MODULE(_rayforge, m) {
     rf::py::bind_world(m);
     rf::py::bind_render(m);
     rf::py::bind_raycasting_scene(m);
+    rf::py::bind_device_buffer(m);
 }

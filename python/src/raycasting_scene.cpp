@@ -18,6 +18,7 @@
 #include <shared_mutex>
 
 #include "arrays.h"
+#include "device_arrays.h"
 #include "bindings.h"
 #include "core/parallel.h"
 #include "rayforge/accel/mesh_queries.h"
@@ -126,6 +127,18 @@ public:
             r.run([&] { world_->occluded(to_rays(rows, tnear, tfar), blocked); });
         }
         return out;
+    }
+
+    // Device arrays in place (device_arrays.h); the world must live on their device.
+    void trace_on_device(const pyb::handle& rays, const pyb::handle* hits, const pyb::handle* occluded,
+                         const std::optional<intptr_t>& stream) {
+        (void)read(0, false);
+        std::shared_lock<std::shared_mutex> lock;
+        {
+            pyb::gil_scoped_release release;
+            lock = ready();
+        }
+        trace_device_arrays(*world_, rays, hits, occluded, stream);
     }
 
     pyb::array count_intersections(const pyb::handle& rays, int nthreads) {
@@ -387,6 +400,22 @@ void bind_raycasting_scene(pyb::module_& m) {
         .def("cast_rays", &RaycastingScene::cast_rays, pyb::arg("rays"), pyb::arg("nthreads") = 0,
              "Closest hits of (..., 6) rays [ox, oy, oz, dx, dy, dz]: t_hit (inf on a miss), geometry_ids, "
              "primitive_ids (INVALID_ID on a miss), primitive_uvs (..., 2), primitive_normals (..., 3).")
+        .def(
+            "cast_rays_on_device",
+            [](RaycastingScene& s, const pyb::handle& rays, const pyb::handle& hits, const std::optional<intptr_t>& stream) {
+                s.trace_on_device(rays, &hits, nullptr, stream);
+            },
+            pyb::arg("rays"), pyb::arg("hits"), pyb::kw_only(), pyb::arg("stream") = pyb::none(),
+            "Beyond Open3D: closest hits of rays in CUDA memory written into CUDA memory, nothing through the "
+            "host (a scene made with device='cuda'; objects with __cuda_array_interface__ or __dlpack__): rays "
+            "(n, 8) float32 [ox, oy, oz, tmin, dx, dy, dz, tmax], hits (n, 4) 4-byte [t, u, v, prim] with prim "
+            "the world's flat triangle index as uint32 bits (0xFFFFFFFF on a miss); stream a cudaStream_t as int.")
+        .def(
+            "test_occlusions_on_device",
+            [](RaycastingScene& s, const pyb::handle& rays, const pyb::handle& occluded,
+               const std::optional<intptr_t>& stream) { s.trace_on_device(rays, nullptr, &occluded, stream); },
+            pyb::arg("rays"), pyb::arg("occluded"), pyb::kw_only(), pyb::arg("stream") = pyb::none(),
+            "Any hits of rays in CUDA memory (as cast_rays_on_device) into occluded (n,) uint8 or bool in CUDA memory.")
         .def("test_occlusions", &RaycastingScene::test_occlusions, pyb::arg("rays"), pyb::arg("tnear") = 0.0f,
              pyb::arg("tfar") = kInf, pyb::arg("nthreads") = 0,
              "Whether each ray hits anything with t in [tnear, tfar] (bool).")

@@ -7,6 +7,7 @@
 #include <memory>
 
 #include "arrays.h"
+#include "device_arrays.h"
 #include "bindings.h"
 #include "core/parallel.h"
 #include "rayforge/core/memory_budget.h"
@@ -277,7 +278,24 @@ void bind_world(pyb::module_& m) {
                  return out;
              },
              pyb::arg("rays"), pyb::arg("tnear") = 0.0f, pyb::arg("tfar") = std::numeric_limits<float>::infinity(),
-             "Whether anything lies on each ray between tnear and tfar.");
+             "Whether anything lies on each ray between tnear and tfar.")
+        .def(
+            "trace_on_device",
+            [](const World& w, const pyb::handle& rays, const pyb::handle& hits, const std::optional<intptr_t>& stream) {
+                trace_device_arrays(w, rays, &hits, nullptr, stream);
+            },
+            pyb::arg("rays"), pyb::arg("hits"), pyb::kw_only(), pyb::arg("stream") = pyb::none(),
+            "Closest hits of rays in CUDA memory, written into CUDA memory (objects with __cuda_array_interface__ "
+            "or __dlpack__): rays (n, 8) float32 [ox, oy, oz, tmin, dx, dy, dz, tmax], hits (n, 4) 4-byte "
+            "[t, u, v, prim] (prim as uint32 bits, 0xFFFFFFFF on a miss); stream a cudaStream_t as an int "
+            "(default: the rays' producer stream, else the default stream). The world must be on that device.")
+        .def(
+            "occluded_on_device",
+            [](const World& w, const pyb::handle& rays, const pyb::handle& occluded, const std::optional<intptr_t>& stream) {
+                trace_device_arrays(w, rays, nullptr, &occluded, stream);
+            },
+            pyb::arg("rays"), pyb::arg("occluded"), pyb::kw_only(), pyb::arg("stream") = pyb::none(),
+            "Any hits of rays in CUDA memory (as trace_on_device) into occluded (n,) uint8 or bool in CUDA memory.");
 
     m.def(
         "open_world",

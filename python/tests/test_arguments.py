@@ -137,3 +137,37 @@ def test_renderer_options(options):
         r.render_pass()
     except EXPECTED:
         pass
+
+
+@st.composite
+def cuda_interfaces(draw):
+    """Fake __cuda_array_interface__ dicts, well formed or not (their memory is never read:
+    the checks or the CPU world's refusal come first)."""
+    class Fake:
+        pass
+
+    fake = Fake()
+    interface = {
+        "shape": draw(st.one_of(st.tuples(st.integers(-2, 9)), st.tuples(st.integers(-2, 9), st.integers(-2, 9)),
+                                odd_values)),
+        "typestr": draw(st.one_of(st.sampled_from(["<f4", "<u4", "|u1", "|b1", "<f8", ">f4", "<f", "x"]), odd_values)),
+        "data": draw(st.one_of(st.tuples(st.integers(0, 2**40), st.booleans()), odd_values)),
+        "version": 3,
+    }
+    if draw(st.booleans()):
+        interface["strides"] = draw(st.one_of(st.none(), st.tuples(st.integers(-8, 64), st.integers(-8, 64)), odd_values))
+    if draw(st.booleans()):
+        interface["stream"] = draw(st.one_of(st.none(), st.integers(-1, 3), odd_values))
+    fake.__cuda_array_interface__ = draw(st.one_of(st.just(interface), odd_values))
+    return fake
+
+
+@SETTINGS
+@given(rays=st.one_of(cuda_interfaces(), arrays(last=8), odd_values),
+       out=st.one_of(cuda_interfaces(), arrays(last=4), odd_values), stream=st.one_of(st.none(), st.integers(-1, 3)))
+def test_device_array_queries_on_a_cpu_world(scene, rays, out, stream):
+    # A CPU scene: every call ends in one of the expected errors, whatever the arguments.
+    for call in (lambda: scene.cast_rays_on_device(rays, out, stream=stream),
+                 lambda: scene.test_occlusions_on_device(rays, out, stream=stream)):
+        with pytest.raises(EXPECTED):
+            call()

@@ -449,9 +449,15 @@ void DeviceTracer::trace_on_device(const Ray* rays, Hit* hits, uint8_t* occluded
     const bool any_hit = hits == nullptr;
     check_device_pointer(any_hit ? static_cast<const void*>(occluded) : static_cast<const void*>(hits), impl.device,
                          any_hit ? "the occlusion flags" : "the hits");
+    const cudaStream_t s = static_cast<cudaStream_t>(stream);
+    const cudaError_t usable = cudaStreamQuery(s);
+    if (usable != cudaSuccess && usable != cudaErrorNotReady) {
+        (void)cudaGetLastError();
+        throw Error(std::string("cuda::DeviceTracer::trace_on_device: the stream is not usable on cuda:") +
+                    std::to_string(impl.device) + " (" + cudaGetErrorString(usable) + ")");
+    }
     query_persistent_blocks(impl);
     const BatchScratchLease scratch(impl.batch_scratch, impl.device);  // the ray counter, this call's own
-    const cudaStream_t s = static_cast<cudaStream_t>(stream);
     RF_CUDA_CHECK(cudaMemsetAsync(scratch->counter.data(), 0, sizeof(uint32_t), s));
     launch_trace(impl, any_hit, n, {rays, hits, occluded, scratch->counter.data(), s});
     RF_CUDA_CHECK(cudaStreamSynchronize(s));
