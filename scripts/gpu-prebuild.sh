@@ -28,6 +28,10 @@ sources=$(cd "$ROOT" && find src include apps bench tests cmake CMakeLists.txt -
 cmake -S "$ROOT" -B "$build" -DCMAKE_BUILD_TYPE=Release -DRAYFORGE_NATIVE=OFF -DRAYFORGE_MARCH=x86-64-v3 -DRAYFORGE_BUILD_BENCHMARKS=OFF \
   -DCMAKE_CUDA_ARCHITECTURES=90 -DCMAKE_DISABLE_FIND_PACKAGE_embree=TRUE -DRAYFORGE_ENABLE_VIEWER=OFF > /dev/null
 cmake --build "$build" -j "$jobs" --target rayforge_cli rayforge_gpu_tests
+# The Python module too, where this build has it (gpu-run.sh's python step).
+if cmake --build "$build" --target help | grep -q "_rayforge$"; then
+  cmake --build "$build" -j "$jobs" --target _rayforge
+fi
 rf="$build/bin/rayforge"
 gpu_tests=$(find "$build" -name rayforge_gpu_tests -type f | head -1)
 [[ -x "$rf" && -n "$gpu_tests" ]] || { echo "gpu-prebuild.sh: the build did not produce both binaries" >&2; exit 1; }
@@ -46,6 +50,10 @@ done | sort -u | while read -r library; do
     *) cp -L "$library" "$stage/lib/" ;;
   esac
 done
+if compgen -G "$build/python/rayforge/_rayforge*.so" > /dev/null; then
+  mkdir -p "$stage/python"
+  cp -r "$build/python/rayforge" "$stage/python/"
+fi
 # What gpu-run.sh checks before using them: the digest of the sources,
 # taken before the build (the device's copy of the checkout has no git),
 # and, for people, the commit.

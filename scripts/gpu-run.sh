@@ -16,7 +16,10 @@
 #               device dynamic accels' tests, render --frames with --update refit (explode) and
 #               two-level (nbody), and a per-frame rebuild on the device (hlbvh2, lbvh30, ploc) of
 #               builtin:explode (into builds.txt)
-#   all         tests sanitizers bench builds world animate
+#   python      the Python module staged by gpu-prebuild.sh: CUDA scenes against the CPU, device
+#               arrays through __cuda_array_interface__ and DLPack, threads, 10M rays' Mrays/s
+#               (python/tests/gpu_check.py, into builds.txt; UNAVAILABLE where it cannot import)
+#   all         tests sanitizers bench builds world animate python
 # Every run first checks the runtime (`rayforge info --devices`). Each step
 # prints one line, "gpu-run: STEP: ok|FAIL|UNAVAILABLE[: why]", also kept in
 # $OUT/summary.txt. RAYFORGE_REQUIRE_GPU=1 is exported: a gpu test that finds
@@ -46,10 +49,10 @@ summary="$out/summary.txt"
 steps=()
 for arg in "${@:-all}"; do
   case "$arg" in
-    all) steps+=(tests memcheck synccheck racecheck bench builds world animate) ;;
+    all) steps+=(tests memcheck synccheck racecheck bench builds world animate python) ;;
     sanitizers) steps+=(memcheck synccheck racecheck) ;;
-    tests | memcheck | synccheck | racecheck | bench | builds | world | animate) steps+=("$arg") ;;
-    *) echo "usage: $0 [tests|sanitizers|memcheck|synccheck|racecheck|bench|builds|world|animate|all]..." >&2; exit 2 ;;
+    tests | memcheck | synccheck | racecheck | bench | builds | world | animate | python) steps+=("$arg") ;;
+    *) echo "usage: $0 [tests|sanitizers|memcheck|synccheck|racecheck|bench|builds|world|animate|python|all]..." >&2; exit 2 ;;
   esac
 done
 
@@ -360,6 +363,36 @@ step_animate() {
   if ((rc == 0)); then report animate ok "figures in builds.txt"; else report animate FAIL "$(grep -m1 -E 'error|FAILED' "$log")"; fi
 }
 
+# The Python module on the device (staged by gpu-prebuild.sh when its build
+# had one): python/tests/gpu_check.py traces with a CUDA RaycastingScene and
+# World from several threads, through both device-array interfaces, against
+# the CPU, and times cast_rays_on_device on 10M rays (Mrays/s end to end).
+# UNAVAILABLE where the module cannot load (another Python than it was built
+# for). Appended to builds.txt.
+step_python() {
+  if [[ -n "$no_device" ]]; then
+    report python FAIL "not run: no CUDA device: $no_device"
+    return
+  fi
+  local log="$out/builds.txt" package="$ROOT/.gpu-prebuilt/python"
+  if [[ ! -d "$package/rayforge" ]]; then
+    report python UNAVAILABLE "no module staged in .gpu-prebuilt/python (its build had no Python)"
+    return
+  fi
+  local python
+  python=$(command -v python3 || true)
+  if [[ -z "$python" ]] || ! PYTHONPATH="$package" "$python" -c "import rayforge" >> "$log" 2>&1; then
+    report python UNAVAILABLE "the module does not import with ${python:-no python3} here ($(tail -1 "$log" | cut -c1-120))"
+    return
+  fi
+  echo "== python: python/tests/gpu_check.py" >> "$log"
+  if PYTHONPATH="$package" timeout 300 "$python" "$ROOT/python/tests/gpu_check.py" >> "$log" 2>&1; then
+    report python ok "$(grep -m1 'Mrays/s' "$log")"
+  else
+    report python FAIL "$(tail -1 "$log" | cut -c1-160)"
+  fi
+}
+
 if find_binaries; then
   check_runtime
   unpack_scenes
@@ -371,6 +404,7 @@ if find_binaries; then
       builds) step_builds ;;
       world) step_world ;;
       animate) step_animate ;;
+      python) step_python ;;
     esac
   done
 else
