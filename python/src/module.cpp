@@ -15,7 +15,8 @@ namespace pyb = pybind11;
 PYBIND11_MODULE(_rayforge, m) {
     m.doc() = "rayforge: a ray tracing engine for large scenes on CPUs and NVIDIA GPUs (docs/python.md).";
     m.attr("__version__") = RAYFORGE_VERSION;
-    pyb::register_exception<rf::Error>(m, "Error", PyExc_RuntimeError);
+    pyb::register_exception<rf::Error>(m, "Error", PyExc_RuntimeError).doc() =
+        "An error of the engine (a file, an option, a budget, a device): its message is one line.";
     m.def("cuda_backend_built", &rf::cuda_backend_built, "Whether this build contains the CUDA backend.");
     m.def(
         "devices",

@@ -389,9 +389,10 @@ void bind_raycasting_scene(pyb::module_& m) {
         "test_occlusions run on `device` (cpu, cuda, cuda:N); the other queries run on the CPU.")
         .def(pyb::init<int, const std::string&, const std::string&, const std::string&>(), pyb::arg("nthreads") = 0,
              pyb::kw_only(), pyb::arg("device") = "cpu", pyb::arg("builder") = "binned", pyb::arg("layout") = "bvh8")
-        .def_property_readonly_static("INVALID_ID", [](const pyb::object&) { return kInvalidId; })
-        .def_property_readonly("device", &RaycastingScene::device)
-        .def_property_readonly("geometry_count", &RaycastingScene::geometry_count)
+        .def_property_readonly_static("INVALID_ID", [](const pyb::object&) { return kInvalidId; },
+                                      "0xFFFFFFFF: the id of nothing (a miss)")
+        .def_property_readonly("device", &RaycastingScene::device, "where cast_rays and test_occlusions run")
+        .def_property_readonly("geometry_count", &RaycastingScene::geometry_count, "meshes added")
         .def("add_triangles", &RaycastingScene::add_triangles, pyb::arg("vertex_positions"),
              pyb::arg("triangle_indices"),
              "Adds a mesh: vertex_positions (n, 3) float32, triangle_indices (m, 3) uint32. Returns its geometry id.")

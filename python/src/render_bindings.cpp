@@ -110,14 +110,17 @@ void bind_render(pyb::module_& m) {
                  return to_array(r.renderer->image());
              },
              "Runs passes until spp are done (or time_budget is spent) and returns the image.")
-        .def_property_readonly("passes", [](const PyRenderer& r) { return r.renderer->passes(); })
-        .def_property_readonly("device", [](const PyRenderer& r) { return to_string(r.renderer->device()); })
+        .def_property_readonly("passes", [](const PyRenderer& r) { return r.renderer->passes(); },
+                               "passes accumulated since the last restart")
+        .def_property_readonly("device", [](const PyRenderer& r) { return to_string(r.renderer->device()); },
+                               "where it renders: its world's device")
         .def("image", [](const PyRenderer& r) { return to_array(r.renderer->image()); },
              "The mean of the passes: float32 (height, width, 3), linear radiance.")
         .def("albedo", [](const PyRenderer& r) { return to_array(r.renderer->albedo()); }, "AOV (aovs=True)")
         .def("normal", [](const PyRenderer& r) { return to_array(r.renderer->normal()); }, "AOV (aovs=True)")
         .def("depth", [](const PyRenderer& r) { return to_array(r.renderer->depth()); }, "AOV (aovs=True)")
-        .def("set_camera", [](PyRenderer& r, const Camera& c) { r.renderer->set_camera(c); }, pyb::arg("camera"))
+        .def("set_camera", [](PyRenderer& r, const Camera& c) { r.renderer->set_camera(c); }, pyb::arg("camera"),
+             "A new camera; accumulation restarts.")
         .def("set_options",
              [](PyRenderer& r, const pyb::kwargs& kw) {
                  RenderOptions o = r.renderer->options();
@@ -133,7 +136,7 @@ void bind_render(pyb::module_& m) {
             d["shadow_rays"] = s.shadow_rays;
             d["seconds"] = s.seconds;
             return d;
-        });
+        }, "samples, closest_rays, shadow_rays and seconds of the passes so far");
 
     m.def(
         "write_image",

@@ -175,11 +175,11 @@ void bind_camera(pyb::module_& m) {
         .def_static("parse", [](const std::string& text) { return parsed("camera", [&] { return parse_camera(text); }); },
                     pyb::arg("text"), "The CLI's --camera form 'ex,ey,ez,tx,ty,tz,ux,uy,uz,fov'.")
         .def_property("eye", [](const Camera& c) { return array3(c.eye); },
-                      [](Camera& c, std::array<float, 3> v) { c.eye = vec3(v); })
+                      [](Camera& c, std::array<float, 3> v) { c.eye = vec3(v); }, "position (x, y, z)")
         .def_property("target", [](const Camera& c) { return array3(c.target); },
-                      [](Camera& c, std::array<float, 3> v) { c.target = vec3(v); })
+                      [](Camera& c, std::array<float, 3> v) { c.target = vec3(v); }, "the point looked at")
         .def_property("up", [](const Camera& c) { return array3(c.up); },
-                      [](Camera& c, std::array<float, 3> v) { c.up = vec3(v); })
+                      [](Camera& c, std::array<float, 3> v) { c.up = vec3(v); }, "the up direction")
         .def_readwrite("fov", &Camera::vfov_degrees, "vertical field of view, degrees")
         .def_readwrite("aperture_radius", &Camera::aperture_radius, "thin lens radius (0: pinhole)")
         .def_readwrite("focus_distance", &Camera::focus_distance, "0: the distance from eye to target")
@@ -192,10 +192,11 @@ void bind_world(pyb::module_& m) {
         m, "World",
         "A scene with its triangles and acceleration structure on one device, kept current as time moves "
         "(docs/world.md). Made by open_world or make_world.")
-        .def_property_readonly("device", [](const World& w) { return to_string(w.device()); })
-        .def_property_readonly("paged", &World::paged)
-        .def_property_readonly("animated", &World::animated)
-        .def_property_readonly("time", &World::time)
+        .def_property_readonly("device", [](const World& w) { return to_string(w.device()); },
+                               "where the structure lives and queries run: 'cpu' or 'cuda:N'")
+        .def_property_readonly("paged", &World::paged, "whether the world reads a paged .rfpack file")
+        .def_property_readonly("animated", &World::animated, "whether set_time moves it")
+        .def_property_readonly("time", &World::time, "the time the world was last set to, seconds")
         .def_property_readonly("time_range",
                                [](const World& w) {
                                    const TimeRange r = w.time_range();
@@ -206,10 +207,13 @@ void bind_world(pyb::module_& m) {
                                [](const World& w) {
                                    const Box3f b = w.bounds();
                                    return pyb::make_tuple(array3(b.lo), array3(b.hi));
-                               })
+                               },
+                               "((min x, y, z), (max x, y, z)) of the triangles now")
         .def_property_readonly("notes", &World::notes, "defaults the device replaced (a scene file's update method)")
         .def("camera", &World::camera, "The scene's own camera at the current time (or one framing it).")
-        .def("stats", [](const World& w) { return stats_dict(w.stats()); })
+        .def("stats", [](const World& w) { return stats_dict(w.stats()); },
+             "triangles, host_bytes, device_bytes, load_ms, last_commit, commit_ms, commits, accel, sah_cost, nodes, "
+             "update_method")
         .def("commit",
              [](World& w) {
                  WorldStats s;
