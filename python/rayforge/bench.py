@@ -133,7 +133,8 @@ def close_distances(a, b):
 def close_hits(a, b):
     """The fraction of rays on which two engines agree: both miss, or both hit within 1e-4 relative."""
     both = np.isfinite(a) & np.isfinite(b)
-    agree = (~np.isfinite(a) & ~np.isfinite(b)) | (both & (np.abs(a - b) <= 1e-4 * np.maximum(1.0, np.abs(b))))
+    with np.errstate(invalid="ignore"):  # inf - inf on misses, masked out by `both`
+        agree = (~np.isfinite(a) & ~np.isfinite(b)) | (both & (np.abs(a - b) <= 1e-4 * np.maximum(1.0, np.abs(b))))
     return float(agree.mean())
 
 
