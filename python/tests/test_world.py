@@ -110,15 +110,14 @@ def test_animated_world_follows_time():
 
 
 def test_open_world_scene_file_and_builtin():
-    data = os.environ.get("RAYFORGE_TEST_DATA")
     world = rayforge.open_world("builtin:cornell")
     assert world.stats()["triangles"] > 0
-    if data:
-        path = os.path.join(data, "obj")
-        objs = sorted(f for f in os.listdir(path) if f.endswith(".obj"))
-        assert objs
-        w = rayforge.open_world(os.path.join(path, objs[0]))
-        assert w.stats()["triangles"] >= 0
+    data = os.environ.get("RAYFORGE_TEST_DATA") or os.path.join(os.path.dirname(__file__), "..", "..", "tests", "data")
+    cube = rayforge.open_world(os.path.join(data, "obj", "cube.obj"))
+    assert cube.stats()["triangles"] == 12
+    # A malformed file is one rayforge.Error naming the file and line.
+    with pytest.raises(rayforge.Error, match=r"bad_face\.obj:4: bad vertex index in face"):
+        rayforge.open_world(os.path.join(data, "obj", "bad_face.obj"))
 
 
 def test_build_bvh_is_a_valid_tree(rng):
