@@ -3,6 +3,7 @@
 // hits, eviction under tiny budgets, corrupted and truncated files.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -13,10 +14,13 @@
 #include "accel_test_rays.h"
 #include "ooc/convert_scene.h"
 #include "ooc/pack_file.h"
+#include "ooc/page_cache.h"
 #include "ooc/paged_engine.h"
 #include "ooc/paged_traversal.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
+#include "rayforge/core/memory_budget.h"
+#include "rayforge/ooc/paged_scene.h"
 #include "rayforge/io/scene_io.h"
 #include "test_paths.h"
 
@@ -209,6 +213,57 @@ std::string open_error(const std::string& path) {
     } catch (const Error& e) {
         return e.what();
     }
+}
+
+// The budget's shares: a share larger than its manager can use (all its
+// pages at once) passes the rest on, so a small scene under a large budget
+// holds every page of every kind; a share that was given stays as given;
+// and a budget the machine cannot hold is refused when the file is opened.
+TEST(PagedScene, UnusedBudgetSharesGoToTheOtherCaches) {
+    const PagedFixture& f = fixture();
+    const PackFile file(f.path);
+    const FileHeader& h = file.header();
+    const uint64_t geometry_all = PageCache::budget_for_all(h.geometry_pages, largest_raw_page(file, 0, h.geometry_pages));
+    const uint64_t attributes_all = PageCache::budget_for_all(h.attribute_pages, file.resident().attribute_page_bytes);
+    ASSERT_EQ(h.texture_pages, 0u);
+    auto caches_of = [&](const PagedSceneOptions& o) { return open_paged_scene(f.path, o)->caches(); };
+
+    // Everything fits: each share shrinks to what its manager can use.
+    PagedSceneOptions large;
+    large.memory_budget = size_t(1) << 30;
+    std::vector<PageCacheReport> c = caches_of(large);
+    EXPECT_EQ(c[0].budget_bytes, geometry_all);
+    EXPECT_EQ(c[1].budget_bytes, attributes_all);
+    EXPECT_EQ(c[0].slots, h.geometry_pages);
+    EXPECT_EQ(c[1].slots, h.attribute_pages);
+
+    // Geometry's 80 % is more than it can use, attributes' 20 % less: the
+    // attributes get geometry's surplus (up to their own need).
+    PagedSceneOptions tight;
+    tight.memory_budget = size_t(double(geometry_all) / 0.8 * 1.02);
+    ASSERT_LT(0.2 * double(tight.memory_budget), double(attributes_all));
+    c = caches_of(tight);
+    EXPECT_EQ(c[0].budget_bytes, geometry_all);
+    const double expected = std::min(double(attributes_all), double(tight.memory_budget) - double(geometry_all));
+    EXPECT_NEAR(double(c[1].budget_bytes), expected, 2.0);
+    EXPECT_GT(c[1].budget_bytes, size_t(0.2 * double(tight.memory_budget)));
+
+    // A given share is kept as given, even when the other one has room.
+    PagedSceneOptions given = tight;
+    given.attribute_budget = size_t(64) << 10;
+    c = caches_of(given);
+    EXPECT_EQ(c[1].budget_bytes, size_t(64) << 10);
+
+    // More than the machine has: refused when opened, with the numbers.
+    const size_t previous = set_memory_budget(size_t(1) << 20);
+    try {
+        (void)open_paged_scene(f.path, large);
+        ADD_FAILURE() << "a budget over the memory available was accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("more than the 1 MiB of memory available"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("--memory-budget"), std::string::npos) << e.what();
+    }
+    set_memory_budget(previous);
 }
 
 TEST(PagedScene, TruncatedAndCorruptedFilesGiveOneLineErrors) {

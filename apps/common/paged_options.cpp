@@ -72,7 +72,8 @@ void add_paged_read_options(CLI::App* cmd, PagedSceneOptions& o) {
     };
     size_option("--memory-budget", o.memory_budget,
                 "Paged scenes: memory for the page caches together, e.g. 512M, 2G (default 1G); split "
-                "geometry 70%, attributes 15%, textures 15% (80/20 without textures)");
+                "geometry 70%, attributes 15%, textures 15% (80/20 without textures), a share's surplus over "
+                "what its cache can use going to the others; more than the memory available is refused");
     size_option("--geometry-budget", o.geometry_budget,
                 "Paged scenes: the geometry cache's budget (overrides its share)");
     size_option("--attribute-budget", o.attribute_budget,

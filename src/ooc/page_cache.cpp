@@ -91,6 +91,12 @@ void check_pages(const PackFile& file, const std::string& name, uint64_t first_p
 
 }  // namespace
 
+size_t largest_raw_page(const PackFile& file, uint64_t first, uint64_t count) {
+    uint32_t largest = 1;
+    for (uint64_t i = first; i < first + count; ++i) largest = std::max(largest, file.directory()[i].raw_bytes);
+    return largest;
+}
+
 PageCache::PageCache(const PackFile& file, uint64_t first_page, uint32_t page_count, size_t slot_bytes,
                      size_t budget_bytes, std::string name)
     : file_(file), first_page_(first_page), name_(std::move(name)) {

@@ -57,6 +57,10 @@ struct PageCacheStats {
     [[nodiscard]] double hit_rate() const { return requests ? double(hits) / double(requests) : 1.0; }
 };
 
+// The largest raw page of `file`'s directory entries [first, first + count):
+// the size of a cache slot for them (at least 1).
+size_t largest_raw_page(const PackFile& file, uint64_t first, uint64_t count);
+
 class PageCache {
 public:
     // What the manager holds besides the pool: per page a descriptor, a
@@ -75,6 +79,11 @@ public:
     // threads (the caller's arena).
     PageCache(const PackFile& file, uint64_t first_page, uint32_t page_count, size_t slot_bytes, size_t budget_bytes,
               std::string name);
+    // The budget that holds all `page_count` pages at once (tables included):
+    // a larger one leaves the rest unused.
+    [[nodiscard]] static uint64_t budget_for_all(uint32_t page_count, size_t slot_bytes) {
+        return uint64_t(page_count) * (kTableBytesPerPage + slot_bytes + kBookkeepingBytesPerSlot);
+    }
     ~PageCache();
     PageCache(const PageCache&) = delete;
     PageCache& operator=(const PageCache&) = delete;

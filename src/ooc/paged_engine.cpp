@@ -20,19 +20,12 @@ double ms_since(Clock::time_point start) {
     return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
-// The largest raw page of a kind: the size of its cache slots.
-size_t largest_page(const PackFile& file, uint64_t first, uint64_t count) {
-    uint32_t largest = 1;
-    for (uint64_t i = first; i < first + count; ++i) largest = std::max(largest, file.directory()[i].raw_bytes);
-    return largest;
-}
-
 }  // namespace
 
 PagedEngine::PagedEngine(std::shared_ptr<const PackFile> file, const EngineBudgets& budgets, int threads)
     : file_(std::move(file)), threads_(threads) {
     const FileHeader& h = file_->header();
-    geometry_ = std::make_unique<PageCache>(*file_, 0, h.geometry_pages, largest_page(*file_, 0, h.geometry_pages),
+    geometry_ = std::make_unique<PageCache>(*file_, 0, h.geometry_pages, largest_raw_page(*file_, 0, h.geometry_pages),
                                             budgets.geometry, "geometry");
     attributes_ = std::make_unique<PageCache>(*file_, file_->first_attribute_page(), h.attribute_pages,
                                               file_->resident().attribute_page_bytes, budgets.attributes, "attributes");

@@ -2,10 +2,14 @@
 // file with its page managers and its query engine behind rf::Accel.
 #include "rayforge/ooc/paged_scene.h"
 
+#include <algorithm>
 #include <cstring>
 
 #include "ooc/paged_scene_impl.h"
+#include "ooc/page_cache.h"
+#include "ooc/texture_cache.h"
 #include "rayforge/core/error.h"
+#include "rayforge/core/memory_budget.h"
 
 namespace rf {
 
@@ -35,18 +39,64 @@ PageCacheReport report(const std::string& name, const PageCacheStats& s, uint32_
     return r;
 }
 
-// The options' budgets, shares of the total where not given.
+// The options' budgets: the ones given as they are; the others shares of the
+// total (geometry 70 %, attributes 15 %, textures 15 %; without textures
+// 80 % and 20 %), where a share larger than its manager can use (every page
+// of its kind held at once) gives the rest to the other shares that can
+// use it, in proportion to their weights.
 struct Budgets {
     size_t geometry, attributes, textures;
 };
 
-Budgets split_budget(const PagedSceneOptions& o, bool has_textures) {
-    const double total = double(o.memory_budget);
-    Budgets b;
-    b.geometry = o.geometry_budget ? o.geometry_budget : size_t(total * (has_textures ? 0.70 : 0.80));
-    b.attributes = o.attribute_budget ? o.attribute_budget : size_t(total * (has_textures ? 0.15 : 0.20));
-    b.textures = !has_textures ? 0 : (o.texture_budget ? o.texture_budget : size_t(total * 0.15));
-    return b;
+Budgets split_budget(const PagedSceneOptions& o, const PackFile& file) {
+    const FileHeader& h = file.header();
+    const bool has_textures = h.texture_pages > 0;
+    const double weight[3] = {has_textures ? 0.70 : 0.80, has_textures ? 0.15 : 0.20, has_textures ? 0.15 : 0.0};
+    const size_t given[3] = {o.geometry_budget, o.attribute_budget, has_textures ? o.texture_budget : 0};
+    const double need[3] = {
+        double(PageCache::budget_for_all(h.geometry_pages, largest_raw_page(file, 0, h.geometry_pages))),
+        double(PageCache::budget_for_all(h.attribute_pages, file.resident().attribute_page_bytes)),
+        double(TextureTileCache::budget_for_slots(h.texture_pages))};
+    double share[3];
+    bool open[3];  // a default share that can take more
+    for (int m = 0; m < 3; ++m) {
+        share[m] = given[m] ? double(given[m]) : double(o.memory_budget) * weight[m];
+        open[m] = !given[m] && weight[m] > 0.0;
+    }
+    for (int round = 0; round < 3; ++round) {  // each round closes at least one share, or ends
+        double surplus = 0.0, open_weight = 0.0;
+        for (int m = 0; m < 3; ++m) {
+            if (!open[m]) continue;
+            if (share[m] >= need[m]) {
+                surplus += share[m] - need[m];
+                share[m] = need[m];
+                open[m] = false;
+            } else {
+                open_weight += weight[m];
+            }
+        }
+        if (surplus <= 0.0 || open_weight <= 0.0) break;
+        for (int m = 0; m < 3; ++m)
+            if (open[m]) share[m] += surplus * weight[m] / open_weight;
+    }
+    return {size_t(share[0]), size_t(share[1]), has_textures ? size_t(share[2]) : 0};
+}
+
+// rf::Error when the caches could grow past the process's memory budget
+// (MemAvailable, or RAYFORGE_MEMORY_BUDGET): a budget the machine cannot
+// hold fails here with its numbers, not later to the OOM killer.
+void check_against_memory(const Budgets& b, const PackFile& file, const std::string& path) {
+    const FileHeader& h = file.header();
+    const uint64_t reach =
+        std::min<uint64_t>(b.geometry, PageCache::budget_for_all(h.geometry_pages, largest_raw_page(file, 0, h.geometry_pages))) +
+        std::min<uint64_t>(b.attributes, PageCache::budget_for_all(h.attribute_pages, file.resident().attribute_page_bytes)) +
+        std::min<uint64_t>(b.textures, TextureTileCache::budget_for_slots(h.texture_pages)) +
+        file.resident_memory_bytes();
+    if (reach > memory_budget()) {
+        throw Error(path + ": the page caches and resident levels may grow to " + std::to_string(reach >> 20) +
+                    " MiB, more than the " + std::to_string(memory_budget() >> 20) +
+                    " MiB of memory available (MemAvailable, or RAYFORGE_MEMORY_BUDGET): give a smaller --memory-budget");
+    }
 }
 
 }  // namespace
@@ -84,7 +134,8 @@ AccelStats PagedAccel::stats() const {
 
 PagedSceneImpl::PagedSceneImpl(const std::string& path, const PagedSceneOptions& options)
     : file_(std::make_shared<const PackFile>(path)), batch_paths_(options.batch_paths) {
-    const Budgets budgets = split_budget(options, file_->header().texture_pages > 0);
+    const Budgets budgets = split_budget(options, *file_);
+    check_against_memory(budgets, *file_, path);
     engine_ = std::make_unique<PagedEngine>(file_, EngineBudgets{budgets.geometry, budgets.attributes}, options.threads);
     textures_ = std::make_unique<TextureTileCache>(*file_, budgets.textures, "textures");
     paged_textures_ = make_paged_textures(*file_, *textures_);

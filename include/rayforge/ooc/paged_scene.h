@@ -87,7 +87,10 @@ Scene generate_scene(const GenerateOptions& options);
 struct PagedSceneOptions {
     size_t memory_budget = size_t(1) << 30;  // the page caches together
     // Per-manager budgets; 0 takes a share of memory_budget: geometry 70%,
-    // attributes 15%, textures 15% (without textures 80% and 20%).
+    // attributes 15%, textures 15% (without textures 80% and 20%). A share
+    // larger than its manager can use (all its pages at once) passes the
+    // rest to the other shares. Opening fails with rf::Error when the caches
+    // could grow past the memory available (rf::memory_budget()).
     size_t geometry_budget = 0;
     size_t attribute_budget = 0;
     size_t texture_budget = 0;
