@@ -175,9 +175,18 @@ TEST(PagedRender, CliConvertsGeneratesDescribesAndRendersPagedFiles) {
     const test::CliResult convert = test::run_cli("convert builtin:cornell -o " + dir + "/c.rfpack --zstd -q");
     ASSERT_EQ(convert.exit_code, 0) << convert.err;
     EXPECT_NE(convert.out.find("quads"), std::string::npos);
+    EXPECT_NE(convert.out.find(" bytes a triangle"), std::string::npos) << convert.out;
     const test::CliResult info = test::run_cli("info " + dir + "/c.rfpack");
     ASSERT_EQ(info.exit_code, 0) << info.err;
     EXPECT_NE(info.out.find("paged scene"), std::string::npos);
+    // The density, file bytes / triangles, as convert printed it.
+    const auto density = [](const std::string& text) {
+        const size_t end = text.find(" bytes a triangle");
+        const size_t start = text.find_last_of(" (", end - 1);
+        return end == std::string::npos ? -1.0 : std::stod(text.substr(start + 1, end - start - 1));
+    };
+    EXPECT_GT(density(info.out), 0.0) << info.out;
+    EXPECT_EQ(density(info.out), density(convert.out));
     const test::CliResult render =
         test::run_cli("render " + dir + "/c.rfpack -o " + dir + "/c.png --res 32x24 --memory-budget 1M -q");
     ASSERT_EQ(render.exit_code, 0) << render.err;
@@ -185,6 +194,7 @@ TEST(PagedRender, CliConvertsGeneratesDescribesAndRendersPagedFiles) {
     const test::CliResult generate =
         test::run_cli("generate terrain --triangles 20K -o " + dir + "/t.rfpack --compact-attributes -q");
     ASSERT_EQ(generate.exit_code, 0) << generate.err;
+    EXPECT_NE(generate.out.find(" bytes a triangle"), std::string::npos) << generate.out;
     const test::CliResult obj = test::run_cli("generate terrain-statues --triangles 5K -o " + dir + "/s.obj -q");
     ASSERT_EQ(obj.exit_code, 0) << obj.err;
     EXPECT_EQ(test::run_cli("info " + dir + "/s.obj").exit_code, 0);

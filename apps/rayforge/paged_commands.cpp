@@ -14,6 +14,7 @@
 #include "paged_options.h"
 #include "progress_bar.h"
 #include "rayforge/core/error.h"
+#include "rayforge/core/memory_budget.h"
 #include "rayforge/io/image_io.h"
 #include "rayforge/io/scene_io.h"
 #include "rayforge/ooc/paged_scene.h"
@@ -33,14 +34,14 @@ void print_write_report(const std::string& path, const PagedWriteReport& r, doub
         return;
     }
     std::printf("%s: %llu triangles -> %llu quads (%.1f%% paired) in %u geometry, %u attribute, %u texture pages | "
-                "%s (geometry %s, attributes %s, textures %s, resident %s) | max quantisation error %.3g | %.1f s "
-                "(%.2f Mtriangles/s)\n",
+                "%s (geometry %s, attributes %s, textures %s, resident %s), %.1f bytes a triangle | max quantisation "
+                "error %.3g | %.1f s (%.2f Mtriangles/s)\n",
                 path.c_str(), (unsigned long long)r.triangles, (unsigned long long)r.quads,
                 r.triangles ? 100.0 * double(r.paired_triangles) / double(r.triangles) : 0.0, r.geometry_pages,
                 r.attribute_pages, r.texture_pages, format_bytes(double(r.file_bytes)).c_str(),
                 format_bytes(double(r.geometry_bytes)).c_str(), format_bytes(double(r.attribute_bytes)).c_str(),
                 format_bytes(double(r.texture_bytes)).c_str(), format_bytes(double(r.resident_bytes)).c_str(),
-                r.max_quantisation_error, ms / 1e3, ms > 0.0 ? double(r.triangles) / (ms * 1e3) : 0.0);
+                r.bytes_per_triangle(), r.max_quantisation_error, ms / 1e3, ms > 0.0 ? double(r.triangles) / (ms * 1e3) : 0.0);
     for (const std::string& note : r.notes) std::printf("%s: note: %s\n", path.c_str(), note.c_str());
 }
 
@@ -135,16 +136,19 @@ int run_generate(const GenerateArgs& a) {
 
 int run_paged_info(const std::string& path, bool verbose) {
     PagedSceneOptions small;
-    small.memory_budget = size_t(1) << 30;  // the pools are never touched: only the tables become resident
+    // The pools are never touched, only the tables become resident; a budget
+    // well inside the memory available, so that the open's check passes.
+    small.memory_budget = std::min(size_t(1) << 30, memory_budget() / 4);
     const std::unique_ptr<PagedScene> scene = open_paged_scene(path, small);
     const PagedSceneInfo& i = scene->info();
     const Vec3f lo = i.bounds.lo, hi = i.bounds.hi;
     std::printf("%s: paged scene, %llu triangles in %llu quads, %u objects\n", path.c_str(),
                 (unsigned long long)i.triangles, (unsigned long long)i.quads, i.objects);
-    std::printf("  file %s: %u geometry pages, %u attribute pages (%s each, %s records), %u texture tiles\n",
-                format_bytes(double(i.file_bytes)).c_str(), i.geometry_pages, i.attribute_pages,
-                format_bytes(double(i.attribute_page_bytes)).c_str(), i.compact_attributes ? "32-byte" : "64-byte",
-                i.texture_pages);
+    std::printf("  file %s (%.1f bytes a triangle): %u geometry pages, %u attribute pages (%s each, %s records), %u "
+                "texture tiles\n",
+                format_bytes(double(i.file_bytes)).c_str(), i.bytes_per_triangle(), i.geometry_pages,
+                i.attribute_pages, format_bytes(double(i.attribute_page_bytes)).c_str(),
+                i.compact_attributes ? "32-byte" : "64-byte", i.texture_pages);
     std::printf("  always resident %s: top grid %dx%dx%d, %u materials, %u lights, %u textures\n",
                 format_bytes(double(i.resident_bytes)).c_str(), i.grid[0], i.grid[1], i.grid[2], i.materials, i.lights,
                 i.textures);

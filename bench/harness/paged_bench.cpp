@@ -686,7 +686,8 @@ std::string info_line(const PagedFileSummary& s) {
          << " quads per page on average), " << thousands(i.attribute_pages) << " attribute pages ("
          << format("%.0f KiB", double(i.attribute_page_bytes) / 1024.0) << ", "
          << (i.compact_attributes ? "32" : "64") << "-byte records), " << thousands(i.texture_pages)
-         << " texture tiles; file " << megabytes(double(i.file_bytes)) << ", always resident "
+         << " texture tiles; file " << megabytes(double(i.file_bytes)) << " ("
+         << format("%.1f", i.bytes_per_triangle()) << " bytes a triangle), always resident "
          << megabytes(double(i.resident_bytes)) << "; top grid " << i.grid[0] << "x" << i.grid[1] << "x" << i.grid[2]
          << "\n";
     return line.str();
@@ -803,6 +804,7 @@ Json summary_json(const PagedFileSummary& s) {
         budgets.push_back({{"budget", f}, {"managers", list}});
     }
     return {{"path", i.path}, {"triangles", i.triangles}, {"quads", i.quads}, {"file_bytes", i.file_bytes},
+            {"bytes_per_triangle", i.bytes_per_triangle()},
             {"geometry_pages", i.geometry_pages}, {"attribute_pages", i.attribute_pages},
             {"texture_pages", i.texture_pages}, {"grid", {i.grid[0], i.grid[1], i.grid[2]}},
             {"resident_bytes", i.resident_bytes}, {"compact_attributes", i.compact_attributes},

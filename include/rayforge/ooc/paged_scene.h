@@ -47,6 +47,8 @@ struct PagedWriteReport {
     uint64_t objects = 0;                 // objects handed to the writer when streamed
     uint64_t scratch_bytes = 0;           // the streaming converter's scratch files, together
     uint64_t max_object_triangles = 0;    // the largest object its memory budget allowed
+    // The file's density: file bytes / unique triangles (every paged triangle is unique).
+    [[nodiscard]] double bytes_per_triangle() const { return triangles ? double(file_bytes) / double(triangles) : 0.0; }
 };
 
 // Writes `scene` (finalize()d) as a paged scene file, instance by instance.
@@ -121,6 +123,8 @@ struct PagedSceneInfo {
     size_t resident_bytes = 0;      // always in memory: the resident levels, tables, directory
     bool compact_attributes = false;
     uint32_t attribute_page_bytes = 0;
+    // The file's density: file bytes / unique triangles (every paged triangle is unique).
+    [[nodiscard]] double bytes_per_triangle() const { return triangles ? double(file_bytes) / double(triangles) : 0.0; }
 };
 
 // What the query loops did since the last reset.
