@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -264,6 +265,54 @@ TEST(PagedScene, UnusedBudgetSharesGoToTheOtherCaches) {
         EXPECT_NE(std::string(e.what()).find("--memory-budget"), std::string::npos) << e.what();
     }
     set_memory_budget(previous);
+}
+
+// The seed's any-hit rule (§6.3.3): a shadow ray tests every cached page
+// before asking for a missing one. Here the ray crosses the box of a frame
+// (not cached; the ray passes through its hole) before a cached wall that
+// blocks it: the wall answers, and the frame's page is never read.
+TEST(PagedScene, ShadowRaysBlockedByCachedPagesLoadNothing) {
+    Scene scene;
+    scene.materials.push_back(Material{});
+    auto add_quads = [&](const std::vector<std::array<Vec3f, 4>>& quads) {
+        Mesh mesh;
+        for (const auto& q : quads) {
+            const uint32_t base = uint32_t(mesh.positions.size());
+            mesh.positions.insert(mesh.positions.end(), q.begin(), q.end());
+            mesh.indices.insert(mesh.indices.end(), {base, base + 1, base + 2, base, base + 2, base + 3});
+        }
+        mesh.material_ids.assign(mesh.triangle_count(), 0);
+        scene.instances.push_back({uint32_t(scene.meshes.size()), Affine3f::identity()});
+        scene.meshes.push_back(std::move(mesh));
+    };
+    // A square frame at z = 0 around a hole of [-1, 1]^2, and a wall at z = -5.
+    add_quads({{Vec3f(-2, -2, 0), Vec3f(2, -2, 0), Vec3f(2, -1, 0), Vec3f(-2, -1, 0)},
+               {Vec3f(-2, 1, 0), Vec3f(2, 1, 0), Vec3f(2, 2, 0), Vec3f(-2, 2, 0)},
+               {Vec3f(-2, -1, 0), Vec3f(-1, -1, 0), Vec3f(-1, 1, 0), Vec3f(-2, 1, 0)},
+               {Vec3f(1, -1, 0), Vec3f(2, -1, 0), Vec3f(2, 1, 0), Vec3f(1, 1, 0)}});
+    add_quads({{Vec3f(-4, -4, -5), Vec3f(4, -4, -5), Vec3f(4, 4, -5), Vec3f(-4, 4, -5)}});
+    scene.finalize();
+    const std::string path = test::temp_dir("paged_any_hit") + "/frame.rfpack";
+    (void)convert_scene(scene, path, PackWriterOptions{});
+    auto file = std::make_shared<const PackFile>(path);
+    ASSERT_EQ(file->header().geometry_pages, 2u);
+    PagedEngine engine(file, {size_t(64) << 20, size_t(1) << 20}, 0);
+    const Vec3f down(0.0f, 0.0f, -1.0f);
+    // Cache the wall alone: a ray beside the frame's box.
+    std::vector<Hit> hits(1);
+    engine.intersect(std::vector<Ray>{{Vec3f(3.5f, 3.5f, 5.0f), 0.0f, down, kInfinity}}, hits);
+    ASSERT_TRUE(hits[0].found());
+    ASSERT_EQ(engine.geometry_cache().stats().pages_read, 1u);
+    engine.geometry_cache().reset_stats();
+    // Through the frame's hole to the wall: blocked by the cached wall, nothing read.
+    std::vector<uint8_t> blocked(1);
+    engine.occluded(std::vector<Ray>{{Vec3f(0.0f, 0.0f, 5.0f), 0.0f, down, 20.0f}}, blocked);
+    EXPECT_EQ(blocked[0], 1);
+    EXPECT_EQ(engine.geometry_cache().stats().pages_read, 0u);
+    // A shadow ray that only the missing frame can block still loads it and is blocked.
+    engine.occluded(std::vector<Ray>{{Vec3f(1.5f, 0.0f, 5.0f), 0.0f, down, 6.0f}}, blocked);
+    EXPECT_EQ(blocked[0], 1);
+    EXPECT_EQ(engine.geometry_cache().stats().pages_read, 1u);
 }
 
 TEST(PagedScene, TruncatedAndCorruptedFilesGiveOneLineErrors) {

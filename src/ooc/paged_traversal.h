@@ -15,7 +15,11 @@
 //     goes on, testing every cached page further along (speculative
 //     testing: a hit there shortens the ray, so farther pages may never be
 //     needed).
-// Any-hit rays (shadows) stop at their first hit among cached pages.
+// Any-hit rays (shadows) stop at their first hit among cached pages, and
+// request their first missing page only when the iteration ends without
+// one (the seed's §6.3.3 rule: every cached page is tested before a
+// missing one is asked for, so a shadow ray blocked by cached geometry
+// loads nothing).
 // A ray is finished when an iteration requested nothing.
 //
 // Robustness: the grid's cells hold every page within a small margin of
@@ -236,7 +240,8 @@ struct CellVisit {
     PagedRayState& state;
     PagedCounters& counters;
     PageMailbox mailbox;
-    bool requested = false;
+    bool requested = false;        // a missing page is (closest hit) or will be (any hit) requested
+    uint32_t deferred_page = 0;    // any hit: the page to request if no cached page blocks the ray
 
     // True when an any-hit query found a hit (the ray is then finished).
     template <bool kAnyHit>
@@ -284,7 +289,8 @@ struct CellVisit {
         if ((d & kWasRead) || mailbox.seen(page)) return false;
         if (d & kOutOfCore) {
             if (!requested) {
-                v.geometry.request(page);
+                if (kAnyHit) deferred_page = page;
+                else v.geometry.request(page);
                 requested = true;
                 state.restart = cell;
             }
@@ -332,7 +338,7 @@ RF_HD bool paged_iteration(const PagedSceneView& v, const Ray& ray, PagedRayStat
     GridWalk walk;
     walk.init(v, ray, start);
     const rf::detail::SlabRay slab = rf::detail::SlabRay::make(ray);
-    CellVisit visit{v, ray, slab, state, counters, PageMailbox{}, false};
+    CellVisit visit{v, ray, slab, state, counters, PageMailbox{}, false, 0};
     // A straight line crosses at most res[0] + res[1] + res[2] cells; the cap
     // also ends walks whose plane distances rounding made non-finite.
     for (int steps = v.res[0] + v.res[1] + v.res[2] + 2; steps > 0; --steps) {
@@ -345,6 +351,7 @@ RF_HD bool paged_iteration(const PagedSceneView& v, const Ray& ray, PagedRayStat
     }
     const bool requested = visit.requested;
     if (!requested) state.restart = kRayFinished;
+    else if (kAnyHit) v.geometry.request(visit.deferred_page);  // no cached page blocked the ray
     return requested;
 }
 
