@@ -242,6 +242,7 @@ void PackWriter::add_object(const ObjectInput& object) {
     });
     const std::vector<std::vector<uint32_t>> page_quads =
         partition_into_pages(object.positions, quads, s.options.quads_per_page);
+    const Vec3f step = lattice_steps(object.positions, quads, page_quads);
 
     struct Ready {
         BuiltPage page;
@@ -253,7 +254,7 @@ void PackWriter::add_object(const ObjectInput& object) {
     parallel::with_threads(s.options.threads, [&] {
         parallel::for_each_index(size_t(0), page_quads.size(), [&](size_t p) {
             Ready& r = ready[p];
-            r.page = build_page(object.positions, object.shading, quads, page_quads[p], s.options.attribute_format);
+            r.page = build_page(object.positions, object.shading, quads, page_quads[p], step, s.options.attribute_format);
             r.geometry = store(std::move(r.page.geometry), s.options.codec, s.options.zstd_level);
             const std::vector<uint8_t>& records = r.page.attributes;
             for (size_t at = 0; at < records.size(); at += attribute_page) {

@@ -101,14 +101,27 @@ void sort_by_morton(std::span<uint32_t> ids, std::span<const QuadBox> boxes) {
     for (size_t k = 0; k < ids.size(); ++k) ids[k] = keyed[k].second;
 }
 
-// The decode transform of a page: offset + scale * q spans `box` with q in [-kQuantMax, kQuantMax].
-void quantisation_for(const Box3f& box, Vec3f& offset, Vec3f& scale) {
-    offset = (box.lo + box.hi) * 0.5f;
-    const Vec3f half = (box.hi - box.lo) * 0.5f;
-    const float largest = std::max(half.x, std::max(half.y, half.z));
-    // A flat page still needs an invertible transform: a floor relative to its size.
-    const float floor_scale = std::max(largest * 1e-6f, 1e-30f) / float(kQuantMax);
-    for (int a = 0; a < 3; ++a) scale[a] = std::max(half[a] / float(kQuantMax), floor_scale);
+// The smallest power of two >= x (x > 0, normal).
+float power_of_two_at_least(float x) {
+    int e = 0;
+    const float m = std::frexp(x, &e);  // x = m 2^e, m in [0.5, 1)
+    return std::ldexp(1.0f, m == 0.5f ? e - 1 : e);
+}
+
+Box3f page_box(std::span<const Vec3f> positions, std::span<const QuadRef> quads, std::span<const uint32_t> page_quads) {
+    Box3f box;
+    for (uint32_t q : page_quads) box.extend(quad_bounds(positions, quads[q]));
+    return box;
+}
+
+// The decode transform of a page on the object's lattice: scale = the
+// lattice step, offset = the lattice point nearest the box's centre, so
+// offset + scale * q spans the box with |q| <= kQuantMax (the step leaves
+// half a step of room: see lattice_steps).
+void quantisation_for(const Box3f& box, const Vec3f& step, Vec3f& offset, Vec3f& scale) {
+    const Vec3f centre = (box.lo + box.hi) * 0.5f;
+    for (int a = 0; a < 3; ++a) offset[a] = step[a] * std::nearbyint(centre[a] / step[a]);
+    scale = step;
 }
 
 int16_t quantise(float p, float offset, float scale) {
@@ -184,13 +197,29 @@ std::vector<std::vector<uint32_t>> partition_into_pages(std::span<const Vec3f> p
     return pages;
 }
 
+Vec3f lattice_steps(std::span<const Vec3f> positions, std::span<const QuadRef> quads,
+                    std::span<const std::vector<uint32_t>> page_quads) {
+    Vec3f half(0.0f);
+    for (const std::vector<uint32_t>& page : page_quads) {
+        const Box3f box = page_box(positions, quads, page);
+        if (box.is_empty()) continue;
+        const Vec3f h = (box.hi - box.lo) * 0.5f;
+        for (int a = 0; a < 3; ++a) half[a] = std::max(half[a], h[a]);
+    }
+    // A flat axis still needs an invertible transform: a floor relative to the largest half extent.
+    const float largest = std::max(half.x, std::max(half.y, half.z));
+    const float floor_step = std::max(largest * 1e-6f, 1e-30f) / float(kQuantMax - 1);
+    Vec3f step;
+    for (int a = 0; a < 3; ++a) step[a] = power_of_two_at_least(std::max(half[a] / float(kQuantMax - 1), floor_step));
+    return step;
+}
+
 BuiltPage build_page(std::span<const Vec3f> positions, std::span<const ShadingTriangle> shading,
-                     std::span<const QuadRef> quads, std::span<const uint32_t> page_quads, AttributeFormat format) {
+                     std::span<const QuadRef> quads, std::span<const uint32_t> page_quads, const Vec3f& step,
+                     AttributeFormat format) {
     BuiltPage page;
-    Box3f input_box;
-    for (uint32_t q : page_quads) input_box.extend(quad_bounds(positions, quads[q]));
     Vec3f offset, scale;
-    quantisation_for(input_box, offset, scale);
+    quantisation_for(page_box(positions, quads, page_quads), step, offset, scale);
 
     // Quantised quads, each remembering its source quad for the attributes.
     std::vector<Quad> qquads(page_quads.size());

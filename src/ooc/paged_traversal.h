@@ -98,8 +98,21 @@ RF_HDI Triangle quad_half(const Quad& q, int half) {
             Vec3f(float(q.v[d][0]), float(q.v[d][1]), float(q.v[d][2]))};
 }
 
-RF_HDI Box3f page_box(const PageNode& n) {
-    return {Vec3f(float(n.lo[0]), float(n.lo[1]), float(n.lo[2])), Vec3f(float(n.hi[0]), float(n.hi[1]), float(n.hi[2]))};
+// A node's box in the page's quantised space, grown by `pad` units: the ray
+// is taken into that space with rounding, the triangles are tested in world
+// space (test_quads), so a box must never cull what the world test hits.
+RF_HDI Box3f page_box(const PageNode& n, float pad) {
+    return {Vec3f(float(n.lo[0]) - pad, float(n.lo[1]) - pad, float(n.lo[2]) - pad),
+            Vec3f(float(n.hi[0]) + pad, float(n.hi[1]) + pad, float(n.hi[2]) + pad)};
+}
+
+// Half `half` of quad `q` decoded to world space. On a writer's lattice
+// (page_builder.h) offset + scale * q is exact, so a vertex two pages share
+// is the same point in both, and the watertight test in world space leaves
+// no gap at their seam.
+RF_HDI Triangle decoded_quad_half(const Quad& q, int half, const PageInfo& info) {
+    const Triangle t = quad_half(q, half);
+    return {info.offset + info.scale * t.v0, info.offset + info.scale * t.v1, info.offset + info.scale * t.v2};
 }
 
 // A node to come back to and where the ray enters it (skipped once a hit is closer).
@@ -108,16 +121,17 @@ struct PendingNode {
     float entry;
 };
 
-// Tests quads [first, first + count) of a page; true when `hit` got closer.
+// Tests quads [first, first + count) of a page, decoded to world space,
+// against the world ray; true when `hit` got closer.
 template <bool kAnyHit>
-RF_HDI bool test_quads(const Quad* quads, uint32_t first, uint32_t count, uint32_t page, const WatertightRay& wt,
-                       float tmin, Hit& hit, PagedCounters& counters) {
+RF_HDI bool test_quads(const Quad* quads, uint32_t first, uint32_t count, uint32_t page, const PageInfo& info,
+                       const WatertightRay& wt, float tmin, Hit& hit, PagedCounters& counters) {
     bool found = false;
     for (uint32_t q = first; q < first + count; ++q) {
         ++counters.quads;
         for (int half = 0; half < 2; ++half) {
             TriangleHit th;
-            if (!intersect_triangle(wt, quad_half(quads[q], half), tmin, hit.t, th)) continue;
+            if (!intersect_triangle(wt, decoded_quad_half(quads[q], half, info), tmin, hit.t, th)) continue;
             hit.t = th.t;
             hit.u = th.u;
             hit.v = th.v;
@@ -142,26 +156,29 @@ RF_HDI bool search_page(const uint8_t* bytes, const PageInfo& info, uint32_t pag
     local.org = (world.org - info.offset) / info.scale;
     local.dir = world.dir / info.scale;
     const rf::detail::SlabRay slab = rf::detail::SlabRay::make(local);
-    const WatertightRay wt = WatertightRay::make(local);
+    const WatertightRay wt = WatertightRay::make(world);
+    // One quantisation unit, plus the rounding of a far origin's coordinates.
+    const float far = fmaxf(fabsf(local.org.x), fmaxf(fabsf(local.org.y), fabsf(local.org.z)));
+    const float pad = 1.0f + far * 0x1p-20f;
     bool found = false;
     PendingNode stack[kBvhMaxDepth];
     int top = 0;
     float entry;
     ++counters.nodes;
-    if (!rf::detail::slab_test(slab, page_box(nodes[0]), world.tmin, hit.t, entry)) return false;
+    if (!rf::detail::slab_test(slab, page_box(nodes[0], pad), world.tmin, hit.t, entry)) return false;
     uint32_t node = 0;
     for (;;) {
         const PageNode& n = nodes[node];
         if (n.is_leaf()) {
-            if (test_quads<kAnyHit>(quads, n.first(), n.count(), page, wt, world.tmin, hit, counters)) {
+            if (test_quads<kAnyHit>(quads, n.first(), n.count(), page, info, wt, world.tmin, hit, counters)) {
                 found = true;
                 if (kAnyHit) return true;
             }
         } else {
             counters.nodes += 2;
             float e0, e1;
-            const bool h0 = rf::detail::slab_test(slab, page_box(nodes[n.left()]), world.tmin, hit.t, e0);
-            const bool h1 = rf::detail::slab_test(slab, page_box(nodes[n.left() + 1]), world.tmin, hit.t, e1);
+            const bool h0 = rf::detail::slab_test(slab, page_box(nodes[n.left()], pad), world.tmin, hit.t, e0);
+            const bool h1 = rf::detail::slab_test(slab, page_box(nodes[n.left() + 1], pad), world.tmin, hit.t, e1);
             if (h0 && h1) {
                 const bool first_near = e0 <= e1;
                 if (top < kBvhMaxDepth) stack[top++] = {n.left() + (first_near ? 1u : 0u), first_near ? e1 : e0};
