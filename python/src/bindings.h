@@ -4,7 +4,9 @@
 
 #include <pybind11/pybind11.h>
 
+#include <cstdint>
 #include <optional>
+#include <span>
 #include <string>
 
 #include "rayforge/core/error.h"
@@ -37,5 +39,21 @@ WorldOptions world_options(const std::string& device, const std::string& structu
                            const std::string& layout, const std::optional<std::string>& gpu_kernel,
                            const std::optional<std::string>& update, int threads,
                            const std::optional<std::string>& memory_budget);
+
+// Where per-hit outputs go (normals and triangle_ids may be null).
+struct HitOutputs {
+    float* t;                 // inf on a miss
+    uint32_t* geometry_ids;   // the instance; kInvalidId on a miss
+    uint32_t* primitive_ids;  // the triangle of its mesh
+    float* uvs;               // 2 per hit
+    float* normals;           // 3 per hit: the unit geometric normal
+    uint32_t* triangle_ids;   // the world's flat triangle index
+};
+
+// Fills `out` from the world's hits, in parallel (call without the GIL). A
+// paged world's hits carry the paged triangle id (page * 8192 + slot) and
+// no geometry in memory to map it back: their geometry and primitive ids are
+// kInvalidId and their normals NaN (documented in docs/python.md).
+void fill_hit_outputs(const World& world, std::span<const Hit> hits, const HitOutputs& out);
 
 }  // namespace rf::py

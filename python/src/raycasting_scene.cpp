@@ -96,7 +96,7 @@ public:
              normals = output<float>(rows.leading, {3});
         auto geometry_ids = output<uint32_t>(rows.leading), primitive_ids = output<uint32_t>(rows.leading);
         const HitOutputs out{t_hit.mutable_data(), geometry_ids.mutable_data(), primitive_ids.mutable_data(),
-                             uvs.mutable_data(), normals.mutable_data()};
+                             uvs.mutable_data(), normals.mutable_data(), nullptr};
         const Reading r = read(nthreads, false);
         {
             pyb::gil_scoped_release release;
@@ -172,7 +172,7 @@ public:
         std::copy(all.ray_splits.begin(), all.ray_splits.end(), splits.mutable_data());
         std::copy(all.ray_ids.begin(), all.ray_ids.end(), ray_ids.mutable_data());
         const HitOutputs out{t_hit.mutable_data(), geometry_ids.mutable_data(), primitive_ids.mutable_data(),
-                             uvs.mutable_data(), nullptr};
+                             uvs.mutable_data(), nullptr, nullptr};
         {
             pyb::gil_scoped_release release;
             const std::shared_lock<std::shared_mutex> lock = ready();
@@ -195,7 +195,7 @@ public:
         auto geometry_ids = output<uint32_t>(rows.leading), primitive_ids = output<uint32_t>(rows.leading);
         std::vector<float> distance_unused(rows.rows);
         const HitOutputs out{distance_unused.data(), geometry_ids.mutable_data(), primitive_ids.mutable_data(),
-                             uvs.mutable_data(), normals.mutable_data()};
+                             uvs.mutable_data(), normals.mutable_data(), nullptr};
         float* p = points.mutable_data();
         const Reading r = read(nthreads, true);
         {
@@ -263,15 +263,6 @@ private:
             });
         }
     };
-    // Where per-hit outputs go (normals may be null).
-    struct HitOutputs {
-        float* t;
-        uint32_t* geometry_ids;
-        uint32_t* primitive_ids;
-        float* uvs;
-        float* normals;
-    };
-
     // Checks before the GIL is released; the mesh queries are made from now on.
     Reading read(int nthreads, bool mesh_queries) {
         if (scene_.meshes.empty()) throw pyb::value_error("the scene has no geometry: add_triangles first");
@@ -299,25 +290,8 @@ private:
         }
     }
 
-    // Per-hit outputs from flat hits (t, geometry and primitive ids, uvs, unit
-    // geometric normals), held shared by the caller.
-    void fill_hits(std::span<const Hit> hits, const HitOutputs& out) const {
-        const SceneGeometry& g = world_->geometry();
-        parallel::for_range(size_t(0), hits.size(), size_t(4096), [&](size_t lo, size_t hi) {
-            for (size_t i = lo; i < hi; ++i) {
-                const Hit& h = hits[i];
-                const bool found = h.found() && h.prim < g.size();
-                out.t[i] = found ? h.t : kInf;
-                out.geometry_ids[i] = found ? g.triangle_instance[h.prim] : kInvalidId;
-                out.primitive_ids[i] = found ? g.local_triangle[h.prim] : kInvalidId;
-                out.uvs[2 * i] = found ? h.u : 0.0f;
-                out.uvs[2 * i + 1] = found ? h.v : 0.0f;
-                if (!out.normals) continue;
-                const Vec3f n = found ? normalize(g.triangles[h.prim].geometric_normal()) : Vec3f(0.0f);
-                out.normals[3 * i] = n.x, out.normals[3 * i + 1] = n.y, out.normals[3 * i + 2] = n.z;
-            }
-        });
-    }
+    // Per-hit outputs from flat hits, held shared by the caller.
+    void fill_hits(std::span<const Hit> hits, const HitOutputs& out) const { fill_hit_outputs(*world_, hits, out); }
 
     static void check_samples(int nsamples) {
         if (nsamples < 1 || nsamples % 2 == 0 || nsamples > 31)

@@ -21,36 +21,15 @@ std::array<float, 3> array3(Vec3f v) { return {v.x, v.y, v.z}; }
 
 // Per-ray hit records as the dictionary RaycastingScene.cast_rays returns,
 // plus the flat triangle index (world.geometry's order).
-// A paged world's hits carry the paged triangle id (page * 8192 + slot) and
-// no geometry in memory to map it back: its instance and mesh triangle ids
-// are kInvalidId and its normals NaN (documented in docs/python.md).
 pyb::dict hit_dict(const World& world, std::span<const Hit> hits, const std::vector<pyb::ssize_t>& leading) {
     auto t_hit = output<float>(leading), uvs = output<float>(leading, {2}), normals = output<float>(leading, {3});
     auto triangle_ids = output<uint32_t>(leading), instance_ids = output<uint32_t>(leading),
          primitive_ids = output<uint32_t>(leading);
-    const SceneGeometry& g = world.geometry();
-    const bool paged = world.paged();
-    float *t = t_hit.mutable_data(), *uv = uvs.mutable_data(), *n = normals.mutable_data();
-    uint32_t *tri = triangle_ids.mutable_data(), *inst = instance_ids.mutable_data(), *prim = primitive_ids.mutable_data();
+    const HitOutputs out{t_hit.mutable_data(),  instance_ids.mutable_data(), primitive_ids.mutable_data(),
+                         uvs.mutable_data(),    normals.mutable_data(),      triangle_ids.mutable_data()};
     {
         pyb::gil_scoped_release release;
-        parallel::for_range(size_t(0), hits.size(), size_t(4096), [&](size_t lo, size_t hi) {
-            for (size_t i = lo; i < hi; ++i) {
-                const Hit& h = hits[i];
-                const bool found = h.found() && (paged || h.prim < g.size());
-                const bool mapped = found && !paged;
-                t[i] = found ? h.t : std::numeric_limits<float>::infinity();
-                uv[2 * i] = found ? h.u : 0.0f;
-                uv[2 * i + 1] = found ? h.v : 0.0f;
-                tri[i] = found ? h.prim : kInvalidId;
-                inst[i] = mapped ? g.triangle_instance[h.prim] : kInvalidId;
-                prim[i] = mapped ? g.local_triangle[h.prim] : kInvalidId;
-                const Vec3f normal = mapped  ? normalize(g.triangles[h.prim].geometric_normal())
-                                     : found ? Vec3f(std::numeric_limits<float>::quiet_NaN())
-                                             : Vec3f(0.0f);
-                n[3 * i] = normal.x, n[3 * i + 1] = normal.y, n[3 * i + 2] = normal.z;
-            }
-        });
+        fill_hit_outputs(world, hits, out);
     }
     pyb::dict d;
     d["t_hit"] = t_hit;
@@ -161,6 +140,29 @@ WorldOptions world_options(const std::string& device, const std::string& structu
         o.paged.memory_budget = *bytes;
     }
     return o;
+}
+
+void fill_hit_outputs(const World& world, std::span<const Hit> hits, const HitOutputs& out) {
+    const SceneGeometry& g = world.geometry();
+    const bool paged = world.paged();
+    parallel::for_range(size_t(0), hits.size(), size_t(4096), [&](size_t lo, size_t hi) {
+        for (size_t i = lo; i < hi; ++i) {
+            const Hit& h = hits[i];
+            const bool found = h.found() && (paged || h.prim < g.size());
+            const bool mapped = found && !paged;
+            out.t[i] = found ? h.t : std::numeric_limits<float>::infinity();
+            out.uvs[2 * i] = found ? h.u : 0.0f;
+            out.uvs[2 * i + 1] = found ? h.v : 0.0f;
+            out.geometry_ids[i] = mapped ? g.triangle_instance[h.prim] : kInvalidId;
+            out.primitive_ids[i] = mapped ? g.local_triangle[h.prim] : kInvalidId;
+            if (out.triangle_ids) out.triangle_ids[i] = found ? h.prim : kInvalidId;
+            if (!out.normals) continue;
+            const Vec3f n = mapped  ? normalize(g.triangles[h.prim].geometric_normal())
+                            : found ? Vec3f(std::numeric_limits<float>::quiet_NaN())
+                                    : Vec3f(0.0f);
+            out.normals[3 * i] = n.x, out.normals[3 * i + 1] = n.y, out.normals[3 * i + 2] = n.z;
+        }
+    });
 }
 
 void bind_camera(pyb::module_& m) {
