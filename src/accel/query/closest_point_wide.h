@@ -46,7 +46,11 @@ using simd::vfloat;
 using simd::vmask;
 
 #if defined(RF_SIMD_SSE)
-RF_SIMD_INLINE vfloat<4> select(vmask<4> m, vfloat<4> a, vfloat<4> b) { return {_mm_blendv_ps(b.v, a.v, m.v)}; }
+// SSE2 only (and/andnot/or, the masks are whole lanes): the library is
+// also built without -march=native (the fuzzers, RAYFORGE_NATIVE=OFF).
+RF_SIMD_INLINE vfloat<4> select(vmask<4> m, vfloat<4> a, vfloat<4> b) {
+    return {_mm_or_ps(_mm_and_ps(m.v, a.v), _mm_andnot_ps(m.v, b.v))};
+}
 RF_SIMD_INLINE vmask<4> and_not(vmask<4> a, vmask<4> b) { return {_mm_andnot_ps(b.v, a.v)}; }
 RF_SIMD_INLINE vmask<4> is_nan(vfloat<4> a) { return {_mm_cmpunord_ps(a.v, a.v)}; }
 #else
