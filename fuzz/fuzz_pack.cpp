@@ -136,7 +136,7 @@ void read_every_page(const PackFile& file) {
             if (i >= file.header().geometry_pages) return;
             const GeometryPageView v = view_geometry_page(bytes, "page " + std::to_string(i));
             uint32_t sum = 0;
-            for (uint32_t n = 0; n < v.node_count; ++n) sum += v.nodes[n].payload + uint16_t(v.nodes[n].lo[0]);
+            for (uint32_t n = 0; n < v.node_count; ++n) sum += v.nodes[n].base_index_child + v.nodes[n].q_hi_z[7];
             for (uint32_t q = 0; q < v.quad_count; ++q) sum += uint16_t(v.quads[q].v[3][2]);
             g_sink = g_sink + sum;
         });

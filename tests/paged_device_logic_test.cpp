@@ -115,7 +115,9 @@ public:
         staging_.resize(layout.bytes());
         for (auto& fill : fills_) fill.resize(layout.bytes());
         const PackFile& file = *f.file;
-        view_ = make_paged_view(file, file.pages().data(), file.cell_roots().data(), file.middle_nodes().data(),
+        view_ = make_paged_view(file,
+                                {file.pages().data(), file.cell_roots().data(), file.middle_nodes().data(),
+                                 file.top_nodes().data(), file.top_pages().data()},
                                 PageTableView{descriptors_.data(), pool_.data(), layout.slot_bytes, page_count});
     }
 

@@ -6,9 +6,12 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstddef>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <random>
 
@@ -39,16 +42,18 @@ struct PagedFixture {
     ConvertResult converted;
 };
 
-const PagedFixture& fixture(AttributeFormat format = AttributeFormat::Full) {
+const PagedFixture& fixture(AttributeFormat format = AttributeFormat::Full, TopLevel top = TopLevel::WideBvh) {
     static std::map<int, std::unique_ptr<PagedFixture>> cache;
-    auto& slot = cache[int(format)];
+    auto& slot = cache[int(format) * 2 + int(top)];
     if (!slot) {
         slot = std::make_unique<PagedFixture>();
         slot->scene = make_builtin_scene("spheres");
         slot->scene.finalize();
         slot->geometry = SceneGeometry::build(slot->scene);
-        slot->path = test::temp_dir("paged_fixture_" + std::to_string(int(format))) + "/spheres.rfpack";
+        slot->path = test::temp_dir("paged_fixture_" + std::to_string(int(format)) + "_" + std::to_string(int(top))) +
+                     "/spheres.rfpack";
         PackWriterOptions options;
+        options.top_level = top;
         options.attribute_format = format;
         options.quads_per_page = 512;  // many pages from a small scene
         options.codec = format == AttributeFormat::Compact ? Codec::Zstd : Codec::None;
@@ -114,24 +119,41 @@ TEST(PagedScene, RoundTripKeepsCountsAndBoundsQuantisation) {
                     ASSERT_LE(w[a], info.bounds.hi[a]);
                 }
             }
+        // Every quad is in exactly one leaf slot, inside the slot's box.
+        std::vector<int> leaf_of_quad(g.quad_count, 0);
         for (uint32_t n = 0; n < g.node_count; ++n) {
-            if (!g.nodes[n].is_leaf()) continue;
-            for (uint32_t q = g.nodes[n].first(); q < g.nodes[n].first() + g.nodes[n].count(); ++q)
-                for (const auto& v : g.quads[q].v)
-                    for (int a = 0; a < 3; ++a) {
-                        ASSERT_GE(v[a], g.nodes[n].lo[a]);
-                        ASSERT_LE(v[a], g.nodes[n].hi[a]);
-                    }
+            const PageNode& node = g.nodes[n];
+            for (int s = 0; s < kCwbvhWidth; ++s) {
+                if (node.meta[s] == kCwbvhEmptyMeta || cwbvh_meta_is_inner(node.meta[s])) continue;
+                const uint32_t ref = pack::detail::page_child_ref(node, s);
+                const uint32_t first = (ref & ~pack::detail::kPageLeafRef) >> 2, count = ref & 3u;
+                ASSERT_GE(count, 1u);
+                ASSERT_LE(count, kPageLeafQuads);
+                const Box3f box = cwbvh_child_box(node, s);
+                for (uint32_t q = first; q < first + count; ++q) {
+                    ++leaf_of_quad[q];
+                    for (const auto& v : g.quads[q].v)
+                        for (int a = 0; a < 3; ++a) {
+                            ASSERT_GE(float(v[a]), box.lo[a]);
+                            ASSERT_LE(float(v[a]), box.hi[a]);
+                        }
+                }
+            }
         }
+        for (uint32_t q = 0; q < g.quad_count; ++q) ASSERT_EQ(leaf_of_quad[q], 1) << "page " << p << " quad " << q;
     }
 }
 
-// The traversal (top grid, middle BVHs, page BVHs, restarts) finds exactly
+// The traversal (either top level, the page BVHs, restarts) finds exactly
 // what brute force over the same pages finds, with a roomy cache and with a
 // cache of one geometry page (every page evicted and reloaded in turn).
-TEST(PagedScene, HitsEqualBruteForceOverTheSamePagesUnderAnyBudget) {
-    const PagedFixture& f = fixture();
+class PagedTopLevels : public ::testing::TestWithParam<TopLevel> {};
+
+TEST_P(PagedTopLevels, HitsEqualBruteForceOverTheSamePagesUnderAnyBudget) {
+    const PagedFixture& f = fixture(AttributeFormat::Full, GetParam());
     auto file = std::make_shared<const PackFile>(f.path);
+    EXPECT_EQ(file->resident().top_level, GetParam());
+    EXPECT_EQ(file->top_nodes().empty(), GetParam() == TopLevel::Grid);
     const auto pages = read_all_geometry(*file);
     const std::vector<Ray> rays = test::make_rays(f.geometry, 1200, 7);
     std::vector<Hit> expected(rays.size());
@@ -160,6 +182,11 @@ TEST(PagedScene, HitsEqualBruteForceOverTheSamePagesUnderAnyBudget) {
         EXPECT_LE(engine.geometry_cache().memory_bytes(), geometry_budget);
     }
 }
+
+INSTANTIATE_TEST_SUITE_P(PagedScene, PagedTopLevels, ::testing::Values(TopLevel::WideBvh, TopLevel::Grid),
+                         [](const ::testing::TestParamInfo<TopLevel>& info) {
+                             return std::string(info.param == TopLevel::Grid ? "Grid" : "WideBvh");
+                         });
 
 // Paged hits are the in-core hits up to quantisation: the same surfaces at
 // (nearly) the same distances and with the same shading records.
@@ -411,6 +438,92 @@ TEST(PagedScene, TruncatedAndCorruptedFilesGiveOneLineErrors) {
     } catch (const Error& e) {
         EXPECT_NE(std::string(e.what()).find("page 3 checksum mismatch"), std::string::npos) << e.what();
     }
+
+    // A version-1 file (binary page BVHs) is refused with what to do.
+    std::vector<uint8_t> old_version = good;
+    FileHeader header;
+    std::memcpy(&header, old_version.data(), sizeof(header));
+    header.version = 1;
+    header.header_checksum = crc32c(&header, offsetof(FileHeader, header_checksum));
+    std::memcpy(old_version.data(), &header, sizeof(header));
+    write_bytes(dir + "/v1.rfpack", old_version);
+    EXPECT_NE(open_error(dir + "/v1.rfpack").find("version 1 (this rayforge reads version 2; convert the scene again)"),
+              std::string::npos)
+        << open_error(dir + "/v1.rfpack");
+}
+
+// Wide trees in pages and in the resident top level come from files: a tree
+// that would send the traversal out of its arrays, around a cycle, twice
+// through a node or past its stack is refused, naming the node.
+TEST(PagedScene, MalformedWideTreesAreRefused) {
+    const PagedFixture& f = fixture();
+    const PackFile file(f.path);
+    // The page with the most nodes.
+    const auto pages = read_all_geometry(file);
+    size_t largest = 0;
+    for (size_t p = 0; p < pages.size(); ++p)
+        if (pages[p].size() > pages[largest].size()) largest = p;
+    const GeometryPageView view = view_geometry_page(pages[largest], "page");
+    ASSERT_GT(view.node_count, 1u);
+    const std::vector<PageNode> good(view.nodes, view.nodes + view.node_count);
+    EXPECT_EQ(check_wide_tree(good.data(), view.node_count, view.quad_count), "");
+    const auto problem = [&](auto&& edit) {
+        std::vector<PageNode> nodes = good;
+        edit(nodes);
+        return check_wide_tree(nodes.data(), uint32_t(nodes.size()), view.quad_count);
+    };
+    const int inner = [&] {
+        for (int s = 0; s < kCwbvhWidth; ++s)
+            if (cwbvh_meta_is_inner(good[0].meta[s])) return s;
+        return -1;
+    }();
+    ASSERT_GE(inner, 0);
+    EXPECT_NE(problem([](auto& n) { n[0].base_index_child = 0; }).find("before it"), std::string::npos);
+    EXPECT_NE(problem([](auto& n) { n[0].base_index_child = uint32_t(n.size()); }).find("outside the page"), std::string::npos);
+    EXPECT_NE(problem([&](auto& n) { n[0].imask = uint8_t(n[0].imask ^ (1u << inner)); }).find("inner mask"),
+              std::string::npos);
+    EXPECT_NE(problem([&](auto& n) { n[0].meta[inner] = uint8_t(0x20u | 3u); }).find("node 0"), std::string::npos);
+    // A leaf slot pointing past the quads.
+    for (uint32_t i = 0; i < good.size(); ++i)
+        for (int s = 0; s < kCwbvhWidth; ++s)
+            if (good[i].meta[s] != kCwbvhEmptyMeta && !cwbvh_meta_is_inner(good[i].meta[s])) {
+                EXPECT_NE(problem([&](auto& n) { n[i].base_index_triangle = view.quad_count; }).find("past its items"),
+                          std::string::npos);
+                i = uint32_t(good.size());
+                break;
+            }
+    // Two parents for one node (node 1 also the child of its last inner sibling's slot).
+    std::vector<PageNode> chain(3);
+    for (auto& n : chain) n = PageNode{};
+    chain[0].imask = 0b11;
+    chain[0].meta[0] = cwbvh_inner_meta(0);
+    chain[0].meta[1] = cwbvh_inner_meta(1);
+    chain[0].base_index_child = 1;
+    chain[1].meta[0] = cwbvh_leaf_meta(1, 0);
+    chain[2].meta[0] = cwbvh_leaf_meta(1, 0);
+    EXPECT_EQ(check_wide_tree(chain.data(), 3, 1), "");
+    chain[1].imask = 0b1;
+    chain[1].meta[0] = cwbvh_inner_meta(0);
+    chain[1].base_index_child = 2;
+    EXPECT_NE(check_wide_tree(chain.data(), 3, 1).find("two parents"), std::string::npos);
+    // Deeper than the traversal's stack: a chain of kCwbvhMaxDepth + 1 nodes (kCwbvhMaxDepth pass).
+    const auto chain_of = [](uint32_t length) {
+        std::vector<PageNode> nodes(length);
+        for (uint32_t i = 0; i < length; ++i) {
+            nodes[i] = PageNode{};
+            if (i + 1 < length) {
+                nodes[i].imask = 1;
+                nodes[i].meta[0] = cwbvh_inner_meta(0);
+                nodes[i].base_index_child = i + 1;
+            } else {
+                nodes[i].meta[0] = cwbvh_leaf_meta(1, 0);
+            }
+        }
+        return nodes;
+    };
+    const std::vector<PageNode> deepest = chain_of(kCwbvhMaxDepth), too_deep = chain_of(kCwbvhMaxDepth + 1);
+    EXPECT_EQ(check_wide_tree(deepest.data(), uint32_t(deepest.size()), 1), "");
+    EXPECT_NE(check_wide_tree(too_deep.data(), uint32_t(too_deep.size()), 1).find("deeper than"), std::string::npos);
 }
 
 }  // namespace

@@ -570,7 +570,7 @@ TEST(SessionPaged, ShowsAPagedSceneAsThePagedRendererRendersIt) {
     const SessionStatus status = session.status();
     EXPECT_EQ(status.error_count, 0u) << status.error;
     EXPECT_EQ(status.triangles, file->paged_scene().info().triangles);
-    EXPECT_EQ(status.accel.name, "paged/grid+bvh");
+    EXPECT_EQ(status.accel.name, "paged/bvh");
     ASSERT_EQ(status.paged.caches.size(), 3u);
     EXPECT_EQ(status.paged.caches[0].name, "geometry");
     EXPECT_EQ(status.paged.caches[1].name, "attributes");
@@ -586,7 +586,7 @@ TEST(SessionPaged, ShowsAPagedSceneAsThePagedRendererRendersIt) {
     // print-stats carries the same figures.
     const ViewerStats stats;
     const auto json = nlohmann::json::parse(stats.json(status, Clock::now()));
-    EXPECT_EQ(json["structure"], "paged/grid+bvh");
+    EXPECT_EQ(json["structure"], "paged/bvh");
     EXPECT_EQ(json["paged"]["budget_bytes"], status.paged.budget_bytes);
     EXPECT_EQ(json["paged"]["caches"]["geometry"]["slots"], geometry.slots);
     EXPECT_EQ(json["paged"]["caches"]["geometry"]["bytes_read"], geometry.bytes_read);
@@ -632,7 +632,7 @@ TEST(SessionPaged, CameraIntegratorAndExposureChangesWorkAsInCore) {
     frame = settled_frame(session, 3);
     ASSERT_TRUE(frame);
     EXPECT_EQ(pixels_of(*frame), paged_reference(s, moved));
-    EXPECT_EQ(session.status().accel.name, "paged/grid+bvh");
+    EXPECT_EQ(session.status().accel.name, "paged/bvh");
     EXPECT_EQ(session.status().error_count, 0u) << session.status().error;
 }
 

@@ -268,7 +268,7 @@ TEST(ViewerGui, PagedSceneMatchesTheRenderCommand) {
         expect_same_image(dir + "/" + name + ".png", out);
     }
     const auto stats = nlohmann::json::parse(lines[0]);
-    EXPECT_EQ(stats["structure"], "paged/grid+bvh");
+    EXPECT_EQ(stats["structure"], "paged/bvh");
     EXPECT_GT(stats["triangles"].get<double>(), 0.0);
     const auto& caches = stats["paged"]["caches"];
     EXPECT_GT(caches["geometry"]["slots"].get<int>(), 0);

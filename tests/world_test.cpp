@@ -305,7 +305,7 @@ TEST(World, PagedWorldRendersFromItsFile) {
     EXPECT_FALSE(world->animated());
     EXPECT_EQ(world->stats().last_commit, CommitKind::None);  // its structure came with the file
     EXPECT_EQ(world->stats().triangles, world->paged_scene().info().triangles);
-    EXPECT_EQ(world->accel().stats().name, "paged/grid+bvh");
+    EXPECT_EQ(world->accel().stats().name, "paged/bvh");
     EXPECT_TRUE(world->geometry().triangles.empty());
     EXPECT_FALSE(world->set_time(1.0f).updated);
     EXPECT_THROW(world->geometry_replaced(GeometryChange{{0}, {}, false}), Error);

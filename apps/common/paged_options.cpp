@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "option_binding.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cli {
@@ -95,7 +96,10 @@ void add_paged_write_options(CLI::App* cmd, PagedWriteArgs& a) {
                     "Bytes per surface-attribute page, a power of two from 1K to 1M (default 4K)");
     cmd->add_option("--page-quads", a.quads_per_page, "Quads per geometry page, 64..4096 (default 4096, Garanzha 2014's 4K)")
         ->check(CLI::Range(64, 4096));
-    cmd->add_option("--grid", a.grid, "Top-grid cells on the scene's longest axis, 1..256 (default 32)")
+    add_named_option(cmd, "--top", a.top, parse_paged_top_level, {"bvh", "grid"},
+                     "How rays find pages: bvh (one wide BVH over the page bounds, the default) or grid (Garanzha "
+                     "2014's top grid with a BVH in every cell)");
+    cmd->add_option("--grid", a.grid, "--top grid: cells on the scene's longest axis, 1..256 (default 32)")
         ->check(CLI::Range(1, 256));
 }
 
@@ -106,6 +110,7 @@ PagedWriteOptions paged_write_options(const PagedWriteArgs& a, int threads) {
     o.compact_attributes = a.compact;
     o.attribute_page_bytes = uint32_t(parse_bytes(a.attribute_page, "--attribute-page"));
     o.quads_per_page = a.quads_per_page;
+    o.top_level = a.top;
     o.grid_resolution = a.grid;
     o.threads = threads;
     return o;

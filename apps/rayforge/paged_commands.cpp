@@ -149,9 +149,12 @@ int run_paged_info(const std::string& path, bool verbose) {
                 format_bytes(double(i.file_bytes)).c_str(), i.bytes_per_triangle(), i.geometry_pages,
                 i.attribute_pages, format_bytes(double(i.attribute_page_bytes)).c_str(),
                 i.compact_attributes ? "32-byte" : "64-byte", i.texture_pages);
-    std::printf("  always resident %s: top grid %dx%dx%d, %u materials, %u lights, %u textures\n",
-                format_bytes(double(i.resident_bytes)).c_str(), i.grid[0], i.grid[1], i.grid[2], i.materials, i.lights,
-                i.textures);
+    const std::string top = i.top_level == PagedTopLevel::Grid
+                                ? "top grid " + std::to_string(i.grid[0]) + "x" + std::to_string(i.grid[1]) + "x" +
+                                      std::to_string(i.grid[2])
+                                : "top BVH of " + std::to_string(i.top_nodes) + " wide nodes";
+    std::printf("  always resident %s: %s, %u materials, %u lights, %u textures\n",
+                format_bytes(double(i.resident_bytes)).c_str(), top.c_str(), i.materials, i.lights, i.textures);
     std::printf("  bounds (%g, %g, %g) - (%g, %g, %g)\n", lo.x, lo.y, lo.z, hi.x, hi.y, hi.z);
     if (verbose) std::printf("  camera %s\n", to_string(scene->camera()).c_str());
     return 0;

@@ -144,7 +144,7 @@ void print_paged_summary(const RenderArgs& a, const World& world) {
                 format_bytes(double(info.resident_bytes)).c_str());
     std::printf("%s: caches: %s\n", out, cache_line(scene).c_str());
     const double per_ray = q.queries ? 1.0 / double(q.queries) : 0.0;
-    std::printf("%s: per query: %.2f iterations, %.1f cells, %.1f middle nodes, %.2f pages searched, %.1f page nodes, "
+    std::printf("%s: per query: %.2f iterations, %.1f grid cells, %.1f top-level nodes, %.2f pages searched, %.1f page nodes, "
                 "%.1f quads tested | traversal %.1f ms, sort %.1f ms\n",
                 out, double(q.ray_iterations) * per_ray, double(q.cells) * per_ray, double(q.middle_nodes) * per_ray,
                 double(q.pages_searched) * per_ray, double(q.page_nodes) * per_ray, double(q.quads_tested) * per_ray,

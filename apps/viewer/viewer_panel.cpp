@@ -172,7 +172,7 @@ void App::draw_bookmarks_section() {
 
 void App::draw_structure_section(const SessionStatus& status) {
     if (scene_kind() == SceneKind::Paged)
-        ImGui::TextWrapped("%s, from the paged file: top grid, middle BVHs, page BVHs. Structure settings do not "
+        ImGui::TextWrapped("%s, from the paged file: the top level and the page BVHs. Structure settings do not "
                            "apply; the page caches' budgets are set at start (--memory-budget).",
                            status.accel.name.c_str());
     setting_group("structure");

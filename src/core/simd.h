@@ -189,6 +189,32 @@ RF_SIMD_INLINE vmask<8> operator|(vmask<8> a, vmask<8> b) { return {_mm256_or_ps
 RF_SIMD_INLINE unsigned bits(vmask<8> m) { return unsigned(_mm256_movemask_ps(m.v)); }
 #endif
 
+// Eight unsigned bytes as floats (the 8-bit child boxes of compressed wide
+// nodes), and the mask of the nonzero ones among eight bytes.
+template <int N>
+RF_SIMD_INLINE vfloat<N> load_bytes(const uint8_t* p) {
+    vfloat<N> r;
+    for (int i = 0; i < N; ++i) r.v[i] = float(p[i]);
+    return r;
+}
+RF_SIMD_INLINE unsigned nonzero_bytes8(const uint8_t* p) {
+#if defined(RF_SIMD_SSE)
+    const __m128i b = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(p));
+    return ~unsigned(_mm_movemask_epi8(_mm_cmpeq_epi8(b, _mm_setzero_si128()))) & 0xFFu;
+#else
+    unsigned m = 0;
+    for (int i = 0; i < 8; ++i) m |= p[i] != 0 ? 1u << i : 0u;
+    return m;
+#endif
+}
+#if defined(RF_SIMD_AVX2)
+template <>
+RF_SIMD_INLINE vfloat<8> load_bytes<8>(const uint8_t* p) {
+    const __m128i b = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(p));
+    return {_mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(b))};
+}
+#endif
+
 // Sort keys of the children a ray enters: the entry distance's bit pattern
 // with its low three bits replaced by the child's slot, so that one integer
 // sort orders the children by distance and still says which is which.

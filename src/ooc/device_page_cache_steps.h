@@ -31,6 +31,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <span>
@@ -151,16 +152,31 @@ inline constexpr uint64_t kDefaultStagingBytes = uint64_t(1) << 20;
 
 // The resident levels and a page table as the per-ray code sees them, with
 // PagedEngine::view()'s arithmetic (the same cell sizes to the bit).
-[[nodiscard]] inline PagedSceneView make_paged_view(const PackFile& f, const PageInfo* pages, const uint32_t* roots,
-                                                    const BvhNode* middle, PageTableView geometry) {
+// Where the resident levels lie for the rays (host or device copies of the
+// file's arrays).
+struct ResidentArrays {
+    const PageInfo* pages = nullptr;
+    const uint32_t* cell_roots = nullptr;
+    const BvhNode* middle_nodes = nullptr;
+    const PageNode* top_nodes = nullptr;  // null when the file has no top BVH
+    const uint32_t* top_pages = nullptr;
+};
+
+[[nodiscard]] inline PagedSceneView make_paged_view(const PackFile& f, const ResidentArrays& a, PageTableView geometry) {
     const ResidentHeader& r = f.resident();
     PagedSceneView v;
-    v.pages = pages;
-    v.cell_roots = roots;
-    v.middle_nodes = middle;
+    v.pages = a.pages;
+    v.cell_roots = a.cell_roots;
+    v.middle_nodes = a.middle_nodes;
+    if (!f.top_nodes().empty()) {
+        v.top_nodes = a.top_nodes;
+        v.top_pages = a.top_pages;
+    }
+    for (int a3 = 0; a3 < 3; ++a3)
+        v.coord_scale = std::max({v.coord_scale, std::fabs(r.bounds.lo[a3]), std::fabs(r.bounds.hi[a3])});
     v.geometry = geometry;
     v.grid_bounds = r.grid_bounds;
-    for (int a = 0; a < 3; ++a) v.res[a] = r.grid_res[a];
+    for (int a3 = 0; a3 < 3; ++a3) v.res[a3] = r.grid_res[a3];
     v.cell_size = (r.grid_bounds.hi - r.grid_bounds.lo) / Vec3f(float(v.res[0]), float(v.res[1]), float(v.res[2]));
     v.page_count = uint32_t(f.pages().size());
     return v;

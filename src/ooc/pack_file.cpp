@@ -2,6 +2,8 @@
 // at open, so a page read later can only fail on its own bytes.
 #include "ooc/pack_file.h"
 
+#include <bit>
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -14,6 +16,7 @@
 #include <cstring>
 
 #include "rayforge/core/error.h"
+#include "rayforge/core/float_bits.h"
 #include "rayforge/core/memory_budget.h"
 
 #if defined(__SSE4_2__)
@@ -143,7 +146,8 @@ void PackFile::open_checked() {
         throw file_byte_error(path_, 0, "not a paged scene file (bad magic)");
     if (header_.version != kVersion)
         throw file_byte_error(path_, 8, "unsupported paged scene version " + std::to_string(header_.version) +
-                                            " (this rayforge reads version " + std::to_string(kVersion) + ")");
+                                            " (this rayforge reads version " + std::to_string(kVersion) +
+                                            (header_.version < kVersion ? "; convert the scene again" : "") + ")");
     if (header_.header_bytes != sizeof(FileHeader) ||
         crc32c(&header_, offsetof(FileHeader, header_checksum)) != header_.header_checksum)
         throw file_byte_error(path_, 0, "header checksum mismatch (corrupted file)");
@@ -197,6 +201,11 @@ void PackFile::read_resident(uint64_t size) {
     for (int a = 0; a < 3; ++a)
         if (r.grid_res[a] < 1 || r.grid_res[a] > kMaxGridResolution)
             throw file_byte_error(path_, h.resident_offset, "bad top-grid resolution");
+    if (r.top_level != TopLevel::WideBvh && r.top_level != TopLevel::Grid)
+        throw file_byte_error(path_, h.resident_offset, "bad top level");
+    if ((r.top_level == TopLevel::WideBvh) != (r.top_node_count > 0 || h.geometry_pages == 0) ||
+        r.top_node_count > 2 * uint64_t(h.geometry_pages))
+        throw file_byte_error(path_, h.resident_offset, "top BVH node count disagrees with the top level");
     if (r.attribute_format != AttributeFormat::Full && r.attribute_format != AttributeFormat::Compact)
         throw file_byte_error(path_, h.resident_offset, "bad attribute format");
     if (r.attribute_page_bytes < 1024 || r.attribute_page_bytes > (1u << 20) ||
@@ -208,11 +217,28 @@ void PackFile::read_resident(uint64_t size) {
     in.read_array(pages_, h.geometry_pages, "page bounds");
     in.read_array(cell_roots_, cells, "top-grid cells");
     in.read_array(middle_nodes_, r.middle_node_count, "middle BVH nodes");
+    in.read_array(top_nodes_, r.top_node_count, "top BVH nodes");
+    in.read_array(top_pages_, r.top_node_count > 0 ? h.geometry_pages : 0, "top BVH pages");
     in.read_array(materials_, r.material_count, "materials");
     in.read_array(lights_, r.light_count, "lights");
     in.read_array(textures_, r.texture_count, "textures");
     validate_resident();
 }
+
+namespace {
+
+// A page's decode scale: per axis a power of two whose reciprocal is a
+// normal float too (the traversal divides by multiplying with it).
+bool power_of_two_scale(const Vec3f& scale) {
+    for (int a = 0; a < 3; ++a) {
+        const uint32_t bits = float_to_bits(scale[a]);
+        const uint32_t exponent = (bits >> 23) & 0xFFu;
+        if ((bits & 0x807FFFFFu) != 0 || exponent < 1 || exponent > 253) return false;
+    }
+    return true;
+}
+
+}  // namespace
 
 void PackFile::validate_resident() const {
     const uint64_t at = header_.resident_offset;
@@ -224,7 +250,7 @@ void PackFile::validate_resident() const {
         if (p.first_attribute_page != next_attribute_page)
             throw file_byte_error(path_, at, "page " + std::to_string(i) + ": its attribute pages are out of order");
         next_attribute_page += attribute_pages;
-        if (!finite_box(p.bounds) || !finite_vec(p.offset) || !finite_vec(p.scale) || p.quad_count == 0 ||
+        if (!finite_box(p.bounds) || !finite_vec(p.offset) || !power_of_two_scale(p.scale) || p.quad_count == 0 ||
             p.quad_count > kQuadsPerPage || uint64_t(p.first_attribute_page) + attribute_pages > header_.attribute_pages)
             throw file_byte_error(path_, at, "page " + std::to_string(i) + ": bad bounds, size or attribute range");
     }
@@ -237,6 +263,12 @@ void PackFile::validate_resident() const {
                                         : (node.first <= i || node.first >= n - 1);
         if (bad || !finite_box(node.bounds))
             throw file_byte_error(path_, at, "middle BVH node " + std::to_string(i) + " is malformed");
+    }
+    if (!top_nodes_.empty()) {
+        const std::string problem = check_wide_tree(top_nodes_.data(), uint32_t(top_nodes_.size()), uint32_t(top_pages_.size()));
+        if (!problem.empty()) throw file_byte_error(path_, at, "top BVH " + problem);
+        for (uint32_t page : top_pages_)
+            if (page >= pages_.size()) throw file_byte_error(path_, at, "a top BVH leaf points past the pages");
     }
     validate_materials();
     for (const TextureInfo& t : textures_) {
@@ -363,8 +395,51 @@ size_t PackFile::expected_attribute_bytes(uint32_t a) const {
 size_t PackFile::resident_memory_bytes() const {
     return directory_.capacity() * sizeof(PageEntry) + pages_.capacity() * sizeof(PageInfo) +
            cell_roots_.capacity() * sizeof(uint32_t) + middle_nodes_.capacity() * sizeof(BvhNode) +
+           top_nodes_.capacity() * sizeof(PageNode) + top_pages_.capacity() * sizeof(uint32_t) +
            materials_.capacity() * sizeof(ShadingMaterial) + lights_.capacity() * sizeof(Light) +
            textures_.capacity() * sizeof(TextureInfo);
+}
+
+// The structure the wide traversals rely on: every slot's meta well formed,
+// leaves within the items, inner children after their parent and within the
+// nodes, each node but the root referenced exactly once (a tree, so a walk
+// visits each node at most once), depth at most kCwbvhMaxDepth (the
+// traversal's stack).
+std::string check_wide_tree(const PageNode* nodes, uint32_t node_count, uint32_t item_count) {
+    std::vector<uint8_t> depth(node_count, 0);
+    depth[0] = 1;
+    for (uint32_t i = 0; i < node_count; ++i) {
+        PageNode n;
+        std::memcpy(&n, &nodes[i], sizeof(n));
+        if (depth[i] == 0) return "node " + std::to_string(i) + " is not reachable from the root";
+        unsigned inner_slots = 0;
+        for (int s = 0; s < kCwbvhWidth; ++s) {
+            const uint8_t meta = n.meta[s];
+            if (meta == kCwbvhEmptyMeta) continue;
+            if (cwbvh_meta_is_inner(meta)) {
+                if (meta != cwbvh_inner_meta(s)) return "node " + std::to_string(i) + " has a malformed inner slot";
+                inner_slots |= 1u << s;
+                continue;
+            }
+            const unsigned count_bits = meta >> 5, offset = meta & 31u;
+            if ((count_bits != 1 && count_bits != 3 && count_bits != 7) || offset >= 24)
+                return "node " + std::to_string(i) + " has a malformed leaf slot";
+            if (uint64_t(n.base_index_triangle) + offset + unsigned(std::popcount(count_bits)) > item_count)
+                return "node " + std::to_string(i) + " has a leaf past its items";
+        }
+        if (inner_slots != n.imask) return "node " + std::to_string(i) + " has an inner mask that disagrees with its slots";
+        const unsigned inner_count = unsigned(std::popcount(inner_slots));
+        if (inner_count == 0) continue;
+        if (n.base_index_child <= i || uint64_t(n.base_index_child) + inner_count > node_count)
+            return "node " + std::to_string(i) + " has children outside the page or before it";
+        if (depth[i] >= kCwbvhMaxDepth) return "node " + std::to_string(i) + " is deeper than " + std::to_string(kCwbvhMaxDepth);
+        for (unsigned c = 0; c < inner_count; ++c) {
+            uint8_t& d = depth[n.base_index_child + c];
+            if (d != 0) return "node " + std::to_string(n.base_index_child + c) + " has two parents";
+            d = uint8_t(depth[i] + 1);
+        }
+    }
+    return "";
 }
 
 GeometryPageView view_geometry_page(std::span<const uint8_t> bytes, const std::string& what) {
@@ -375,15 +450,11 @@ GeometryPageView view_geometry_page(std::span<const uint8_t> bytes, const std::s
     if (h.quad_count == 0 || h.quad_count > kQuadsPerPage || h.node_count == 0 || h.node_count > 2 * kQuadsPerPage ||
         need > bytes.size())
         throw Error(what + ": geometry page sizes disagree with its bytes");
-    GeometryPageView v;
     const auto* nodes = reinterpret_cast<const PageNode*>(bytes.data() + sizeof(h));
-    for (uint32_t i = 0; i < h.node_count; ++i) {
-        const PageNode& n = nodes[i];
-        const bool ok = n.is_leaf() ? n.count() >= 1 && n.count() <= kPageLeafQuads && n.first() + n.count() <= h.quad_count
-                                    : n.left() > i && n.left() + 1 < h.node_count;
-        if (!ok) throw Error(what + ": geometry page node " + std::to_string(i) + " is malformed");
-    }
-    v.nodes = reinterpret_cast<const PageNode*>(bytes.data() + sizeof(h));
+    const std::string problem = check_wide_tree(nodes, h.node_count, h.quad_count);
+    if (!problem.empty()) throw Error(what + ": geometry page " + problem);
+    GeometryPageView v;
+    v.nodes = nodes;
     v.quads = reinterpret_cast<const Quad*>(bytes.data() + sizeof(h) + size_t(h.node_count) * sizeof(PageNode));
     v.node_count = h.node_count;
     v.quad_count = h.quad_count;

@@ -34,6 +34,9 @@ public:
     [[nodiscard]] std::span<const PageInfo> pages() const { return pages_; }
     [[nodiscard]] std::span<const uint32_t> cell_roots() const { return cell_roots_; }
     [[nodiscard]] std::span<const BvhNode> middle_nodes() const { return middle_nodes_; }
+    // TopLevel::WideBvh: the top BVH (empty for a grid file or no pages).
+    [[nodiscard]] std::span<const PageNode> top_nodes() const { return top_nodes_; }
+    [[nodiscard]] std::span<const uint32_t> top_pages() const { return top_pages_; }
     [[nodiscard]] std::span<const ShadingMaterial> materials() const { return materials_; }
     [[nodiscard]] std::span<const Light> lights() const { return lights_; }
     [[nodiscard]] std::span<const TextureInfo> textures() const { return textures_; }
@@ -77,6 +80,8 @@ private:
     std::vector<PageInfo> pages_;
     std::vector<uint32_t> cell_roots_;
     std::vector<BvhNode> middle_nodes_;
+    std::vector<PageNode> top_nodes_;
+    std::vector<uint32_t> top_pages_;
     std::vector<ShadingMaterial> materials_;
     std::vector<Light> lights_;
     std::vector<TextureInfo> textures_;
@@ -89,6 +94,11 @@ struct GeometryPageView {
     uint32_t node_count = 0;
     uint32_t quad_count = 0;
 };
+// "" when nodes[0, node_count) form a wide tree view_geometry_page accepts
+// (well-formed slots, leaf items below item_count, children after their
+// parent, one parent each, at most kCwbvhMaxDepth deep), else what is wrong.
+std::string check_wide_tree(const PageNode* nodes, uint32_t node_count, uint32_t item_count);
+
 // Views `bytes` as a geometry page; rf::Error (naming `what`) when its sizes
 // disagree or a node points outside the page or backwards (so traversal of
 // a checked page always ends).

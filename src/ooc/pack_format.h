@@ -2,16 +2,18 @@
 // ray tracer (Garanzha 2014, ch. 6, §6.3; docs/paged-scenes.md has the
 // byte layout). A scene is cut into pages that are read on demand:
 //   - geometry pages: up to kQuadsPerPage quads (triangle pairs) with 16-bit
-//     page-local quantised vertices and the page's own BVH (leaves of at most
-//     kPageLeafQuads quads), the quantisation folded into the page's decode
-//     transform (§6.3.2);
+//     page-local quantised vertices and the page's own compressed 8-wide BVH
+//     (format 2: CWBVH nodes, Ylitie et al. 2017, in the page's quantised
+//     coordinates, leaves of one to three quads), the quantisation folded
+//     into the page's decode transform (§6.3.2);
 //   - attribute pages: the shading record of every triangle, in the quads'
 //     Morton order (§6.4), in pages of `attribute_page_bytes`;
 //   - texture pages: 32x32-texel tiles of every mip level (§6.5).
 // What is always resident (the "resident section"): per geometry page its
-// world bounds and decode transform, the top grid of kGridResolution^3 cells
-// and per cell a BVH over the page bounds clipped to the cell (§6.3.1 (e)-(g)),
-// the materials, lights, camera and texture descriptions.
+// world bounds and decode transform, the top level (a CWBVH over the page
+// bounds, or the seed's top grid of kGridResolution^3 cells and per cell a
+// BVH over the page bounds clipped to the cell, §6.3.1 (e)-(g)), the
+// materials, lights, camera and texture descriptions.
 //
 // Every page carries a checksum of its stored bytes; the header, the page
 // directory and the resident section carry their own. All integers are
@@ -22,6 +24,7 @@
 #include <cstddef>
 #include <cstdint>
 
+#include "accel/bvh/layout/cwbvh_layout.h"
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/box.h"
 #include "rayforge/math/vec.h"
@@ -29,12 +32,14 @@
 namespace rf::pack {
 
 inline constexpr char kMagic[8] = {'R', 'F', 'P', 'A', 'C', 'K', '\r', '\n'};
-inline constexpr uint32_t kVersion = 1;
+// 2: wide (CWBVH) page BVHs; 1 (binary page BVHs) is no longer read: a
+// version-1 file gets a "convert it again" error.
+inline constexpr uint32_t kVersion = 2;
 
 // Garanzha 2014's parameters (§6.3, §6.7.1).
 inline constexpr uint32_t kQuadsPerPage = 4096;      // NP
 inline constexpr uint32_t kBranchQuads = 65536;      // NB, the SAH-branch limit
-inline constexpr uint32_t kPageLeafQuads = 15;       // bottom-BVH leaves
+inline constexpr uint32_t kPageLeafQuads = kCwbvhMaxLeafTriangles;  // quads in a page-BVH leaf (1..3)
 inline constexpr uint32_t kTrianglesPerPageSlot = 2 * kQuadsPerPage;  // Hit::prim = page * this + 2 * quad + half
 inline constexpr int kDefaultGridResolution = 32;    // the top grid, cells per axis
 inline constexpr int kMaxGridResolution = 256;
@@ -83,20 +88,15 @@ struct PageEntry {
 };
 static_assert(sizeof(PageEntry) == 24);
 
-// A bottom-BVH node of a geometry page: a box in the page's quantised
-// coordinates (conservative: lo rounded down, hi up) and either the first of
-// two adjacent children or a leaf's quads.
-struct PageNode {
-    int16_t lo[3];
-    int16_t hi[3];
-    uint32_t payload;  // inner: index of the left child (the right one follows); leaf: kLeafBit | count << 16 | first
-    static constexpr uint32_t kLeafBit = 0x80000000u;
-    [[nodiscard]] RF_HDI bool is_leaf() const { return (payload & kLeafBit) != 0; }
-    [[nodiscard]] RF_HDI uint32_t first() const { return payload & 0xFFFFu; }
-    [[nodiscard]] RF_HDI uint32_t count() const { return (payload >> 16) & 0x7FFFu; }
-    [[nodiscard]] RF_HDI uint32_t left() const { return payload; }
-};
-static_assert(sizeof(PageNode) == 16);
+// A page-BVH node: a CWBVH node (accel/bvh/layout/cwbvh_layout.h, 80
+// bytes) whose boxes are in the page's quantised coordinates, where
+// base_index_child indexes the page's nodes and base_index_triangle its
+// quads: a leaf slot's meta holds its quad count (1..3, unary) and the
+// offset of its first quad from base_index_triangle. Children follow their
+// parent, every node but the root has exactly one parent, and the tree is at
+// most kCwbvhMaxDepth nodes deep (view_geometry_page checks all three).
+using PageNode = CwbvhNode;
+static_assert(sizeof(PageNode) == 80);
 
 // Four quantised vertices. The quad is the triangles (v0, v1, v2) and
 // (v0, v2, v3); an unpaired triangle repeats v0 as v3 (its second half is
@@ -107,12 +107,14 @@ struct Quad {
 static_assert(sizeof(Quad) == 24);
 
 // A geometry page as read (raw bytes): this header, node_count PageNodes
-// (node 0 the root), then quad_count Quads.
+// (node 0 the root; 16-byte aligned in a cache slot), then quad_count
+// Quads in leaf order.
 struct GeometryPageHeader {
     uint32_t quad_count = 0;
     uint32_t node_count = 0;
+    uint32_t reserved[2] = {};
 };
-static_assert(sizeof(GeometryPageHeader) == 8);
+static_assert(sizeof(GeometryPageHeader) == 16);
 
 // Always resident, one per geometry page: world = offset + scale * quantised.
 struct PageInfo {
@@ -149,11 +151,21 @@ struct TextureInfo {
 };
 static_assert(sizeof(TextureInfo) == 80);
 
+// How a ray finds the pages it meets. WideBvh (the default): one CWBVH over
+// the pages' world bounds, leaves of one to three pages (base_index_triangle
+// and the leaf offsets index top_pages). Grid: the seed's top grid with a
+// BVH over the (clipped) page bounds in every cell (§6.3.1 (e)-(g)), kept so
+// that its tables can be reproduced. A file holds one of the two (the other's
+// arrays are empty: one empty cell, no top nodes).
+enum class TopLevel : uint8_t { WideBvh = 0, Grid = 1 };
+
 // The resident section starts with this; the arrays follow in this order,
 // each at an offset rounded up to 16 bytes:
 //   PageInfo[geometry_pages]
 //   uint32_t cell_root[grid_cells]   (index into the middle nodes, or kEmptyCell)
 //   BvhNode middle_nodes[middle_node_count]   (leaves of one page each: first = page)
+//   PageNode top_nodes[top_node_count]        (world space; node 0 the root)
+//   uint32_t top_pages[geometry_pages when top_node_count > 0]  (page of each top leaf item)
 //   ShadingMaterial materials[material_count]
 //   Light lights[light_count]
 //   TextureInfo textures[texture_count]
@@ -168,12 +180,14 @@ struct ResidentHeader {
     uint32_t attribute_page_bytes = kDefaultAttributePageBytes;
     AttributeFormat attribute_format = AttributeFormat::Full;
     uint8_t has_camera = 0;
-    uint8_t reserved8[2] = {};
+    TopLevel top_level = TopLevel::WideBvh;
+    uint8_t reserved8 = 0;
     uint32_t object_count = 0;
     float camera[10] = {};             // eye, target, up, vfov (when has_camera)
     float camera_lens[2] = {};         // aperture radius, focus distance
     float environment[6] = {};         // colour rgb, strength, rotation, (unused)
-    uint32_t reserved[8] = {};
+    uint32_t top_node_count = 0;       // TopLevel::WideBvh: nodes of the top BVH
+    uint32_t reserved[7] = {};
 };
 static_assert(sizeof(ResidentHeader) == 192);
 inline constexpr uint32_t kEmptyCell = 0xFFFFFFFFu;

@@ -293,10 +293,22 @@ PackSummary PackWriter::finish(const ProgressCallback& progress) {
     if (progress) progress(0.0);
     if (s.materials.empty()) s.materials.push_back(ShadingMaterial::from(Material{}));
     ResidentHeader& r = s.resident;
-    const TopGrid grid = parallel::with_threads(s.options.threads, [&] {
-        return build_top_grid(s.pages, s.options.grid_resolution);
+    // The chosen top level; the other's arrays stay empty (the grid: one empty cell).
+    TopGrid grid;
+    TopBvh top;
+    parallel::with_threads(s.options.threads, [&] {
+        if (s.options.top_level == TopLevel::Grid) {
+            grid = build_top_grid(s.pages, s.options.grid_resolution);
+            return;
+        }
+        grid = build_top_grid({}, 1);
+        top = build_top_bvh(s.pages);
+        for (const PageInfo& p : s.pages) grid.scene_bounds.extend(p.bounds);
+        if (!s.pages.empty()) grid.grid_bounds = grid.scene_bounds;
     });
     if (progress) progress(0.8);
+    r.top_level = s.options.top_level;
+    r.top_node_count = uint32_t(top.nodes.size());
     r.bounds = grid.scene_bounds;
     r.grid_bounds = grid.grid_bounds;
     for (int a = 0; a < 3; ++a) r.grid_res[a] = grid.resolution[a];
@@ -316,6 +328,8 @@ PackSummary PackWriter::finish(const ProgressCallback& progress) {
     put(s.pages.data(), s.pages.size() * sizeof(PageInfo));
     put(grid.cell_roots.data(), grid.cell_roots.size() * sizeof(uint32_t));
     put(grid.middle_nodes.data(), grid.middle_nodes.size() * sizeof(BvhNode));
+    put(top.nodes.data(), top.nodes.size() * sizeof(PageNode));
+    put(top.pages.data(), top.pages.size() * sizeof(uint32_t));
     put(s.materials.data(), s.materials.size() * sizeof(ShadingMaterial));
     put(s.lights.data(), s.lights.size() * sizeof(Light));
     put(s.textures.data(), s.textures.size() * sizeof(TextureInfo));
@@ -355,6 +369,7 @@ PackSummary PackWriter::finish(const ProgressCallback& progress) {
     out.attribute_pages = h.attribute_pages;
     out.texture_pages = h.texture_pages;
     out.middle_nodes = r.middle_node_count;
+    out.top_nodes = r.top_node_count;
     out.resident_bytes = resident.size();
     out.file_bytes = s.end;
     if (progress) progress(1.0);

@@ -1,8 +1,7 @@
 // Writing a paged scene file (pack_format.h), object by object, out of core
 // as the dissertation's preprocessor does (§6.3.1 (h)): each object's pages
 // are built and written when it is added, then its memory is freed; only
-// the per-page bounds stay until finish() builds the top grid and the middle
-// BVHs over them. So the writer's memory is bounded by its largest object
+// the per-page bounds stay until finish() builds the top level over them. So the writer's memory is bounded by its largest object
 // (about kWriterBytesPerTriangle per triangle) plus 64 bytes per page.
 #pragma once
 
@@ -31,7 +30,8 @@ struct PackWriterOptions {
     AttributeFormat attribute_format = AttributeFormat::Full;
     uint32_t attribute_page_bytes = kDefaultAttributePageBytes;  // a power of two, 1 KB .. 1 MB
     uint32_t quads_per_page = kQuadsPerPage;                     // 64 .. kQuadsPerPage
-    int grid_resolution = kDefaultGridResolution;                // 1 .. kMaxGridResolution
+    TopLevel top_level = TopLevel::WideBvh;                      // how rays find pages (pack_format.h)
+    int grid_resolution = kDefaultGridResolution;                // TopLevel::Grid: 1 .. kMaxGridResolution
     int threads = 0;                                             // 0 = all cores
 };
 
@@ -50,7 +50,8 @@ struct PackSummary {
     uint32_t geometry_pages = 0;
     uint32_t attribute_pages = 0;
     uint32_t texture_pages = 0;
-    uint32_t middle_nodes = 0;
+    uint32_t middle_nodes = 0;       // TopLevel::Grid: the cells' BVH nodes
+    uint32_t top_nodes = 0;          // TopLevel::WideBvh: the top BVH's nodes
     uint64_t file_bytes = 0;
     uint64_t geometry_bytes = 0;     // stored bytes of the geometry pages
     uint64_t attribute_bytes = 0;
@@ -80,7 +81,7 @@ public:
     // non-finite coordinates or out-of-range indices or materials).
     void add_object(const ObjectInput& object);
 
-    // Builds the top grid and middle BVHs, writes the resident section, the
+    // Builds the top level (pack_format.h), writes the resident section, the
     // directory and the header. Nothing may be added after it.
     PackSummary finish(const ProgressCallback& progress = {});
 

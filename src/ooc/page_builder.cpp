@@ -6,6 +6,7 @@
 #include <cstring>
 
 #include "accel/bvh/builders/morton_code.h"
+#include "accel/bvh/layout/cwbvh_layout.h"
 #include "ooc/attribute_records.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
@@ -15,7 +16,6 @@ namespace rf::pack {
 namespace {
 
 constexpr int kBranchBins = 16;
-constexpr float kPageNodeCost = 2.0f;  // SAH traversal cost of a page node, relative to a quad test
 
 struct QuadBox {
     Box3f box;
@@ -129,7 +129,9 @@ int16_t quantise(float p, float offset, float scale) {
     return int16_t(std::clamp(q, -float(kQuantMax), float(kQuantMax)));
 }
 
-// The page's BVH over its quantised quads, as PageNodes; returns the quads'
+// The page's BVH over its quantised quads: a binned SAH binary BVH over the
+// quads' boxes, collapsed into CWBVH nodes (build_cwbvh: leaves of one to
+// three quads, octant-ordered slots, 8-bit child boxes); returns the quads'
 // leaf order (slot -> index into `quads`).
 std::vector<uint32_t> build_page_bvh(const std::vector<Quad>& quads, std::vector<PageNode>& nodes) {
     std::vector<Triangle> boxes(quads.size());
@@ -140,28 +142,20 @@ std::vector<uint32_t> build_page_bvh(const std::vector<Quad>& quads, std::vector
                 lo[a] = std::min(lo[a], float(v[a]));
                 hi[a] = std::max(hi[a], float(v[a]));
             }
-        // A triangle with the quad's box and the box's centre as centroid.
+        // A triangle with the quad's box as its bounds and the box's centre as centroid.
         boxes[i] = {lo, hi, (lo + hi) * 0.5f};
     }
     BuildOptions options;
     options.builder = Builder::BinnedSah;
     options.max_leaf_size = int(kPageLeafQuads);
-    // Leaves of several quads: 35 bytes a quad with the structure (31 at cost 4,
-    // Garanzha 2014's 29; 47 at cost 1) for 2% slower tracing than cost 1 (docs/paged-scenes.md).
-    options.sah.traversal = kPageNodeCost;
     options.threads = 0;  // already inside the writer's parallel loop over pages
-    Bvh bvh = build_bvh(boxes, options);
-    nodes.resize(bvh.nodes.size());
-    for (size_t i = 0; i < bvh.nodes.size(); ++i) {
-        const BvhNode& b = bvh.nodes[i];
-        PageNode& n = nodes[i];
-        for (int a = 0; a < 3; ++a) {
-            n.lo[a] = int16_t(std::floor(b.bounds.lo[a]));
-            n.hi[a] = int16_t(std::ceil(b.bounds.hi[a]));
-        }
-        n.payload = b.is_leaf() ? (PageNode::kLeafBit | b.count << 16 | b.first) : b.first;
-    }
-    return std::move(bvh.prim_indices);
+    const Bvh bvh = build_bvh(boxes, options);
+    CwbvhBvh wide = build_cwbvh(bvh, boxes);
+    if (wide.triangles.size() != quads.size()) throw Error("paged scene writer: the page BVH lost or repeated quads");
+    nodes = std::move(wide.nodes);
+    std::vector<uint32_t> order(wide.triangles.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = float_to_bits(wide.triangles[i].v0.w);
+    return order;
 }
 
 ShadingTriangle corner_record(const ShadingTriangle& source, const uint8_t corner_of[3]) {

@@ -92,9 +92,9 @@ void check_pages(const PackFile& file, const std::string& name, uint64_t first_p
 }  // namespace
 
 size_t largest_raw_page(const PackFile& file, uint64_t first, uint64_t count) {
-    uint32_t largest = 1;
-    for (uint64_t i = first; i < first + count; ++i) largest = std::max(largest, file.directory()[i].raw_bytes);
-    return largest;
+    uint64_t largest = 1;
+    for (uint64_t i = first; i < first + count; ++i) largest = std::max<uint64_t>(largest, file.directory()[i].raw_bytes);
+    return size_t((largest + 15) & ~uint64_t(15));  // slots 16-byte aligned: page nodes are read in place
 }
 
 PageCache::PageCache(const PackFile& file, uint64_t first_page, uint32_t page_count, size_t slot_bytes,

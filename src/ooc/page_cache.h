@@ -57,8 +57,8 @@ struct PageCacheStats {
     [[nodiscard]] double hit_rate() const { return requests ? double(hits) / double(requests) : 1.0; }
 };
 
-// The largest raw page of `file`'s directory entries [first, first + count):
-// the size of a cache slot for them (at least 1).
+// The largest raw page of `file`'s directory entries [first, first + count)
+// rounded up to 16 bytes: the size of a cache slot for them (at least 16).
 size_t largest_raw_page(const PackFile& file, uint64_t first, uint64_t count);
 
 class PageCache {

@@ -5,6 +5,7 @@
 
 #include "backend/cpu/cpu_wavefront.h"
 #include "core/parallel.h"
+#include "ooc/device_page_cache_steps.h"
 #include "ooc/attribute_records.h"
 #include "rayforge/core/error.h"
 #include "render/ray_sort_key.h"
@@ -33,17 +34,10 @@ PagedEngine::PagedEngine(std::shared_ptr<const PackFile> file, const EngineBudge
 
 PagedSceneView PagedEngine::view() {
     const PackFile& f = *file_;
-    const ResidentHeader& r = f.resident();
-    PagedSceneView v;
-    v.pages = f.pages().data();
-    v.cell_roots = f.cell_roots().data();
-    v.middle_nodes = f.middle_nodes().data();
-    v.geometry = geometry_->view();
-    v.grid_bounds = r.grid_bounds;
-    for (int a = 0; a < 3; ++a) v.res[a] = r.grid_res[a];
-    v.cell_size = (r.grid_bounds.hi - r.grid_bounds.lo) / Vec3f(float(v.res[0]), float(v.res[1]), float(v.res[2]));
-    v.page_count = uint32_t(f.pages().size());
-    return v;
+    return make_paged_view(f,
+                           {f.pages().data(), f.cell_roots().data(), f.middle_nodes().data(), f.top_nodes().data(),
+                            f.top_pages().data()},
+                           geometry_->view());
 }
 
 void PagedEngine::reset_stats() {

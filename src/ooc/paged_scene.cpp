@@ -124,8 +124,9 @@ void PagedAccel::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded
 AccelStats PagedAccel::stats() const {
     const PackFile& f = engine_.file();
     AccelStats s;
-    s.name = "paged/grid+bvh";
-    s.node_count = f.middle_nodes().size();
+    const bool grid = f.resident().top_level == TopLevel::Grid;
+    s.name = grid ? "paged/grid+bvh" : "paged/bvh";
+    s.node_count = grid ? f.middle_nodes().size() : f.top_nodes().size();
     s.leaf_count = f.pages().size();
     s.bytes = f.resident_memory_bytes();
     s.sah_cost = s.quality_cost = std::nan("");
@@ -161,6 +162,8 @@ void PagedSceneImpl::fill_info(const std::string& path) {
     info_.textures = r.texture_count;
     info_.objects = r.object_count;
     for (int a = 0; a < 3; ++a) info_.grid[a] = r.grid_res[a];
+    info_.top_level = r.top_level == pack::TopLevel::Grid ? PagedTopLevel::Grid : PagedTopLevel::WideBvh;
+    info_.top_nodes = r.top_node_count;
     info_.bounds = r.bounds;
     info_.resident_bytes = file_->resident_memory_bytes();
     info_.compact_attributes = r.attribute_format == AttributeFormat::Compact;

@@ -13,6 +13,14 @@
 
 namespace rf {
 
+PagedTopLevel parse_paged_top_level(const std::string& name) {
+    if (name == "bvh") return PagedTopLevel::WideBvh;
+    if (name == "grid") return PagedTopLevel::Grid;
+    throw Error("unknown paged top level '" + name + "' (bvh or grid)");
+}
+
+std::string to_string(PagedTopLevel top) { return top == PagedTopLevel::Grid ? "grid" : "bvh"; }
+
 namespace {
 
 pack::PackWriterOptions writer_options(const PagedWriteOptions& o) {
@@ -22,6 +30,7 @@ pack::PackWriterOptions writer_options(const PagedWriteOptions& o) {
     w.attribute_format = o.compact_attributes ? pack::AttributeFormat::Compact : pack::AttributeFormat::Full;
     w.attribute_page_bytes = o.attribute_page_bytes;
     w.quads_per_page = o.quads_per_page;
+    w.top_level = o.top_level == PagedTopLevel::Grid ? pack::TopLevel::Grid : pack::TopLevel::WideBvh;
     w.grid_resolution = o.grid_resolution;
     w.threads = o.threads;
     return w;
@@ -36,6 +45,7 @@ PagedWriteReport to_report(const pack::PackSummary& s, std::vector<std::string> 
     r.attribute_pages = s.attribute_pages;
     r.texture_pages = s.texture_pages;
     r.middle_nodes = s.middle_nodes;
+    r.top_nodes = s.top_nodes;
     r.file_bytes = s.file_bytes;
     r.geometry_bytes = s.geometry_bytes;
     r.attribute_bytes = s.attribute_bytes;

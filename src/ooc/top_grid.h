@@ -1,5 +1,6 @@
-// The always-resident levels of the paged scene (Garanzha 2014, §6.3.1
-// (e)-(g)): a uniform top grid over the scene and, in every non-empty cell,
+// The always-resident levels of the paged scene: by default one wide BVH
+// over the pages' bounds (TopLevel::WideBvh), or the seed's (Garanzha 2014,
+// §6.3.1 (e)-(g)): a uniform top grid over the scene and, in every non-empty cell,
 // a BVH over the bounds of the pages overlapping it, each clipped to the
 // cell (isectAABB_i), with one page per leaf. A ray walks the grid with a
 // 3D-DDA and can restart at any cell; the middle BVHs are cheap to re-walk.
@@ -23,6 +24,16 @@ struct TopGrid {
 };
 
 TopGrid build_top_grid(std::span<const PageInfo> pages, int cells_on_longest);
+
+// The wide top level: a binned SAH BVH over the page bounds collapsed into
+// CWBVH nodes (world space, leaves of one to three pages); a leaf's items
+// are top_pages[base_index_triangle + offset ...]. Empty for no pages.
+struct TopBvh {
+    std::vector<PageNode> nodes;
+    std::vector<uint32_t> pages;  // page of each leaf item, in leaf order
+};
+
+TopBvh build_top_bvh(std::span<const PageInfo> pages);
 
 // Cells per axis for a box and a resolution on its longest axis.
 void grid_resolution_for(const Box3f& box, int cells_on_longest, int out[3]);

@@ -26,19 +26,32 @@ namespace rf {
 
 // ---- Writing -------------------------------------------------------------
 
+// How rays find the pages they meet (the file's always-resident top level).
+enum class PagedTopLevel {
+    WideBvh,  // one compressed 8-wide BVH over the pages' bounds (the default: fewest node visits)
+    Grid,     // Garanzha 2014's top grid with a BVH over the clipped page bounds in every cell (§6.3.1)
+};
+
+// "bvh" / "grid"; rf::Error for any other name.
+PagedTopLevel parse_paged_top_level(const std::string& name);
+std::string to_string(PagedTopLevel top);
+
 struct PagedWriteOptions {
     bool zstd = false;                   // compress each page (libzstd), kept raw where that is not smaller
     int zstd_level = 3;                  // 1..19
     bool compact_attributes = false;     // 32-byte shading records (half-float uvs, no normal-map tangents) instead of 64
     uint32_t attribute_page_bytes = 4096;  // a power of two, 1 KB .. 1 MB
     uint32_t quads_per_page = 4096;        // 64 .. 4096 (Garanzha 2014's NP = 4K)
-    int grid_resolution = 32;              // top-grid cells on the longest axis, 1 .. 256 (Garanzha 2014's 32^3)
+    PagedTopLevel top_level = PagedTopLevel::WideBvh;
+    int grid_resolution = 32;              // PagedTopLevel::Grid: cells on the longest axis, 1 .. 256 (Garanzha 2014's 32^3)
     int threads = 0;                       // 0 = all cores
 };
 
 struct PagedWriteReport {
     uint64_t triangles = 0, quads = 0, paired_triangles = 0;
-    uint32_t geometry_pages = 0, attribute_pages = 0, texture_pages = 0, middle_nodes = 0;
+    uint32_t geometry_pages = 0, attribute_pages = 0, texture_pages = 0;
+    uint32_t middle_nodes = 0;  // PagedTopLevel::Grid: the cells' BVH nodes
+    uint32_t top_nodes = 0;     // PagedTopLevel::WideBvh: the top BVH's nodes
     uint64_t file_bytes = 0, geometry_bytes = 0, attribute_bytes = 0, texture_bytes = 0, resident_bytes = 0;
     double max_quantisation_error = 0.0;  // largest |decoded - input| vertex coordinate, world units
     std::vector<std::string> notes;       // what the paged form leaves out (opaque cut-outs, ...)
@@ -118,7 +131,9 @@ struct PagedSceneInfo {
     uint64_t triangles = 0, quads = 0, file_bytes = 0;
     uint32_t geometry_pages = 0, attribute_pages = 0, texture_pages = 0;
     uint32_t materials = 0, lights = 0, textures = 0, objects = 0;
-    int grid[3] = {1, 1, 1};
+    PagedTopLevel top_level = PagedTopLevel::WideBvh;
+    uint32_t top_nodes = 0;          // WideBvh: nodes of the top BVH
+    int grid[3] = {1, 1, 1};         // Grid: cells per axis
     Box3f bounds;
     size_t resident_bytes = 0;      // always in memory: the resident levels, tables, directory
     bool compact_attributes = false;
@@ -130,6 +145,8 @@ struct PagedSceneInfo {
 // What the query loops did since the last reset.
 struct PagedQueryStats {
     uint64_t queries = 0, iterations = 0, ray_iterations = 0, shading_fetches = 0;
+    // cells: top-grid cells walked (Grid files); middle_nodes: top-level nodes
+    // visited (the cells' binary BVH nodes, or the top BVH's wide nodes).
     uint64_t cells = 0, middle_nodes = 0, pages_searched = 0, page_nodes = 0, quads_tested = 0;
     double traversal_ms = 0.0, sort_ms = 0.0;
 };

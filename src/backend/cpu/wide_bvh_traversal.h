@@ -107,32 +107,40 @@ struct BoxRay {
     }
 };
 
-// Slab test of all N children; bit c of the result is set when the ray
-// enters child c within [tmin, tmax]. `t_near` receives the entry distances.
+// Slab test of N boxes given as bounds[2 * axis + side][box] (side 0 = lo,
+// 1 = hi: WideNode::bounds); bit c of the result is set when the ray enters
+// box c within [tmin, tmax]. `t_near` receives the entry distances.
 template <int N>
-RF_SIMD_INLINE unsigned box_hits(const WideNode<N>& node, const BoxRay<N>& r, simd::vfloat<N> tmin,
+RF_SIMD_INLINE unsigned box_hits(const float (&bounds)[6][N], const BoxRay<N>& r, simd::vfloat<N> tmin,
                                  simd::vfloat<N> tmax_far, simd::vfloat<N>& t_near) {
     using namespace simd;
 #if defined(__FMA__)
-    const vfloat<N> x0 = fmadd(load<N>(node.bounds[r.near_row[0]]), r.rcp_near[0], r.neg_org_near[0]);
-    const vfloat<N> y0 = fmadd(load<N>(node.bounds[r.near_row[1]]), r.rcp_near[1], r.neg_org_near[1]);
-    const vfloat<N> z0 = fmadd(load<N>(node.bounds[r.near_row[2]]), r.rcp_near[2], r.neg_org_near[2]);
-    const vfloat<N> x1 = fmadd(load<N>(node.bounds[r.far_row[0]]), r.rcp_far[0], r.neg_org_far[0]);
-    const vfloat<N> y1 = fmadd(load<N>(node.bounds[r.far_row[1]]), r.rcp_far[1], r.neg_org_far[1]);
-    const vfloat<N> z1 = fmadd(load<N>(node.bounds[r.far_row[2]]), r.rcp_far[2], r.neg_org_far[2]);
+    const vfloat<N> x0 = fmadd(load<N>(bounds[r.near_row[0]]), r.rcp_near[0], r.neg_org_near[0]);
+    const vfloat<N> y0 = fmadd(load<N>(bounds[r.near_row[1]]), r.rcp_near[1], r.neg_org_near[1]);
+    const vfloat<N> z0 = fmadd(load<N>(bounds[r.near_row[2]]), r.rcp_near[2], r.neg_org_near[2]);
+    const vfloat<N> x1 = fmadd(load<N>(bounds[r.far_row[0]]), r.rcp_far[0], r.neg_org_far[0]);
+    const vfloat<N> y1 = fmadd(load<N>(bounds[r.far_row[1]]), r.rcp_far[1], r.neg_org_far[1]);
+    const vfloat<N> z1 = fmadd(load<N>(bounds[r.far_row[2]]), r.rcp_far[2], r.neg_org_far[2]);
 #else
-    const vfloat<N> x0 = mul(sub(load<N>(node.bounds[r.near_row[0]]), r.org[0]), r.rcp_near[0]);
-    const vfloat<N> y0 = mul(sub(load<N>(node.bounds[r.near_row[1]]), r.org[1]), r.rcp_near[1]);
-    const vfloat<N> z0 = mul(sub(load<N>(node.bounds[r.near_row[2]]), r.org[2]), r.rcp_near[2]);
-    const vfloat<N> x1 = mul(sub(load<N>(node.bounds[r.far_row[0]]), r.org[0]), r.rcp_far[0]);
-    const vfloat<N> y1 = mul(sub(load<N>(node.bounds[r.far_row[1]]), r.org[1]), r.rcp_far[1]);
-    const vfloat<N> z1 = mul(sub(load<N>(node.bounds[r.far_row[2]]), r.org[2]), r.rcp_far[2]);
+    const vfloat<N> x0 = mul(sub(load<N>(bounds[r.near_row[0]]), r.org[0]), r.rcp_near[0]);
+    const vfloat<N> y0 = mul(sub(load<N>(bounds[r.near_row[1]]), r.org[1]), r.rcp_near[1]);
+    const vfloat<N> z0 = mul(sub(load<N>(bounds[r.near_row[2]]), r.org[2]), r.rcp_near[2]);
+    const vfloat<N> x1 = mul(sub(load<N>(bounds[r.far_row[0]]), r.org[0]), r.rcp_far[0]);
+    const vfloat<N> y1 = mul(sub(load<N>(bounds[r.far_row[1]]), r.org[1]), r.rcp_far[1]);
+    const vfloat<N> z1 = mul(sub(load<N>(bounds[r.far_row[2]]), r.org[2]), r.rcp_far[2]);
 #endif
     // Operand order matters: a NaN slab distance (origin on the plane of a
     // zero direction component, without FMA) must leave the bound unchanged.
     t_near = max(z0, max(y0, max(x0, tmin)));
     const vfloat<N> t_far = min(z1, min(y1, min(x1, tmax_far)));
     return bits(cmp_le(t_near, t_far));
+}
+
+// The same test on a node's N child boxes.
+template <int N>
+RF_SIMD_INLINE unsigned box_hits(const WideNode<N>& node, const BoxRay<N>& r, simd::vfloat<N> tmin,
+                                 simd::vfloat<N> tmax_far, simd::vfloat<N>& t_near) {
+    return box_hits(node.bounds, r, tmin, tmax_far, t_near);
 }
 
 // Starts loading a child the ray will visit later (its node's four cache

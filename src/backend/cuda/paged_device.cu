@@ -180,7 +180,9 @@ struct DevicePagedEngine::Impl {
     class Loop;
     template <bool kAnyHit>
     void run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded);
-    [[nodiscard]] size_t resident_bytes() const { return pages.bytes() + cell_roots.bytes() + middle_nodes.bytes(); }
+    [[nodiscard]] size_t resident_bytes() const {
+        return pages.bytes() + cell_roots.bytes() + middle_nodes.bytes() + top_nodes.bytes() + top_pages.bytes();
+    }
 
     std::shared_ptr<const pack::PackFile> file;
     int device = 0;
@@ -191,6 +193,8 @@ struct DevicePagedEngine::Impl {
     DeviceBuffer<pack::PageInfo> pages{"paged: page infos"};
     DeviceBuffer<uint32_t> cell_roots{"paged: cell roots"};
     DeviceBuffer<BvhNode> middle_nodes{"paged: middle nodes"};
+    DeviceBuffer<pack::PageNode> top_nodes{"paged: top BVH nodes"};
+    DeviceBuffer<uint32_t> top_pages{"paged: top BVH pages"};
     DeviceBuffer<uint32_t> descriptors{"paged: device descriptors"};
     DeviceBuffer<uint8_t> staging{"paged: device staging"};
     DeviceBuffer<uint8_t> pool{"paged: device page pool"};
@@ -217,12 +221,15 @@ DevicePagedEngine::Impl::Impl(std::shared_ptr<const pack::PackFile> f, const Dev
     pages.upload(file->pages());
     cell_roots.upload(file->cell_roots());
     middle_nodes.upload(file->middle_nodes());
+    top_nodes.upload(file->top_nodes());
+    top_pages.upload(file->top_pages());
     descriptors.allocate(page_count);
     staging.allocate(layout.bytes());
     pool.allocate(size_t(slots) * layout.slot_bytes);
     for (auto& fill : fills) fill = std::make_unique<PinnedBuffer>("paged: staging fill", layout.bytes());
     const pack::PageTableView table{descriptors.data(), pool.data(), layout.slot_bytes, page_count};
-    view = pack::make_paged_view(*file, pages.data(), cell_roots.data(), middle_nodes.data(), table);
+    view = pack::make_paged_view(
+        *file, {pages.data(), cell_roots.data(), middle_nodes.data(), top_nodes.data(), top_pages.data()}, table);
 }
 
 // The device side of run_device_query_loop: each step one launch or copy.
