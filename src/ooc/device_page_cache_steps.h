@@ -68,12 +68,13 @@ RF_HDI void device_start_step(const DeviceRayArrays& a, const Box3f& bounds, uin
     a.order[i] = i;
 }
 
-// Queue position k in an iteration: the ray's paged_iteration.
+// Queue position k in an iteration: the ray's paged_iteration (`fresh`:
+// the pages the last swap admitted, in device memory).
 template <bool kAnyHit>
 RF_HDI void device_iteration_step(const PagedSceneView& v, const DeviceRayArrays& a, uint32_t k,
-                                  PagedCounters& counters) {
+                                  const FreshPages& fresh, PagedCounters& counters) {
     const uint32_t i = a.pending[k];
-    a.again[k] = paged_iteration<kAnyHit>(v, a.rays[i], a.states[i], counters) ? 1 : 0;
+    a.again[k] = paged_iteration<kAnyHit>(v, a.rays[i], a.states[i], counters, fresh) ? 1 : 0;
 }
 
 // Ray i's answer, as PagedEngine gives it.
@@ -398,7 +399,7 @@ private:
 struct DeviceLoopStats {
     uint64_t queries = 0;
     uint64_t iterations = 0;
-    uint64_t ray_iterations = 0;  // sum over iterations of the rays pending in it
+    uint64_t ray_iterations = 0;  // sum over iterations of the rays pending in it (running or waiting for their page)
     uint64_t fills = 0;           // staging fills: host -> device copies
     uint64_t pages_staged = 0;
     uint64_t bytes_staged = 0;    // copied host -> device (tables and pages)
@@ -463,8 +464,10 @@ void stage_admissions(Backend& backend, const StagingLayout& layout, PageCache& 
 
 // The query loop of Listing 6.1 for the device pool, over a Backend:
 //   void begin(uint32_t rays)        fresh states and keys, rays sorted by key into the pending queue
-//   uint32_t iterate(uint32_t count) one iteration over the queue's `count` rays, the queue
-//                                    compacted to those that asked for a page; returns their count
+//   uint32_t iterate(uint32_t count, std::span<const uint32_t> fresh, bool every_page_fresh)
+//                                    one iteration over the queue's `count` rays (`fresh`: the
+//                                    pages the last swap admitted, unless every_page_fresh), the
+//                                    queue compacted to those that asked for a page; returns their count
 //   void download_descriptors(std::span<uint32_t>), void upload_descriptors(std::span<const uint32_t>)
 //   uint8_t* begin_fill(), void end_fill(uint32_t pages, uint64_t bytes)   (stage_admissions)
 //   void finish(uint32_t rays)       the answers
@@ -483,12 +486,14 @@ void run_device_query_loop(Backend& backend, DevicePoolPlanner& planner, const S
     // WasRead survives eviction, so a page is admitted at most once per loop.
     const uint64_t iteration_limit = uint64_t(planner.page_count()) + 2;
     uint32_t pending = ray_count;
+    std::vector<uint32_t> fresh;  // the pages the last swap admitted
+    bool every_page_fresh = true;  // the first iteration (fresh rays), and after a large swap
     for (uint64_t iteration = 0; pending > 0; ++iteration) {
         if (iteration > iteration_limit)
             throw Error(file.path() + ": device paged query loop did not converge (a page manager bug)");
         ++stats.iterations;
         stats.ray_iterations += pending;
-        pending = backend.iterate(pending);
+        pending = backend.iterate(pending, fresh, every_page_fresh);
         backend.download_descriptors(planner.descriptors());
         planner.mark_cached_as_read();
         size_t admitted = 0;
@@ -497,6 +502,10 @@ void run_device_query_loop(Backend& backend, DevicePoolPlanner& planner, const S
             const std::span<const SlotAdmission> admissions = planner.swap_requested_pages();
             const auto decided = std::chrono::steady_clock::now();
             admitted = admissions.size();
+            every_page_fresh = admitted > kMaxFreshPages;
+            fresh.clear();
+            if (!every_page_fresh)
+                for (const SlotAdmission& a : admissions) fresh.push_back(a.page);
             stage_admissions(backend, layout, host, file, admissions, stats);
             stats.swap_ms += detail::ms_between(start, decided);
             stats.staging_ms += detail::ms_between(decided, std::chrono::steady_clock::now());

@@ -100,7 +100,7 @@ size_t largest_raw_page(const PackFile& file, uint64_t first, uint64_t count) {
 PageCache::PageCache(const PackFile& file, uint64_t first_page, uint32_t page_count, size_t slot_bytes,
                      size_t budget_bytes, std::string name)
     : file_(file), first_page_(first_page), name_(std::move(name)) {
-    static_assert(kBookkeepingBytesPerSlot == 2 * sizeof(uint32_t) + sizeof(Admission) + sizeof(uint8_t));
+    static_assert(kBookkeepingBytesPerSlot == 3 * sizeof(uint32_t) + sizeof(Admission) + sizeof(uint8_t));
     static_assert(kTableBytesPerPage == 3 * sizeof(uint32_t) + sizeof(uint8_t));
     check_pages(file, name_, first_page, page_count, slot_bytes);
     slot_count_ = slots_within_budget(name_, page_count, slot_bytes, budget_bytes);
@@ -115,6 +115,7 @@ PageCache::PageCache(const PackFile& file, uint64_t first_page, uint32_t page_co
     free_slots_.reserve(slot_count_);
     for (uint32_t slot = slot_count_; slot-- > 0;) free_slots_.push_back(slot);
     admissions_.reserve(slot_count_);
+    last_loaded_.reserve(slot_count_);
     view_ = PageTableView{descriptors_.data(), pool_.get(), uint64_t(slot_bytes), page_count};
 }
 
@@ -123,7 +124,7 @@ PageCache::~PageCache() = default;
 size_t PageCache::memory_bytes() const {
     return size_t(slot_count_) * slot_bytes() +
            sizeof(uint32_t) * (descriptors_.capacity() + page_ids_.capacity() + sorted_ids_.capacity() +
-                               free_slots_.capacity() + slot_page_.capacity()) +
+                               free_slots_.capacity() + slot_page_.capacity() + last_loaded_.capacity()) +
            requested_missing_.capacity() + sizeof(Admission) * admissions_.capacity() +
            prefix_keys_.capacity();
 }
@@ -139,6 +140,7 @@ size_t PageCache::swap_requested_pages() {
     const uint32_t missing = count_requests();
     size_t loaded = 0;
     std::string error;
+    last_loaded_.clear();
     if (missing > 0) {
         if (missing <= free_slots_.size())
             admit_to_free_slots(missing);
@@ -348,6 +350,7 @@ size_t PageCache::settle_admissions() {
         if (a.ok) {
             descriptors_[a.page] = a.slot;
             slot_page_[a.slot] = a.page;
+            last_loaded_.push_back(a.page);
             ++loaded;
         } else {
             descriptors_[a.page] = kOutOfCore;

@@ -36,6 +36,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -65,9 +66,9 @@ class PageCache {
 public:
     // What the manager holds besides the pool: per page a descriptor, a
     // page id, the sort's output and a flag; per slot its page, a free-list
-    // entry, a load and a sort key.
+    // entry, a load, a loaded page and a sort key.
     static constexpr size_t kTableBytesPerPage = 3 * sizeof(uint32_t) + 1;
-    static constexpr size_t kBookkeepingBytesPerSlot = 2 * sizeof(uint32_t) + 12 + 1;
+    static constexpr size_t kBookkeepingBytesPerSlot = 3 * sizeof(uint32_t) + 12 + 1;
 
     // Pages [first_page, first_page + page_count) of `file`'s directory,
     // each at most slot_bytes raw; as many slots as fit in budget_bytes
@@ -97,6 +98,8 @@ public:
 
     // See above. Returns the pages loaded.
     size_t swap_requested_pages();
+    // The pages the last swap loaded.
+    [[nodiscard]] std::span<const uint32_t> last_loaded() const { return last_loaded_; }
     // WasRead := 1 for every cached page (after an iteration of a query loop)...
     void mark_cached_as_read();
     // ... and := 0 for all (at the start of a query loop).
@@ -149,6 +152,7 @@ private:
     std::vector<uint32_t> free_slots_;     // a stack, slot 0 on top at first
     std::vector<uint32_t> slot_page_;      // page held by each slot (or kNoPage)
     std::vector<Admission> admissions_;    // this call's loads, at most slot_count_
+    std::vector<uint32_t> last_loaded_;    // the pages of the admissions that loaded
     PageTableView view_;
     bool evicted_read_ = false;  // some missing page holds WasRead (see evict)
     PageCacheStats stats_;

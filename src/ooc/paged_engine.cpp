@@ -79,18 +79,22 @@ void PagedEngine::run_queries(std::span<const Ray> rays, std::span<PagedRayState
             throw Error(file_->path() + ": paged query loop did not converge (a page manager bug)");
         start = Clock::now();
         const uint32_t count = uint32_t(pending_.size());
+        // The first iteration (fresh rays) and after a large swap, every ray runs.
+        const std::span<const uint32_t> last_loaded = geometry_->last_loaded();
+        const FreshPages fresh = iteration > 0 && last_loaded.size() <= kMaxFreshPages
+                                     ? FreshPages{last_loaded.data(), uint32_t(last_loaded.size())}
+                                     : FreshPages{};
         std::mutex totals_mutex;
         parallel::for_range(0u, count, kRayGrain, [&](uint32_t lo, uint32_t hi) {
             PagedCounters c;
             for (uint32_t k = lo; k < hi; ++k) {
                 const uint32_t i = pending_[k];
-                again[k] = paged_iteration<kAnyHit>(v, rays[i], states[i], c) ? 1 : 0;
+                again[k] = paged_iteration<kAnyHit>(v, rays[i], states[i], c, fresh) ? 1 : 0;
             }
             std::lock_guard<std::mutex> lock(totals_mutex);
             stats_.add(c);
         });
         ++stats_.iterations;
-        stats_.ray_iterations += count;
         uint32_t kept = 0;
         for (uint32_t k = 0; k < count; ++k)
             if (again[k]) pending_[kept++] = pending_[k];

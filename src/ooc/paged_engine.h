@@ -34,12 +34,13 @@ struct EngineBudgets {
 struct EngineStats {
     uint64_t queries = 0;        // rays (closest and any hit)
     uint64_t iterations = 0;     // re-entrant iterations over all loops
-    uint64_t ray_iterations = 0; // sum over iterations of the rays pending in it
+    uint64_t ray_iterations = 0; // sum over iterations of the rays that ran in it (not those waiting for their page)
     uint64_t shading_fetches = 0;
     double traversal_ms = 0.0;   // inside the iterations
     double sort_ms = 0.0;
     uint64_t cells = 0, middle = 0, pages = 0, nodes = 0, quads = 0;
     void add(const PagedCounters& c) {
+        ray_iterations += c.runs;
         cells += c.cells;
         middle += c.middle;
         pages += c.pages;

@@ -115,7 +115,7 @@ void expect_same_as_cpu(const Pools& p) {
             << what << ": " << name << " " << device << " on the device, " << host << " on the CPU";
     };
     near(s.loop.iterations, cpu.iterations, "iterations");
-    near(s.loop.ray_iterations, cpu.ray_iterations, "ray iterations");
+    near(s.runs, cpu.ray_iterations, "ray runs");
     near(s.cells, cpu.cells, "cells");
     near(s.middle, cpu.middle, "middle nodes");
     near(s.pages, cpu.pages, "pages searched");

@@ -48,6 +48,7 @@ namespace rf::cuda {
 namespace {
 
 using pack::DeviceRayArrays;
+using pack::FreshPages;
 using pack::PagedCounters;
 using pack::PagedRayState;
 using pack::PagedSceneView;
@@ -55,7 +56,7 @@ using pack::StagedPage;
 using Clock = std::chrono::steady_clock;
 
 constexpr uint32_t kScatterThreads = 256;  // per staged page
-constexpr int kCounterFields = 5;
+constexpr int kCounterFields = 6;
 
 double ms_since(Clock::time_point start) {
     return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
@@ -71,7 +72,7 @@ __global__ void start_kernel(DeviceRayArrays a, Box3f bounds, uint32_t count) {
 // The counters of a warp summed, one atomic per warp and field: every lane
 // of the warp must get here (blocks of kBlockSize, a multiple of 32).
 __device__ void add_counters(const PagedCounters& c, unsigned long long* totals) {
-    const uint32_t values[kCounterFields] = {c.cells, c.middle, c.pages, c.nodes, c.quads};
+    const uint32_t values[kCounterFields] = {c.cells, c.middle, c.pages, c.nodes, c.quads, c.runs};
     for (int f = 0; f < kCounterFields; ++f) {
         const uint32_t sum = __reduce_add_sync(0xFFFFFFFFu, values[f]);
         if ((threadIdx.x & 31u) == 0 && sum != 0) atomicAdd(&totals[f], (unsigned long long)sum);
@@ -79,10 +80,11 @@ __device__ void add_counters(const PagedCounters& c, unsigned long long* totals)
 }
 
 template <bool kAnyHit>
-__global__ void iteration_kernel(PagedSceneView view, DeviceRayArrays a, uint32_t count, unsigned long long* totals) {
+__global__ void iteration_kernel(PagedSceneView view, DeviceRayArrays a, uint32_t count, FreshPages fresh,
+                                 unsigned long long* totals) {
     const uint32_t k = blockIdx.x * blockDim.x + threadIdx.x;
     PagedCounters c;
-    if (k < count) pack::device_iteration_step<kAnyHit>(view, a, k, c);
+    if (k < count) pack::device_iteration_step<kAnyHit>(view, a, k, fresh, c);
     add_counters(c, totals);
 }
 
@@ -196,6 +198,7 @@ struct DevicePagedEngine::Impl {
     DeviceBuffer<pack::PageNode> top_nodes{"paged: top BVH nodes"};
     DeviceBuffer<uint32_t> top_pages{"paged: top BVH pages"};
     DeviceBuffer<uint32_t> descriptors{"paged: device descriptors"};
+    DeviceBuffer<uint32_t> fresh{"paged: pages the last swap admitted"};
     DeviceBuffer<uint8_t> staging{"paged: device staging"};
     DeviceBuffer<uint8_t> pool{"paged: device page pool"};
     // Two pinned fills: the host gathers one while the other is copied.
@@ -224,6 +227,7 @@ DevicePagedEngine::Impl::Impl(std::shared_ptr<const pack::PackFile> f, const Dev
     top_nodes.upload(file->top_nodes());
     top_pages.upload(file->top_pages());
     descriptors.allocate(page_count);
+    fresh.allocate(pack::kMaxFreshPages);
     staging.allocate(layout.bytes());
     pool.allocate(size_t(slots) * layout.slot_bytes);
     for (auto& fill : fills) fill = std::make_unique<PinnedBuffer>("paged: staging fill", layout.bytes());
@@ -255,10 +259,17 @@ public:
         e_.stats.iterate_ms += ms_since(start);
     }
 
-    uint32_t iterate(uint32_t count) {
+    uint32_t iterate(uint32_t count, std::span<const uint32_t> fresh, bool every_page_fresh) {
         const Clock::time_point start = Clock::now();
         RayBuffers& b = e_.rays;
-        launch(iteration_kernel<kAnyHit>, count, e_.view, arrays(b.queue[current_].data()), count, b.totals.data());
+        FreshPages device_fresh;  // every page by default
+        if (!every_page_fresh) {
+            if (!fresh.empty())
+                RF_CUDA_CHECK(cudaMemcpy(e_.fresh.data(), fresh.data(), fresh.size_bytes(), cudaMemcpyHostToDevice));
+            device_fresh = {e_.fresh.data(), uint32_t(fresh.size())};
+        }
+        launch(iteration_kernel<kAnyHit>, count, e_.view, arrays(b.queue[current_].data()), count, device_fresh,
+               b.totals.data());
         cub_run(b.scratch, [&](void* temp, size_t& bytes) {
             return cub::DeviceSelect::Flagged(temp, bytes, b.queue[current_].data(), b.again.data(),
                                               b.queue[1 - current_].data(), b.selected.data(), int(count));
@@ -307,6 +318,7 @@ public:
         s.pages += totals[2];
         s.nodes += totals[3];
         s.quads += totals[4];
+        s.runs += totals[5];
     }
 
 private:

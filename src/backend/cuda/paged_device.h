@@ -35,7 +35,7 @@ struct DevicePagedBudgets {
 struct DevicePagedStats {
     pack::DeviceLoopStats loop;
     pack::DevicePoolStats device_pool;
-    uint64_t cells = 0, middle = 0, pages = 0, nodes = 0, quads = 0;  // summed PagedCounters
+    uint64_t runs = 0, cells = 0, middle = 0, pages = 0, nodes = 0, quads = 0;  // summed PagedCounters
     double iterate_ms = 0.0;  // kernels and compaction, to their end
     double manage_ms = 0.0;   // descriptor copies and the swap decision
     double staging_ms = 0.0;  // host cache, gather, copies and scatters
