@@ -111,7 +111,7 @@ std::vector<size_t> expect_copies_differ(const std::vector<GeneratedObject>& obj
 }
 
 TEST(Generate, NamesTheScenes) {
-    EXPECT_EQ(generator_names(), (std::vector<std::string>{"terrain-statues", "terrain"}));
+    EXPECT_EQ(generator_names(), (std::vector<std::string>{"terrain-statues", "terrain", "forest"}));
 }
 
 TEST(Generate, IsDeterministicFromTheSeed) {

@@ -33,6 +33,7 @@ const SpheresPack& spheres_pack() {
         scene.finalize();
         PagedWriteOptions options;
         options.quads_per_page = 256;
+        options.flatten_instances = true;  // hundreds of pages
         SpheresPack p;
         p.path = test::temp_dir("paged_bench") + "/spheres.rfpack";
         convert_to_paged(scene, p.path, options);

@@ -117,7 +117,7 @@ public:
         const PackFile& file = *f.file;
         view_ = make_paged_view(file,
                                 {file.pages().data(), file.cell_roots().data(), file.middle_nodes().data(),
-                                 file.top_nodes().data(), file.top_pages().data()},
+                                 file.top_nodes().data(), file.top_refs().data(), file.instances().data()},
                                 PageTableView{descriptors_.data(), pool_.data(), layout.slot_bytes, page_count});
     }
 

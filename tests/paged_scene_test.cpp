@@ -62,14 +62,20 @@ const PagedFixture& fixture(AttributeFormat format = AttributeFormat::Full, TopL
     return *slot;
 }
 
-// Closest hit over every quad of every page, decoded to world space.
-Hit brute_force(const PackFile& file, const std::vector<std::vector<uint8_t>>& pages, const Ray& world) {
+// Closest hit over every quad of every page, through every top reference:
+// a world-space page decoded in world space, an instanced one in its
+// object's space with the ray taken there (as the traversal does). The
+// instance of the hit in `instance`.
+Hit brute_force(const PackFile& file, const std::vector<std::vector<uint8_t>>& pages, const Ray& world,
+                uint32_t* instance = nullptr) {
     Hit best;
     best.t = world.tmax;
-    const WatertightRay wt = WatertightRay::make(world);
-    for (uint32_t p = 0; p < pages.size(); ++p) {
-        const GeometryPageView g = view_geometry_page(pages[p], "page");
-        const PageInfo& info = file.pages()[p];
+    uint32_t best_instance = kNoInstance;
+    for (const TopRef& ref : file.top_refs()) {
+        const Ray ray = ref.instance == kNoInstance ? world : pack::detail::object_ray(file.instances()[ref.instance], world);
+        const WatertightRay wt = WatertightRay::make(ray);
+        const GeometryPageView g = view_geometry_page(pages[ref.page], "page");
+        const PageInfo& info = file.pages()[ref.page];
         for (uint32_t q = 0; q < g.quad_count; ++q)
             for (int half = 0; half < 2; ++half) {
                 TriangleHit th;
@@ -78,11 +84,13 @@ Hit brute_force(const PackFile& file, const std::vector<std::vector<uint8_t>>& p
                     best.t = th.t;
                     best.u = th.u;
                     best.v = th.v;
-                    best.prim = p * kTrianglesPerPageSlot + 2 * q + uint32_t(half);
+                    best.prim = ref.page * kTrianglesPerPageSlot + 2 * q + uint32_t(half);
+                    best_instance = ref.instance;
                 }
             }
     }
     if (!best.found()) best = Hit{};
+    if (instance) *instance = best.found() ? best_instance : kNoInstance;
     return best;
 }
 
@@ -96,11 +104,29 @@ std::vector<std::vector<uint8_t>> read_all_geometry(const PackFile& file) {
 TEST(PagedScene, RoundTripKeepsCountsAndBoundsQuantisation) {
     const PagedFixture& f = fixture();
     const PackFile file(f.path);
-    EXPECT_EQ(file.header().triangle_count, f.geometry.size());
+    // A mesh placed once is written once in world space, a mesh placed more
+    // often once in its own space plus an instance per placement.
+    std::vector<uint32_t> uses(f.scene.meshes.size(), 0);
+    for (const Instance& i : f.scene.instances) ++uses[i.mesh];
+    uint64_t unique = 0, placed = 0, instances = 0;
+    for (size_t m = 0; m < uses.size(); ++m) {
+        unique += uses[m] > 0 ? f.scene.meshes[m].triangle_count() : 0;
+        if (uses[m] > 1) {
+            placed += uses[m] * f.scene.meshes[m].triangle_count();
+            instances += uses[m];
+        }
+    }
+    ASSERT_GT(instances, 0u) << "the fixture has no instanced mesh";
+    EXPECT_EQ(file.header().triangle_count, unique);
+    EXPECT_EQ(f.converted.summary.triangles, unique);
+    EXPECT_EQ(f.converted.summary.instanced_triangles, placed);
+    EXPECT_EQ(file.instances().size(), instances);
     EXPECT_EQ(file.header().geometry_pages, f.converted.summary.geometry_pages);
     EXPECT_GT(file.header().geometry_pages, 10u);
+    // Expanded through its instances, the file holds the scene's triangles.
+    EXPECT_EQ(decode_paged_geometry(f.path).geometry.triangles.size(), f.geometry.size());
     // Most triangles find a partner on closed, indexed meshes.
-    EXPECT_GT(double(f.converted.summary.paired_triangles), 0.9 * double(f.geometry.size()));
+    EXPECT_GT(double(f.converted.summary.paired_triangles), 0.9 * double(unique));
     // Quantisation error at most half a step of the largest page's 16-bit grid.
     double largest_step = 0.0;
     for (const PageInfo& p : file.pages()) largest_step = std::max({largest_step, double(p.scale.x), double(p.scale.y), double(p.scale.z)});
@@ -157,7 +183,9 @@ TEST_P(PagedTopLevels, HitsEqualBruteForceOverTheSamePagesUnderAnyBudget) {
     const auto pages = read_all_geometry(*file);
     const std::vector<Ray> rays = test::make_rays(f.geometry, 1200, 7);
     std::vector<Hit> expected(rays.size());
-    for (size_t i = 0; i < rays.size(); ++i) expected[i] = brute_force(*file, pages, rays[i]);
+    std::vector<uint32_t> expected_instance(rays.size());
+    for (size_t i = 0; i < rays.size(); ++i) expected[i] = brute_force(*file, pages, rays[i], &expected_instance[i]);
+    size_t found_instanced = 0;
 
     size_t slot = 0;
     for (const auto& p : pages) slot = std::max(slot, p.size());
@@ -167,7 +195,8 @@ TEST_P(PagedTopLevels, HitsEqualBruteForceOverTheSamePagesUnderAnyBudget) {
     for (size_t geometry_budget : {size_t(64) << 20, slots(1), slots(3), slots(pages.size() / 4)}) {
         PagedEngine engine(file, {geometry_budget, size_t(1) << 20}, 0);
         std::vector<Hit> hits(rays.size());
-        engine.intersect(rays, hits);
+        std::vector<uint32_t> instances(rays.size());
+        engine.intersect(rays, hits, instances);
         std::vector<uint8_t> blocked(rays.size());
         engine.occluded(rays, blocked);
         size_t found = 0;
@@ -177,6 +206,9 @@ TEST_P(PagedTopLevels, HitsEqualBruteForceOverTheSamePagesUnderAnyBudget) {
             if (!expected[i].found()) continue;
             ++found;
             ASSERT_EQ(hits[i].t, expected[i].t) << "ray " << i;
+            found_instanced += expected_instance[i] != kNoInstance ? 1 : 0;
+            // Equally close triangles aside, the same instance.
+            if (hits[i].prim == expected[i].prim) ASSERT_EQ(instances[i], expected_instance[i]) << "ray " << i;
         }
         EXPECT_GT(found, rays.size() / 3);
         EXPECT_LE(engine.geometry_cache().memory_bytes(), geometry_budget);
@@ -188,6 +220,7 @@ TEST_P(PagedTopLevels, HitsEqualBruteForceOverTheSamePagesUnderAnyBudget) {
             EXPECT_LT(double(s.ray_iterations), 0.5 * double(s.iterations) * double(rays.size()));
         }
     }
+    EXPECT_GT(found_instanced, rays.size() / 10) << "rays hit instanced pages";
 }
 
 INSTANTIATE_TEST_SUITE_P(PagedScene, PagedTopLevels, ::testing::Values(TopLevel::WideBvh, TopLevel::Grid),
@@ -229,6 +262,86 @@ TEST(PagedScene, PagedHitsMatchInCoreHitsWithinQuantisation) {
         EXPECT_GT(double(agree), 0.995 * double(rays.size())) << "format " << int(format);
         EXPECT_GT(double(same_record), 0.995 * double(both)) << "format " << int(format);
     }
+}
+
+// A generated forest: unique terrain and prototypes, thousands of
+// instances. Written with instances, the paged hits are the in-core hits of
+// the same scene (instances expanded) up to quantisation, with each hit's
+// instance reported and its record in world space; the file holds each
+// prototype once.
+TEST(PagedScene, GeneratedForestInstancesMatchInCore) {
+    GenerateOptions g;
+    g.name = "forest";
+    g.triangles = 20'000;
+    g.instanced_triangles = 400'000;
+    const std::string path = test::temp_dir("paged_forest") + "/forest.rfpack";
+    const PagedWriteReport written = generate_paged_scene(g, path);
+    EXPECT_GT(written.instances, 50u);
+    EXPECT_GE(written.instanced_triangles, g.instanced_triangles);
+    EXPECT_LT(written.triangles, 2 * g.triangles);
+    Scene scene = generate_scene(g);
+    const SceneGeometry geometry = SceneGeometry::build(scene);
+    // In memory: the terrain tiles placed once each, then the prototypes, placed by the instances.
+    uint64_t unique = 0, shown_by_instances = 0;
+    for (const Mesh& m : scene.meshes) unique += m.triangle_count();
+    const size_t first_prototype = scene.meshes.size() - 6;
+    for (const Instance& i : scene.instances)
+        if (i.mesh >= first_prototype) shown_by_instances += scene.meshes[i.mesh].triangle_count();
+    EXPECT_EQ(written.triangles, unique);
+    EXPECT_EQ(written.instanced_triangles, shown_by_instances);
+    EXPECT_EQ(scene.instances.size() - written.instances, first_prototype);
+    auto file = std::make_shared<const PackFile>(path);
+    EXPECT_EQ(file->instances().size(), written.instances);
+    PagedEngine engine(file, {size_t(1) << 30, size_t(1) << 30}, 0);
+    const auto accel = build_accel(geometry);
+    const std::vector<ShadingTriangle> in_core = build_shading_triangles(scene, geometry);
+    const std::vector<Ray> rays = test::make_rays(geometry, 3000, 5);
+    std::vector<Hit> paged(rays.size()), exact(rays.size());
+    std::vector<uint32_t> instances(rays.size());
+    engine.intersect(rays, paged, instances);
+    accel->intersect(rays, exact);
+    std::vector<ShadingTriangle> records(rays.size());
+    engine.fetch_shading(paged, records, instances);
+    const float tolerance = 50.0f * 4.0f * float(written.max_quantisation_error);
+    size_t agree = 0, both = 0, instanced = 0, same_normal = 0;
+    for (size_t i = 0; i < rays.size(); ++i) {
+        if (paged[i].found() != exact[i].found()) continue;
+        ++agree;
+        if (!exact[i].found()) continue;
+        const Vec3f a = rays[i].org + rays[i].dir * paged[i].t, b = rays[i].org + rays[i].dir * exact[i].t;
+        if (length(a - b) > tolerance) continue;
+        ++both;
+        instanced += instances[i] != kNoInstance ? 1 : 0;
+        if (dot(records[i].geometric_normal, in_core[exact[i].prim].geometric_normal) > 0.95f) ++same_normal;
+    }
+    EXPECT_GT(double(agree), 0.995 * double(rays.size()));
+    EXPECT_GT(double(same_normal), 0.99 * double(both));
+    EXPECT_GT(instanced, both / 20) << "rays reach the instances";
+}
+
+// Instances are placed only through instanced objects, with finite, invertible transforms.
+TEST(PagedScene, WriterRefusesBadInstances) {
+    const std::string dir = test::temp_dir("paged_bad_instances");
+    PackWriter writer(dir + "/x.rfpack");
+    writer.add_material(ShadingMaterial::from(Material{}));
+    const std::vector<Vec3f> p = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+    const std::vector<uint32_t> idx = {0, 1, 2};
+    const std::vector<ShadingTriangle> shading(1);
+    const uint32_t world = writer.add_object({p, idx, shading});
+    const uint32_t object = writer.add_instanced_object({p, idx, shading});
+    EXPECT_THROW(writer.add_instance(world, Affine3f::identity()), Error);
+    EXPECT_THROW(writer.add_instance(object + 1, Affine3f::identity()), Error);
+    EXPECT_THROW(writer.add_instance(object, Affine3f::scale(Vec3f(1, 0, 1))), Error);
+    Affine3f nan = Affine3f::identity();
+    nan.m[1][3] = NAN;
+    EXPECT_THROW(writer.add_instance(object, nan), Error);
+    writer.add_instance(object, Affine3f::translation(Vec3f(2, 0, 0)));
+    const PackSummary summary = writer.finish();
+    EXPECT_EQ(summary.instances, 1u);
+    EXPECT_EQ(summary.instanced_triangles, 1u);
+    EXPECT_EQ(summary.triangles, 2u);
+    const PackFile file(dir + "/x.rfpack");
+    EXPECT_EQ(file.top_refs().size(), 2u);
 }
 
 std::vector<uint8_t> file_bytes(const std::string& path) {

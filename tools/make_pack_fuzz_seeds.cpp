@@ -133,6 +133,20 @@ int main(int argc, char** argv) {
         PackWriterOptions compact = plain;
         compact.attribute_format = AttributeFormat::Compact;
         convert(dir, "compact", scene_of({quad(0.0f), lone_triangle()}), compact);
+        // A mesh placed four times (one mirrored) beside a unique one: instances.
+        {
+            Scene scene = scene_of({tetrahedron(Vec3f(0.0f)), quad(-1.0f)});
+            scene.instances.clear();
+            const Affine3f moves[4] = {Affine3f::identity(), Affine3f::translation(Vec3f(3, 0, 0)),
+                                       Affine3f::translation(Vec3f(0, 3, 1)) * Affine3f::scale(Vec3f(2.0f)),
+                                       Affine3f::scale(Vec3f(-1, 1, 1))};
+            for (const Affine3f& m : moves) scene.instances.push_back({0, m, true});
+            scene.instances.push_back({1, Affine3f::identity(), true});
+            scene.finalize();
+            convert(dir, "instances", scene, zstd);
+            PackWriterOptions grid_instances = grid;
+            convert(dir, "instances-grid", scene, grid_instances);
+        }
         // Many small pages: a top BVH of several levels.
         PackWriterOptions pages = compact;
         pages.codec = Codec::Zstd;

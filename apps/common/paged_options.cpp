@@ -99,6 +99,9 @@ void add_paged_write_options(CLI::App* cmd, PagedWriteArgs& a) {
     add_named_option(cmd, "--top", a.top, parse_paged_top_level, {"bvh", "grid"},
                      "How rays find pages: bvh (one wide BVH over the page bounds, the default) or grid (Garanzha "
                      "2014's top grid with a BVH in every cell)");
+    cmd->add_flag("--flatten-instances", a.flatten_instances,
+                  "Write every instance's triangles in world space instead of a mesh placed by several instances "
+                  "once plus its instances");
     cmd->add_option("--grid", a.grid, "--top grid: cells on the scene's longest axis, 1..256 (default 32)")
         ->check(CLI::Range(1, 256));
 }
@@ -111,6 +114,7 @@ PagedWriteOptions paged_write_options(const PagedWriteArgs& a, int threads) {
     o.attribute_page_bytes = uint32_t(parse_bytes(a.attribute_page, "--attribute-page"));
     o.quads_per_page = a.quads_per_page;
     o.top_level = a.top;
+    o.flatten_instances = a.flatten_instances;
     o.grid_resolution = a.grid;
     o.threads = threads;
     return o;

@@ -23,6 +23,7 @@ struct PagedWriteArgs {
     std::string attribute_page = "4K";
     uint32_t quads_per_page = 4096;
     PagedTopLevel top = PagedTopLevel::WideBvh;
+    bool flatten_instances = false;
     int grid = 32;
 };
 void add_paged_write_options(CLI::App* cmd, PagedWriteArgs& args);

@@ -50,6 +50,7 @@ struct GenerateArgs {
     std::string triangles = "4M";
     uint64_t seed = 1;
     std::string max_object = "2M";
+    std::string instanced;  // forest: --instanced-triangles
     PagedWriteArgs write;
     int threads = 0;
     bool quiet = false;

@@ -33,10 +33,14 @@ void print_write_report(const std::string& path, const PagedWriteReport& r, doub
         for (const std::string& note : r.notes) std::printf("%s: note: %s\n", path.c_str(), note.c_str());
         return;
     }
-    std::printf("%s: %llu triangles -> %llu quads (%.1f%% paired) in %u geometry, %u attribute, %u texture pages | "
-                "%s (geometry %s, attributes %s, textures %s, resident %s), %.1f bytes a triangle | max quantisation "
-                "error %.3g | %.1f s (%.2f Mtriangles/s)\n",
-                path.c_str(), (unsigned long long)r.triangles, (unsigned long long)r.quads,
+    const std::string placed =
+        r.instances == 0 ? std::string()
+                         : " (+ " + std::to_string(r.instances) + " instances placing " +
+                               std::to_string(r.instanced_triangles) + " more)";
+    std::printf("%s: %llu unique triangles%s -> %llu quads (%.1f%% paired) in %u geometry, %u attribute, %u texture "
+                "pages | %s (geometry %s, attributes %s, textures %s, resident %s), %.1f bytes a unique triangle | max "
+                "quantisation error %.3g | %.1f s (%.2f Mtriangles/s)\n",
+                path.c_str(), (unsigned long long)r.triangles, placed.c_str(), (unsigned long long)r.quads,
                 r.triangles ? 100.0 * double(r.paired_triangles) / double(r.triangles) : 0.0, r.geometry_pages,
                 r.attribute_pages, r.texture_pages, format_bytes(double(r.file_bytes)).c_str(),
                 format_bytes(double(r.geometry_bytes)).c_str(), format_bytes(double(r.attribute_bytes)).c_str(),
@@ -98,7 +102,8 @@ CLI::App* add_generate_command(CLI::App& app, GenerateArgs& a) {
     std::string names;
     for (const std::string& n : generated_scene_names()) names += (names.empty() ? "" : ", ") + n;
     CLI::App* cmd = app.add_subcommand(
-        "generate", "Write a procedural scene of unique geometry (no downloads) as a paged file, or as .obj");
+        "generate",
+        "Write a procedural scene (unique geometry; forest: plus instances) as a paged file, or as .obj");
     cmd->add_option("name", a.name, "Scene kind: " + names)->required()->check(CLI::IsMember(generated_scene_names()));
     cmd->add_option("--triangles", a.triangles, "Triangles, e.g. 20M, 1.2G (K/M/G are powers of 1000 here; default 4M)");
     cmd->add_option("-o,--output", a.output, "Output: .rfpack (paged, written out of core) or .obj")->required();
@@ -107,6 +112,8 @@ CLI::App* add_generate_command(CLI::App& app, GenerateArgs& a) {
                     "Folder with stanford-bunny/ and stanford-dragon/ (e.g. ../shared/scenes); default: procedural "
                     "statues only");
     cmd->add_option("--max-object", a.max_object, "Largest object handed to the writer, in triangles (default 2M)");
+    cmd->add_option("--instanced-triangles", a.instanced,
+                    "forest: the triangles its instances show, e.g. 10G (default 25 times --triangles)");
     add_paged_write_options(cmd, a.write);
     cmd->add_option("--threads", a.threads, "Threads (default: all cores)")->check(CLI::NonNegativeNumber);
     cmd->add_flag("-q,--quiet", a.quiet, "No progress bar");
@@ -121,6 +128,7 @@ int run_generate(const GenerateArgs& a) {
     g.seed = a.seed;
     g.statue_dir = a.statues;
     g.max_object_triangles = parse_count(a.max_object, "--max-object");
+    if (!a.instanced.empty()) g.instanced_triangles = parse_count(a.instanced, "--instanced-triangles");
     const PagedWriteOptions options = paged_write_options(a.write, a.threads);
     const Clock::time_point start = Clock::now();
     PagedWriteReport report;
@@ -142,9 +150,13 @@ int run_paged_info(const std::string& path, bool verbose) {
     const std::unique_ptr<PagedScene> scene = open_paged_scene(path, small);
     const PagedSceneInfo& i = scene->info();
     const Vec3f lo = i.bounds.lo, hi = i.bounds.hi;
-    std::printf("%s: paged scene, %llu triangles in %llu quads, %u objects\n", path.c_str(),
+    std::printf("%s: paged scene, %llu unique triangles in %llu quads, %u objects", path.c_str(),
                 (unsigned long long)i.triangles, (unsigned long long)i.quads, i.objects);
-    std::printf("  file %s (%.1f bytes a triangle): %u geometry pages, %u attribute pages (%s each, %s records), %u "
+    if (i.instances > 0)
+        std::printf(", %llu instances placing %llu more triangles (%llu in all)", (unsigned long long)i.instances,
+                    (unsigned long long)i.instanced_triangles, (unsigned long long)(i.instanced_triangles + i.triangles));
+    std::printf("\n");
+    std::printf("  file %s (%.1f bytes a unique triangle): %u geometry pages, %u attribute pages (%s each, %s records), %u "
                 "texture tiles\n",
                 format_bytes(double(i.file_bytes)).c_str(), i.bytes_per_triangle(), i.geometry_pages,
                 i.attribute_pages, format_bytes(double(i.attribute_page_bytes)).c_str(),

@@ -687,7 +687,7 @@ std::string info_line(const PagedFileSummary& s) {
          << format("%.0f KiB", double(i.attribute_page_bytes) / 1024.0) << ", "
          << (i.compact_attributes ? "32" : "64") << "-byte records), " << thousands(i.texture_pages)
          << " texture tiles; file " << megabytes(double(i.file_bytes)) << " ("
-         << format("%.1f", i.bytes_per_triangle()) << " bytes a triangle), always resident "
+         << format("%.1f", i.bytes_per_triangle()) << " bytes a unique triangle), always resident "
          << megabytes(double(i.resident_bytes)) << "; top grid " << i.grid[0] << "x" << i.grid[1] << "x" << i.grid[2]
          << "\n";
     return line.str();

@@ -77,15 +77,27 @@ ConvertResult convert_scene(const Scene& scene, const std::string& path, const P
     if (scene.animated())
         result.notes.push_back("the scene is animated; a paged file holds it as it is at time " +
                                std::to_string(scene.time) + " s");
+    // A mesh placed by two or more visible instances is written once, in its
+    // own space, and placed by instances (the seed's clones); a mesh placed
+    // once is written in world space.
+    std::vector<uint32_t> uses(scene.meshes.size(), 0);
+    if (!options.flatten_instances)
+        for (const Instance& instance : scene.instances) uses[instance.mesh] += instance.visible ? 1 : 0;
+    constexpr uint32_t kNotWritten = 0xFFFFFFFFu;
+    std::vector<uint32_t> object_of(scene.meshes.size(), kNotWritten);
     for (const Instance& instance : scene.instances) {
         const Mesh& mesh = scene.meshes[instance.mesh];
-        if (!instance.visible) {  // hidden at this time: not in the file
-            done += mesh.triangle_count();
+        done += mesh.triangle_count();
+        if (!instance.visible) continue;  // hidden at this time: not in the file
+        const bool instanced = uses[instance.mesh] > 1;
+        if (instanced && object_of[instance.mesh] != kNotWritten) {
+            writer.add_instance(object_of[instance.mesh], instance.transform);
             continue;
         }
+        const Affine3f to_file = instanced ? Affine3f::identity() : instance.transform;
         std::vector<Vec3f> positions(mesh.positions.size());
-        for (size_t i = 0; i < positions.size(); ++i) positions[i] = instance.transform.transform_point(mesh.positions[i]);
-        const Affine3f normal_matrix = instance.transform.normal_matrix();
+        for (size_t i = 0; i < positions.size(); ++i) positions[i] = to_file.transform_point(mesh.positions[i]);
+        const Affine3f normal_matrix = to_file.normal_matrix();
         std::vector<ShadingTriangle> shading(mesh.triangle_count());
         for (size_t t = 0; t < shading.size(); ++t) {
             const uint32_t* idx = &mesh.indices[3 * t];
@@ -93,8 +105,12 @@ ConvertResult convert_scene(const Scene& scene, const std::string& path, const P
             const uint32_t material = t < mesh.material_ids.size() ? mesh.material_ids[t] : 0;
             shading[t] = make_shading_triangle(mesh.normals, mesh.uvs, normal_matrix, tri, idx, material);
         }
-        writer.add_object({positions, mesh.indices, shading});
-        done += shading.size();
+        if (instanced) {
+            object_of[instance.mesh] = writer.add_instanced_object({positions, mesh.indices, shading});
+            writer.add_instance(object_of[instance.mesh], instance.transform);
+        } else {
+            writer.add_object({positions, mesh.indices, shading});
+        }
         if (progress) progress(0.9 * double(done) / double(total));
     }
     result.summary = writer.finish([&](double f) {

@@ -1,6 +1,7 @@
-// An in-memory scene written as a paged scene file, one instance at a time
-// (each instance is an object of its own: the paged file holds unique
-// geometry, §6.3.1 (h)). What the paged renderer cannot do is reported in
+// An in-memory scene written as a paged scene file, one instance at a time:
+// a mesh placed once becomes a world-space object (§6.3.1 (h)), a mesh
+// placed by several instances one object-space object placed by instances
+// (the seed's clones). What the paged renderer cannot do is reported in
 // `notes`: cut-outs and blending become opaque, an environment map becomes
 // its constant colour, normal maps lose their tangent frames.
 #pragma once

@@ -160,7 +160,8 @@ struct ResidentArrays {
     const uint32_t* cell_roots = nullptr;
     const BvhNode* middle_nodes = nullptr;
     const PageNode* top_nodes = nullptr;  // null when the file has no top BVH
-    const uint32_t* top_pages = nullptr;
+    const TopRef* top_refs = nullptr;
+    const InstanceInfo* instances = nullptr;
 };
 
 [[nodiscard]] inline PagedSceneView make_paged_view(const PackFile& f, const ResidentArrays& a, PageTableView geometry) {
@@ -169,10 +170,9 @@ struct ResidentArrays {
     v.pages = a.pages;
     v.cell_roots = a.cell_roots;
     v.middle_nodes = a.middle_nodes;
-    if (!f.top_nodes().empty()) {
-        v.top_nodes = a.top_nodes;
-        v.top_pages = a.top_pages;
-    }
+    v.refs = a.top_refs;
+    v.instances = a.instances;
+    if (!f.top_nodes().empty()) v.top_nodes = a.top_nodes;
     for (int a3 = 0; a3 < 3; ++a3)
         v.coord_scale = std::max({v.coord_scale, std::fabs(r.bounds.lo[a3]), std::fabs(r.bounds.hi[a3])});
     v.geometry = geometry;

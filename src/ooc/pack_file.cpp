@@ -203,8 +203,8 @@ void PackFile::read_resident(uint64_t size) {
             throw file_byte_error(path_, h.resident_offset, "bad top-grid resolution");
     if (r.top_level != TopLevel::WideBvh && r.top_level != TopLevel::Grid)
         throw file_byte_error(path_, h.resident_offset, "bad top level");
-    if ((r.top_level == TopLevel::WideBvh) != (r.top_node_count > 0 || h.geometry_pages == 0) ||
-        r.top_node_count > 2 * uint64_t(h.geometry_pages))
+    if ((r.top_level == TopLevel::WideBvh) != (r.top_node_count > 0 || r.top_ref_count == 0) ||
+        r.top_node_count > 2 * uint64_t(r.top_ref_count))
         throw file_byte_error(path_, h.resident_offset, "top BVH node count disagrees with the top level");
     if (r.attribute_format != AttributeFormat::Full && r.attribute_format != AttributeFormat::Compact)
         throw file_byte_error(path_, h.resident_offset, "bad attribute format");
@@ -218,7 +218,8 @@ void PackFile::read_resident(uint64_t size) {
     in.read_array(cell_roots_, cells, "top-grid cells");
     in.read_array(middle_nodes_, r.middle_node_count, "middle BVH nodes");
     in.read_array(top_nodes_, r.top_node_count, "top BVH nodes");
-    in.read_array(top_pages_, r.top_node_count > 0 ? h.geometry_pages : 0, "top BVH pages");
+    in.read_array(top_refs_, r.top_ref_count, "top references");
+    in.read_array(instances_, r.instance_count, "instances");
     in.read_array(materials_, r.material_count, "materials");
     in.read_array(lights_, r.light_count, "lights");
     in.read_array(textures_, r.texture_count, "textures");
@@ -240,6 +241,33 @@ bool power_of_two_scale(const Vec3f& scale) {
 
 }  // namespace
 
+// The references and instances: every reference to a page that exists,
+// world-space pages directly and object-space ones through an instance of
+// their object; finite transforms; each instance's page range its object's.
+void PackFile::validate_instances() const {
+    const uint64_t at = header_.resident_offset;
+    for (size_t i = 0; i < instances_.size(); ++i) {
+        const InstanceInfo& inst = instances_[i];
+        bool finite = true;
+        for (int k = 0; k < 12; ++k)
+            finite = finite && std::isfinite(inst.world_from_object[k]) && std::isfinite(inst.object_from_world[k]);
+        if (!finite || uint64_t(inst.first_page) + inst.page_count > pages_.size())
+            throw file_byte_error(path_, at, "instance " + std::to_string(i) + ": bad transform or page range");
+        for (uint32_t p = inst.first_page; p < inst.first_page + inst.page_count; ++p)
+            if (!pages_[p].instanced || pages_[p].object != inst.object)
+                throw file_byte_error(path_, at, "instance " + std::to_string(i) + ": its pages are not its object's");
+    }
+    for (size_t i = 0; i < top_refs_.size(); ++i) {
+        const TopRef& ref = top_refs_[i];
+        const bool ok = ref.page < pages_.size() &&
+                        (ref.instance == kNoInstance
+                             ? pages_[ref.page].instanced == 0
+                             : ref.instance < instances_.size() && pages_[ref.page].instanced == 1 &&
+                                   ref.page - instances_[ref.instance].first_page < instances_[ref.instance].page_count);
+        if (!ok) throw file_byte_error(path_, at, "top reference " + std::to_string(i) + " is malformed");
+    }
+}
+
 void PackFile::validate_resident() const {
     const uint64_t at = header_.resident_offset;
     const uint32_t records_per_page = resident_.attribute_page_bytes / attribute_record_bytes(resident_.attribute_format);
@@ -250,7 +278,8 @@ void PackFile::validate_resident() const {
         if (p.first_attribute_page != next_attribute_page)
             throw file_byte_error(path_, at, "page " + std::to_string(i) + ": its attribute pages are out of order");
         next_attribute_page += attribute_pages;
-        if (!finite_box(p.bounds) || !finite_vec(p.offset) || !power_of_two_scale(p.scale) || p.quad_count == 0 ||
+        if (!finite_box(p.bounds) || !finite_vec(p.offset) || !power_of_two_scale(p.scale) || p.instanced > 1 ||
+            p.quad_count == 0 ||
             p.quad_count > kQuadsPerPage || uint64_t(p.first_attribute_page) + attribute_pages > header_.attribute_pages)
             throw file_byte_error(path_, at, "page " + std::to_string(i) + ": bad bounds, size or attribute range");
     }
@@ -259,16 +288,15 @@ void PackFile::validate_resident() const {
         if (root != kEmptyCell && root >= n) throw file_byte_error(path_, at, "a top-grid cell points past the middle BVHs");
     for (uint32_t i = 0; i < n; ++i) {
         const BvhNode& node = middle_nodes_[i];
-        const bool bad = node.is_leaf() ? (node.count != 1 || node.first >= pages_.size())
+        const bool bad = node.is_leaf() ? (node.count != 1 || node.first >= top_refs_.size())
                                         : (node.first <= i || node.first >= n - 1);
         if (bad || !finite_box(node.bounds))
             throw file_byte_error(path_, at, "middle BVH node " + std::to_string(i) + " is malformed");
     }
+    validate_instances();
     if (!top_nodes_.empty()) {
-        const std::string problem = check_wide_tree(top_nodes_.data(), uint32_t(top_nodes_.size()), uint32_t(top_pages_.size()));
+        const std::string problem = check_wide_tree(top_nodes_.data(), uint32_t(top_nodes_.size()), uint32_t(top_refs_.size()));
         if (!problem.empty()) throw file_byte_error(path_, at, "top BVH " + problem);
-        for (uint32_t page : top_pages_)
-            if (page >= pages_.size()) throw file_byte_error(path_, at, "a top BVH leaf points past the pages");
     }
     validate_materials();
     for (const TextureInfo& t : textures_) {
@@ -395,7 +423,8 @@ size_t PackFile::expected_attribute_bytes(uint32_t a) const {
 size_t PackFile::resident_memory_bytes() const {
     return directory_.capacity() * sizeof(PageEntry) + pages_.capacity() * sizeof(PageInfo) +
            cell_roots_.capacity() * sizeof(uint32_t) + middle_nodes_.capacity() * sizeof(BvhNode) +
-           top_nodes_.capacity() * sizeof(PageNode) + top_pages_.capacity() * sizeof(uint32_t) +
+           top_nodes_.capacity() * sizeof(PageNode) + top_refs_.capacity() * sizeof(TopRef) +
+           instances_.capacity() * sizeof(InstanceInfo) +
            materials_.capacity() * sizeof(ShadingMaterial) + lights_.capacity() * sizeof(Light) +
            textures_.capacity() * sizeof(TextureInfo);
 }

@@ -36,7 +36,9 @@ public:
     [[nodiscard]] std::span<const BvhNode> middle_nodes() const { return middle_nodes_; }
     // TopLevel::WideBvh: the top BVH (empty for a grid file or no pages).
     [[nodiscard]] std::span<const PageNode> top_nodes() const { return top_nodes_; }
-    [[nodiscard]] std::span<const uint32_t> top_pages() const { return top_pages_; }
+    // What the top level reaches (in the top BVH's leaf order), and the instances.
+    [[nodiscard]] std::span<const TopRef> top_refs() const { return top_refs_; }
+    [[nodiscard]] std::span<const InstanceInfo> instances() const { return instances_; }
     [[nodiscard]] std::span<const ShadingMaterial> materials() const { return materials_; }
     [[nodiscard]] std::span<const Light> lights() const { return lights_; }
     [[nodiscard]] std::span<const TextureInfo> textures() const { return textures_; }
@@ -68,6 +70,7 @@ private:
     void read_directory(uint64_t size);
     void read_resident(uint64_t size);
     void validate_resident() const;
+    void validate_instances() const;
     void validate_materials() const;
     void check_page_contents(uint64_t index, std::span<const uint8_t> raw) const;
     [[nodiscard]] size_t expected_attribute_bytes(uint32_t attribute_page) const;
@@ -81,7 +84,8 @@ private:
     std::vector<uint32_t> cell_roots_;
     std::vector<BvhNode> middle_nodes_;
     std::vector<PageNode> top_nodes_;
-    std::vector<uint32_t> top_pages_;
+    std::vector<TopRef> top_refs_;
+    std::vector<InstanceInfo> instances_;
     std::vector<ShadingMaterial> materials_;
     std::vector<Light> lights_;
     std::vector<TextureInfo> textures_;

@@ -116,17 +116,44 @@ struct GeometryPageHeader {
 };
 static_assert(sizeof(GeometryPageHeader) == 16);
 
-// Always resident, one per geometry page: world = offset + scale * quantised.
+// Always resident, one per geometry page: position = offset + scale *
+// quantised, in world space, or in its object's space when the object is
+// instanced (the seed's clones: placed by InstanceInfo transforms).
 struct PageInfo {
-    Box3f bounds;                    // world space, of the decoded quads
+    Box3f bounds;                    // of the decoded quads, in the space above
     Vec3f offset;
     Vec3f scale;
     uint32_t quad_count = 0;
     uint32_t first_attribute_page = 0;  // attribute pages of this page's triangles start here
     uint32_t object = 0;                // the input object it came from
-    uint32_t reserved = 0;
+    uint32_t instanced = 0;             // 1: object space, reached only through instances
 };
 static_assert(sizeof(PageInfo) == 64);
+
+// A placement of an instanced object's pages: world = world_from_object *
+// object (3x4, row-major); its inverse takes rays into object space, where
+// the pages' decode transform (M_encode) applies, so a ray reaches a page's
+// quantised space through object_from_world then M_encode^-1, the seed's
+// M_instance * M_encode^-1 read backwards. The object's pages are
+// [first_page, first_page + page_count).
+struct InstanceInfo {
+    float world_from_object[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+    float object_from_world[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+    uint32_t object = 0;
+    uint32_t first_page = 0;
+    uint32_t page_count = 0;
+    uint32_t reserved = 0;
+};
+static_assert(sizeof(InstanceInfo) == 112);
+
+// What the top level's leaves reach: a page, as it lies (instance
+// kNoInstance: a world-space page) or through an instance.
+inline constexpr uint32_t kNoInstance = 0xFFFFFFFFu;
+struct TopRef {
+    uint32_t page = 0;
+    uint32_t instance = kNoInstance;
+};
+static_assert(sizeof(TopRef) == 8);
 
 // A 32-byte shading record (AttributeFormat::Compact): oct-encoded normals
 // as in rf::ShadingTriangle, uvs as IEEE half floats.
@@ -151,21 +178,25 @@ struct TextureInfo {
 };
 static_assert(sizeof(TextureInfo) == 80);
 
-// How a ray finds the pages it meets. WideBvh (the default): one CWBVH over
-// the pages' world bounds, leaves of one to three pages (base_index_triangle
-// and the leaf offsets index top_pages). Grid: the seed's top grid with a
-// BVH over the (clipped) page bounds in every cell (§6.3.1 (e)-(g)), kept so
-// that its tables can be reproduced. A file holds one of the two (the other's
-// arrays are empty: one empty cell, no top nodes).
+// How rays find the pages they meet, through the top references (TopRef:
+// every world-space page once, every instanced object's pages once per
+// instance). WideBvh (the default): one CWBVH over the references' world
+// boxes, leaves of one to three references (base_index_triangle and the
+// leaf offsets index top_refs, which are in leaf order). Grid: the seed's
+// top grid with a BVH over the (clipped) boxes in every cell (§6.3.1
+// (e)-(g)), kept so that its tables can be reproduced; its leaves index
+// top_refs. A file holds one of the two (the other's arrays are empty: one
+// empty cell, or no top nodes).
 enum class TopLevel : uint8_t { WideBvh = 0, Grid = 1 };
 
 // The resident section starts with this; the arrays follow in this order,
 // each at an offset rounded up to 16 bytes:
 //   PageInfo[geometry_pages]
 //   uint32_t cell_root[grid_cells]   (index into the middle nodes, or kEmptyCell)
-//   BvhNode middle_nodes[middle_node_count]   (leaves of one page each: first = page)
+//   BvhNode middle_nodes[middle_node_count]   (leaves of one reference each: first = its index in top_refs)
 //   PageNode top_nodes[top_node_count]        (world space; node 0 the root)
-//   uint32_t top_pages[geometry_pages when top_node_count > 0]  (page of each top leaf item)
+//   TopRef top_refs[top_ref_count]
+//   InstanceInfo instances[instance_count]
 //   ShadingMaterial materials[material_count]
 //   Light lights[light_count]
 //   TextureInfo textures[texture_count]
@@ -187,7 +218,10 @@ struct ResidentHeader {
     float camera_lens[2] = {};         // aperture radius, focus distance
     float environment[6] = {};         // colour rgb, strength, rotation, (unused)
     uint32_t top_node_count = 0;       // TopLevel::WideBvh: nodes of the top BVH
-    uint32_t reserved[7] = {};
+    uint32_t top_ref_count = 0;
+    uint32_t instance_count = 0;
+    uint32_t instanced_triangles[2] = {};  // low, high 32 bits: the triangles the instances place
+    uint32_t reserved[3] = {};
 };
 static_assert(sizeof(ResidentHeader) == 192);
 inline constexpr uint32_t kEmptyCell = 0xFFFFFFFFu;

@@ -109,6 +109,14 @@ struct PackWriter::State {
     uint64_t end = sizeof(FileHeader);
     std::vector<PageEntry> geometry_entries, attribute_entries, texture_entries;
     std::vector<PageInfo> pages;
+    struct ObjectPages {
+        uint32_t first_page = 0, page_count = 0;
+        uint64_t triangles = 0;
+        bool instanced = false;
+    };
+    std::vector<ObjectPages> object_pages;  // by object id
+    std::vector<TopRef> refs;               // what the top level will reach, in the order added
+    std::vector<InstanceInfo> instances;
     std::vector<ShadingMaterial> materials;
     std::vector<Light> lights;
     std::vector<TextureInfo> textures;
@@ -230,11 +238,45 @@ uint32_t PackWriter::add_texture(const Texture& texture) {
     return uint32_t(s.textures.size() - 1);
 }
 
-void PackWriter::add_object(const ObjectInput& object) {
+uint32_t PackWriter::add_object(const ObjectInput& object) { return write_object(object, false); }
+
+uint32_t PackWriter::add_instanced_object(const ObjectInput& object_space) { return write_object(object_space, true); }
+
+void PackWriter::add_instance(uint32_t object, const Affine3f& world_from_object) {
+    State& s = *state_;
+    s.require_open("add_instance");
+    if (object >= s.object_pages.size() || !s.object_pages[object].instanced)
+        throw Error("paged scene writer: object " + std::to_string(object) + " was not added as an instanced object");
+    for (const auto& row : world_from_object.m)
+        for (float v : row)
+            if (!std::isfinite(v)) throw Error("paged scene writer: an instance transform is not finite");
+    const Affine3f object_from_world = world_from_object.inverse();  // rf::Error when singular
+    const State::ObjectPages& o = s.object_pages[object];
+    InstanceInfo info;
+    std::memcpy(info.world_from_object, world_from_object.m, sizeof(info.world_from_object));
+    std::memcpy(info.object_from_world, object_from_world.m, sizeof(info.object_from_world));
+    info.object = object;
+    info.first_page = o.first_page;
+    info.page_count = o.page_count;
+    const uint32_t id = uint32_t(s.instances.size());
+    if (id == kNoInstance || s.refs.size() + o.page_count >= kNoInstance)
+        throw Error("paged scene writer: more than 2^32 instances or instanced pages");
+    s.instances.push_back(info);
+    for (uint32_t p = 0; p < o.page_count; ++p) s.refs.push_back({o.first_page + p, id});
+    s.summary.instanced_triangles += o.triangles;
+    ++s.summary.instances;
+}
+
+uint32_t PackWriter::write_object(const ObjectInput& object, bool instanced) {
     State& s = *state_;
     s.require_open("add_object");
     check_object(object, s.materials.size());
-    if (object.indices.empty()) return;
+    const uint32_t id = s.objects;
+    s.object_pages.push_back({uint32_t(s.pages.size()), 0, object.indices.size() / 3, instanced});
+    if (object.indices.empty()) {
+        ++s.objects;
+        return id;
+    }
     std::vector<uint32_t> material(object.shading.size());
     for (size_t t = 0; t < material.size(); ++t) material[t] = object.shading[t].material;
     const std::vector<QuadRef> quads = parallel::with_threads(s.options.threads, [&] {
@@ -267,7 +309,9 @@ void PackWriter::add_object(const ObjectInput& object) {
     });
     for (Ready& r : ready) {
         PageInfo info = r.page.info;
-        info.object = s.objects;
+        info.object = id;
+        info.instanced = instanced ? 1 : 0;
+        if (!instanced) s.refs.push_back({uint32_t(s.pages.size()), kNoInstance});
         info.first_attribute_page = uint32_t(s.attribute_entries.size());
         s.geometry_entries.push_back(s.append(r.geometry, PageKind::Geometry));
         s.summary.geometry_bytes += r.geometry.bytes.size();
@@ -284,7 +328,9 @@ void PackWriter::add_object(const ObjectInput& object) {
     s.summary.triangles += object.indices.size() / 3;
     s.summary.quads += quads.size();
     for (const QuadRef& q : quads) s.summary.paired_triangles += q.second != QuadRef::kNoTriangle ? 2 : 0;
+    s.object_pages.back().page_count = uint32_t(s.pages.size()) - s.object_pages.back().first_page;
     ++s.objects;
+    return id;
 }
 
 PackSummary PackWriter::finish(const ProgressCallback& progress) {
@@ -293,22 +339,45 @@ PackSummary PackWriter::finish(const ProgressCallback& progress) {
     if (progress) progress(0.0);
     if (s.materials.empty()) s.materials.push_back(ShadingMaterial::from(Material{}));
     ResidentHeader& r = s.resident;
-    // The chosen top level; the other's arrays stay empty (the grid: one empty cell).
+    // The references' world boxes (an instanced page's object-space bounds
+    // through its instance), then the chosen top level over them; the
+    // other's arrays stay empty (the grid: one empty cell).
+    std::vector<Box3f> boxes(s.refs.size());
+    for (size_t i = 0; i < s.refs.size(); ++i) {
+        const TopRef& ref = s.refs[i];
+        const Box3f& b = s.pages[ref.page].bounds;
+        if (ref.instance == kNoInstance) {
+            boxes[i] = b;
+            continue;
+        }
+        Affine3f m;
+        std::memcpy(m.m, s.instances[ref.instance].world_from_object, sizeof(m.m));
+        boxes[i] = m.transform_box(b);
+    }
     TopGrid grid;
     TopBvh top;
     parallel::with_threads(s.options.threads, [&] {
         if (s.options.top_level == TopLevel::Grid) {
-            grid = build_top_grid(s.pages, s.options.grid_resolution);
+            grid = build_top_grid(boxes, s.options.grid_resolution);
             return;
         }
         grid = build_top_grid({}, 1);
-        top = build_top_bvh(s.pages);
-        for (const PageInfo& p : s.pages) grid.scene_bounds.extend(p.bounds);
-        if (!s.pages.empty()) grid.grid_bounds = grid.scene_bounds;
+        top = build_top_bvh(boxes);
+        for (const Box3f& b : boxes) grid.scene_bounds.extend(b);
+        if (!boxes.empty()) grid.grid_bounds = grid.scene_bounds;
     });
+    std::vector<TopRef> refs = s.refs;
+    if (!top.nodes.empty()) {  // in the top BVH's leaf order
+        if (top.refs.size() != refs.size()) throw Error("paged scene writer: the top BVH lost or repeated references");
+        for (size_t k = 0; k < refs.size(); ++k) refs[k] = s.refs[top.refs[k]];
+    }
     if (progress) progress(0.8);
     r.top_level = s.options.top_level;
     r.top_node_count = uint32_t(top.nodes.size());
+    r.top_ref_count = uint32_t(refs.size());
+    r.instance_count = uint32_t(s.instances.size());
+    r.instanced_triangles[0] = uint32_t(s.summary.instanced_triangles);
+    r.instanced_triangles[1] = uint32_t(s.summary.instanced_triangles >> 32);
     r.bounds = grid.scene_bounds;
     r.grid_bounds = grid.grid_bounds;
     for (int a = 0; a < 3; ++a) r.grid_res[a] = grid.resolution[a];
@@ -329,7 +398,8 @@ PackSummary PackWriter::finish(const ProgressCallback& progress) {
     put(grid.cell_roots.data(), grid.cell_roots.size() * sizeof(uint32_t));
     put(grid.middle_nodes.data(), grid.middle_nodes.size() * sizeof(BvhNode));
     put(top.nodes.data(), top.nodes.size() * sizeof(PageNode));
-    put(top.pages.data(), top.pages.size() * sizeof(uint32_t));
+    put(refs.data(), refs.size() * sizeof(TopRef));
+    put(s.instances.data(), s.instances.size() * sizeof(InstanceInfo));
     put(s.materials.data(), s.materials.size() * sizeof(ShadingMaterial));
     put(s.lights.data(), s.lights.size() * sizeof(Light));
     put(s.textures.data(), s.textures.size() * sizeof(TextureInfo));

@@ -16,6 +16,7 @@
 #include "rayforge/scene/light.h"
 #include "rayforge/scene/texture.h"
 #include "render/material_eval.h"
+#include "rayforge/math/affine.h"
 #include "render/shading_triangles.h"
 
 namespace rf::pack {
@@ -31,6 +32,7 @@ struct PackWriterOptions {
     uint32_t attribute_page_bytes = kDefaultAttributePageBytes;  // a power of two, 1 KB .. 1 MB
     uint32_t quads_per_page = kQuadsPerPage;                     // 64 .. kQuadsPerPage
     TopLevel top_level = TopLevel::WideBvh;                      // how rays find pages (pack_format.h)
+    bool flatten_instances = false;  // convert_scene: every instance in world space (the file then holds no instances)
     int grid_resolution = kDefaultGridResolution;                // TopLevel::Grid: 1 .. kMaxGridResolution
     int threads = 0;                                             // 0 = all cores
 };
@@ -44,7 +46,9 @@ struct ObjectInput {
 };
 
 struct PackSummary {
-    uint64_t triangles = 0;
+    uint64_t triangles = 0;          // unique (every page's triangles once)
+    uint64_t instanced_triangles = 0; // placed by instances (each instance's object counted again)
+    uint32_t instances = 0;
     uint64_t quads = 0;
     uint64_t paired_triangles = 0;   // triangles that found a partner
     uint32_t geometry_pages = 0;
@@ -78,8 +82,16 @@ public:
     void set_environment(const Environment& environment);
 
     // Pairs, partitions, quantises and writes one object (rf::Error on
-    // non-finite coordinates or out-of-range indices or materials).
-    void add_object(const ObjectInput& object);
+    // non-finite coordinates or out-of-range indices or materials), in
+    // world space; returns its id.
+    uint32_t add_object(const ObjectInput& object);
+    // The same for an object placed by instances (the seed's clones): its
+    // pages are written once, in the object's own space, and reached only
+    // through add_instance.
+    uint32_t add_instanced_object(const ObjectInput& object_space);
+    // One more placement of an instanced object (rf::Error when `object` is
+    // not one, or the transform is not finite or not invertible).
+    void add_instance(uint32_t object, const Affine3f& world_from_object);
 
     // Builds the top level (pack_format.h), writes the resident section, the
     // directory and the header. Nothing may be added after it.
@@ -88,6 +100,8 @@ public:
     [[nodiscard]] const PackSummary& summary() const;
 
 private:
+    uint32_t write_object(const ObjectInput& object, bool instanced);
+
     struct State;
     std::unique_ptr<State> state_;
 };

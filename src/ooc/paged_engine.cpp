@@ -36,7 +36,7 @@ PagedSceneView PagedEngine::view() {
     const PackFile& f = *file_;
     return make_paged_view(f,
                            {f.pages().data(), f.cell_roots().data(), f.middle_nodes().data(), f.top_nodes().data(),
-                            f.top_pages().data()},
+                            f.top_refs().data(), f.instances().data()},
                            geometry_->view());
 }
 
@@ -110,12 +110,16 @@ void PagedEngine::run_queries(std::span<const Ray> rays, std::span<PagedRayState
     stats_.queries += n;
 }
 
-void PagedEngine::intersect(std::span<const Ray> rays, std::span<Hit> hits) {
+void PagedEngine::intersect(std::span<const Ray> rays, std::span<Hit> hits, std::span<uint32_t> instances) {
     std::lock_guard<std::mutex> lock(mutex_);
     parallel::with_threads(threads_, [&] {
         states_.assign(rays.size(), PagedRayState{});
         run_queries<false>(rays, states_);
-        for (size_t i = 0; i < rays.size(); ++i) hits[i] = states_[i].hit.found() ? states_[i].hit : Hit{};
+        for (size_t i = 0; i < rays.size(); ++i) {
+            const bool found = states_[i].hit.found();
+            hits[i] = found ? states_[i].hit : Hit{};
+            if (!instances.empty()) instances[i] = found ? states_[i].instance : kNoInstance;
+        }
     });
 }
 
@@ -128,7 +132,43 @@ void PagedEngine::occluded(std::span<const Ray> rays, std::span<uint8_t> occlude
     });
 }
 
-void PagedEngine::fetch_shading(std::span<const Hit> hits, std::span<ShadingTriangle> records) {
+namespace {
+
+// An object-space record in world space through its instance, as the
+// in-core records of a world-space triangle would be: the wound normal
+// through the normal matrix, flipped by a mirroring transform (the winding
+// turns), shading normals through the normal matrix, the tangent through
+// the linear part, the uv density over the area's scale.
+ShadingTriangle to_world(const ShadingTriangle& t, const InstanceInfo& instance) {
+    const float* w = instance.world_from_object;
+    const float* o = instance.object_from_world;
+    const auto linear = [&](Vec3f v) {
+        return Vec3f(w[0] * v.x + w[1] * v.y + w[2] * v.z, w[4] * v.x + w[5] * v.y + w[6] * v.z,
+                     w[8] * v.x + w[9] * v.y + w[10] * v.z);
+    };
+    const auto normal = [&](Vec3f n) {  // (object_from_world's linear part) transposed
+        return Vec3f(o[0] * n.x + o[4] * n.y + o[8] * n.z, o[1] * n.x + o[5] * n.y + o[9] * n.z,
+                     o[2] * n.x + o[6] * n.y + o[10] * n.z);
+    };
+    const float det = w[0] * (w[5] * w[10] - w[6] * w[9]) - w[1] * (w[4] * w[10] - w[6] * w[8]) +
+                      w[2] * (w[4] * w[9] - w[5] * w[8]);
+    ShadingTriangle r = t;
+    const Vec3f g = normal(t.geometric_normal);
+    const float g_length = length(g);
+    r.geometric_normal = g_length > 0.0f ? g * ((det < 0.0f ? -1.0f : 1.0f) / g_length) : t.geometric_normal;
+    if (t.flags & kHasNormals)
+        for (uint32_t& n : r.normals) n = encode_octahedral(normalize(normal(decode_octahedral(n))));
+    if (t.flags & kHasTangent) r.tangent = encode_octahedral(normalize(linear(decode_octahedral(t.tangent))));
+    if (det < 0.0f) r.flags ^= kNegativeBitangent;
+    const float area_scale = std::fabs(det) * g_length;
+    if (area_scale > 0.0f) r.uv_area_ratio = t.uv_area_ratio / area_scale;
+    return r;
+}
+
+}  // namespace
+
+void PagedEngine::fetch_shading(std::span<const Hit> hits, std::span<ShadingTriangle> records,
+                                std::span<const uint32_t> instances) {
     std::lock_guard<std::mutex> lock(mutex_);
     const ResidentHeader& r = file_->resident();
     const AttributeFormat format = r.attribute_format;
@@ -159,7 +199,10 @@ void PagedEngine::fetch_shading(std::span<const Hit> hits, std::span<ShadingTria
                     table.request(page);
                     const uint8_t* bytes = table.cached(page);
                     again[k] = bytes == nullptr;
-                    if (bytes) records[i] = decode_attribute_record(bytes + offset, format);
+                    if (!bytes) continue;
+                    records[i] = decode_attribute_record(bytes + offset, format);
+                    if (!instances.empty() && instances[i] != kNoInstance)
+                        records[i] = to_world(records[i], file_->instances()[instances[i]]);
                 }
             });
             uint32_t kept = 0;

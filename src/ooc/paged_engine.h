@@ -54,12 +54,17 @@ public:
     PagedEngine(std::shared_ptr<const PackFile> file, const EngineBudgets& budgets, int threads);
 
     [[nodiscard]] const PackFile& file() const { return *file_; }
-    // Closest hits (Hit::prim = page * kTrianglesPerPageSlot + 2 * quad + half) and any hits.
-    void intersect(std::span<const Ray> rays, std::span<Hit> hits);
+    // Closest hits (Hit::prim = page * kTrianglesPerPageSlot + 2 * quad + half)
+    // and any hits. `instances`, when not empty, receives each hit's
+    // instance (kNoInstance for a world-space page or a miss): the paged hit
+    // record's part that the Hit every kernel uses does not carry.
+    void intersect(std::span<const Ray> rays, std::span<Hit> hits, std::span<uint32_t> instances = {});
     void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded);
     // The shading record of every found hit (misses get a default record),
-    // through the attribute manager's own loop.
-    void fetch_shading(std::span<const Hit> hits, std::span<ShadingTriangle> records);
+    // through the attribute manager's own loop; with `instances` (from
+    // intersect), records of instanced pages are taken to world space.
+    void fetch_shading(std::span<const Hit> hits, std::span<ShadingTriangle> records,
+                       std::span<const uint32_t> instances = {});
 
     [[nodiscard]] PageCache& geometry_cache() { return *geometry_; }
     [[nodiscard]] PageCache& attribute_cache() { return *attributes_; }

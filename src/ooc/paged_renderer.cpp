@@ -124,13 +124,15 @@ private:
     pack::PagedSceneImpl& paged_;
     PagedShadingView view_;
     std::vector<ShadingTriangle> records_;
+    std::vector<uint32_t> instances_;  // of the last batch's hits
 };
 
 void PagedRenderer::trace_and_shade(std::span<const Ray> rays, std::span<Hit> hits) {
-    paged_.engine().intersect(rays, hits);
+    instances_.resize(hits.size());
+    paged_.engine().intersect(rays, hits, instances_);
     const size_t base = records_.size();
     records_.resize(base + hits.size());
-    paged_.engine().fetch_shading(hits, std::span<ShadingTriangle>(records_.data() + base, hits.size()));
+    paged_.engine().fetch_shading(hits, std::span<ShadingTriangle>(records_.data() + base, hits.size()), instances_);
     for (size_t k = 0; k < hits.size(); ++k)
         if (hits[k].found()) hits[k].prim = uint32_t(base + k);
     view_.shading_triangles = records_.data();

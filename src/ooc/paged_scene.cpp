@@ -164,6 +164,8 @@ void PagedSceneImpl::fill_info(const std::string& path) {
     for (int a = 0; a < 3; ++a) info_.grid[a] = r.grid_res[a];
     info_.top_level = r.top_level == pack::TopLevel::Grid ? PagedTopLevel::Grid : PagedTopLevel::WideBvh;
     info_.top_nodes = r.top_node_count;
+    info_.instances = r.instance_count;
+    info_.instanced_triangles = uint64_t(r.instanced_triangles[0]) | uint64_t(r.instanced_triangles[1]) << 32;
     info_.bounds = r.bounds;
     info_.resident_bytes = file_->resident_memory_bytes();
     info_.compact_attributes = r.attribute_format == AttributeFormat::Compact;
@@ -238,27 +240,42 @@ DecodedPagedGeometry decode_paged_geometry(const std::string& path) {
     const pack::PackFile file(path);
     DecodedPagedGeometry out;
     SceneGeometry& g = out.geometry;
+    // The instances of each page (none: the page lies in world space).
+    std::vector<std::vector<uint32_t>> instances_of(file.header().geometry_pages);
+    for (uint32_t i = 0; i < file.instances().size(); ++i) {
+        const pack::InstanceInfo& inst = file.instances()[i];
+        for (uint32_t p = inst.first_page; p < inst.first_page + inst.page_count; ++p) instances_of[p].push_back(i);
+    }
     std::vector<uint8_t> bytes, scratch;
     for (uint32_t p = 0; p < file.header().geometry_pages; ++p) {
+        const pack::PageInfo& info = file.pages()[p];
+        if (info.instanced && instances_of[p].empty()) continue;  // an object no instance places
         file.read_page(p, bytes, scratch);
         const pack::GeometryPageView page = pack::view_geometry_page(bytes, path);
-        const pack::PageInfo& info = file.pages()[p];
-        for (uint32_t q = 0; q < page.quad_count; ++q) {
-            const auto& v = page.quads[q].v;
-            for (int half = 0; half < 2; ++half) {
-                if (half == 1 && std::memcmp(v[3], v[0], sizeof(v[0])) == 0) continue;
-                const int c = half == 0 ? 1 : 2, d = half == 0 ? 2 : 3;
-                const auto decode = [&](const int16_t* q3) {
-                    return info.offset + info.scale * Vec3f(float(q3[0]), float(q3[1]), float(q3[2]));
-                };
-                g.triangles.push_back({decode(v[0]), decode(v[c]), decode(v[d])});
-                g.triangle_instance.push_back(0);
-                g.local_triangle.push_back(uint32_t(out.prims.size()));
-                g.material.push_back(0);
-                out.prims.push_back(p * pack::kTrianglesPerPageSlot + 2 * q + uint32_t(half));
+        const std::vector<uint32_t> placements = info.instanced ? instances_of[p] : std::vector<uint32_t>{pack::kNoInstance};
+        for (uint32_t instance : placements) {
+            Affine3f to_world = Affine3f::identity();
+            if (instance != pack::kNoInstance)
+                std::memcpy(to_world.m, file.instances()[instance].world_from_object, sizeof(to_world.m));
+            for (uint32_t q = 0; q < page.quad_count; ++q) {
+                const auto& v = page.quads[q].v;
+                for (int half = 0; half < 2; ++half) {
+                    if (half == 1 && std::memcmp(v[3], v[0], sizeof(v[0])) == 0) continue;
+                    const int c = half == 0 ? 1 : 2, d = half == 0 ? 2 : 3;
+                    const auto decode = [&](const int16_t* q3) {
+                        return to_world.transform_point(info.offset +
+                                                        info.scale * Vec3f(float(q3[0]), float(q3[1]), float(q3[2])));
+                    };
+                    g.triangles.push_back({decode(v[0]), decode(v[c]), decode(v[d])});
+                    g.bounds.extend(g.triangles.back().bounds());
+                    g.triangle_instance.push_back(0);
+                    g.local_triangle.push_back(uint32_t(out.prims.size()));
+                    g.material.push_back(0);
+                    out.prims.push_back(p * pack::kTrianglesPerPageSlot + 2 * q + uint32_t(half));
+                    out.instances.push_back(instance);
+                }
             }
         }
-        g.bounds.extend(info.bounds);
     }
     g.normal_matrices.push_back(Affine3f::identity());
     return out;

@@ -59,11 +59,12 @@ namespace rf::pack {
 // The resident levels and the geometry pages as the per-ray code sees them.
 struct PagedSceneView {
     const PageInfo* pages = nullptr;
-    // TopLevel::WideBvh (top_nodes set): the top BVH ...
+    const TopRef* refs = nullptr;            // what the top level reaches
+    const InstanceInfo* instances = nullptr;
+    // TopLevel::WideBvh (top_nodes set): the top BVH (leaf item k is refs[k]) ...
     const PageNode* top_nodes = nullptr;
-    const uint32_t* top_pages = nullptr;
     float coord_scale = 1.0f;  // largest |coordinate| of the scene's bounds
-    // ... or TopLevel::Grid: the grid and the cells' middle BVHs.
+    // ... or TopLevel::Grid: the grid and the cells' middle BVHs (leaves: a reference).
     const uint32_t* cell_roots = nullptr;
     const BvhNode* middle_nodes = nullptr;
     PageTableView geometry;
@@ -84,6 +85,7 @@ struct PagedRayState {
     uint32_t restart = kRayNotStarted; // cell to resume in, or kRayNotStarted / kRayFinished
     uint32_t occluded = 0;            // any-hit queries: found something
     uint32_t waiting_for = kNotWaiting;  // the page its last run asked for
+    uint32_t instance = kNoInstance;     // the instance of the hit's page (kNoInstance: a world-space page)
 };
 
 // The pages the last swap loaded (`count` of them at `pages`), or
@@ -494,6 +496,30 @@ RF_HDI bool start_cell(const PagedSceneView& v, const Ray& ray, float tmax, int 
     return true;
 }
 
+// `ray` in the object space of `instance`.
+RF_HDI Ray object_ray(const InstanceInfo& instance, const Ray& ray) {
+    const float* m = instance.object_from_world;
+    Ray r = ray;
+    r.org = Vec3f(m[0] * ray.org.x + m[1] * ray.org.y + m[2] * ray.org.z + m[3],
+                  m[4] * ray.org.x + m[5] * ray.org.y + m[6] * ray.org.z + m[7],
+                  m[8] * ray.org.x + m[9] * ray.org.y + m[10] * ray.org.z + m[11]);
+    r.dir = Vec3f(m[0] * ray.dir.x + m[1] * ray.dir.y + m[2] * ray.dir.z,
+                  m[4] * ray.dir.x + m[5] * ray.dir.y + m[6] * ray.dir.z,
+                  m[8] * ray.dir.x + m[9] * ray.dir.y + m[10] * ray.dir.z);
+    return r;
+}
+
+// The largest |coordinate| of a box (sizes WideBoxRay's guards).
+RF_HDI float box_scale(const Box3f& b) {
+    float s = 0.0f;
+    for (int a = 0; a < 3; ++a) {
+        const float lo = fabsf(b.lo[a]), hi = fabsf(b.hi[a]);
+        s = lo > s ? lo : s;
+        s = hi > s ? hi : s;
+    }
+    return s;
+}
+
 // A ray's visit of the pages it meets in one iteration: cached pages are
 // searched, the first missing one is requested (see the file's comment).
 struct PageVisit {
@@ -508,11 +534,16 @@ struct PageVisit {
     bool requested = false;        // a missing page is (closest hit) or will be (any hit) requested
     uint32_t deferred_page = 0;    // the first missing page (any hit: requested only if no cached page blocks the ray)
 
+    // Top reference `r`: its page as it lies, or through its instance.
     // True when an any-hit query found a hit (the ray is then finished).
     template <bool kAnyHit>
-    RF_HDI bool visit_page(uint32_t page) {
+    RF_HDI bool visit_ref(uint32_t r) {
+        const TopRef ref = v.refs[r];
+        const uint32_t page = ref.page;
         const uint32_t d = v.geometry.descriptor(page);
-        if ((d & kWasRead) || mailbox.seen(page)) return false;
+        // WasRead stays per page: in the iteration it was cached, every ray
+        // searched it through every reference it met.
+        if ((d & kWasRead) || mailbox.seen(r)) return false;
         if (d & kOutOfCore) {
             if (!requested) {
                 if (!kAnyHit) v.geometry.request(page);
@@ -523,15 +554,26 @@ struct PageVisit {
             return false;
         }
         v.geometry.request(page);  // a use, for the LFU counts
-        mailbox.add(page);
+        mailbox.add(r);
         ++counters.pages;
         const uint8_t* bytes = v.geometry.slots + uint64_t(d & kSlotMask) * v.geometry.slot_bytes;
-        if (search_page<kAnyHit>(bytes, v.pages[page], page, ray, box, leaf_test, state.hit, counters) && kAnyHit) {
-            state.occluded = 1;
-            state.restart = kRayFinished;
-            return true;
+        const PageInfo& info = v.pages[page];
+        bool hit;
+        if (ref.instance == kNoInstance) {
+            hit = search_page<kAnyHit>(bytes, info, page, ray, box, leaf_test, state.hit, counters);
+        } else {
+            // Into the object's space (t is unchanged by the affine map), where
+            // the page's decode transform applies; triangles tested there.
+            const Ray local = object_ray(v.instances[ref.instance], ray);
+            hit = search_page<kAnyHit>(bytes, info, page, local, WideBoxRay::make(local, 0.0f, box_scale(info.bounds)),
+                                       PageLeafTest::make(local), state.hit, counters);
         }
-        return false;
+        if (!hit) return false;
+        state.instance = ref.instance;
+        if (!kAnyHit) return false;
+        state.occluded = 1;
+        state.restart = kRayFinished;
+        return true;
     }
 
     // The end of the iteration: true when the ray asked for a page and must run again.
@@ -570,7 +612,7 @@ struct CellVisit {
         for (;;) {
             const BvhNode& n = v.middle_nodes[node];
             if (n.is_leaf()) {
-                if (pages.visit_page<kAnyHit>(n.first)) return true;
+                if (pages.visit_ref<kAnyHit>(n.first)) return true;
             } else {
                 counters.middle += 2;
                 float e0, e1;
@@ -613,7 +655,7 @@ RF_HDI bool top_bvh_iteration(const PagedSceneView& v, const Ray& ray, PagedRayS
     bool blocked = false;
     walk_wide_tree(v.top_nodes, test, state.hit.t, counters.middle, [&](uint32_t first, uint32_t count) {
         for (uint32_t i = first; i < first + count; ++i)
-            if (visit.visit_page<kAnyHit>(v.top_pages[i])) return blocked = true;
+            if (visit.visit_ref<kAnyHit>(i)) return blocked = true;
         return false;
     });
     return blocked ? false : visit.finish<kAnyHit>();
@@ -667,8 +709,10 @@ RF_HDI bool has_news(const PagedSceneView& v, const Ray& ray, const PagedRayStat
     if (fresh.count == 0) return false;
     const rf::detail::SlabRay slab = rf::detail::SlabRay::make(ray);
     for (uint32_t i = 0; i < fresh.count; ++i) {
+        const PageInfo& page = v.pages[fresh.pages[i]];
         float entry;
-        if (rf::detail::slab_test(slab, v.pages[fresh.pages[i]].bounds, ray.tmin, state.hit.t, entry)) return true;
+        // An instanced page's bounds are in its object's space: run.
+        if (page.instanced || rf::detail::slab_test(slab, page.bounds, ray.tmin, state.hit.t, entry)) return true;
     }
     return false;
 }

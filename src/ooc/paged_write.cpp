@@ -32,6 +32,7 @@ pack::PackWriterOptions writer_options(const PagedWriteOptions& o) {
     w.quads_per_page = o.quads_per_page;
     w.top_level = o.top_level == PagedTopLevel::Grid ? pack::TopLevel::Grid : pack::TopLevel::WideBvh;
     w.grid_resolution = o.grid_resolution;
+    w.flatten_instances = o.flatten_instances;
     w.threads = o.threads;
     return w;
 }
@@ -39,6 +40,8 @@ pack::PackWriterOptions writer_options(const PagedWriteOptions& o) {
 PagedWriteReport to_report(const pack::PackSummary& s, std::vector<std::string> notes) {
     PagedWriteReport r;
     r.triangles = s.triangles;
+    r.instances = s.instances;
+    r.instanced_triangles = s.instanced_triangles;
     r.quads = s.quads;
     r.paired_triangles = s.paired_triangles;
     r.geometry_pages = s.geometry_pages;
@@ -63,6 +66,7 @@ pack::GenerateOptions generator_options(const GenerateOptions& o) {
     g.seed = o.seed;
     g.statue_dir = o.statue_dir;
     g.max_object_triangles = o.max_object_triangles;
+    g.instanced_triangles = o.instanced_triangles;
     return g;
 }
 
@@ -175,10 +179,16 @@ PagedWriteReport generate_paged_scene(const GenerateOptions& options, const std:
     const auto report = [&](double f) {
         if (progress) progress(0.97 * f);
     };
+    const pack::InstanceSink instances{
+        [&](const pack::GeneratedObject& o) {
+            const std::vector<ShadingTriangle> shading = shading_of(o);
+            return writer.add_instanced_object({o.positions, o.indices, shading});
+        },
+        [&](uint32_t prototype, const Affine3f& m) { writer.add_instance(prototype, m); }};
     pack::generate_scene(g, [&](const pack::GeneratedObject& o) {
         const std::vector<ShadingTriangle> shading = shading_of(o);
         writer.add_object({o.positions, o.indices, shading});
-    }, report);
+    }, report, &instances);
     const pack::PackSummary summary = writer.finish([&](double f) {
         if (progress) progress(0.97 + 0.03 * f);
     });
@@ -195,7 +205,7 @@ Scene generate_scene(const GenerateOptions& options) {
     scene.lights = std::move(look.lights);
     scene.environment = look.environment;
     scene.camera = look.camera;
-    pack::generate_scene(g, [&](const pack::GeneratedObject& o) {
+    const auto add_mesh = [&](const pack::GeneratedObject& o) {
         Mesh mesh;
         mesh.name = "object" + std::to_string(scene.meshes.size());
         mesh.positions = o.positions;
@@ -204,8 +214,14 @@ Scene generate_scene(const GenerateOptions& options) {
         mesh.indices = o.indices;
         mesh.material_ids = o.material_ids;
         scene.meshes.push_back(std::move(mesh));
-        scene.instances.push_back({uint32_t(scene.meshes.size() - 1), Affine3f::identity()});
-    });
+        return uint32_t(scene.meshes.size() - 1);
+    };
+    const pack::InstanceSink instances{add_mesh, [&](uint32_t mesh, const Affine3f& m) {
+                                           scene.instances.push_back({mesh, m, true});
+                                       }};
+    pack::generate_scene(
+        g, [&](const pack::GeneratedObject& o) { scene.instances.push_back({add_mesh(o), Affine3f::identity(), true}); },
+        {}, &instances);
     scene.finalize();
     return scene;
 }

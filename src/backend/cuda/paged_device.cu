@@ -183,7 +183,8 @@ struct DevicePagedEngine::Impl {
     template <bool kAnyHit>
     void run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded);
     [[nodiscard]] size_t resident_bytes() const {
-        return pages.bytes() + cell_roots.bytes() + middle_nodes.bytes() + top_nodes.bytes() + top_pages.bytes();
+        return pages.bytes() + cell_roots.bytes() + middle_nodes.bytes() + top_nodes.bytes() + top_refs.bytes() +
+               instances.bytes();
     }
 
     std::shared_ptr<const pack::PackFile> file;
@@ -196,7 +197,8 @@ struct DevicePagedEngine::Impl {
     DeviceBuffer<uint32_t> cell_roots{"paged: cell roots"};
     DeviceBuffer<BvhNode> middle_nodes{"paged: middle nodes"};
     DeviceBuffer<pack::PageNode> top_nodes{"paged: top BVH nodes"};
-    DeviceBuffer<uint32_t> top_pages{"paged: top BVH pages"};
+    DeviceBuffer<pack::TopRef> top_refs{"paged: top references"};
+    DeviceBuffer<pack::InstanceInfo> instances{"paged: instances"};
     DeviceBuffer<uint32_t> descriptors{"paged: device descriptors"};
     DeviceBuffer<uint32_t> fresh{"paged: pages the last swap admitted"};
     DeviceBuffer<uint8_t> staging{"paged: device staging"};
@@ -225,7 +227,8 @@ DevicePagedEngine::Impl::Impl(std::shared_ptr<const pack::PackFile> f, const Dev
     cell_roots.upload(file->cell_roots());
     middle_nodes.upload(file->middle_nodes());
     top_nodes.upload(file->top_nodes());
-    top_pages.upload(file->top_pages());
+    top_refs.upload(file->top_refs());
+    instances.upload(file->instances());
     descriptors.allocate(page_count);
     fresh.allocate(pack::kMaxFreshPages);
     staging.allocate(layout.bytes());
@@ -233,7 +236,9 @@ DevicePagedEngine::Impl::Impl(std::shared_ptr<const pack::PackFile> f, const Dev
     for (auto& fill : fills) fill = std::make_unique<PinnedBuffer>("paged: staging fill", layout.bytes());
     const pack::PageTableView table{descriptors.data(), pool.data(), layout.slot_bytes, page_count};
     view = pack::make_paged_view(
-        *file, {pages.data(), cell_roots.data(), middle_nodes.data(), top_nodes.data(), top_pages.data()}, table);
+        *file,
+        {pages.data(), cell_roots.data(), middle_nodes.data(), top_nodes.data(), top_refs.data(), instances.data()},
+        table);
 }
 
 // The device side of run_device_query_loop: each step one launch or copy.

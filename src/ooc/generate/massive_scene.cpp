@@ -37,6 +37,7 @@
 #include <array>
 #include <bit>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <optional>
 
@@ -59,7 +60,7 @@ uint64_t splitmix64(uint64_t x) {
 }
 
 // Purposes of the random streams, so that no two draw the same numbers.
-enum class Stream : uint64_t { Plan = 1, Copy, Terrain, Texture };
+enum class Stream : uint64_t { Plan = 1, Copy, Terrain, Texture, Placement, Prototype };
 
 // The n-th number of a stream is a pure function of (seed, purpose, index, n).
 class Rng {
@@ -433,7 +434,9 @@ struct ScenePlan {
     Terrain terrain;
     std::vector<StatueSource> sources;
     std::vector<PlannedCopy> copies;  // in grid order, row by row
-    uint32_t grid_x = 1, grid_z = 1;
+    std::vector<PlannedCopy> prototypes;  // "forest": placed by instances
+    uint64_t placements = 0;              // "forest": instances, on the grid below
+    uint32_t grid_x = 1, grid_z = 1;      // statue copies' or placements' slots
     uint64_t triangles = 0;
 };
 
@@ -489,6 +492,34 @@ void check_options(const GenerateOptions& options) {
     if (options.max_object_triangles < kMinObjectTriangles)
         throw Error("generate: max_object_triangles " + std::to_string(options.max_object_triangles) +
                     " is below " + std::to_string(kMinObjectTriangles));
+    if (options.instanced_triangles > kMaxInstancedTriangles)
+        throw Error("generate: " + std::to_string(options.instanced_triangles) + " instanced triangles is above " +
+                    std::to_string(kMaxInstancedTriangles));
+}
+
+// kForestPrototypes prototypes sharing half the unique triangles, each the
+// deepest level of its source that fits; enough placements on a square grid
+// of slots to show instanced_triangles.
+constexpr uint32_t kForestPrototypes = 6;
+
+void plan_forest(ScenePlan& plan, const GenerateOptions& options, uint64_t& unique_statue_triangles) {
+    plan.sources = load_sources(options.statue_dir);
+    const uint64_t per_prototype = options.triangles / 2 / kForestPrototypes;
+    uint64_t shown = 0;
+    for (uint32_t k = 0; k < kForestPrototypes; ++k) {
+        const uint32_t s = k % uint32_t(plan.sources.size());
+        const int level = deepest_level(plan.sources[s], per_prototype, options.max_object_triangles);
+        if (level < 0) continue;  // a source larger than its share
+        plan.prototypes.push_back({s, uint32_t(level), plan.sources[s].triangles(uint32_t(level))});
+        unique_statue_triangles += plan.prototypes.back().triangles;
+        shown += plan.prototypes.back().triangles;
+    }
+    if (plan.prototypes.empty()) throw Error("generate: forest: too few triangles for a prototype");
+    const uint64_t average = std::max<uint64_t>(1, shown / plan.prototypes.size());
+    const uint64_t target = options.instanced_triangles ? options.instanced_triangles : 25 * options.triangles;
+    plan.placements = std::max<uint64_t>(1, (target + average - 1) / average);
+    plan.grid_x = uint32_t(integer_sqrt(plan.placements - 1) + 1);
+    plan.grid_z = uint32_t(std::max<uint64_t>(1, (plan.placements + plan.grid_x - 1) / plan.grid_x));
 }
 
 ScenePlan plan_scene(const GenerateOptions& options) {
@@ -503,6 +534,7 @@ ScenePlan plan_scene(const GenerateOptions& options) {
         plan.grid_x = uint32_t(n > 0 ? integer_sqrt(n - 1) + 1 : 1);  // ceil(sqrt(n))
         plan.grid_z = uint32_t(std::max<uint64_t>(1, (n + plan.grid_x - 1) / plan.grid_x));
     }
+    if (options.name == "forest") plan_forest(plan, options, statue_triangles);
     set_terrain_grid(plan.terrain, options.triangles - statue_triangles, options.max_object_triangles);
     plan.triangles = plan.terrain.triangles() + statue_triangles;
     return plan;
@@ -530,14 +562,13 @@ float resting_height(const Terrain& t, float x, float z, float radius) {
     return lowest;
 }
 
-CopyPlacement place_copy(const ScenePlan& plan, const GenerateOptions& options, uint64_t slot) {
-    Rng rng(options.seed, Stream::Copy, slot);
+// In grid slot `slot` of a shape whose horizontal radius is `footprint` times its size.
+CopyPlacement place_in_slot(const ScenePlan& plan, Rng& rng, uint64_t slot, float footprint) {
     const Terrain& t = plan.terrain;
-    const StatueSource& source = plan.sources[plan.copies[slot].source];
     const float cell_x = float(t.extent / plan.grid_x), cell_z = float(t.extent / plan.grid_z);
     CopyPlacement c;
     c.size = std::min(0.5f * std::min(cell_x, cell_z), kMaxSizeOfExtent * float(t.extent)) * rng.uniform(0.65f, 1.0f);
-    float radius = c.size * source.footprint;
+    float radius = c.size * footprint;
     float jitter_x = std::max(0.0f, 0.5f * cell_x - radius), jitter_z = std::max(0.0f, 0.5f * cell_z - radius);
     c.x = float(-t.extent / 2) + cell_x * (float(slot % plan.grid_x) + 0.5f) + jitter_x * rng.uniform(-1, 1);
     c.z = float(-t.extent / 2) + cell_z * (float(slot / plan.grid_x) + 0.5f) + jitter_z * rng.uniform(-1, 1);
@@ -552,6 +583,11 @@ CopyPlacement place_copy(const ScenePlan& plan, const GenerateOptions& options, 
     c.noise_seed = rng.bits32();
     c.noise_offset = {rng.uniform(0, 64), rng.uniform(0, 64), rng.uniform(0, 64)};
     return c;
+}
+
+CopyPlacement place_copy(const ScenePlan& plan, const GenerateOptions& options, uint64_t slot) {
+    Rng rng(options.seed, Stream::Copy, slot);
+    return place_in_slot(plan, rng, slot, plan.sources[plan.copies[slot].source].footprint);
 }
 
 // Level 0's vertices, then each level's midpoints: on the sphere for the
@@ -609,6 +645,36 @@ void to_world(const CopyPlacement& c, float lowest, GeneratedObject& out) {
         Vec3f q{p.x * c.size, (p.y - lowest) * c.size, p.z * c.size};
         p = {c.x + c.cos_yaw * q.x + c.sin_yaw * q.z, c.base_y + q.y, c.z - c.sin_yaw * q.x + c.cos_yaw * q.z};
     }
+}
+
+// Prototype k of a forest, in its own space: size 1, standing on y = 0 at the origin.
+void make_prototype(ScenePlan& plan, const GenerateOptions& options, uint32_t k, GeneratedObject& out) {
+    const PlannedCopy& planned = plan.prototypes[k];
+    StatueSource& source = plan.sources[planned.source];
+    Rng rng(options.seed, Stream::Prototype, k);
+    CopyPlacement shape;  // at the origin, size 1, unrotated
+    shape.material = kFirstStatueMaterial + k % (kMaterialCount - kFirstStatueMaterial);
+    shape.noise_seed = rng.bits32();
+    shape.noise_offset = {rng.uniform(0, 64), rng.uniform(0, 64), rng.uniform(0, 64)};
+    refine(source, planned.level, out);
+    const float lowest = displace(source, shape, out);
+    to_world(shape, lowest, out);
+    out.indices = source.level(planned.level).indices;
+    area_weighted_normals(out.positions, out.indices, out.normals);
+    out.material_ids.assign(out.indices.size() / 3, shape.material);
+}
+
+// Placement `slot` of a forest: its prototype and world_from_object.
+std::pair<uint32_t, Affine3f> place_instance(const ScenePlan& plan, const GenerateOptions& options, uint64_t slot) {
+    Rng rng(options.seed, Stream::Placement, slot);
+    const uint32_t k = uint32_t(rng.below(plan.prototypes.size()));
+    const CopyPlacement c = place_in_slot(plan, rng, slot, plan.sources[plan.prototypes[k].source].footprint);
+    Affine3f m;
+    const float rows[3][4] = {{c.cos_yaw * c.size, 0, c.sin_yaw * c.size, c.x},
+                              {0, c.size, 0, c.base_y},
+                              {-c.sin_yaw * c.size, 0, c.cos_yaw * c.size, c.z}};
+    std::memcpy(m.m, rows, sizeof(rows));
+    return {k, m};
 }
 
 void make_statue_copy(ScenePlan& plan, const GenerateOptions& options, uint64_t slot, GeneratedObject& out) {
@@ -766,7 +832,39 @@ Box3f scene_bounds(const Terrain& t) {
 
 }  // namespace
 
-std::vector<std::string> generator_names() { return {"terrain-statues", "terrain"}; }
+// The forest's prototypes, then its placements: through `instances`, or as
+// world-space copies to `sink` (every copy then counts as emitted).
+template <class Report>
+void emit_forest(ScenePlan& plan, const GenerateOptions& options, const Sink& sink, const InstanceSink* instances,
+                 Workspace& ws, uint64_t& emitted, const Report& report) {
+    std::vector<uint32_t> ids(plan.prototypes.size());
+    std::vector<GeneratedObject> copies(instances ? 0 : plan.prototypes.size());
+    for (uint32_t k = 0; k < plan.prototypes.size(); ++k) {
+        clear(ws.object);
+        make_prototype(plan, options, k, ws.object);
+        if (instances) {
+            ids[k] = instances->prototype(ws.object);
+            emitted += ws.object.triangle_count();
+        } else {
+            copies[k] = ws.object;
+        }
+    }
+    for (uint64_t slot = 0; slot < plan.placements; ++slot) {
+        const auto [k, m] = place_instance(plan, options, slot);
+        if (instances) {
+            instances->place(ids[k], m);
+        } else {
+            ws.object = copies[k];
+            for (Vec3f& p : ws.object.positions) p = m.transform_point(p);
+            for (Vec3f& n : ws.object.normals) n = normalized_or_up(m.normal_matrix().transform_vector(n));
+            sink(ws.object);
+            emitted += ws.object.triangle_count();
+        }
+    }
+    report(1.0);
+}
+
+std::vector<std::string> generator_names() { return {"terrain-statues", "terrain", "forest"}; }
 
 GeneratedLook generated_look(const GenerateOptions& options) {
     check_options(options);
@@ -787,7 +885,7 @@ GeneratedLook generated_look(const GenerateOptions& options) {
 }
 
 uint64_t generate_scene(const GenerateOptions& options, const Sink& sink,
-                        const std::function<void(double)>& progress) {
+                        const std::function<void(double)>& progress, const InstanceSink* instances) {
     check_options(options);
     ScenePlan plan = plan_scene(options);
     Workspace ws;
@@ -815,6 +913,7 @@ uint64_t generate_scene(const GenerateOptions& options, const Sink& sink,
         emitted += ws.object.triangle_count();
         report(double(emitted) / double(plan.triangles));
     }
+    if (!plan.prototypes.empty()) emit_forest(plan, options, sink, instances, ws, emitted, report);
     report(1.0);
     return emitted;
 }

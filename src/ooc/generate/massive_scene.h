@@ -6,8 +6,11 @@
 // copies of the Stanford bunny and dragon (when `statue_dir` holds them)
 // and of a procedural blob scattered on it, each copy with its own scale,
 // rotation, subdivision level and noise displacement, so no two copies and
-// no two pages are alike. "terrain": the terrain alone. Everything is a
-// pure function of the options (see massive_scene.cpp for the layout).
+// no two pages are alike. "terrain": the terrain alone. "forest": the
+// terrain with a few unique statue prototypes (half the triangles), each
+// placed by many instances (the seed's clones: `instanced_triangles` more,
+// the triangles the placements show). Everything is a pure function of the
+// options (see massive_scene.cpp for the layout).
 #pragma once
 
 #include <cstdint>
@@ -15,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "rayforge/math/affine.h"
 #include "rayforge/math/box.h"
 #include "rayforge/math/vec.h"
 #include "rayforge/scene/camera.h"
@@ -37,7 +41,11 @@ struct GenerateOptions {
     // or unreadable is left out, and the procedural blob is always used.
     std::string statue_dir;
     uint64_t max_object_triangles = 2'000'000;  // no object the sink receives is larger
+    // "forest": triangles shown by the instances (0: 25 times `triangles`).
+    uint64_t instanced_triangles = 0;
 };
+inline constexpr uint64_t kMaxInstancedTriangles = 1'000'000'000'000ull;
+
 
 // One object, in world space.
 struct GeneratedObject {
@@ -48,6 +56,13 @@ struct GeneratedObject {
     std::vector<uint32_t> material_ids;  // one per triangle, index into GeneratedLook::materials
 
     [[nodiscard]] size_t triangle_count() const { return indices.size() / 3; }
+};
+
+// Where instanced content goes ("forest"): each prototype once, in its own
+// space (prototype returns the id place takes), then its placements.
+struct InstanceSink {
+    std::function<uint32_t(const GeneratedObject&)> prototype;
+    std::function<void(uint32_t prototype, const Affine3f& world_from_object)> place;
 };
 
 // Everything but the geometry: materials (textures referenced by index into
@@ -77,8 +92,11 @@ GeneratedLook generated_look(const GenerateOptions& options);
 // O(max_object_triangles) plus the statue sources and their subdivided
 // topologies (about 24 bytes per subdivided triangle, at most 4/3 of
 // max(max_object_triangles, source) per source).
+// "forest": with `instances`, prototypes and placements go there; without,
+// every placement is a world-space copy handed to `sink` (small scenes).
+// Returns the unique triangles emitted.
 uint64_t generate_scene(const GenerateOptions& options,
                         const std::function<void(const GeneratedObject&)>& sink,
-                        const std::function<void(double)>& progress = {});
+                        const std::function<void(double)>& progress = {}, const InstanceSink* instances = nullptr);
 
 }  // namespace rf::pack
