@@ -680,7 +680,10 @@ int threads_used(const PagedBenchConfig& config) {
 std::string info_line(const PagedFileSummary& s) {
     const PagedSceneInfo& i = s.info;
     std::ostringstream line;
-    line << "== " << i.path << ": " << thousands(i.triangles) << " triangles in " << thousands(i.quads) << " quads; "
+    line << "== " << i.path << ": " << thousands(i.triangles) << " unique triangles";
+    if (i.instances > 0)
+        line << " (+ " << thousands(i.instances) << " instances showing " << thousands(i.instanced_triangles) << " more)";
+    line << " in " << thousands(i.quads) << " quads; "
          << thousands(i.geometry_pages) << " geometry pages (page quads ~" << s.inferred_page_quads << ": largest page "
          << format("%.1f KiB", double(s.geometry_slot_bytes) / 1024.0) << ", " << format("%.0f", s.mean_page_quads)
          << " quads per page on average), " << thousands(i.attribute_pages) << " attribute pages ("
@@ -688,8 +691,11 @@ std::string info_line(const PagedFileSummary& s) {
          << (i.compact_attributes ? "32" : "64") << "-byte records), " << thousands(i.texture_pages)
          << " texture tiles; file " << megabytes(double(i.file_bytes)) << " ("
          << format("%.1f", i.bytes_per_triangle()) << " bytes a unique triangle), always resident "
-         << megabytes(double(i.resident_bytes)) << "; top grid " << i.grid[0] << "x" << i.grid[1] << "x" << i.grid[2]
-         << "\n";
+         << megabytes(double(i.resident_bytes)) << "; ";
+    if (i.top_level == PagedTopLevel::Grid)
+        line << "top grid " << i.grid[0] << "x" << i.grid[1] << "x" << i.grid[2] << "\n";
+    else
+        line << "top BVH of " << thousands(i.top_nodes) << " wide nodes\n";
     return line.str();
 }
 
