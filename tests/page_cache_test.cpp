@@ -18,12 +18,14 @@
 #include <random>
 #include <set>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/parallel.h"
 #include "ooc/pack_file.h"
 #include "ooc/pack_format.h"
 #include "ooc/page_cache.h"
+#include "ooc/reader_pool.h"
 #include "rayforge/core/error.h"
 #include "test_paths.h"
 
@@ -825,6 +827,37 @@ TEST(PageCache, ConcurrentRequestsMatchTheSerialModel) {
     }
     EXPECT_GT(cache.stats().evictions, 0u);
     EXPECT_GT(cache.stats().hits, 0u);
+}
+
+}  // namespace
+}  // namespace rf::pack
+
+namespace rf::pack {
+namespace {
+
+// The reader pool runs every index of a run exactly once, any number of
+// runs in a row, from several caller threads at once (one run at a time),
+// and a run of nothing returns at once.
+TEST(ReaderPool, RunsEveryIndexOnceWhoeverCalls) {
+    ReaderPool pool(8);
+    pool.run(0, [](size_t) { FAIL() << "a run of nothing ran something"; });
+    for (size_t count : {1u, 2u, 7u, 8u, 9u, 1000u}) {
+        std::vector<std::atomic<int>> hits(count);
+        pool.run(count, [&](size_t i) { hits[i].fetch_add(1); });
+        for (size_t i = 0; i < count; ++i) ASSERT_EQ(hits[i].load(), 1) << "count " << count << ", index " << i;
+    }
+    std::vector<std::thread> callers;
+    std::atomic<int> total{0};
+    for (int c = 0; c < 4; ++c)
+        callers.emplace_back([&] {
+            for (int r = 0; r < 50; ++r) pool.run(17, [&](size_t) { total.fetch_add(1); });
+        });
+    for (std::thread& t : callers) t.join();
+    EXPECT_EQ(total.load(), 4 * 50 * 17);
+    // The shared pool, as the page managers use it.
+    std::atomic<int> shared{0};
+    ReaderPool::shared().run(100, [&](size_t) { shared.fetch_add(1); });
+    EXPECT_EQ(shared.load(), 100);
 }
 
 }  // namespace

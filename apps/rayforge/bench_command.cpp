@@ -226,6 +226,7 @@ int run_paged_bench_command(const BenchArgs& a, const std::string& command_line)
     }
     config.repetitions = a.repetitions;
     config.passes = a.passes;
+    config.cold_from_disk = a.cold_from_disk;
     config.threads = a.threads;
     if (!a.light_dir.empty()) config.light = parse_light_dir(a.light_dir);
     const std::vector<std::string> files = split_list(a.paged);
@@ -443,6 +444,9 @@ CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
         ->delimiter(',');
     cmd->add_option("--passes", a.passes, "--paged: path-tracing passes per budget, the first one cold (default 4)")
         ->check(CLI::Range(2, 10000));
+    cmd->add_flag("--cold-from-disk", a.cold_from_disk,
+                  "--paged: before each cold run also drop the file from the operating system's cache "
+                  "(posix_fadvise), so cold runs read the disk");
     cmd->add_option("--light-dir", a.light_dir,
                     "--paged: the shadow set's light, a directional light travelling along x,y,z (default: the file's "
                     "first light, when the API lists it)");

@@ -112,6 +112,7 @@ struct BenchArgs {
     std::vector<std::string> paged;        // .rfpack files
     std::vector<std::string> budgets;      // cache fractions of the scene, "0.01" or "1/100" ("" = Garanzha 2014's five)
     int passes = 4;                        // path-tracing passes per budget
+    bool cold_from_disk = false;           // --paged: drop the file from the OS cache before each cold run
     std::string light_dir;                 // "x,y,z": a directional light for the shadow set
     // --animate: per-frame updates over an animation (bench/harness/animate_bench.h).
     bool animate = false;

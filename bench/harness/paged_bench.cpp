@@ -514,7 +514,7 @@ PagedBenchRow run_ray_set(PagedScene& scene, const TracedSet& set, double budget
     row.rays = set.rays.size();
     std::vector<Hit> hits(set.any_hit ? 0 : set.rays.size());
     std::vector<uint8_t> occluded(set.any_hit ? set.rays.size() : 0);
-    scene.clear_caches();
+    scene.clear_caches(config.cold_from_disk);
     scene.reset_stats();
     const double cold_ms = trace_paged(scene, set, hits, occluded);
     collect_counts(scene, {cold_ms}, row.rays, row.cold);
@@ -542,7 +542,7 @@ PagedBenchRow run_path_tracing(World& world, const Camera& camera, double budget
     options.integrator = IntegratorKind::Path;
     options.max_depth = config.max_depth;
     options.threads = config.threads;
-    scene.clear_caches();
+    scene.clear_caches(config.cold_from_disk);
     scene.reset_stats();
     const std::unique_ptr<Renderer> renderer = make_renderer(world, camera, options);
     PagedBenchRow row;

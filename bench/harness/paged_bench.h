@@ -27,6 +27,10 @@ struct PagedBenchConfig {
     int passes = 4;                  // path-tracing passes per budget (the first is the cold one)
     int max_depth = 3;               // path bounces (Garanzha 2014's 3)
     int threads = 0;                 // 0 = all cores
+    // Cold runs from the disk: before each, the file's pages are also dropped
+    // from the operating system's cache (otherwise a file that fits in
+    // memory is read from it after the first run).
+    bool cold_from_disk = false;
     // The shadow set's light; unset: the file's first light (PagedScene
     // lights), and no shadow set when there is none.
     std::optional<Light> light;

@@ -420,6 +420,10 @@ size_t PackFile::expected_attribute_bytes(uint32_t a) const {
     return size_t(std::min<uint64_t>(per_page, records - first)) * record;
 }
 
+void PackFile::drop_os_cache() const {
+    (void)::posix_fadvise(fd_, 0, 0, POSIX_FADV_DONTNEED);
+}
+
 size_t PackFile::resident_memory_bytes() const {
     return directory_.capacity() * sizeof(PageEntry) + pages_.capacity() * sizeof(PageInfo) +
            cell_roots_.capacity() * sizeof(uint32_t) + middle_nodes_.capacity() * sizeof(BvhNode) +

@@ -62,6 +62,11 @@ public:
     // The same into a caller's buffer of at least raw_bytes (a cache slot).
     size_t read_page(uint64_t index, std::span<uint8_t> out, std::vector<uint8_t>& scratch) const;
 
+    // Asks the operating system to drop the file's pages from its page
+    // cache (posix_fadvise DONTNEED): later reads come from the disk (cold
+    // measurements). Best effort: ignored where refused.
+    void drop_os_cache() const;
+
     // Bytes of the resident section held in memory.
     [[nodiscard]] size_t resident_memory_bytes() const;
 

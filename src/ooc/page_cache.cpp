@@ -34,6 +34,7 @@
 #include <span>
 
 #include "core/parallel.h"
+#include "ooc/reader_pool.h"
 #include "core/assert.h"
 #include "rayforge/core/error.h"
 
@@ -309,32 +310,29 @@ void PageCache::evict(uint32_t page) {
     ++stats_.evictions;
 }
 
-// Step 3: reads every admission into its slot, on TBB's threads. Returns the
-// first failure's message by admission order ("" when all were read).
+// Step 3: reads every admission into its slot, many at once on the reader
+// pool (reader_pool.h: a real queue depth). Returns the first failure's
+// message by admission order ("" when all were read).
 std::string PageCache::read_admissions() {
     const Clock::time_point start = Clock::now();
     std::mutex error_mutex;
     size_t error_index = admissions_.size();
     std::string error;
     std::atomic<uint64_t> bytes_read{0};
-    parallel::for_range(size_t(0), admissions_.size(), size_t(1), [&](size_t lo, size_t hi) {
-        std::vector<uint8_t> scratch;  // a compressed page's stored bytes, one per task
-        uint64_t task_bytes = 0;
-        for (size_t i = lo; i < hi; ++i) {
-            Admission& a = admissions_[i];
-            const std::span<uint8_t> slot(pool_.get() + uint64_t(a.slot) * view_.slot_bytes, view_.slot_bytes);
-            try {
-                task_bytes += file_.read_page(first_page_ + a.page, slot, scratch);
-                a.ok = true;
-            } catch (const std::exception& e) {  // kept for after the bookkeeping; a thread must not throw
-                const std::lock_guard<std::mutex> lock(error_mutex);
-                if (i < error_index) {
-                    error_index = i;
-                    error = name_ + ": " + e.what();  // the reader's message names the file, page and offset
-                }
+    ReaderPool::shared().run(admissions_.size(), [&](size_t i) {
+        thread_local std::vector<uint8_t> scratch;  // a compressed page's stored bytes, one per reader
+        Admission& a = admissions_[i];
+        const std::span<uint8_t> slot(pool_.get() + uint64_t(a.slot) * view_.slot_bytes, view_.slot_bytes);
+        try {
+            bytes_read += file_.read_page(first_page_ + a.page, slot, scratch);
+            a.ok = true;
+        } catch (const std::exception& e) {  // kept for after the bookkeeping; a reader must not throw
+            const std::lock_guard<std::mutex> lock(error_mutex);
+            if (i < error_index) {
+                error_index = i;
+                error = name_ + ": " + e.what();  // the reader's message names the file, page and offset
             }
         }
-        bytes_read += task_bytes;
     });
     stats_.bytes_read += bytes_read;
     stats_.io_ms += ms_since(start);

@@ -212,10 +212,11 @@ void PagedSceneImpl::reset_stats() {
     textures_->reset_stats();
 }
 
-void PagedSceneImpl::clear_caches() {
+void PagedSceneImpl::clear_caches(bool os_cache) {
     engine_->geometry_cache().clear();
     engine_->attribute_cache().clear();
     textures_->clear();
+    if (os_cache) file_->drop_os_cache();
 }
 
 size_t PagedSceneImpl::memory_bytes() const {

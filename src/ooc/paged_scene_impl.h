@@ -42,7 +42,7 @@ public:
     [[nodiscard]] std::vector<PageCacheReport> caches() const override;
     [[nodiscard]] PagedQueryStats query_stats() const override;
     void reset_stats() override;
-    void clear_caches() override;
+    void clear_caches(bool os_cache = false) override;
     [[nodiscard]] size_t memory_bytes() const override;
 
     [[nodiscard]] const PackFile& file() const { return *file_; }

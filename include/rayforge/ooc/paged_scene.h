@@ -172,8 +172,10 @@ public:
     [[nodiscard]] virtual std::vector<PageCacheReport> caches() const = 0;
     [[nodiscard]] virtual PagedQueryStats query_stats() const = 0;
     virtual void reset_stats() = 0;
-    // Empties the caches (a cold start).
-    virtual void clear_caches() = 0;
+    // Empties the caches (a cold start); with `os_cache`, also asks the
+    // operating system to drop the file's pages from its own cache
+    // (posix_fadvise DONTNEED), so the next reads come from the disk.
+    virtual void clear_caches(bool os_cache = false) = 0;
     // The caches plus the resident levels: what this scene holds in memory.
     [[nodiscard]] virtual size_t memory_bytes() const = 0;
 };
