@@ -43,7 +43,7 @@ WorldOptions world_options(const std::string& device, const std::string& structu
 // Where per-hit outputs go (normals and triangle_ids may be null).
 struct HitOutputs {
     float* t;                 // inf on a miss
-    uint32_t* geometry_ids;   // the instance; kInvalidId on a miss
+    uint32_t* geometry_ids;   // the instance (paged: the file's instance); kInvalidId on a miss
     uint32_t* primitive_ids;  // the triangle of its mesh
     float* uvs;               // 2 per hit
     float* normals;           // 3 per hit: the unit geometric normal
@@ -52,8 +52,11 @@ struct HitOutputs {
 
 // Fills `out` from the world's hits, in parallel (call without the GIL). A
 // paged world's hits carry the paged triangle id (page * 8192 + slot) and
-// no geometry in memory to map it back: their geometry and primitive ids are
-// kInvalidId and their normals NaN (documented in docs/python.md).
-void fill_hit_outputs(const World& world, std::span<const Hit> hits, const HitOutputs& out);
+// no geometry in memory to map it back: their geometry ids are the file's
+// instances (`paged_instances`, from PagedScene::intersect; kInvalidId for a
+// world-space page), primitive ids kInvalidId and normals NaN (documented in
+// docs/python.md).
+void fill_hit_outputs(const World& world, std::span<const Hit> hits, const HitOutputs& out,
+                      std::span<const uint32_t> paged_instances = {});
 
 }  // namespace rf::py

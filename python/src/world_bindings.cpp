@@ -21,7 +21,8 @@ std::array<float, 3> array3(Vec3f v) { return {v.x, v.y, v.z}; }
 
 // Per-ray hit records as the dictionary RaycastingScene.cast_rays returns,
 // plus the flat triangle index (world.geometry's order).
-pyb::dict hit_dict(const World& world, std::span<const Hit> hits, const std::vector<pyb::ssize_t>& leading) {
+pyb::dict hit_dict(const World& world, std::span<const Hit> hits, const std::vector<pyb::ssize_t>& leading,
+                   std::span<const uint32_t> paged_instances = {}) {
     auto t_hit = output<float>(leading), uvs = output<float>(leading, {2}), normals = output<float>(leading, {3});
     auto triangle_ids = output<uint32_t>(leading), instance_ids = output<uint32_t>(leading),
          primitive_ids = output<uint32_t>(leading);
@@ -29,7 +30,7 @@ pyb::dict hit_dict(const World& world, std::span<const Hit> hits, const std::vec
                          uvs.mutable_data(),    normals.mutable_data(),      triangle_ids.mutable_data()};
     {
         pyb::gil_scoped_release release;
-        fill_hit_outputs(world, hits, out);
+        fill_hit_outputs(world, hits, out, paged_instances);
     }
     pyb::dict d;
     d["t_hit"] = t_hit;
@@ -142,7 +143,8 @@ WorldOptions world_options(const std::string& device, const std::string& structu
     return o;
 }
 
-void fill_hit_outputs(const World& world, std::span<const Hit> hits, const HitOutputs& out) {
+void fill_hit_outputs(const World& world, std::span<const Hit> hits, const HitOutputs& out,
+                      std::span<const uint32_t> paged_instances) {
     const SceneGeometry& g = world.geometry();
     const bool paged = world.paged();
     parallel::for_range(size_t(0), hits.size(), size_t(4096), [&](size_t lo, size_t hi) {
@@ -153,7 +155,9 @@ void fill_hit_outputs(const World& world, std::span<const Hit> hits, const HitOu
             out.t[i] = found ? h.t : std::numeric_limits<float>::infinity();
             out.uvs[2 * i] = found ? h.u : 0.0f;
             out.uvs[2 * i + 1] = found ? h.v : 0.0f;
-            out.geometry_ids[i] = mapped ? g.triangle_instance[h.prim] : kInvalidId;
+            out.geometry_ids[i] = mapped                               ? g.triangle_instance[h.prim]
+                                  : found && !paged_instances.empty() ? paged_instances[i]
+                                                                      : kInvalidId;
             out.primitive_ids[i] = mapped ? g.local_triangle[h.prim] : kInvalidId;
             if (out.triangle_ids) out.triangle_ids[i] = found ? h.prim : kInvalidId;
             if (!out.normals) continue;
@@ -262,16 +266,19 @@ void bind_world(pyb::module_& m) {
              [](const World& w, const pyb::handle& rays, float tnear, float tfar) {
                  const FloatRows rows = float_rows(rays, 6, "rays");
                  RawArray<Hit> hits(rows.rows);
+                 RawArray<uint32_t> instances(w.paged() ? rows.rows : 0);
                  {
                      pyb::gil_scoped_release release;
                      const RawArray<Ray> r = to_rays(rows, tnear, tfar);
-                     w.intersect(r, hits);
+                     if (w.paged()) w.paged_scene().intersect(r, hits, instances);
+                     else w.intersect(r, hits);
                  }
-                 return hit_dict(w, hits, rows.leading);
+                 return hit_dict(w, hits, rows.leading, instances);
              },
              pyb::arg("rays"), pyb::arg("tnear") = 0.0f, pyb::arg("tfar") = std::numeric_limits<float>::infinity(),
-             "Closest hits of (..., 6) rays: t_hit, geometry_ids (instance), primitive_ids (triangle of its mesh), "
-             "primitive_uvs, primitive_normals, triangle_ids (the world's flat index).")
+             "Closest hits of (..., 6) rays: t_hit, geometry_ids (instance; paged: the file's instance), primitive_ids "
+             "(triangle of its mesh), primitive_uvs, primitive_normals, triangle_ids (the world's flat index; paged: "
+             "the paged triangle id).")
         .def("occluded",
              [](const World& w, const pyb::handle& rays, float tnear, float tfar) {
                  const FloatRows rows = float_rows(rays, 6, "rays");

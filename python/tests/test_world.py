@@ -207,8 +207,17 @@ def test_paged_world_from_a_converted_file(tmp_path):
     both = hit & np.isfinite(a["t_hit"])
     # Paged vertices are quantised (about 1e-5 of the scene's extent).
     np.testing.assert_allclose(a["t_hit"][both], b["t_hit"][both], rtol=1e-4, atol=2e-3)
-    # The paged file keeps no input ids: triangle_ids is the paged id, the rest unknown.
-    assert np.all(a["geometry_ids"] == 0xFFFFFFFF) and np.all(a["primitive_ids"] == 0xFFFFFFFF)
+    # The paged file keeps no input ids: triangle_ids is the paged id, geometry_ids
+    # the file's instance (the spheres share a mesh, paged once and placed by
+    # instances; the ground is a world-space page), primitive ids unknown.
+    assert np.all(a["primitive_ids"] == 0xFFFFFFFF)
+    assert np.all(a["geometry_ids"][~np.isfinite(a["t_hit"])] == 0xFFFFFFFF)
+    instanced = a["geometry_ids"][both] != 0xFFFFFFFF
+    assert instanced.any() and (~instanced).any()
+    # Hits on the same in-core instance of a sphere land on one paged instance.
+    sphere = (b["geometry_ids"][both] != b["geometry_ids"][both][~instanced][0]) & instanced
+    pairs = set(zip(b["geometry_ids"][both][sphere].tolist(), a["geometry_ids"][both][sphere].tolist()))
+    assert len(pairs) == len({p[0] for p in pairs})
     assert np.all(a["triangle_ids"][both] != 0xFFFFFFFF)
     assert np.all(np.isnan(a["primitive_normals"][both]))
     np.testing.assert_array_equal(paged.occluded(rays), np.isfinite(a["t_hit"]))

@@ -39,6 +39,9 @@ public:
     [[nodiscard]] std::vector<Light> lights() const override { return {file_->lights().begin(), file_->lights().end()}; }
     [[nodiscard]] Environment environment() const override { return file_->environment(); }
     [[nodiscard]] const Accel& accel() const override { return *accel_; }
+    void intersect(std::span<const Ray> rays, std::span<Hit> hits, std::span<uint32_t> instances) const override {
+        engine_->intersect(rays, hits, instances);
+    }
     [[nodiscard]] std::vector<PageCacheReport> caches() const override;
     [[nodiscard]] PagedQueryStats query_stats() const override;
     void reset_stats() override;

@@ -169,6 +169,10 @@ public:
     // query loop; a single ray is a batch of one). Hit::prim identifies a
     // paged triangle (page * 8192 + slot), not an input triangle.
     [[nodiscard]] virtual const Accel& accel() const = 0;
+    // accel().intersect, and each hit's instance in the file (0xFFFFFFFF for
+    // a world-space page or a miss): instanced meshes are paged once and
+    // placed by instances, so a paged triangle id alone does not say where.
+    virtual void intersect(std::span<const Ray> rays, std::span<Hit> hits, std::span<uint32_t> instances) const = 0;
     [[nodiscard]] virtual std::vector<PageCacheReport> caches() const = 0;
     [[nodiscard]] virtual PagedQueryStats query_stats() const = 0;
     virtual void reset_stats() = 0;
