@@ -355,22 +355,20 @@ PackSummary PackWriter::finish(const ProgressCallback& progress) {
         boxes[i] = m.transform_box(b);
     }
     TopGrid grid;
-    TopBvh top;
+    WideTree top;
     parallel::with_threads(s.options.threads, [&] {
         if (s.options.top_level == TopLevel::Grid) {
             grid = build_top_grid(boxes, s.options.grid_resolution);
             return;
         }
         grid = build_top_grid({}, 1);
-        top = build_top_bvh(boxes);
+        top = build_wide_tree(boxes);
         for (const Box3f& b : boxes) grid.scene_bounds.extend(b);
         if (!boxes.empty()) grid.grid_bounds = grid.scene_bounds;
     });
     std::vector<TopRef> refs = s.refs;
-    if (!top.nodes.empty()) {  // in the top BVH's leaf order
-        if (top.refs.size() != refs.size()) throw Error("paged scene writer: the top BVH lost or repeated references");
-        for (size_t k = 0; k < refs.size(); ++k) refs[k] = s.refs[top.refs[k]];
-    }
+    if (!top.nodes.empty())  // in the top BVH's leaf order
+        for (size_t k = 0; k < refs.size(); ++k) refs[k] = s.refs[top.items[k]];
     if (progress) progress(0.8);
     r.top_level = s.options.top_level;
     r.top_node_count = uint32_t(top.nodes.size());

@@ -129,33 +129,15 @@ int16_t quantise(float p, float offset, float scale) {
     return int16_t(std::clamp(q, -float(kQuantMax), float(kQuantMax)));
 }
 
-// The page's BVH over its quantised quads: a binned SAH binary BVH over the
-// quads' boxes, collapsed into CWBVH nodes (build_cwbvh: leaves of one to
-// three quads, octant-ordered slots, 8-bit child boxes); returns the quads'
-// leaf order (slot -> index into `quads`).
+// The page's wide BVH over its quantised quads; returns the quads' leaf
+// order (slot -> index into `quads`).
 std::vector<uint32_t> build_page_bvh(const std::vector<Quad>& quads, std::vector<PageNode>& nodes) {
-    std::vector<Triangle> boxes(quads.size());
-    for (size_t i = 0; i < quads.size(); ++i) {
-        Vec3f lo(INFINITY, INFINITY, INFINITY), hi(-INFINITY, -INFINITY, -INFINITY);
-        for (const auto& v : quads[i].v)
-            for (int a = 0; a < 3; ++a) {
-                lo[a] = std::min(lo[a], float(v[a]));
-                hi[a] = std::max(hi[a], float(v[a]));
-            }
-        // A triangle with the quad's box as its bounds and the box's centre as centroid.
-        boxes[i] = {lo, hi, (lo + hi) * 0.5f};
-    }
-    BuildOptions options;
-    options.builder = Builder::BinnedSah;
-    options.max_leaf_size = int(kPageLeafQuads);
-    options.threads = 0;  // already inside the writer's parallel loop over pages
-    const Bvh bvh = build_bvh(boxes, options);
-    CwbvhBvh wide = build_cwbvh(bvh, boxes);
-    if (wide.triangles.size() != quads.size()) throw Error("paged scene writer: the page BVH lost or repeated quads");
-    nodes = std::move(wide.nodes);
-    std::vector<uint32_t> order(wide.triangles.size());
-    for (size_t i = 0; i < order.size(); ++i) order[i] = float_to_bits(wide.triangles[i].v0.w);
-    return order;
+    std::vector<Box3f> boxes(quads.size());
+    for (size_t i = 0; i < quads.size(); ++i)
+        for (const auto& v : quads[i].v) boxes[i].extend(Vec3f(float(v[0]), float(v[1]), float(v[2])));
+    WideTree tree = build_wide_tree(boxes);
+    nodes = std::move(tree.nodes);
+    return std::move(tree.items);
 }
 
 ShadingTriangle corner_record(const ShadingTriangle& source, const uint8_t corner_of[3]) {
@@ -168,6 +150,24 @@ ShadingTriangle corner_record(const ShadingTriangle& source, const uint8_t corne
 }
 
 }  // namespace
+
+WideTree build_wide_tree(std::span<const Box3f> boxes) {
+    WideTree tree;
+    if (boxes.empty()) return tree;
+    // Each box as a "triangle" with the box's bounds and its centre as centroid.
+    std::vector<Triangle> shapes(boxes.size());
+    for (size_t i = 0; i < boxes.size(); ++i) shapes[i] = {boxes[i].lo, boxes[i].hi, boxes[i].center()};
+    BuildOptions options;
+    options.builder = Builder::BinnedSah;
+    options.max_leaf_size = int(kCwbvhMaxLeafTriangles);
+    const Bvh bvh = build_bvh(shapes, options);
+    CwbvhBvh wide = build_cwbvh(bvh, shapes);
+    if (wide.triangles.size() != boxes.size()) throw Error("paged scene writer: a wide BVH lost or repeated boxes");
+    tree.nodes = std::move(wide.nodes);
+    tree.items.resize(wide.triangles.size());
+    for (size_t i = 0; i < tree.items.size(); ++i) tree.items[i] = float_to_bits(wide.triangles[i].v0.w);
+    return tree;
+}
 
 std::vector<std::vector<uint32_t>> partition_into_pages(std::span<const Vec3f> positions,
                                                         std::span<const QuadRef> quads, uint32_t quads_per_page) {

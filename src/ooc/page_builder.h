@@ -26,6 +26,17 @@
 
 namespace rf::pack {
 
+// A CWBVH over boxes, the form of both a page's tree (over its quads'
+// boxes, in quantised space) and the top BVH (over the page references'
+// world boxes): a binned SAH BVH collapsed by build_cwbvh (leaves of one to
+// three boxes, octant-ordered slots, 8-bit child boxes). Leaf item k is
+// box items[k]. Empty for no boxes.
+struct WideTree {
+    std::vector<PageNode> nodes;
+    std::vector<uint32_t> items;
+};
+WideTree build_wide_tree(std::span<const Box3f> boxes);
+
 // Quad indices of each page, in page order.
 std::vector<std::vector<uint32_t>> partition_into_pages(std::span<const Vec3f> positions,
                                                         std::span<const QuadRef> quads, uint32_t quads_per_page);

@@ -157,19 +157,11 @@ inline constexpr uint32_t kPageLeafRef = 0x80000000u;
 // At most seven children wait per wide level.
 inline constexpr int kPageStackSize = kCwbvhMaxDepth * (kCwbvhWidth - 1) + 1;
 
-RF_HDI uint32_t page_popc(uint32_t x) {
-#if defined(__CUDA_ARCH__)
-    return uint32_t(__popc(x));
-#else
-    return uint32_t(__builtin_popcount(x));
-#endif
-}
-
 // The reference of slot `s` (nonempty) of `n`.
 RF_HDI uint32_t page_child_ref(const PageNode& n, int s) {
     const uint8_t meta = n.meta[s];
-    if (cwbvh_meta_is_inner(meta)) return n.base_index_child + page_popc(n.imask & ((1u << s) - 1u));
-    return kPageLeafRef | (n.base_index_triangle + (meta & 31u)) << 2 | page_popc(meta >> 5);
+    if (cwbvh_meta_is_inner(meta)) return n.base_index_child + cwbvh_popc(n.imask & ((1u << s) - 1u));
+    return kPageLeafRef | (n.base_index_triangle + (meta & 31u)) << 2 | cwbvh_popc(meta >> 5);
 }
 
 // Per-ray constants of the wide node test in the CWBVH paper's form (Ylitie,
@@ -405,14 +397,14 @@ RF_HDI void walk_wide_tree(const PageNode* nodes, const PageNodeTest& test, cons
             alignas(32) float near[kCwbvhWidth];
             const unsigned mask = test.hits(n, tmax, near);
             if (mask == 0) break;
-            if (page_popc(mask) == 1) {
-                ref = page_child_ref(n, int(page_popc(mask - 1)));
+            if (cwbvh_popc(mask) == 1) {
+                ref = page_child_ref(n, int(cwbvh_popc(mask - 1)));
                 continue;
             }
             uint32_t keys[kCwbvhWidth];
             test.sort(near, mask, keys);
             // The farther ones wait, farthest deepest; the nearest is next.
-            for (int i = int(page_popc(mask)) - 1; i > 0; --i)
+            for (int i = int(cwbvh_popc(mask)) - 1; i > 0; --i)
                 stack[top++] = {page_child_ref(n, int(keys[i] & 7u)), near[keys[i] & 7u]};
             ref = page_child_ref(n, int(keys[0] & 7u));
         }

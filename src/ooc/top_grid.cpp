@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 
-#include "accel/bvh/layout/cwbvh_layout.h"
 #include "core/parallel.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/scene/scene_geometry.h"
@@ -48,25 +47,6 @@ void grid_resolution_for(const Box3f& box, int cells_on_longest, int out[3]) {
         out[a] = longest > 0.0f ? std::clamp(int(std::lround(float(cells_on_longest) * extent[a] / longest)), 1,
                                              cells_on_longest)
                                 : 1;
-}
-
-TopBvh build_top_bvh(std::span<const Box3f> ref_boxes) {
-    TopBvh top;
-    if (ref_boxes.empty()) return top;
-    std::vector<Triangle> boxes(ref_boxes.size());
-    for (size_t i = 0; i < ref_boxes.size(); ++i) {
-        const Box3f& b = ref_boxes[i];
-        boxes[i] = {b.lo, b.hi, (b.lo + b.hi) * 0.5f};
-    }
-    BuildOptions options;
-    options.builder = Builder::BinnedSah;
-    options.max_leaf_size = int(kCwbvhMaxLeafTriangles);
-    const Bvh bvh = build_bvh(boxes, options);
-    CwbvhBvh wide = build_cwbvh(bvh, boxes);
-    top.nodes = std::move(wide.nodes);
-    top.refs.resize(wide.triangles.size());
-    for (size_t i = 0; i < top.refs.size(); ++i) top.refs[i] = float_to_bits(wide.triangles[i].v0.w);
-    return top;
 }
 
 TopGrid build_top_grid(std::span<const Box3f> ref_boxes, int cells_on_longest) {

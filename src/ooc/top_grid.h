@@ -26,16 +26,6 @@ struct TopGrid {
 // Over the world boxes of the top references (pack_format.h's TopRef).
 TopGrid build_top_grid(std::span<const Box3f> ref_boxes, int cells_on_longest);
 
-// The wide top level: a binned SAH BVH over the references' world boxes
-// collapsed into CWBVH nodes (leaves of one to three references); leaf
-// item k is reference refs[k] (the writer stores the references in this
-// order). Empty for no references.
-struct TopBvh {
-    std::vector<PageNode> nodes;
-    std::vector<uint32_t> refs;  // the reference of each leaf item, in leaf order
-};
-
-TopBvh build_top_bvh(std::span<const Box3f> ref_boxes);
 
 // Cells per axis for a box and a resolution on its longest axis.
 void grid_resolution_for(const Box3f& box, int cells_on_longest, int out[3]);

@@ -85,13 +85,7 @@ inline constexpr float kCwbvhPostponeRatio = 0.2f;
 
 namespace detail {
 
-RF_HDI uint32_t cwbvh_popc(uint32_t x) {
-#if defined(__CUDA_ARCH__)
-    return static_cast<uint32_t>(__popc(x));
-#else
-    return static_cast<uint32_t>(__builtin_popcount(x));
-#endif
-}
+using rf::cwbvh_popc;
 
 // Index of the highest / lowest set bit; x != 0.
 RF_HDI int cwbvh_highest_bit(uint32_t x) {

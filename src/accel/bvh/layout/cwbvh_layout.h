@@ -87,6 +87,15 @@ inline constexpr int kCwbvhMaxLeafTriangles = 3;
 inline constexpr int kCwbvhStackSize = 32;
 inline constexpr int kCwbvhMaxDepth = kCwbvhStackSize + 1;
 
+// Set bits of x (a node's inner slots below a slot, a leaf's unary count).
+RF_HDI uint32_t cwbvh_popc(uint32_t x) {
+#if defined(__CUDA_ARCH__)
+    return static_cast<uint32_t>(__popc(x));
+#else
+    return static_cast<uint32_t>(__builtin_popcount(x));
+#endif
+}
+
 // meta byte helpers: empty slot, inner-node marker and leaf encoding.
 inline constexpr uint8_t kCwbvhEmptyMeta = 0;
 RF_HDI bool cwbvh_meta_is_inner(uint8_t meta) { return (meta & 0x18u) == 0x18u; }
