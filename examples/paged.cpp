@@ -1,5 +1,5 @@
 // Generates a small paged scene (.rfpack) with the library, opens it as a
-// world whose page caches may hold about a tenth of it, renders it with the
+// world whose page caches may hold about a tenth of its pages, renders it with the
 // path tracer and prints what the caches did: a scene rendered from pages
 // read on demand, larger than the memory it is given.
 //   paged OUT.rfpack OUT.png [TRIANGLES]     default 200000 triangles
@@ -23,7 +23,7 @@ int main(int argc, char** argv) {
                     static_cast<unsigned long long>(written.file_bytes));
 
         rf::WorldOptions options;
-        options.paged.memory_budget = written.file_bytes / 10;  // a tenth of the file
+        options.paged.memory_budget = written.decoded_bytes / 10;  // a tenth of the (decoded) pages
         const auto world = rf::open_world(argv[1], options);
         rf::RenderOptions render;
         render.width = 160;

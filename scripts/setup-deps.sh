@@ -19,6 +19,7 @@ packages=(
   libbenchmark-dev               # micro-benchmarks
   libembree-dev                  # optional benchmark peer (Embree 3)
   libzstd-dev                    # compressed geometry pages
+  libmeshoptimizer-dev           # paged scenes' page codec (meshopt vertex and index codecs before zstd)
   clang libclang-rt-14-dev       # libFuzzer targets and sanitizer runtimes (scripts/fuzz.sh)
   zlib1g-dev                     # tinyexr compiled into the fuzzers needs zlib.h
   python3-matplotlib             # charts of `rayforge bench --json` (scripts/plot-bench.py)

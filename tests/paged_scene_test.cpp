@@ -56,7 +56,9 @@ const PagedFixture& fixture(AttributeFormat format = AttributeFormat::Full, TopL
         options.top_level = top;
         options.attribute_format = format;
         options.quads_per_page = 512;  // many pages from a small scene
-        options.codec = format == AttributeFormat::Compact ? Codec::Zstd : Codec::None;
+        options.codec = format == AttributeFormat::Compact  ? Codec::Zstd
+                        : format == AttributeFormat::Shared ? Codec::Meshopt
+                                                            : Codec::None;
         slot->converted = convert_scene(slot->scene, slot->path, options);
     }
     return *slot;
@@ -231,7 +233,7 @@ INSTANTIATE_TEST_SUITE_P(PagedScene, PagedTopLevels, ::testing::Values(TopLevel:
 // Paged hits are the in-core hits up to quantisation: the same surfaces at
 // (nearly) the same distances and with the same shading records.
 TEST(PagedScene, PagedHitsMatchInCoreHitsWithinQuantisation) {
-    for (AttributeFormat format : {AttributeFormat::Full, AttributeFormat::Compact}) {
+    for (AttributeFormat format : {AttributeFormat::Full, AttributeFormat::Compact, AttributeFormat::Shared}) {
         const PagedFixture& f = fixture(format);
         auto file = std::make_shared<const PackFile>(f.path);
         PagedEngine engine(file, {size_t(1) << 20, size_t(1) << 16}, 0);
@@ -262,6 +264,50 @@ TEST(PagedScene, PagedHitsMatchInCoreHitsWithinQuantisation) {
         EXPECT_GT(double(agree), 0.995 * double(rays.size())) << "format " << int(format);
         EXPECT_GT(double(same_record), 0.995 * double(both)) << "format " << int(format);
     }
+}
+
+// The default file (shared-vertex attributes, meshopt codec) and a Full,
+// raw one of the same scene: the same pages, so the same hits; records equal
+// but for the stated rounding of the geometric normal and the uv/area ratio.
+TEST(PagedScene, SharedAttributesDecodeToTheFullRecords) {
+    const PagedFixture& full = fixture(AttributeFormat::Full);
+    const PagedFixture& shared = fixture(AttributeFormat::Shared);
+    auto full_file = std::make_shared<const PackFile>(full.path);
+    auto shared_file = std::make_shared<const PackFile>(shared.path);
+    EXPECT_LT(shared_file->header().file_bytes * 3, full_file->header().file_bytes);
+    size_t meshopt_pages = 0;
+    for (const PageEntry& e : shared_file->directory()) meshopt_pages += e.codec == Codec::Meshopt;
+    EXPECT_GT(meshopt_pages, shared_file->header().geometry_pages);  // geometry and attribute pages
+    // Tiny caches, so that attribute pages are read, evicted and read again.
+    PagedEngine a(full_file, {size_t(1) << 20, size_t(1) << 14}, 0), b(shared_file, {size_t(1) << 20, size_t(1) << 14}, 0);
+    std::vector<Ray> rays = test::make_rays(full.geometry, 6000, 5);
+    std::vector<Hit> ha(rays.size()), hb(rays.size());
+    std::vector<uint32_t> ia(rays.size()), ib(rays.size());
+    a.intersect(rays, ha, ia);
+    b.intersect(rays, hb, ib);
+    std::vector<ShadingTriangle> ra(rays.size()), rb(rays.size());
+    a.fetch_shading(ha, ra, ia);
+    b.fetch_shading(hb, rb, ib);
+    size_t found = 0;
+    for (size_t i = 0; i < rays.size(); ++i) {
+        ASSERT_EQ(ha[i].prim, hb[i].prim) << i;
+        ASSERT_EQ(ha[i].t, hb[i].t) << i;
+        ASSERT_EQ(ia[i], ib[i]) << i;
+        if (!ha[i].found()) continue;
+        ++found;
+        const ShadingTriangle &x = ra[i], &y = rb[i];
+        EXPECT_EQ(x.material, y.material);
+        EXPECT_EQ(x.flags, y.flags);
+        EXPECT_EQ(x.tangent, y.tangent);
+        for (int c = 0; c < 3; ++c) {
+            EXPECT_EQ(x.normals[c], y.normals[c]);
+            EXPECT_EQ(x.uv[c].x, y.uv[c].x);
+            EXPECT_EQ(x.uv[c].y, y.uv[c].y);
+        }
+        EXPECT_LT(length(x.geometric_normal - y.geometric_normal), 0.06 * 3.14159265 / 180.0) << i;
+        EXPECT_NEAR(y.uv_area_ratio, x.uv_area_ratio, 0.0014 * x.uv_area_ratio) << i;
+    }
+    EXPECT_GT(found, rays.size() / 4);
 }
 
 // A generated forest: unique terrain and prototypes, thousands of
@@ -559,17 +605,21 @@ TEST(PagedScene, TruncatedAndCorruptedFilesGiveOneLineErrors) {
         EXPECT_NE(std::string(e.what()).find("page 3 checksum mismatch"), std::string::npos) << e.what();
     }
 
-    // A version-1 file (binary page BVHs) is refused with what to do.
-    std::vector<uint8_t> old_version = good;
-    FileHeader header;
-    std::memcpy(&header, old_version.data(), sizeof(header));
-    header.version = 1;
-    header.header_checksum = crc32c(&header, offsetof(FileHeader, header_checksum));
-    std::memcpy(old_version.data(), &header, sizeof(header));
-    write_bytes(dir + "/v1.rfpack", old_version);
-    EXPECT_NE(open_error(dir + "/v1.rfpack").find("version 1 (this rayforge reads version 2; convert the scene again)"),
-              std::string::npos)
-        << open_error(dir + "/v1.rfpack");
+    // Version 1 (binary page BVHs) and 2 (per-triangle attribute records
+    // only) files are refused with what to do.
+    for (uint32_t version : {1u, 2u}) {
+        std::vector<uint8_t> old_version = good;
+        FileHeader header;
+        std::memcpy(&header, old_version.data(), sizeof(header));
+        header.version = version;
+        header.header_checksum = crc32c(&header, offsetof(FileHeader, header_checksum));
+        std::memcpy(old_version.data(), &header, sizeof(header));
+        const std::string old_path = dir + "/v" + std::to_string(version) + ".rfpack";
+        write_bytes(old_path, old_version);
+        const std::string expected =
+            "version " + std::to_string(version) + " (this rayforge reads version 3; convert the scene again)";
+        EXPECT_NE(open_error(old_path).find(expected), std::string::npos) << open_error(old_path);
+    }
 }
 
 // Wide trees in pages and in the resident top level come from files: a tree

@@ -119,8 +119,13 @@ int main(int argc, char** argv) {
         using pack::Codec;
         using pack::PackWriterOptions;
         using pack::TopLevel;
-        PackWriterOptions plain;
+        PackWriterOptions plain;  // the defaults: shared-vertex attributes, the meshopt codec
         convert(dir, "triangles", scene_of({quad(0.0f), lone_triangle()}), plain);
+        PackWriterOptions full_raw = plain;
+        full_raw.attribute_format = AttributeFormat::Full;
+        full_raw.codec = Codec::None;
+        convert(dir, "full-raw", scene_of({quad(0.0f), lone_triangle(), wavy_grid(6)}), full_raw);
+        convert(dir, "shared-meshopt", scene_of({wavy_grid(12), tetrahedron(Vec3f(0, 0, 2))}), plain);
         PackWriterOptions grid = plain;
         grid.top_level = TopLevel::Grid;
         grid.grid_resolution = 4;

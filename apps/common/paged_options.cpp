@@ -87,13 +87,21 @@ void add_paged_read_options(CLI::App* cmd, PagedSceneOptions& o) {
 }
 
 void add_paged_write_options(CLI::App* cmd, PagedWriteArgs& a) {
-    cmd->add_flag("--zstd", a.zstd, "Compress every page with zstd (kept raw where that is not smaller)");
-    cmd->add_option("--zstd-level", a.zstd_level, "zstd level, 1..19 (default 3)")->check(CLI::Range(1, 19));
-    cmd->add_flag("--compact-attributes", a.compact,
-                  "32-byte shading records (half-float uvs; no normal-map tangents, no uv-density mip selection) "
-                  "instead of 64");
+    CLI::Option* codec = add_named_option(
+        cmd, "--codec", a.codec, parse_paged_codec, {"meshopt", "zstd", "none"},
+        "How pages are stored: meshopt (meshoptimizer's vertex and index codecs, then zstd; the default), zstd "
+        "(zstd alone) or none (raw); a page is kept raw where the codec does not make it smaller");
+    cmd->add_flag("--zstd", a.zstd, "The same as --codec zstd")->excludes(codec);
+    cmd->add_option("--zstd-level", a.zstd_level, "zstd level of --codec meshopt and zstd, 1..19 (default 3)")
+        ->check(CLI::Range(1, 19));
+    CLI::Option* attributes = add_named_option(
+        cmd, "--attributes", a.attributes, parse_paged_attributes, {"shared", "full", "compact"},
+        "How shading normals, uvs and materials are stored: shared (per-vertex data shared within a page; the "
+        "default, exact but for an octahedral geometric normal), full (a 64-byte record a triangle, exact) or "
+        "compact (a 32-byte record: half-float uvs, no normal-map tangents, no uv-density mip selection)");
+    cmd->add_flag("--compact-attributes", a.compact, "The same as --attributes compact")->excludes(attributes);
     cmd->add_option("--attribute-page", a.attribute_page,
-                    "Bytes per surface-attribute page, a power of two from 1K to 1M (default 4K)");
+                    "Bytes per surface-attribute page (at most, before the codec), a power of two from 1K to 1M (default 8K)");
     cmd->add_option("--page-quads", a.quads_per_page, "Quads per geometry page, 64..4096 (default 4096, Garanzha 2014's 4K)")
         ->check(CLI::Range(64, 4096));
     add_named_option(cmd, "--top", a.top, parse_paged_top_level, {"bvh", "grid"},
@@ -108,9 +116,9 @@ void add_paged_write_options(CLI::App* cmd, PagedWriteArgs& a) {
 
 PagedWriteOptions paged_write_options(const PagedWriteArgs& a, int threads) {
     PagedWriteOptions o;
-    o.zstd = a.zstd;
+    o.codec = a.zstd ? PagedCodec::Zstd : a.codec;
     o.zstd_level = a.zstd_level;
-    o.compact_attributes = a.compact;
+    o.attributes = a.compact ? PagedAttributes::Compact : a.attributes;
     o.attribute_page_bytes = uint32_t(parse_bytes(a.attribute_page, "--attribute-page"));
     o.quads_per_page = a.quads_per_page;
     o.top_level = a.top;

@@ -17,10 +17,12 @@ namespace rf::cli {
 void add_paged_read_options(CLI::App* cmd, PagedSceneOptions& options);
 
 struct PagedWriteArgs {
-    bool zstd = false;
+    PagedCodec codec = PagedCodec::Meshopt;
+    bool zstd = false;     // --zstd: --codec zstd
     int zstd_level = 3;
-    bool compact = false;
-    std::string attribute_page = "4K";
+    PagedAttributes attributes = PagedAttributes::Shared;
+    bool compact = false;  // --compact-attributes: --attributes compact
+    std::string attribute_page = "8K";
     uint32_t quads_per_page = 4096;
     PagedTopLevel top = PagedTopLevel::WideBvh;
     bool flatten_instances = false;

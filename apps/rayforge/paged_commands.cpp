@@ -38,14 +38,14 @@ void print_write_report(const std::string& path, const PagedWriteReport& r, doub
                          : " (+ " + std::to_string(r.instances) + " instances placing " +
                                std::to_string(r.instanced_triangles) + " more)";
     std::printf("%s: %llu unique triangles%s -> %llu quads (%.1f%% paired) in %u geometry, %u attribute, %u texture "
-                "pages | %s (geometry %s, attributes %s, textures %s, resident %s), %.1f bytes a unique triangle | max "
-                "quantisation error %.3g | %.1f s (%.2f Mtriangles/s)\n",
+                "pages | %s (geometry %s, attributes %s, textures %s, resident %s; %s decoded), %.1f bytes a unique "
+                "triangle | max quantisation error %.3g | %.1f s (%.2f Mtriangles/s)\n",
                 path.c_str(), (unsigned long long)r.triangles, placed.c_str(), (unsigned long long)r.quads,
                 r.triangles ? 100.0 * double(r.paired_triangles) / double(r.triangles) : 0.0, r.geometry_pages,
                 r.attribute_pages, r.texture_pages, format_bytes(double(r.file_bytes)).c_str(),
                 format_bytes(double(r.geometry_bytes)).c_str(), format_bytes(double(r.attribute_bytes)).c_str(),
                 format_bytes(double(r.texture_bytes)).c_str(), format_bytes(double(r.resident_bytes)).c_str(),
-                r.bytes_per_triangle(), r.max_quantisation_error, ms / 1e3, ms > 0.0 ? double(r.triangles) / (ms * 1e3) : 0.0);
+                format_bytes(double(r.decoded_bytes)).c_str(), r.bytes_per_triangle(), r.max_quantisation_error, ms / 1e3, ms > 0.0 ? double(r.triangles) / (ms * 1e3) : 0.0);
     for (const std::string& note : r.notes) std::printf("%s: note: %s\n", path.c_str(), note.c_str());
 }
 
@@ -156,11 +156,12 @@ int run_paged_info(const std::string& path, bool verbose) {
         std::printf(", %llu instances placing %llu more triangles (%llu in all)", (unsigned long long)i.instances,
                     (unsigned long long)i.instanced_triangles, (unsigned long long)(i.instanced_triangles + i.triangles));
     std::printf("\n");
-    std::printf("  file %s (%.1f bytes a unique triangle): %u geometry pages, %u attribute pages (%s each, %s records), %u "
-                "texture tiles\n",
+    std::printf("  file %s (%.1f bytes a unique triangle): %u geometry pages, %u attribute pages (at most %s each, %s), %u "
+                "texture tiles; stored: %llu meshopt, %llu zstd, %llu raw; %s decoded\n",
                 format_bytes(double(i.file_bytes)).c_str(), i.bytes_per_triangle(), i.geometry_pages,
-                i.attribute_pages, format_bytes(double(i.attribute_page_bytes)).c_str(),
-                i.compact_attributes ? "32-byte" : "64-byte", i.texture_pages);
+                i.attribute_pages, format_bytes(double(i.attribute_page_bytes)).c_str(), to_string(i.attributes).c_str(),
+                i.texture_pages, (unsigned long long)i.meshopt_pages, (unsigned long long)i.zstd_pages,
+                (unsigned long long)i.raw_pages, format_bytes(double(i.decoded_bytes)).c_str());
     const std::string top = i.top_level == PagedTopLevel::Grid
                                 ? "top grid " + std::to_string(i.grid[0]) + "x" + std::to_string(i.grid[1]) + "x" +
                                       std::to_string(i.grid[2])

@@ -688,7 +688,7 @@ std::string info_line(const PagedFileSummary& s) {
          << format("%.1f KiB", double(s.geometry_slot_bytes) / 1024.0) << ", " << format("%.0f", s.mean_page_quads)
          << " quads per page on average), " << thousands(i.attribute_pages) << " attribute pages ("
          << format("%.0f KiB", double(i.attribute_page_bytes) / 1024.0) << ", "
-         << (i.compact_attributes ? "32" : "64") << "-byte records), " << thousands(i.texture_pages)
+         << to_string(i.attributes) << " attributes), " << thousands(i.texture_pages)
          << " texture tiles; file " << megabytes(double(i.file_bytes)) << " ("
          << format("%.1f", i.bytes_per_triangle()) << " bytes a unique triangle), always resident "
          << megabytes(double(i.resident_bytes)) << "; ";
@@ -813,7 +813,7 @@ Json summary_json(const PagedFileSummary& s) {
             {"bytes_per_triangle", i.bytes_per_triangle()},
             {"geometry_pages", i.geometry_pages}, {"attribute_pages", i.attribute_pages},
             {"texture_pages", i.texture_pages}, {"grid", {i.grid[0], i.grid[1], i.grid[2]}},
-            {"resident_bytes", i.resident_bytes}, {"compact_attributes", i.compact_attributes},
+            {"resident_bytes", i.resident_bytes}, {"attributes", to_string(i.attributes)},
             {"attribute_page_bytes", i.attribute_page_bytes}, {"inferred_page_quads", s.inferred_page_quads},
             {"mean_page_quads", s.mean_page_quads}, {"largest_geometry_page_bytes", s.geometry_slot_bytes},
             {"camera", to_string(s.camera)}, {"shadow_light", s.light.empty() ? Json(nullptr) : Json(s.light)},

@@ -7,7 +7,6 @@
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
-#include <zstd.h>
 
 #include <algorithm>
 #include <array>
@@ -15,6 +14,8 @@
 #include <cmath>
 #include <cstring>
 
+#include "ooc/page_codec.h"
+#include "ooc/shared_attributes.h"
 #include "rayforge/core/error.h"
 #include "rayforge/core/float_bits.h"
 #include "rayforge/core/memory_budget.h"
@@ -177,7 +178,9 @@ void PackFile::read_directory(uint64_t size) {
                               : i < first_texture_page()                ? PageKind::Attributes
                                                                         : PageKind::TextureTile;
         const uint64_t at = h.directory_offset + i * sizeof(PageEntry);
-        if (e.kind != want || (e.codec != Codec::None && e.codec != Codec::Zstd))
+        const bool codec_ok = e.codec == Codec::None || e.codec == Codec::Zstd ||
+                              (e.codec == Codec::Meshopt && e.kind != PageKind::TextureTile);
+        if (e.kind != want || !codec_ok)
             throw file_byte_error(path_, at, "page " + std::to_string(i) + ": bad kind or codec");
         if (e.offset > size || e.stored_bytes > size - e.offset || e.raw_bytes > kMaxPageBytes ||
             e.stored_bytes == 0 || (e.codec == Codec::None && e.stored_bytes != e.raw_bytes))
@@ -206,7 +209,8 @@ void PackFile::read_resident(uint64_t size) {
     if ((r.top_level == TopLevel::WideBvh) != (r.top_node_count > 0 || r.top_ref_count == 0) ||
         r.top_node_count > 2 * uint64_t(r.top_ref_count))
         throw file_byte_error(path_, h.resident_offset, "top BVH node count disagrees with the top level");
-    if (r.attribute_format != AttributeFormat::Full && r.attribute_format != AttributeFormat::Compact)
+    if (r.attribute_format != AttributeFormat::Full && r.attribute_format != AttributeFormat::Compact &&
+        r.attribute_format != AttributeFormat::Shared)
         throw file_byte_error(path_, h.resident_offset, "bad attribute format");
     if (r.attribute_page_bytes < 1024 || r.attribute_page_bytes > (1u << 20) ||
         (r.attribute_page_bytes & (r.attribute_page_bytes - 1)) != 0)
@@ -270,11 +274,15 @@ void PackFile::validate_instances() const {
 
 void PackFile::validate_resident() const {
     const uint64_t at = header_.resident_offset;
-    const uint32_t records_per_page = resident_.attribute_page_bytes / attribute_record_bytes(resident_.attribute_format);
+    const uint32_t record = attribute_record_bytes(resident_.attribute_format);
     uint64_t next_attribute_page = 0;  // the writer lays each page's attribute pages after the previous one's
     for (size_t i = 0; i < pages_.size(); ++i) {
         const PageInfo& p = pages_[i];
-        const uint64_t attribute_pages = (2ull * p.quad_count + records_per_page - 1) / records_per_page;
+        // Records of a fixed size fill their pages; shared runs are whatever fits (at least one triangle).
+        const bool run_ok = record != 0 ? p.attribute_triangles == resident_.attribute_page_bytes / record
+                                        : p.attribute_triangles >= 1 && p.attribute_triangles <= 2 * kQuadsPerPage;
+        if (!run_ok) throw file_byte_error(path_, at, "page " + std::to_string(i) + ": bad attribute run length");
+        const uint64_t attribute_pages = (2ull * p.quad_count + p.attribute_triangles - 1) / p.attribute_triangles;
         if (p.first_attribute_page != next_attribute_page)
             throw file_byte_error(path_, at, "page " + std::to_string(i) + ": its attribute pages are out of order");
         next_attribute_page += attribute_pages;
@@ -374,11 +382,9 @@ size_t PackFile::read_page(uint64_t index, std::span<uint8_t> out, std::vector<u
                                                    (errno ? std::strerror(errno) : "short read"));
     if (crc32c(stored, e.stored_bytes) != e.checksum)
         throw file_byte_error(path_, e.offset, "page " + std::to_string(index) + " checksum mismatch (corrupted file)");
-    if (e.codec == Codec::Zstd) {
-        const size_t got = ZSTD_decompress(out.data(), e.raw_bytes, stored, e.stored_bytes);
-        if (ZSTD_isError(got) || got != e.raw_bytes)
-            throw file_byte_error(path_, e.offset, "page " + std::to_string(index) + " does not decompress");
-    }
+    if (e.codec != Codec::None &&
+        !decode_page({stored, e.stored_bytes}, e.codec, e.kind, resident_.attribute_format, out.first(e.raw_bytes)))
+        throw file_byte_error(path_, e.offset, "page " + std::to_string(index) + " does not decompress");
     check_page_contents(index, out.first(e.raw_bytes));
     return e.stored_bytes;
 }
@@ -397,27 +403,33 @@ void PackFile::check_page_contents(uint64_t index, std::span<const uint8_t> raw)
     }
     if (index < first_texture_page()) {
         // (A page no geometry page owns is never read by shading: not checked.)
-        const size_t expected = expected_attribute_bytes(uint32_t(index - first_attribute_page()));
-        if (expected != 0 && raw.size() != expected) throw Error(what + ": an attribute page of the wrong size");
+        const uint32_t triangles = attribute_page_triangles(uint32_t(index - first_attribute_page()));
+        if (triangles == 0) return;
+        const uint32_t record = attribute_record_bytes(resident_.attribute_format);
+        if (record != 0) {
+            if (raw.size() != size_t(triangles) * record) throw Error(what + ": an attribute page of the wrong size");
+            return;
+        }
+        const std::string problem = check_shared_page(raw, triangles, uint32_t(materials_.size()));
+        if (!problem.empty()) throw Error(what + ": " + problem);
         return;
     }
     if (raw.size() != size_t(kTextureTileSide) * kTextureTileSide * 4) throw Error(what + ": a texture tile of the wrong size");
 }
 
-// Attribute page `a` holds records of the geometry page whose range contains
-// it: full pages, and the rest of its 2 * quad_count records in the last.
-size_t PackFile::expected_attribute_bytes(uint32_t a) const {
-    const uint32_t record = attribute_record_bytes(resident_.attribute_format);
-    const uint32_t per_page = resident_.attribute_page_bytes / record;
+// Attribute page `a` holds triangles of the geometry page whose range
+// contains it: full runs, and the rest of its 2 * quad_count triangles in
+// the last.
+uint32_t PackFile::attribute_page_triangles(uint32_t a) const {
     const auto owner = std::upper_bound(pages_.begin(), pages_.end(), a, [](uint32_t x, const PageInfo& p) {
         return x < p.first_attribute_page;
     });
     if (owner == pages_.begin()) return 0;
     const PageInfo& p = *(owner - 1);
-    const uint64_t records = 2ull * p.quad_count;
-    const uint64_t first = uint64_t(a - p.first_attribute_page) * per_page;
-    if (first >= records) return 0;
-    return size_t(std::min<uint64_t>(per_page, records - first)) * record;
+    const uint64_t triangles = 2ull * p.quad_count;
+    const uint64_t first = uint64_t(a - p.first_attribute_page) * p.attribute_triangles;
+    if (first >= triangles) return 0;
+    return uint32_t(std::min<uint64_t>(p.attribute_triangles, triangles - first));
 }
 
 void PackFile::drop_os_cache() const {

@@ -78,7 +78,7 @@ private:
     void validate_instances() const;
     void validate_materials() const;
     void check_page_contents(uint64_t index, std::span<const uint8_t> raw) const;
-    [[nodiscard]] size_t expected_attribute_bytes(uint32_t attribute_page) const;
+    [[nodiscard]] uint32_t attribute_page_triangles(uint32_t attribute_page) const;
 
     std::string path_;
     int fd_ = -1;

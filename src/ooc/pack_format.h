@@ -6,8 +6,11 @@
 //     (format 2: CWBVH nodes, Ylitie et al. 2017, in the page's quantised
 //     coordinates, leaves of one to three quads), the quantisation folded
 //     into the page's decode transform (§6.3.2);
-//   - attribute pages: the shading record of every triangle, in the quads'
-//     Morton order (§6.4), in pages of `attribute_page_bytes`;
+//   - attribute pages: the shading data of every triangle, in the quads'
+//     Morton order (§6.4), in pages of at most `attribute_page_bytes`, each
+//     holding a run of PageInfo::attribute_triangles triangles (Shared
+//     pages: per-vertex data shared within the run; Full, Compact: a
+//     fixed-size record per triangle);
 //   - texture pages: 32x32-texel tiles of every mip level (§6.5).
 // What is always resident (the "resident section"): per geometry page its
 // world bounds and decode transform, the top level (a CWBVH over the page
@@ -32,9 +35,10 @@
 namespace rf::pack {
 
 inline constexpr char kMagic[8] = {'R', 'F', 'P', 'A', 'C', 'K', '\r', '\n'};
-// 2: wide (CWBVH) page BVHs; 1 (binary page BVHs) is no longer read: a
-// version-1 file gets a "convert it again" error.
-inline constexpr uint32_t kVersion = 2;
+// 3: shared-vertex attribute pages and per-page attribute runs
+// (PageInfo::attribute_triangles), the meshopt page codec; 2: wide (CWBVH)
+// page BVHs. Older files are not read: they get a "convert it again" error.
+inline constexpr uint32_t kVersion = 3;
 
 // Garanzha 2014's parameters (§6.3, §6.7.1).
 inline constexpr uint32_t kQuadsPerPage = 4096;      // NP
@@ -44,14 +48,16 @@ inline constexpr uint32_t kTrianglesPerPageSlot = 2 * kQuadsPerPage;  // Hit::pr
 inline constexpr int kDefaultGridResolution = 32;    // the top grid, cells per axis
 inline constexpr int kMaxGridResolution = 256;
 inline constexpr uint32_t kTextureTileSide = 32;     // texels; an RGBA8 tile is 4 KB
-inline constexpr uint32_t kDefaultAttributePageBytes = 4096;
+inline constexpr uint32_t kDefaultAttributePageBytes = 8192;
 inline constexpr int16_t kQuantMax = 32767;          // quantised coordinates lie in [-kQuantMax, kQuantMax]
 
 enum class PageKind : uint8_t { Geometry = 0, Attributes = 1, TextureTile = 2 };
-enum class Codec : uint8_t { None = 0, Zstd = 1 };
+// Codec::Meshopt: meshoptimizer's vertex and index codecs, then zstd (ooc/page_codec.h).
+enum class Codec : uint8_t { None = 0, Zstd = 1, Meshopt = 2 };
 enum class AttributeFormat : uint8_t {
     Full = 0,     // 64-byte rf::ShadingTriangle records, exact
     Compact = 1,  // 32-byte CompactShading records (half-float uvs)
+    Shared = 2,   // per-vertex data shared within a page (ooc/shared_attributes.h): exact but for an octahedral geometric normal
 };
 
 // At offset 0. header_checksum covers the bytes before it.
@@ -126,7 +132,8 @@ struct PageInfo {
     uint32_t quad_count = 0;
     uint32_t first_attribute_page = 0;  // attribute pages of this page's triangles start here
     uint32_t object = 0;                // the input object it came from
-    uint32_t instanced = 0;             // 1: object space, reached only through instances
+    uint16_t instanced = 0;             // 1: object space, reached only through instances
+    uint16_t attribute_triangles = 0;   // triangles per attribute page (the last holds the rest)
 };
 static_assert(sizeof(PageInfo) == 64);
 
@@ -226,8 +233,10 @@ struct ResidentHeader {
 static_assert(sizeof(ResidentHeader) == 192);
 inline constexpr uint32_t kEmptyCell = 0xFFFFFFFFu;
 
-// Bytes of one attribute record.
-[[nodiscard]] RF_HDI uint32_t attribute_record_bytes(AttributeFormat f) { return f == AttributeFormat::Full ? 64u : 32u; }
+// Bytes of one attribute record (Full, Compact; a Shared page has no fixed-size records: 0).
+[[nodiscard]] RF_HDI uint32_t attribute_record_bytes(AttributeFormat f) {
+    return f == AttributeFormat::Full ? 64u : f == AttributeFormat::Compact ? 32u : 0u;
+}
 
 // Checksum of page and section bytes: CRC-32C (Castagnoli), table-driven.
 uint32_t crc32c(const void* data, size_t bytes, uint32_t seed = 0);

@@ -4,7 +4,6 @@
 
 #include <fcntl.h>
 #include <unistd.h>
-#include <zstd.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -14,6 +13,7 @@
 
 #include "core/parallel.h"
 #include "ooc/page_builder.h"
+#include "ooc/page_codec.h"
 #include "ooc/quad_pairing.h"
 #include "ooc/top_grid.h"
 #include "rayforge/core/error.h"
@@ -24,30 +24,6 @@ namespace rf::pack {
 namespace {
 
 size_t round16(size_t n) { return (n + 15) & ~size_t(15); }
-
-// A page's bytes as stored: zstd when asked for and smaller, raw otherwise.
-struct StoredPage {
-    std::vector<uint8_t> bytes;
-    uint32_t raw_bytes = 0;
-    Codec codec = Codec::None;
-};
-
-StoredPage store(std::vector<uint8_t> raw, Codec codec, int level) {
-    StoredPage s;
-    s.raw_bytes = uint32_t(raw.size());
-    if (codec == Codec::Zstd) {
-        std::vector<uint8_t> packed(ZSTD_compressBound(raw.size()));
-        const size_t n = ZSTD_compress(packed.data(), packed.size(), raw.data(), raw.size(), level);
-        if (!ZSTD_isError(n) && n < raw.size()) {
-            packed.resize(n);
-            s.bytes = std::move(packed);
-            s.codec = Codec::Zstd;
-            return s;
-        }
-    }
-    s.bytes = std::move(raw);
-    return s;
-}
 
 void check_options(const PackWriterOptions& o) {
     const uint32_t a = o.attribute_page_bytes;
@@ -60,7 +36,9 @@ void check_options(const PackWriterOptions& o) {
     if (o.grid_resolution < 1 || o.grid_resolution > kMaxGridResolution)
         throw Error("paged scene writer: grid resolution must be in [1, " + std::to_string(kMaxGridResolution) +
                     "], got " + std::to_string(o.grid_resolution));
-    if (o.codec == Codec::Zstd && (o.zstd_level < 1 || o.zstd_level > 19))
+    if (uint8_t(o.codec) > uint8_t(Codec::Meshopt) || uint8_t(o.attribute_format) > uint8_t(AttributeFormat::Shared))
+        throw Error("paged scene writer: unknown codec or attribute format");
+    if (o.codec != Codec::None && (o.zstd_level < 1 || o.zstd_level > 19))
         throw Error("paged scene writer: zstd level must be in [1, 19], got " + std::to_string(o.zstd_level));
 }
 
@@ -148,6 +126,7 @@ struct PackWriter::State {
         e.checksum = crc32c(page.bytes.data(), page.bytes.size());
         e.kind = kind;
         e.codec = page.codec;
+        summary.decoded_bytes += page.raw_bytes;
         write_at(page.bytes.data(), page.bytes.size(), end);
         end += page.bytes.size();
         return e;
@@ -229,7 +208,8 @@ uint32_t PackWriter::add_texture(const Texture& texture) {
                         const uint32_t sy = std::min(ty * side + y, uint32_t(t.height) - 1);
                         std::memcpy(&tile[(y * side + x) * 4], &texels[(size_t(sy) * size_t(t.width) + sx) * 4], 4);
                     }
-                const StoredPage page = store(std::move(tile), s.options.codec, s.options.zstd_level);
+                const StoredPage page = encode_page(std::move(tile), PageKind::TextureTile, s.options.attribute_format,
+                                                    s.options.codec, s.options.zstd_level);
                 s.texture_entries.push_back(s.append(page, PageKind::TextureTile));
                 s.summary.texture_bytes += page.bytes.size();
             }
@@ -296,15 +276,16 @@ uint32_t PackWriter::write_object(const ObjectInput& object, bool instanced) {
     parallel::with_threads(s.options.threads, [&] {
         parallel::for_each_index(size_t(0), page_quads.size(), [&](size_t p) {
             Ready& r = ready[p];
-            r.page = build_page(object.positions, object.shading, quads, page_quads[p], step, s.options.attribute_format);
-            r.geometry = store(std::move(r.page.geometry), s.options.codec, s.options.zstd_level);
-            const std::vector<uint8_t>& records = r.page.attributes;
-            for (size_t at = 0; at < records.size(); at += attribute_page) {
-                const size_t n = std::min<size_t>(attribute_page, records.size() - at);
-                r.attributes.push_back(store(std::vector<uint8_t>(records.begin() + long(at), records.begin() + long(at + n)),
-                                             s.options.codec, s.options.zstd_level));
-            }
-            r.page.attributes = {};
+            const PackWriterOptions& o = s.options;
+            r.page = build_page(object.positions, object.shading, quads, page_quads[p], step);
+            r.geometry = encode_page(std::move(r.page.geometry), PageKind::Geometry, o.attribute_format, o.codec,
+                                     o.zstd_level);
+            AttributePages cut = cut_attribute_pages(r.page.shading, o.attribute_format, attribute_page);
+            r.page.info.attribute_triangles = uint16_t(cut.triangles_per_page);
+            for (std::vector<uint8_t>& bytes : cut.pages)
+                r.attributes.push_back(
+                    encode_page(std::move(bytes), PageKind::Attributes, o.attribute_format, o.codec, o.zstd_level));
+            r.page.shading = {};
         });
     });
     for (Ready& r : ready) {

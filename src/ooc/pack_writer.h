@@ -26,9 +26,9 @@ namespace rf::pack {
 inline constexpr size_t kWriterBytesPerTriangle = 400;
 
 struct PackWriterOptions {
-    Codec codec = Codec::None;
+    Codec codec = Codec::Meshopt;
     int zstd_level = 3;
-    AttributeFormat attribute_format = AttributeFormat::Full;
+    AttributeFormat attribute_format = AttributeFormat::Shared;
     uint32_t attribute_page_bytes = kDefaultAttributePageBytes;  // a power of two, 1 KB .. 1 MB
     uint32_t quads_per_page = kQuadsPerPage;                     // 64 .. kQuadsPerPage
     TopLevel top_level = TopLevel::WideBvh;                      // how rays find pages (pack_format.h)
@@ -61,6 +61,7 @@ struct PackSummary {
     uint64_t attribute_bytes = 0;
     uint64_t texture_bytes = 0;
     uint64_t resident_bytes = 0;
+    uint64_t decoded_bytes = 0;      // every page as decoded (what caching the whole scene takes)
     double max_quantisation_error = 0.0;  // world units, over all vertices
 };
 

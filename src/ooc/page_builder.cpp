@@ -1,5 +1,7 @@
 #include "ooc/page_builder.h"
 
+#include "ooc/shared_attributes.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -8,6 +10,7 @@
 #include "accel/bvh/builders/morton_code.h"
 #include "accel/bvh/layout/cwbvh_layout.h"
 #include "ooc/attribute_records.h"
+#include "ooc/shared_attributes.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
 
@@ -209,8 +212,7 @@ Vec3f lattice_steps(std::span<const Vec3f> positions, std::span<const QuadRef> q
 }
 
 BuiltPage build_page(std::span<const Vec3f> positions, std::span<const ShadingTriangle> shading,
-                     std::span<const QuadRef> quads, std::span<const uint32_t> page_quads, const Vec3f& step,
-                     AttributeFormat format) {
+                     std::span<const QuadRef> quads, std::span<const uint32_t> page_quads, const Vec3f& step) {
     BuiltPage page;
     Vec3f offset, scale;
     quantisation_for(page_box(positions, quads, page_quads), step, offset, scale);
@@ -232,8 +234,7 @@ BuiltPage build_page(std::span<const Vec3f> positions, std::span<const ShadingTr
     std::memcpy(out + sizeof(header), nodes.data(), nodes.size() * sizeof(PageNode));
     auto* out_quads = reinterpret_cast<Quad*>(out + sizeof(header) + nodes.size() * sizeof(PageNode));
 
-    const uint32_t record = attribute_record_bytes(format);
-    page.attributes.assign(2 * qquads.size() * record, 0);
+    page.shading.assign(2 * qquads.size(), ShadingTriangle{});
     Box3f decoded_box;
     for (size_t slot = 0; slot < order.size(); ++slot) {
         const Quad& q = qquads[order[slot]];
@@ -246,12 +247,9 @@ BuiltPage build_page(std::span<const Vec3f> positions, std::span<const ShadingTr
             const Vec3f error = abs(decoded - positions[source.v[c]]);
             page.max_error = std::max(page.max_error, double(std::max(error.x, std::max(error.y, error.z))));
         }
-        uint8_t* records = page.attributes.data() + 2 * slot * record;
-        encode_attribute_record(corner_record(shading[source.first], source.corner_of[0]), format, records);
+        page.shading[2 * slot] = corner_record(shading[source.first], source.corner_of[0]);
         if (source.second != QuadRef::kNoTriangle)
-            encode_attribute_record(corner_record(shading[source.second], source.corner_of[1]), format, records + record);
-        else
-            encode_attribute_record(ShadingTriangle{}, format, records + record);
+            page.shading[2 * slot + 1] = corner_record(shading[source.second], source.corner_of[1]);
     }
     // Padded so that a ray hitting the decoded quads in the page's own
     // coordinates never misses the box in world space by rounding.
@@ -262,6 +260,46 @@ BuiltPage build_page(std::span<const Vec3f> positions, std::span<const ShadingTr
     page.info.scale = scale;
     page.info.quad_count = uint32_t(qquads.size());
     return page;
+}
+
+namespace {
+
+// Shared runs: the largest run length whose every page fits, searched down
+// from the length the whole page's density suggests (runs share fewer
+// vertices than the whole page, so that guess is a little long).
+uint32_t shared_run_length(std::span<const ShadingTriangle> shading, uint32_t page_bytes) {
+    const auto fits = [&](size_t run) {
+        for (size_t at = 0; at < shading.size(); at += run)
+            if (shared_page_bytes(shading.subspan(at, std::min(run, shading.size() - at))) > page_bytes) return false;
+        return true;
+    };
+    const size_t whole = shared_page_bytes(shading);
+    size_t run = std::clamp<size_t>(shading.size() * page_bytes / std::max<size_t>(whole, 1), 1, shading.size());
+    while (run > 1 && !fits(run)) run = std::min(run - 1, run * 15 / 16);
+    if (!fits(run)) throw Error("paged scene writer: one triangle's shared attributes exceed the attribute page");
+    return uint32_t(run);
+}
+
+}  // namespace
+
+AttributePages cut_attribute_pages(std::span<const ShadingTriangle> shading, AttributeFormat format,
+                                   uint32_t page_bytes) {
+    AttributePages out;
+    if (format == AttributeFormat::Shared) {
+        out.triangles_per_page = shared_run_length(shading, page_bytes);
+        for (size_t at = 0; at < shading.size(); at += out.triangles_per_page)
+            out.pages.push_back(
+                encode_shared_page(shading.subspan(at, std::min<size_t>(out.triangles_per_page, shading.size() - at))));
+        return out;
+    }
+    const uint32_t record = attribute_record_bytes(format);
+    out.triangles_per_page = page_bytes / record;
+    for (size_t at = 0; at < shading.size(); at += out.triangles_per_page) {
+        const size_t n = std::min<size_t>(out.triangles_per_page, shading.size() - at);
+        std::vector<uint8_t>& page = out.pages.emplace_back(n * record);
+        for (size_t i = 0; i < n; ++i) encode_attribute_record(shading[at + i], format, page.data() + i * record);
+    }
+    return out;
 }
 
 }  // namespace rf::pack

@@ -44,7 +44,7 @@ std::vector<std::vector<uint32_t>> partition_into_pages(std::span<const Vec3f> p
 struct BuiltPage {
     PageInfo info;                    // first_attribute_page and object left for the writer
     std::vector<uint8_t> geometry;    // the raw geometry page
-    std::vector<uint8_t> attributes;  // 2 records per quad, in the page's quad order
+    std::vector<ShadingTriangle> shading;  // 2 per quad, in the page's quad order
     double max_error = 0.0;           // largest |decoded - input| coordinate, world units
 };
 
@@ -54,7 +54,17 @@ Vec3f lattice_steps(std::span<const Vec3f> positions, std::span<const QuadRef> q
                     std::span<const std::vector<uint32_t>> page_quads);
 
 BuiltPage build_page(std::span<const Vec3f> positions, std::span<const ShadingTriangle> shading,
-                     std::span<const QuadRef> quads, std::span<const uint32_t> page_quads, const Vec3f& step,
-                     AttributeFormat format);
+                     std::span<const QuadRef> quads, std::span<const uint32_t> page_quads, const Vec3f& step);
+
+// A geometry page's triangles cut into attribute pages of at most
+// `page_bytes`: runs of `triangles_per_page` triangles (the last holds the
+// rest). Full and Compact: page_bytes / record bytes; Shared: the most
+// that keep every run's page within page_bytes.
+struct AttributePages {
+    uint32_t triangles_per_page = 0;
+    std::vector<std::vector<uint8_t>> pages;
+};
+AttributePages cut_attribute_pages(std::span<const ShadingTriangle> shading, AttributeFormat format,
+                                   uint32_t page_bytes);
 
 }  // namespace rf::pack

@@ -7,6 +7,7 @@
 #include "core/parallel.h"
 #include "ooc/device_page_cache_steps.h"
 #include "ooc/attribute_records.h"
+#include "ooc/shared_attributes.h"
 #include "rayforge/core/error.h"
 #include "render/ray_sort_key.h"
 
@@ -173,13 +174,13 @@ void PagedEngine::fetch_shading(std::span<const Hit> hits, std::span<ShadingTria
     const ResidentHeader& r = file_->resident();
     const AttributeFormat format = r.attribute_format;
     const uint32_t record_bytes = attribute_record_bytes(format);
-    const uint32_t per_page = r.attribute_page_bytes / record_bytes;
     const std::span<const PageInfo> pages = file_->pages();
-    // Attribute page and offset of hit i.
-    const auto locate = [&](const Hit& hit, uint32_t& page, uint32_t& offset) {
+    // Attribute page of hit i, and its triangle there.
+    const auto locate = [&](const Hit& hit, uint32_t& page, uint32_t& triangle) {
         const uint32_t record = record_of(hit.prim);
-        page = pages[page_of(hit.prim)].first_attribute_page + record / per_page;
-        offset = (record % per_page) * record_bytes;
+        const PageInfo& info = pages[page_of(hit.prim)];
+        page = info.first_attribute_page + record / info.attribute_triangles;
+        triangle = record % info.attribute_triangles;
     };
     parallel::with_threads(threads_, [&] {
         pending_.clear();
@@ -194,13 +195,15 @@ void PagedEngine::fetch_shading(std::span<const Hit> hits, std::span<ShadingTria
             parallel::for_range(size_t(0), pending_.size(), size_t(kRayGrain), [&](size_t lo, size_t hi) {
                 for (size_t k = lo; k < hi; ++k) {
                     const uint32_t i = pending_[k];
-                    uint32_t page, offset;
-                    locate(hits[i], page, offset);
+                    uint32_t page, triangle;
+                    locate(hits[i], page, triangle);
                     table.request(page);
                     const uint8_t* bytes = table.cached(page);
                     again[k] = bytes == nullptr;
                     if (!bytes) continue;
-                    records[i] = decode_attribute_record(bytes + offset, format);
+                    records[i] = format == AttributeFormat::Shared
+                                     ? decode_shared_record(bytes, triangle)
+                                     : decode_attribute_record(bytes + size_t(triangle) * record_bytes, format);
                     if (!instances.empty() && instances[i] != kNoInstance)
                         records[i] = to_world(records[i], file_->instances()[instances[i]]);
                 }

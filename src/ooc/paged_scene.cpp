@@ -168,8 +168,14 @@ void PagedSceneImpl::fill_info(const std::string& path) {
     info_.instanced_triangles = uint64_t(r.instanced_triangles[0]) | uint64_t(r.instanced_triangles[1]) << 32;
     info_.bounds = r.bounds;
     info_.resident_bytes = file_->resident_memory_bytes();
-    info_.compact_attributes = r.attribute_format == AttributeFormat::Compact;
+    info_.attributes = r.attribute_format == AttributeFormat::Shared ? PagedAttributes::Shared
+                       : r.attribute_format == AttributeFormat::Full ? PagedAttributes::Full
+                                                                     : PagedAttributes::Compact;
     info_.attribute_page_bytes = r.attribute_page_bytes;
+    for (const PageEntry& e : file_->directory()) {
+        ++(e.codec == Codec::Meshopt ? info_.meshopt_pages : e.codec == Codec::Zstd ? info_.zstd_pages : info_.raw_pages);
+        info_.decoded_bytes += e.raw_bytes;
+    }
 }
 
 Camera PagedSceneImpl::camera() const {

@@ -21,13 +21,39 @@ PagedTopLevel parse_paged_top_level(const std::string& name) {
 
 std::string to_string(PagedTopLevel top) { return top == PagedTopLevel::Grid ? "grid" : "bvh"; }
 
+PagedCodec parse_paged_codec(const std::string& name) {
+    if (name == "meshopt") return PagedCodec::Meshopt;
+    if (name == "zstd") return PagedCodec::Zstd;
+    if (name == "none") return PagedCodec::None;
+    throw Error("unknown page codec '" + name + "' (meshopt, zstd or none)");
+}
+
+std::string to_string(PagedCodec codec) {
+    return codec == PagedCodec::Meshopt ? "meshopt" : codec == PagedCodec::Zstd ? "zstd" : "none";
+}
+
+PagedAttributes parse_paged_attributes(const std::string& name) {
+    if (name == "shared") return PagedAttributes::Shared;
+    if (name == "full") return PagedAttributes::Full;
+    if (name == "compact") return PagedAttributes::Compact;
+    throw Error("unknown attribute format '" + name + "' (shared, full or compact)");
+}
+
+std::string to_string(PagedAttributes attributes) {
+    return attributes == PagedAttributes::Shared ? "shared" : attributes == PagedAttributes::Full ? "full" : "compact";
+}
+
 namespace {
 
 pack::PackWriterOptions writer_options(const PagedWriteOptions& o) {
     pack::PackWriterOptions w;
-    w.codec = o.zstd ? pack::Codec::Zstd : pack::Codec::None;
+    w.codec = o.codec == PagedCodec::Meshopt ? pack::Codec::Meshopt
+              : o.codec == PagedCodec::Zstd  ? pack::Codec::Zstd
+                                             : pack::Codec::None;
     w.zstd_level = o.zstd_level;
-    w.attribute_format = o.compact_attributes ? pack::AttributeFormat::Compact : pack::AttributeFormat::Full;
+    w.attribute_format = o.attributes == PagedAttributes::Shared ? pack::AttributeFormat::Shared
+                         : o.attributes == PagedAttributes::Full ? pack::AttributeFormat::Full
+                                                                 : pack::AttributeFormat::Compact;
     w.attribute_page_bytes = o.attribute_page_bytes;
     w.quads_per_page = o.quads_per_page;
     w.top_level = o.top_level == PagedTopLevel::Grid ? pack::TopLevel::Grid : pack::TopLevel::WideBvh;
@@ -54,6 +80,7 @@ PagedWriteReport to_report(const pack::PackSummary& s, std::vector<std::string> 
     r.attribute_bytes = s.attribute_bytes;
     r.texture_bytes = s.texture_bytes;
     r.resident_bytes = s.resident_bytes;
+    r.decoded_bytes = s.decoded_bytes;
     r.max_quantisation_error = s.max_quantisation_error;
     r.notes = std::move(notes);
     return r;

@@ -36,11 +36,32 @@ enum class PagedTopLevel {
 PagedTopLevel parse_paged_top_level(const std::string& name);
 std::string to_string(PagedTopLevel top);
 
+// How pages are stored (each kept raw where the codec does not make it smaller).
+enum class PagedCodec {
+    Meshopt,  // meshoptimizer's vertex/index codecs over the pages' records, then zstd (the default: smallest)
+    Zstd,     // zstd alone
+    None,     // raw
+};
+// "meshopt" / "zstd" / "none"; rf::Error for any other name.
+PagedCodec parse_paged_codec(const std::string& name);
+std::string to_string(PagedCodec codec);
+
+// How surface attributes (shading normals, uvs, materials, tangents) are stored.
+enum class PagedAttributes {
+    Shared,   // per-vertex data shared within a page, per-triangle data once (the default: exact but for an
+              // octahedral geometric normal, about a third of Full's bytes)
+    Full,     // a 64-byte record a triangle, exact
+    Compact,  // a 32-byte record a triangle (half-float uvs; no normal-map tangents, no uv-density mip selection)
+};
+// "shared" / "full" / "compact"; rf::Error for any other name.
+PagedAttributes parse_paged_attributes(const std::string& name);
+std::string to_string(PagedAttributes attributes);
+
 struct PagedWriteOptions {
-    bool zstd = false;                   // compress each page (libzstd), kept raw where that is not smaller
-    int zstd_level = 3;                  // 1..19
-    bool compact_attributes = false;     // 32-byte shading records (half-float uvs, no normal-map tangents) instead of 64
-    uint32_t attribute_page_bytes = 4096;  // a power of two, 1 KB .. 1 MB
+    PagedCodec codec = PagedCodec::Meshopt;
+    int zstd_level = 3;                  // 1..19 (Meshopt and Zstd)
+    PagedAttributes attributes = PagedAttributes::Shared;
+    uint32_t attribute_page_bytes = 8192;  // a power of two, 1 KB .. 1 MB (a page holds at most this much, raw)
     uint32_t quads_per_page = 4096;        // 64 .. 4096 (Garanzha 2014's NP = 4K)
     PagedTopLevel top_level = PagedTopLevel::WideBvh;
     // A mesh placed by several instances is written once and placed by
@@ -58,6 +79,7 @@ struct PagedWriteReport {
     uint32_t middle_nodes = 0;  // PagedTopLevel::Grid: the cells' BVH nodes
     uint32_t top_nodes = 0;     // PagedTopLevel::WideBvh: the top BVH's nodes
     uint64_t file_bytes = 0, geometry_bytes = 0, attribute_bytes = 0, texture_bytes = 0, resident_bytes = 0;
+    uint64_t decoded_bytes = 0;           // every page as decoded: what caching the whole scene takes
     double max_quantisation_error = 0.0;  // largest |decoded - input| vertex coordinate, world units
     std::vector<std::string> notes;       // what the paged form leaves out (opaque cut-outs, ...)
     // convert_file_to_paged only:
@@ -143,8 +165,10 @@ struct PagedSceneInfo {
     int grid[3] = {1, 1, 1};         // Grid: cells per axis
     Box3f bounds;
     size_t resident_bytes = 0;      // always in memory: the resident levels, tables, directory
-    bool compact_attributes = false;
+    PagedAttributes attributes = PagedAttributes::Shared;
     uint32_t attribute_page_bytes = 0;
+    uint64_t meshopt_pages = 0, zstd_pages = 0, raw_pages = 0;  // pages as stored, by codec
+    uint64_t decoded_bytes = 0;      // every page as decoded: what caching the whole scene takes
     // The file's density: file bytes / unique triangles.
     [[nodiscard]] double bytes_per_triangle() const { return triangles ? double(file_bytes) / double(triangles) : 0.0; }
 };
