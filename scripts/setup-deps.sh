@@ -20,6 +20,7 @@ packages=(
   libembree-dev                  # optional benchmark peer (Embree 3)
   libzstd-dev                    # compressed geometry pages
   libmeshoptimizer-dev           # paged scenes' page codec (meshopt vertex and index codecs before zstd)
+  liburing-dev                   # paged scenes' page reads through io_uring (optional: a reader pool otherwise)
   clang libclang-rt-14-dev       # libFuzzer targets and sanitizer runtimes (scripts/fuzz.sh)
   zlib1g-dev                     # tinyexr compiled into the fuzzers needs zlib.h
   python3-matplotlib             # charts of `rayforge bench --json` (scripts/plot-bench.py)

@@ -26,9 +26,11 @@
 #include "ooc/pack_format.h"
 #include "ooc/page_cache.h"
 #include "ooc/reader_pool.h"
+#include "ooc/uring_reader.h"
 #include "rayforge/core/error.h"
 #include "test_paths.h"
 
+#include <fcntl.h>
 #include <unistd.h>
 
 namespace rf::pack {
@@ -858,6 +860,43 @@ TEST(ReaderPool, RunsEveryIndexOnceWhoeverCalls) {
     std::atomic<int> shared{0};
     ReaderPool::shared().run(100, [&](size_t) { shared.fetch_add(1); });
     EXPECT_EQ(shared.load(), 100);
+}
+
+// io_uring reads (where the kernel allows them; the test says so and skips
+// otherwise): more reads than the queue depth, of every size, each equal to
+// a pread of the same range; a read past the end of the file fails with
+// EIO, the others still succeed.
+TEST(UringReader, ReadsEqualPreadsAndAReadPastTheEndFails) {
+    UringReader* reader = UringReader::shared();
+    if (!reader) GTEST_SKIP() << "page reads use the reader pool here: " << UringReader::describe();
+    const std::string path = test::temp_dir("uring_reader") + "/bytes.bin";
+    std::vector<uint8_t> bytes(3 << 20);
+    std::mt19937 rng(3);
+    for (uint8_t& b : bytes) b = uint8_t(rng());
+    {
+        std::ofstream out(path, std::ios::binary);
+        out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+    }
+    const int fd = ::open(path.c_str(), O_RDONLY);
+    ASSERT_GE(fd, 0);
+    const size_t count = 3 * UringReader::kQueueDepth + 5;
+    std::vector<std::vector<uint8_t>> into(count);
+    std::vector<UringReader::Read> reads(count);
+    for (size_t i = 0; i < count; ++i) {
+        const uint32_t size = i % 5 == 0 ? 0u : uint32_t(1 + rng() % (200 << 10));
+        const uint64_t offset = rng() % (bytes.size() - size);
+        into[i].assign(size, 0xAB);
+        reads[i] = {fd, offset, size, into[i].data(), 0};
+    }
+    std::vector<uint8_t> past(4096);
+    reads.push_back({fd, bytes.size() - 100, 4096, past.data(), 0});
+    reader->read_all(reads);
+    for (size_t i = 0; i < count; ++i) {
+        ASSERT_EQ(reads[i].error, 0) << i;
+        ASSERT_TRUE(std::equal(into[i].begin(), into[i].end(), bytes.begin() + long(reads[i].offset))) << i;
+    }
+    EXPECT_EQ(reads.back().error, EIO);
+    ::close(fd);
 }
 
 }  // namespace

@@ -166,6 +166,7 @@ int run_paged_info(const std::string& path, bool verbose) {
                                 ? "top grid " + std::to_string(i.grid[0]) + "x" + std::to_string(i.grid[1]) + "x" +
                                       std::to_string(i.grid[2])
                                 : "top BVH of " + std::to_string(i.top_nodes) + " wide nodes";
+    std::printf("  page reads: %s\n", i.page_reads.c_str());
     std::printf("  always resident %s: %s, %u materials, %u lights, %u textures\n",
                 format_bytes(double(i.resident_bytes)).c_str(), top.c_str(), i.materials, i.lights, i.textures);
     std::printf("  bounds (%g, %g, %g) - (%g, %g, %g)\n", lo.x, lo.y, lo.z, hi.x, hi.y, hi.z);

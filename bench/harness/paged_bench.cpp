@@ -689,8 +689,10 @@ std::string info_line(const PagedFileSummary& s) {
          << " quads per page on average), " << thousands(i.attribute_pages) << " attribute pages ("
          << format("%.0f KiB", double(i.attribute_page_bytes) / 1024.0) << ", "
          << to_string(i.attributes) << " attributes), " << thousands(i.texture_pages)
-         << " texture tiles; file " << megabytes(double(i.file_bytes)) << " ("
-         << format("%.1f", i.bytes_per_triangle()) << " bytes a unique triangle), always resident "
+         << " texture tiles; stored " << thousands(i.meshopt_pages) << " meshopt, " << thousands(i.zstd_pages)
+         << " zstd, " << thousands(i.raw_pages) << " raw; file " << megabytes(double(i.file_bytes)) << " ("
+         << format("%.1f", i.bytes_per_triangle()) << " bytes a unique triangle, "
+         << megabytes(double(i.decoded_bytes)) << " decoded; reads: " << i.page_reads << "), always resident "
          << megabytes(double(i.resident_bytes)) << "; ";
     if (i.top_level == PagedTopLevel::Grid)
         line << "top grid " << i.grid[0] << "x" << i.grid[1] << "x" << i.grid[2] << "\n";
@@ -814,6 +816,8 @@ Json summary_json(const PagedFileSummary& s) {
             {"geometry_pages", i.geometry_pages}, {"attribute_pages", i.attribute_pages},
             {"texture_pages", i.texture_pages}, {"grid", {i.grid[0], i.grid[1], i.grid[2]}},
             {"resident_bytes", i.resident_bytes}, {"attributes", to_string(i.attributes)},
+            {"decoded_bytes", i.decoded_bytes}, {"page_reads", i.page_reads},
+            {"pages_by_codec", {{"meshopt", i.meshopt_pages}, {"zstd", i.zstd_pages}, {"raw", i.raw_pages}}},
             {"attribute_page_bytes", i.attribute_page_bytes}, {"inferred_page_quads", s.inferred_page_quads},
             {"mean_page_quads", s.mean_page_quads}, {"largest_geometry_page_bytes", s.geometry_slot_bytes},
             {"camera", to_string(s.camera)}, {"shadow_light", s.light.empty() ? Json(nullptr) : Json(s.light)},

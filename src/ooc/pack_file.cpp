@@ -367,9 +367,13 @@ size_t PackFile::read_page(uint64_t index, std::vector<uint8_t>& out, std::vecto
     return read_page(index, std::span<uint8_t>(out), scratch);
 }
 
-size_t PackFile::read_page(uint64_t index, std::span<uint8_t> out, std::vector<uint8_t>& scratch) const {
+const PageEntry& PackFile::entry(uint64_t index) const {
     if (index >= directory_.size()) throw Error(path_ + ": page " + std::to_string(index) + " does not exist");
-    const PageEntry& e = directory_[size_t(index)];
+    return directory_[size_t(index)];
+}
+
+size_t PackFile::read_page(uint64_t index, std::span<uint8_t> out, std::vector<uint8_t>& scratch) const {
+    const PageEntry& e = entry(index);
     if (out.size() < e.raw_bytes)
         throw Error(path_ + ": page " + std::to_string(index) + " is larger than its cache slot");
     uint8_t* stored = out.data();
@@ -380,13 +384,20 @@ size_t PackFile::read_page(uint64_t index, std::span<uint8_t> out, std::vector<u
     if (!read_at(fd_, stored, e.stored_bytes, e.offset))
         throw file_byte_error(path_, e.offset, "cannot read page " + std::to_string(index) + ": " +
                                                    (errno ? std::strerror(errno) : "short read"));
-    if (crc32c(stored, e.stored_bytes) != e.checksum)
+    finish_page(index, {stored, e.stored_bytes}, out);
+    return e.stored_bytes;
+}
+
+void PackFile::finish_page(uint64_t index, std::span<const uint8_t> stored, std::span<uint8_t> out) const {
+    const PageEntry& e = entry(index);
+    if (out.size() < e.raw_bytes || stored.size() != e.stored_bytes)
+        throw Error(path_ + ": page " + std::to_string(index) + " is larger than its cache slot");
+    if (crc32c(stored.data(), stored.size()) != e.checksum)
         throw file_byte_error(path_, e.offset, "page " + std::to_string(index) + " checksum mismatch (corrupted file)");
     if (e.codec != Codec::None &&
-        !decode_page({stored, e.stored_bytes}, e.codec, e.kind, resident_.attribute_format, out.first(e.raw_bytes)))
+        !decode_page(stored, e.codec, e.kind, resident_.attribute_format, out.first(e.raw_bytes)))
         throw file_byte_error(path_, e.offset, "page " + std::to_string(index) + " does not decompress");
     check_page_contents(index, out.first(e.raw_bytes));
-    return e.stored_bytes;
 }
 
 // A page whose checksum is right may still have been written wrong (or

@@ -61,6 +61,13 @@ public:
     size_t read_page(uint64_t index, std::vector<uint8_t>& out, std::vector<uint8_t>& scratch) const;
     // The same into a caller's buffer of at least raw_bytes (a cache slot).
     size_t read_page(uint64_t index, std::span<uint8_t> out, std::vector<uint8_t>& scratch) const;
+    // read_page in two steps, for readers that do the I/O themselves
+    // (uring_reader.h): read entry(index).stored_bytes at entry(index).offset
+    // of fd(), into `out` itself for a raw page (Codec::None), then
+    // finish_page: the checksum, the codec into `out`, the content checks.
+    [[nodiscard]] const PageEntry& entry(uint64_t index) const;
+    [[nodiscard]] int fd() const { return fd_; }
+    void finish_page(uint64_t index, std::span<const uint8_t> stored, std::span<uint8_t> out) const;
 
     // Asks the operating system to drop the file's pages from its page
     // cache (posix_fadvise DONTNEED): later reads come from the disk (cold

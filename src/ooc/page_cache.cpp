@@ -27,6 +27,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cstring>
 #include <exception>
@@ -35,6 +36,7 @@
 
 #include "core/parallel.h"
 #include "ooc/reader_pool.h"
+#include "ooc/uring_reader.h"
 #include "core/assert.h"
 #include "rayforge/core/error.h"
 
@@ -310,33 +312,80 @@ void PageCache::evict(uint32_t page) {
     ++stats_.evictions;
 }
 
-// Step 3: reads every admission into its slot, many at once on the reader
-// pool (reader_pool.h: a real queue depth). Returns the first failure's
-// message by admission order ("" when all were read).
+// Step 3: reads every admission into its slot with a real queue depth. With
+// io_uring (uring_reader.h) the stored bytes of all of them are read first,
+// up to its queue depth in flight, then the reader pool checks and decodes
+// them; otherwise each pool thread (reader_pool.h) reads, checks and decodes
+// one page at a time. Returns the first failure's message by admission
+// order ("" when all were read).
 std::string PageCache::read_admissions() {
     const Clock::time_point start = Clock::now();
     std::mutex error_mutex;
     size_t error_index = admissions_.size();
     std::string error;
+    const auto fail = [&](size_t i, const std::string& what) {
+        const std::lock_guard<std::mutex> lock(error_mutex);
+        if (i < error_index) {
+            error_index = i;
+            error = name_ + ": " + what;  // the reader's message names the file, page and offset
+        }
+    };
     std::atomic<uint64_t> bytes_read{0};
+    const bool uring = read_stored_through_uring();
     ReaderPool::shared().run(admissions_.size(), [&](size_t i) {
         thread_local std::vector<uint8_t> scratch;  // a compressed page's stored bytes, one per reader
         Admission& a = admissions_[i];
         const std::span<uint8_t> slot(pool_.get() + uint64_t(a.slot) * view_.slot_bytes, view_.slot_bytes);
-        try {
-            bytes_read += file_.read_page(first_page_ + a.page, slot, scratch);
-            a.ok = true;
-        } catch (const std::exception& e) {  // kept for after the bookkeeping; a reader must not throw
-            const std::lock_guard<std::mutex> lock(error_mutex);
-            if (i < error_index) {
-                error_index = i;
-                error = name_ + ": " + e.what();  // the reader's message names the file, page and offset
+        const uint64_t page = first_page_ + a.page;
+        try {  // a reader must not throw
+            if (!uring) {
+                bytes_read += file_.read_page(page, slot, scratch);
+            } else if (read_errors_[i] != 0) {
+                const PageEntry& e = file_.entry(page);
+                throw Error(file_.path() + ": byte " + std::to_string(e.offset) + ": cannot read page " +
+                            std::to_string(page) + ": " + std::strerror(read_errors_[i]));
+            } else {
+                const PageEntry& e = file_.entry(page);
+                const std::span<const uint8_t> stored =
+                    e.codec == Codec::None ? std::span<const uint8_t>(slot.data(), e.stored_bytes) : stored_[i];
+                file_.finish_page(page, stored, slot);
+                bytes_read += e.stored_bytes;
             }
+            a.ok = true;
+        } catch (const std::exception& e) {
+            fail(i, e.what());
         }
     });
     stats_.bytes_read += bytes_read;
     stats_.io_ms += ms_since(start);
     return error;
+}
+
+// The stored bytes of every admission through io_uring: a raw page straight
+// into its slot, a compressed one into stored_[i]. False where io_uring is
+// not used (then nothing was read).
+bool PageCache::read_stored_through_uring() {
+    UringReader* uring = UringReader::shared();
+    if (!uring || admissions_.empty()) return false;
+    std::vector<UringReader::Read> reads(admissions_.size());
+    if (stored_.size() < admissions_.size()) stored_.resize(admissions_.size());
+    read_errors_.assign(admissions_.size(), 0);
+    for (size_t i = 0; i < admissions_.size(); ++i) {
+        const PageEntry& e = file_.entry(first_page_ + admissions_[i].page);
+        uint8_t* into = pool_.get() + uint64_t(admissions_[i].slot) * view_.slot_bytes;
+        if (e.codec != Codec::None) {
+            stored_[i].resize(e.stored_bytes);
+            into = stored_[i].data();
+        } else if (e.stored_bytes > view_.slot_bytes) {
+            read_errors_[i] = EFBIG;  // (the checks at open make this impossible)
+            continue;
+        }
+        reads[i] = {file_.fd(), e.offset, e.stored_bytes, into, 0};
+    }
+    uring->read_all(reads);
+    for (size_t i = 0; i < reads.size(); ++i)
+        if (read_errors_[i] == 0) read_errors_[i] = reads[i].error;
+    return true;
 }
 
 // The descriptors of this call's admissions: a page read is cached with

@@ -128,6 +128,7 @@ private:
     bool take_requested_missing(uint32_t page);
     void evict(uint32_t page);
     std::string read_admissions();
+    bool read_stored_through_uring();
     size_t settle_admissions();
     void move_failed_to_missing(uint32_t prefix);
 
@@ -152,6 +153,10 @@ private:
     std::vector<uint32_t> free_slots_;     // a stack, slot 0 on top at first
     std::vector<uint32_t> slot_page_;      // page held by each slot (or kNoPage)
     std::vector<Admission> admissions_;    // this call's loads, at most slot_count_
+    // io_uring reads: each admission's stored bytes (in its slot for a raw
+    // page, in stored_ otherwise) and its read's errno.
+    std::vector<std::vector<uint8_t>> stored_;
+    std::vector<int> read_errors_;
     std::vector<uint32_t> last_loaded_;    // the pages of the admissions that loaded
     PageTableView view_;
     bool evicted_read_ = false;  // some missing page holds WasRead (see evict)

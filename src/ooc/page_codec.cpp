@@ -4,6 +4,7 @@
 #include <zstd.h>
 
 #include <cstring>
+#include <memory>
 #include <unordered_map>
 
 #include "ooc/shared_attributes.h"
@@ -223,8 +224,10 @@ bool take_quads(std::span<const uint8_t> in, size_t& at, uint8_t* out, size_t co
     std::memcpy(&vertex_count, in.data() + at, 4);
     at += 4;
     if (vertex_count > 4 * count || !take(in, at, vertex_bytes) || !take(in, at, index_bytes)) return false;
-    std::vector<PaddedVertex> vertices(vertex_count);
-    std::vector<uint32_t> indices(4 * count);
+    thread_local std::vector<PaddedVertex> vertices;  // (a reader's, reused page after page)
+    thread_local std::vector<uint32_t> indices;
+    vertices.resize(vertex_count);
+    indices.resize(4 * count);
     if (meshopt_decodeVertexBuffer(vertices.data(), vertex_count, sizeof(PaddedVertex), vertex_bytes.data(),
                                    vertex_bytes.size()) != 0 ||
         meshopt_decodeIndexSequence(indices.data(), indices.size(), 4, index_bytes.data(), index_bytes.size()) != 0)
@@ -257,7 +260,7 @@ bool decode_meshopt_stream(std::span<const uint8_t> in, PageKind kind, Attribute
             continue;
         }
         if (a.corners) {
-            std::vector<uint32_t> indices;
+            thread_local std::vector<uint32_t> indices;
             if (!take_triangles(in, at, indices, a.count, 65536)) return false;
             for (size_t i = 0; i < a.count; ++i) {
                 const uint16_t v = uint16_t(indices[i]);
@@ -301,10 +304,25 @@ StoredPage encode_page(std::vector<uint8_t> raw, PageKind kind, AttributeFormat 
     return s;
 }
 
+namespace {
+
+// A decompression context per thread: ZSTD_decompress would make one a
+// call, which costs as much as decoding a small page.
+ZSTD_DCtx* thread_dctx() {
+    thread_local std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> dctx(ZSTD_createDCtx(), ZSTD_freeDCtx);
+    return dctx.get();
+}
+
+size_t unzstd(std::span<uint8_t> out, std::span<const uint8_t> in) {
+    return ZSTD_decompressDCtx(thread_dctx(), out.data(), out.size(), in.data(), in.size());
+}
+
+}  // namespace
+
 bool decode_page(std::span<const uint8_t> stored, Codec codec, PageKind kind, AttributeFormat format,
                  std::span<uint8_t> raw) {
     if (codec == Codec::Zstd) {
-        const size_t got = ZSTD_decompress(raw.data(), raw.size(), stored.data(), stored.size());
+        const size_t got = unzstd(raw, stored);
         return !ZSTD_isError(got) && got == raw.size();
     }
     if (codec != Codec::Meshopt || kind == PageKind::TextureTile) return false;
@@ -315,7 +333,7 @@ bool decode_page(std::span<const uint8_t> stored, Codec codec, PageKind kind, At
         return false;
     thread_local std::vector<uint8_t> scratch;
     scratch.resize(size_t(size));
-    const size_t got = ZSTD_decompress(scratch.data(), scratch.size(), stored.data(), stored.size());
+    const size_t got = unzstd(scratch, stored);
     if (ZSTD_isError(got) || got != size) return false;
     return decode_meshopt_stream(scratch, kind, format, raw);
 }

@@ -6,6 +6,7 @@
 #include <cstring>
 
 #include "ooc/paged_scene_impl.h"
+#include "ooc/uring_reader.h"
 #include "ooc/page_cache.h"
 #include "ooc/texture_cache.h"
 #include "rayforge/core/error.h"
@@ -172,6 +173,7 @@ void PagedSceneImpl::fill_info(const std::string& path) {
                        : r.attribute_format == AttributeFormat::Full ? PagedAttributes::Full
                                                                      : PagedAttributes::Compact;
     info_.attribute_page_bytes = r.attribute_page_bytes;
+    info_.page_reads = UringReader::describe();
     for (const PageEntry& e : file_->directory()) {
         ++(e.codec == Codec::Meshopt ? info_.meshopt_pages : e.codec == Codec::Zstd ? info_.zstd_pages : info_.raw_pages);
         info_.decoded_bytes += e.raw_bytes;

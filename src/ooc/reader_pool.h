@@ -5,8 +5,8 @@
 // So the reads run on a process-wide pool of kReaderThreads threads that
 // mostly wait on the disk: each takes the next read, does it (pread,
 // checksum, decompression, checks: PackFile::read_page) and takes another.
-// (io_uring, the first choice, is not used: Debian's liburing is not
-// a dependency yet; this is its fallback.)
+// Where io_uring is used (uring_reader.h) the pool does only the checksums,
+// decompression and checks of the pages io_uring read.
 #pragma once
 
 #include <condition_variable>
@@ -35,6 +35,8 @@ public:
     // once, and returns when all have returned. `task` must not throw. One
     // run at a time: concurrent callers wait their turn.
     void run(size_t count, const std::function<void(size_t)>& task);
+
+    [[nodiscard]] size_t size() const { return threads_.size(); }
 
 private:
     void serve();

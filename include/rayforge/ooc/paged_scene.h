@@ -169,6 +169,7 @@ struct PagedSceneInfo {
     uint32_t attribute_page_bytes = 0;
     uint64_t meshopt_pages = 0, zstd_pages = 0, raw_pages = 0;  // pages as stored, by codec
     uint64_t decoded_bytes = 0;      // every page as decoded: what caching the whole scene takes
+    std::string page_reads;          // how pages are read: "io_uring (queue depth 64)" or "reader pool (...): why"
     // The file's density: file bytes / unique triangles.
     [[nodiscard]] double bytes_per_triangle() const { return triangles ? double(file_bytes) / double(triangles) : 0.0; }
 };
