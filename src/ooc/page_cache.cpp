@@ -27,6 +27,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <thread>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
@@ -313,11 +314,11 @@ void PageCache::evict(uint32_t page) {
 }
 
 // Step 3: reads every admission into its slot with a real queue depth. With
-// io_uring (uring_reader.h) the stored bytes of all of them are read first,
-// up to its queue depth in flight, then the reader pool checks and decodes
-// them; otherwise each pool thread (reader_pool.h) reads, checks and decodes
-// one page at a time. Returns the first failure's message by admission
-// order ("" when all were read).
+// io_uring (uring_reader.h) one thread keeps the stored bytes of all of
+// them in flight while the reader pool checks and decodes each page as its
+// read completes; otherwise each pool thread (reader_pool.h) reads, checks
+// and decodes one page at a time. Returns the first failure's message by
+// admission order ("" when all were read).
 std::string PageCache::read_admissions() {
     const Clock::time_point start = Clock::now();
     std::mutex error_mutex;
@@ -331,7 +332,18 @@ std::string PageCache::read_admissions() {
         }
     };
     std::atomic<uint64_t> bytes_read{0};
-    const bool uring = read_stored_through_uring();
+    UringReader* uring = admissions_.empty() ? nullptr : UringReader::shared();
+    std::vector<UringReader::Read> reads = uring ? uring_reads() : std::vector<UringReader::Read>{};
+    // ready[i]: read i is done (its reader waits on that flag alone).
+    std::vector<std::atomic<uint8_t>> ready(reads.size());
+    std::thread io;
+    if (uring)
+        io = std::thread([&] {
+            uring->read_all(reads, [&](size_t i) {
+                ready[i].store(1, std::memory_order_release);
+                ready[i].notify_one();
+            });
+        });
     ReaderPool::shared().run(admissions_.size(), [&](size_t i) {
         thread_local std::vector<uint8_t> scratch;  // a compressed page's stored bytes, one per reader
         Admission& a = admissions_[i];
@@ -340,33 +352,34 @@ std::string PageCache::read_admissions() {
         try {  // a reader must not throw
             if (!uring) {
                 bytes_read += file_.read_page(page, slot, scratch);
-            } else if (read_errors_[i] != 0) {
-                const PageEntry& e = file_.entry(page);
-                throw Error(file_.path() + ": byte " + std::to_string(e.offset) + ": cannot read page " +
-                            std::to_string(page) + ": " + std::strerror(read_errors_[i]));
-            } else {
-                const PageEntry& e = file_.entry(page);
-                const std::span<const uint8_t> stored =
-                    e.codec == Codec::None ? std::span<const uint8_t>(slot.data(), e.stored_bytes) : stored_[i];
-                file_.finish_page(page, stored, slot);
-                bytes_read += e.stored_bytes;
+                a.ok = true;
+                return;
             }
+            ready[i].wait(0, std::memory_order_acquire);
+            const int read_error = read_errors_[i] != 0 ? read_errors_[i] : reads[i].error;
+            const PageEntry& e = file_.entry(page);
+            if (read_error != 0)
+                throw Error(file_.path() + ": byte " + std::to_string(e.offset) + ": cannot read page " +
+                            std::to_string(page) + ": " + std::strerror(read_error));
+            const std::span<const uint8_t> stored =
+                e.codec == Codec::None ? std::span<const uint8_t>(slot.data(), e.stored_bytes) : stored_[i];
+            file_.finish_page(page, stored, slot);
+            bytes_read += e.stored_bytes;
             a.ok = true;
         } catch (const std::exception& e) {
             fail(i, e.what());
         }
     });
+    if (io.joinable()) io.join();
     stats_.bytes_read += bytes_read;
     stats_.io_ms += ms_since(start);
     return error;
 }
 
-// The stored bytes of every admission through io_uring: a raw page straight
-// into its slot, a compressed one into stored_[i]. False where io_uring is
-// not used (then nothing was read).
-bool PageCache::read_stored_through_uring() {
-    UringReader* uring = UringReader::shared();
-    if (!uring || admissions_.empty()) return false;
+// io_uring's reads of the admissions' stored bytes: a raw page straight into
+// its slot, a compressed one into stored_[i]; read_errors_[i] set for a read
+// not made.
+std::vector<UringReader::Read> PageCache::uring_reads() {
     std::vector<UringReader::Read> reads(admissions_.size());
     if (stored_.size() < admissions_.size()) stored_.resize(admissions_.size());
     read_errors_.assign(admissions_.size(), 0);
@@ -382,10 +395,7 @@ bool PageCache::read_stored_through_uring() {
         }
         reads[i] = {file_.fd(), e.offset, e.stored_bytes, into, 0};
     }
-    uring->read_all(reads);
-    for (size_t i = 0; i < reads.size(); ++i)
-        if (read_errors_[i] == 0) read_errors_[i] = reads[i].error;
-    return true;
+    return reads;
 }
 
 // The descriptors of this call's admissions: a page read is cached with

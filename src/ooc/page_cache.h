@@ -42,6 +42,7 @@
 
 #include "ooc/pack_file.h"
 #include "ooc/page_table.h"
+#include "ooc/uring_reader.h"
 
 namespace rf::pack {
 
@@ -128,7 +129,7 @@ private:
     bool take_requested_missing(uint32_t page);
     void evict(uint32_t page);
     std::string read_admissions();
-    bool read_stored_through_uring();
+    std::vector<UringReader::Read> uring_reads();
     size_t settle_admissions();
     void move_failed_to_missing(uint32_t prefix);
 
@@ -154,7 +155,7 @@ private:
     std::vector<uint32_t> slot_page_;      // page held by each slot (or kNoPage)
     std::vector<Admission> admissions_;    // this call's loads, at most slot_count_
     // io_uring reads: each admission's stored bytes (in its slot for a raw
-    // page, in stored_ otherwise) and its read's errno.
+    // page, in stored_ otherwise) and the errno of a read not made.
     std::vector<std::vector<uint8_t>> stored_;
     std::vector<int> read_errors_;
     std::vector<uint32_t> last_loaded_;    // the pages of the admissions that loaded

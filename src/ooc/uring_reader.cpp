@@ -29,23 +29,27 @@ struct UringReader::Ring {
     io_uring ring;
 };
 
+std::unique_ptr<UringReader> UringReader::create(std::string& why) {
+    auto* ring = new Ring;
+    const int error = io_uring_queue_init(kQueueDepth, &ring->ring, 0);
+    if (error < 0) {
+        why = std::string("io_uring refused: ") + std::strerror(-error);
+        delete ring;
+        return nullptr;
+    }
+    std::unique_ptr<UringReader> reader(new UringReader);
+    reader->ring_ = ring;
+    return reader;
+}
+
 UringReader* UringReader::shared() {
     static UringReader* reader = []() -> UringReader* {
         const char* io = std::getenv("RAYFORGE_PAGE_IO");
-        if (io && std::strcmp(io, "pool") == 0) {
-            refusal() = "RAYFORGE_PAGE_IO=pool";
+        if (!io || std::strcmp(io, "uring") != 0) {
+            refusal() = "the default; RAYFORGE_PAGE_IO=uring reads through io_uring";
             return nullptr;
         }
-        auto* ring = new Ring;
-        const int error = io_uring_queue_init(kQueueDepth, &ring->ring, 0);
-        if (error < 0) {
-            refusal() = std::string("io_uring refused: ") + std::strerror(-error);
-            delete ring;
-            return nullptr;
-        }
-        auto* reader = new UringReader;  // lives as long as the process (readers may run from static destructors)
-        reader->ring_ = ring;
-        return reader;
+        return create(refusal()).release();  // lives as long as the process (reads may run from static destructors)
     }();
     return reader;
 }
@@ -55,10 +59,13 @@ UringReader::~UringReader() {
     delete ring_;
 }
 
-void UringReader::read_all(std::span<Read> reads) {
+void UringReader::read_all(std::span<Read> reads, const std::function<void(size_t)>& done_with) {
     const std::lock_guard<std::mutex> lock(mutex_);
     io_uring& ring = ring_->ring;
     std::vector<uint32_t> done(reads.size(), 0);  // bytes read so far
+    const auto finished = [&](size_t i) {
+        if (done_with) done_with(i);
+    };
     size_t next = 0, in_flight = 0;
     const auto submit = [&](size_t i) {
         io_uring_sqe* sqe = io_uring_get_sqe(&ring);
@@ -75,16 +82,19 @@ void UringReader::read_all(std::span<Read> reads) {
     while (next < reads.size() || in_flight > 0) {
         while (next < reads.size() && in_flight < kQueueDepth) {
             if (reads[next].bytes == 0) {
-                ++next;
+                finished(next++);
                 continue;
             }
             submit(next++);
         }
         if (in_flight == 0) break;
         int rc = io_uring_submit_and_wait(&ring, 1);
-        if (rc < 0 && rc != -EINTR) {  // the ring failed as a whole: every read in flight fails
-            for (Read& r : reads)
-                if (r.error == 0) r.error = -rc;
+        if (rc < 0 && rc != -EINTR) {  // the ring failed as a whole: every read not finished fails
+            for (size_t i = 0; i < reads.size(); ++i)
+                if (reads[i].error == 0 && (i >= next || done[i] < reads[i].bytes)) {
+                    reads[i].error = -rc;
+                    finished(i);
+                }
             return;
         }
         io_uring_cqe* cqe;
@@ -99,12 +109,15 @@ void UringReader::read_all(std::span<Read> reads) {
                     submit(i);
                 } else {
                     r.error = -cqe->res;
+                    finished(i);
                 }
             } else if (cqe->res == 0) {
                 r.error = EIO;  // the file ended before the page did
+                finished(i);
             } else {
                 done[i] += uint32_t(cqe->res);
                 if (done[i] < r.bytes) submit(i);  // a short read: continue it
+                else finished(i);
             }
         }
         io_uring_cq_advance(&ring, seen);
@@ -115,14 +128,20 @@ void UringReader::read_all(std::span<Read> reads) {
 
 struct UringReader::Ring {};
 
+std::unique_ptr<UringReader> UringReader::create(std::string& why) {
+    why = "built without liburing, so without io_uring";
+    return nullptr;
+}
+
 UringReader* UringReader::shared() {
-    refusal() = "built without liburing";
+    static const bool said = (create(refusal()), true);
+    (void)said;
     return nullptr;
 }
 
 UringReader::~UringReader() { delete ring_; }
 
-void UringReader::read_all(std::span<Read>) {}
+void UringReader::read_all(std::span<Read>, const std::function<void(size_t)>&) {}
 
 #endif
 
