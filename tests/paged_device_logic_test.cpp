@@ -116,7 +116,7 @@ public:
         for (auto& fill : fills_) fill.resize(layout.bytes());
         const PackFile& file = *f.file;
         view_ = make_paged_view(file,
-                                {file.pages().data(), file.cell_roots().data(), file.middle_nodes().data(),
+                                {file.pages().data(), file.page_roots().data(), file.cell_roots().data(), file.middle_nodes().data(),
                                  file.top_nodes().data(), file.top_refs().data(), file.instances().data()},
                                 PageTableView{descriptors_.data(), pool_.data(), layout.slot_bytes, page_count});
     }

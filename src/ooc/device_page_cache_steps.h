@@ -157,6 +157,7 @@ inline constexpr uint64_t kDefaultStagingBytes = uint64_t(1) << 20;
 // file's arrays).
 struct ResidentArrays {
     const PageInfo* pages = nullptr;
+    const PageNode* page_roots = nullptr;
     const uint32_t* cell_roots = nullptr;
     const BvhNode* middle_nodes = nullptr;
     const PageNode* top_nodes = nullptr;  // null when the file has no top BVH
@@ -168,6 +169,7 @@ struct ResidentArrays {
     const ResidentHeader& r = f.resident();
     PagedSceneView v;
     v.pages = a.pages;
+    v.page_roots = a.page_roots;
     v.cell_roots = a.cell_roots;
     v.middle_nodes = a.middle_nodes;
     v.refs = a.top_refs;

@@ -219,6 +219,7 @@ void PackFile::read_resident(uint64_t size) {
         throw file_byte_error(path_, h.resident_offset, "non-finite scene bounds");
     const uint64_t cells = uint64_t(r.grid_res[0]) * uint64_t(r.grid_res[1]) * uint64_t(r.grid_res[2]);
     in.read_array(pages_, h.geometry_pages, "page bounds");
+    in.read_array(page_roots_, h.geometry_pages, "page roots");
     in.read_array(cell_roots_, cells, "top-grid cells");
     in.read_array(middle_nodes_, r.middle_node_count, "middle BVH nodes");
     in.read_array(top_nodes_, r.top_node_count, "top BVH nodes");
@@ -407,6 +408,9 @@ void PackFile::check_page_contents(uint64_t index, std::span<const uint8_t> raw)
     const std::string what = path_ + ": page " + std::to_string(index);
     if (index < header_.geometry_pages) {
         const GeometryPageView g = view_geometry_page(raw, what);
+        // Rays test the resident copy of the root, then walk the page's nodes from its result.
+        if (std::memcmp(g.nodes, &page_roots_[size_t(index)], sizeof(PageNode)) != 0)
+            throw Error(what + ": its root node differs from the resident copy");
         if (g.quad_count != pages_[size_t(index)].quad_count)
             throw Error(what + ": holds " + std::to_string(g.quad_count) + " quads, its bounds record says " +
                         std::to_string(pages_[size_t(index)].quad_count));
@@ -449,6 +453,7 @@ void PackFile::drop_os_cache() const {
 
 size_t PackFile::resident_memory_bytes() const {
     return directory_.capacity() * sizeof(PageEntry) + pages_.capacity() * sizeof(PageInfo) +
+           page_roots_.capacity() * sizeof(PageNode) +
            cell_roots_.capacity() * sizeof(uint32_t) + middle_nodes_.capacity() * sizeof(BvhNode) +
            top_nodes_.capacity() * sizeof(PageNode) + top_refs_.capacity() * sizeof(TopRef) +
            instances_.capacity() * sizeof(InstanceInfo) +

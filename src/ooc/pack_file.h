@@ -32,6 +32,8 @@ public:
 
     [[nodiscard]] std::span<const PageEntry> directory() const { return directory_; }
     [[nodiscard]] std::span<const PageInfo> pages() const { return pages_; }
+    // A copy of each geometry page's root node (equal to the page's node 0: checked when the page is read).
+    [[nodiscard]] std::span<const PageNode> page_roots() const { return page_roots_; }
     [[nodiscard]] std::span<const uint32_t> cell_roots() const { return cell_roots_; }
     [[nodiscard]] std::span<const BvhNode> middle_nodes() const { return middle_nodes_; }
     // TopLevel::WideBvh: the top BVH (empty for a grid file or no pages).
@@ -93,6 +95,7 @@ private:
     ResidentHeader resident_{};
     std::vector<PageEntry> directory_;
     std::vector<PageInfo> pages_;
+    std::vector<PageNode> page_roots_;
     std::vector<uint32_t> cell_roots_;
     std::vector<BvhNode> middle_nodes_;
     std::vector<PageNode> top_nodes_;

@@ -13,7 +13,7 @@
 //     fixed-size record per triangle);
 //   - texture pages: 32x32-texel tiles of every mip level (§6.5).
 // What is always resident (the "resident section"): per geometry page its
-// world bounds and decode transform, the top level (a CWBVH over the page
+// world bounds, decode transform and a copy of its BVH's root node, the top level (a CWBVH over the page
 // bounds, or the seed's top grid of kGridResolution^3 cells and per cell a
 // BVH over the page bounds clipped to the cell, §6.3.1 (e)-(g)), the
 // materials, lights, camera and texture descriptions.
@@ -36,7 +36,8 @@ namespace rf::pack {
 
 inline constexpr char kMagic[8] = {'R', 'F', 'P', 'A', 'C', 'K', '\r', '\n'};
 // 3: shared-vertex attribute pages and per-page attribute runs
-// (PageInfo::attribute_triangles), the meshopt page codec; 2: wide (CWBVH)
+// (PageInfo::attribute_triangles), the meshopt page codec, resident page
+// roots; 2: wide (CWBVH)
 // page BVHs. Older files are not read: they get a "convert it again" error.
 inline constexpr uint32_t kVersion = 3;
 
@@ -199,6 +200,7 @@ enum class TopLevel : uint8_t { WideBvh = 0, Grid = 1 };
 // The resident section starts with this; the arrays follow in this order,
 // each at an offset rounded up to 16 bytes:
 //   PageInfo[geometry_pages]
+//   PageNode page_roots[geometry_pages]   (a copy of each page's root node: rays test it before the page)
 //   uint32_t cell_root[grid_cells]   (index into the middle nodes, or kEmptyCell)
 //   BvhNode middle_nodes[middle_node_count]   (leaves of one reference each: first = its index in top_refs)
 //   PageNode top_nodes[top_node_count]        (world space; node 0 the root)

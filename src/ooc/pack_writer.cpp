@@ -87,6 +87,7 @@ struct PackWriter::State {
     uint64_t end = sizeof(FileHeader);
     std::vector<PageEntry> geometry_entries, attribute_entries, texture_entries;
     std::vector<PageInfo> pages;
+    std::vector<PageNode> page_roots;  // a copy of each page's root node
     struct ObjectPages {
         uint32_t first_page = 0, page_count = 0;
         uint64_t triangles = 0;
@@ -268,6 +269,7 @@ uint32_t PackWriter::write_object(const ObjectInput& object, bool instanced) {
 
     struct Ready {
         BuiltPage page;
+        PageNode root;
         StoredPage geometry;
         std::vector<StoredPage> attributes;
     };
@@ -278,6 +280,7 @@ uint32_t PackWriter::write_object(const ObjectInput& object, bool instanced) {
             Ready& r = ready[p];
             const PackWriterOptions& o = s.options;
             r.page = build_page(object.positions, object.shading, quads, page_quads[p], step);
+            std::memcpy(&r.root, r.page.geometry.data() + sizeof(GeometryPageHeader), sizeof(PageNode));
             r.geometry = encode_page(std::move(r.page.geometry), PageKind::Geometry, o.attribute_format, o.codec,
                                      o.zstd_level);
             AttributePages cut = cut_attribute_pages(r.page.shading, o.attribute_format, attribute_page);
@@ -301,6 +304,7 @@ uint32_t PackWriter::write_object(const ObjectInput& object, bool instanced) {
             s.summary.attribute_bytes += a.bytes.size();
         }
         s.pages.push_back(info);
+        s.page_roots.push_back(r.root);
         s.summary.max_quantisation_error = std::max(s.summary.max_quantisation_error, r.page.max_error);
     }
     if (s.geometry_entries.size() > (uint64_t(1) << 32) / kTrianglesPerPageSlot)
@@ -374,6 +378,7 @@ PackSummary PackWriter::finish(const ProgressCallback& progress) {
     };
     put(&r, sizeof(r));
     put(s.pages.data(), s.pages.size() * sizeof(PageInfo));
+    put(s.page_roots.data(), s.page_roots.size() * sizeof(PageNode));
     put(grid.cell_roots.data(), grid.cell_roots.size() * sizeof(uint32_t));
     put(grid.middle_nodes.data(), grid.middle_nodes.size() * sizeof(BvhNode));
     put(top.nodes.data(), top.nodes.size() * sizeof(PageNode));

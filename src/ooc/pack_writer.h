@@ -1,8 +1,8 @@
 // Writing a paged scene file (pack_format.h), object by object, out of core
 // as the dissertation's preprocessor does (§6.3.1 (h)): each object's pages
 // are built and written when it is added, then its memory is freed; only
-// the per-page bounds stay until finish() builds the top level over them. So the writer's memory is bounded by its largest object
-// (about kWriterBytesPerTriangle per triangle) plus 64 bytes per page.
+// the per-page bounds and root nodes stay until finish() builds the top level over them. So the writer's memory is bounded by its largest object
+// (about kWriterBytesPerTriangle per triangle) plus 144 bytes per page.
 #pragma once
 
 #include <cstdint>

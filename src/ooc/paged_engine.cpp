@@ -36,7 +36,7 @@ PagedEngine::PagedEngine(std::shared_ptr<const PackFile> file, const EngineBudge
 PagedSceneView PagedEngine::view() {
     const PackFile& f = *file_;
     return make_paged_view(f,
-                           {f.pages().data(), f.cell_roots().data(), f.middle_nodes().data(), f.top_nodes().data(),
+                           {f.pages().data(), f.page_roots().data(), f.cell_roots().data(), f.middle_nodes().data(), f.top_nodes().data(),
                             f.top_refs().data(), f.instances().data()},
                            geometry_->view());
 }

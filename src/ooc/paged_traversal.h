@@ -59,6 +59,7 @@ namespace rf::pack {
 // The resident levels and the geometry pages as the per-ray code sees them.
 struct PagedSceneView {
     const PageInfo* pages = nullptr;
+    const PageNode* page_roots = nullptr;    // a copy of every page's root node (resident)
     const TopRef* refs = nullptr;            // what the top level reaches
     const InstanceInfo* instances = nullptr;
     // TopLevel::WideBvh (top_nodes set): the top BVH (leaf item k is refs[k]) ...
@@ -377,15 +378,23 @@ struct PageLeafTest {
 };
 #endif
 
+// A node's test: the slots the ray enters before tmax, and where.
+struct NodeHits {
+    unsigned mask = 0;
+    alignas(32) float near[kCwbvhWidth];
+};
+
 // Walks a wide tree (a page's BVH or the top BVH), nearer children first,
 // never past tmax (read again after every leaf: it shrinks as hits are
 // found). leaf(first, count) handles a leaf's items and returns true to end
-// the walk (an any-hit query's hit). `visits` counts the nodes fetched. The
-// tree was checked when it was read (check_wide_tree): at most
-// kCwbvhMaxDepth levels, so the stack cannot overflow.
+// the walk (an any-hit query's hit). `visits` counts the nodes fetched.
+// `root_hits`, when given, is the root's test already made (a page's root
+// is tested from its resident copy before the page is touched). The tree
+// was checked when it was read (check_wide_tree): at most kCwbvhMaxDepth
+// levels, so the stack cannot overflow.
 template <typename Leaf>
 RF_HDI void walk_wide_tree(const PageNode* nodes, const PageNodeTest& test, const float& tmax, uint32_t& visits,
-                           Leaf&& leaf) {
+                           Leaf&& leaf, const NodeHits* root_hits = nullptr) {
     PendingNode stack[kPageStackSize];
     int top = 0;
     uint32_t ref = 0;  // the root
@@ -393,9 +402,16 @@ RF_HDI void walk_wide_tree(const PageNode* nodes, const PageNodeTest& test, cons
         // Down the nearest hit children until a leaf or a node whose children are all missed.
         while (!(ref & kPageLeafRef)) {
             const PageNode& n = nodes[ref];
-            ++visits;
-            alignas(32) float near[kCwbvhWidth];
-            const unsigned mask = test.hits(n, tmax, near);
+            alignas(32) float near_here[kCwbvhWidth];
+            const float* near = near_here;
+            unsigned mask;
+            if (root_hits && ref == 0) {
+                mask = root_hits->mask;
+                near = root_hits->near;
+            } else {
+                ++visits;
+                mask = test.hits(n, tmax, near_here);
+            }
             if (mask == 0) break;
             if (cwbvh_popc(mask) == 1) {
                 ref = page_child_ref(n, int(cwbvh_popc(mask - 1)));
@@ -423,23 +439,32 @@ RF_HDI void walk_wide_tree(const PageNode* nodes, const PageNodeTest& test, cons
 
 // Searches one cached page; true when `hit` got closer (or, any-hit, when
 // anything was hit).
+// (`node_test`: the ray in the page's space; `root_hits`: its root's test.)
 template <bool kAnyHit>
 RF_HDI bool search_page(const uint8_t* bytes, const PageInfo& info, uint32_t page, const Ray& world,
-                        const WideBoxRay& world_box, const PageLeafTest& leaf_test, Hit& hit, PagedCounters& counters) {
+                        const PageNodeTest& node_test, const NodeHits& root_hits, const PageLeafTest& leaf_test,
+                        Hit& hit, PagedCounters& counters) {
     GeometryPageHeader header;
     memcpy(&header, bytes, sizeof(header));
     const auto* nodes = reinterpret_cast<const PageNode*>(bytes + sizeof(header));
     const auto* quads = reinterpret_cast<const Quad*>(bytes + sizeof(header) + header.node_count * sizeof(PageNode));
-    // |quantised coordinates| stay below 2^15; boxes grown by 2 units (see WideBoxRay).
-    const PageNodeTest node_test = PageNodeTest::make(world_box.to_page(info.offset, info.scale, 2.0f, 32768.0f));
     bool found = false;
-    walk_wide_tree(nodes, node_test, hit.t, counters.nodes, [&](uint32_t first, uint32_t count) {
-        counters.quads += count;
-        if (!leaf_test.template test<kAnyHit>(quads, first, count, page, info, world.tmin, hit)) return false;
-        found = true;
-        return kAnyHit;
-    });
+    walk_wide_tree(
+        nodes, node_test, hit.t, counters.nodes,
+        [&](uint32_t first, uint32_t count) {
+            counters.quads += count;
+            if (!leaf_test.template test<kAnyHit>(quads, first, count, page, info, world.tmin, hit)) return false;
+            found = true;
+            return kAnyHit;
+        },
+        &root_hits);
     return found;
+}
+
+// The ray in a page's quantised space: |quantised coordinates| stay below
+// 2^15; boxes grown by 2 units (see WideBoxRay).
+RF_HDI PageNodeTest page_node_test(const WideBoxRay& box, const PageInfo& info) {
+    return PageNodeTest::make(box.to_page(info.offset, info.scale, 2.0f, 32768.0f));
 }
 
 // The 3D-DDA over the top grid's cells (per-axis cell sizes).
@@ -536,6 +561,19 @@ struct PageVisit {
         // WasRead stays per page: in the iteration it was cached, every ray
         // searched it through every reference it met.
         if ((d & kWasRead) || mailbox.seen(r)) return false;
+        // The page's root from its resident copy: a ray that enters none of
+        // its children needs nothing of the page, cached or not (about half
+        // of the rays that cross a page's bounds, on the generated scenes).
+        const PageInfo& info = v.pages[page];
+        Ray local;
+        if (ref.instance != kNoInstance) local = object_ray(v.instances[ref.instance], ray);
+        const Ray& page_ray = ref.instance == kNoInstance ? ray : local;
+        const PageNodeTest node_test = page_node_test(
+            ref.instance == kNoInstance ? box : WideBoxRay::make(local, 0.0f, box_scale(info.bounds)), info);
+        NodeHits root;
+        ++counters.nodes;
+        root.mask = node_test.hits(v.page_roots[page], state.hit.t, root.near);
+        if (root.mask == 0) return false;
         if (d & kOutOfCore) {
             if (!requested) {
                 if (!kAnyHit) v.geometry.request(page);
@@ -549,17 +587,12 @@ struct PageVisit {
         mailbox.add(r);
         ++counters.pages;
         const uint8_t* bytes = v.geometry.slots + uint64_t(d & kSlotMask) * v.geometry.slot_bytes;
-        const PageInfo& info = v.pages[page];
-        bool hit;
-        if (ref.instance == kNoInstance) {
-            hit = search_page<kAnyHit>(bytes, info, page, ray, box, leaf_test, state.hit, counters);
-        } else {
-            // Into the object's space (t is unchanged by the affine map), where
-            // the page's decode transform applies; triangles tested there.
-            const Ray local = object_ray(v.instances[ref.instance], ray);
-            hit = search_page<kAnyHit>(bytes, info, page, local, WideBoxRay::make(local, 0.0f, box_scale(info.bounds)),
-                                       PageLeafTest::make(local), state.hit, counters);
-        }
+        // An instanced page: in the object's space (t is unchanged by the
+        // affine map), where the page's decode transform applies; triangles
+        // tested there.
+        const bool hit = search_page<kAnyHit>(
+            bytes, info, page, page_ray, node_test, root,
+            ref.instance == kNoInstance ? leaf_test : PageLeafTest::make(local), state.hit, counters);
         if (!hit) return false;
         state.instance = ref.instance;
         if (!kAnyHit) return false;

@@ -194,6 +194,7 @@ struct DevicePagedEngine::Impl {
     std::unique_ptr<pack::DevicePoolPlanner> planner;
     // Resident levels, descriptors, staging and pool on the device.
     DeviceBuffer<pack::PageInfo> pages{"paged: page infos"};
+    DeviceBuffer<pack::PageNode> page_roots{"paged: page roots"};
     DeviceBuffer<uint32_t> cell_roots{"paged: cell roots"};
     DeviceBuffer<BvhNode> middle_nodes{"paged: middle nodes"};
     DeviceBuffer<pack::PageNode> top_nodes{"paged: top BVH nodes"};
@@ -224,6 +225,7 @@ DevicePagedEngine::Impl::Impl(std::shared_ptr<const pack::PackFile> f, const Dev
     host = std::make_unique<pack::PageCache>(*file, 0, page_count, host_slot, budgets.host_bytes, "host geometry cache");
     planner = std::make_unique<pack::DevicePoolPlanner>(page_count, slots);
     pages.upload(file->pages());
+    page_roots.upload(file->page_roots());
     cell_roots.upload(file->cell_roots());
     middle_nodes.upload(file->middle_nodes());
     top_nodes.upload(file->top_nodes());
@@ -237,7 +239,8 @@ DevicePagedEngine::Impl::Impl(std::shared_ptr<const pack::PackFile> f, const Dev
     const pack::PageTableView table{descriptors.data(), pool.data(), layout.slot_bytes, page_count};
     view = pack::make_paged_view(
         *file,
-        {pages.data(), cell_roots.data(), middle_nodes.data(), top_nodes.data(), top_refs.data(), instances.data()},
+        {pages.data(), page_roots.data(), cell_roots.data(), middle_nodes.data(), top_nodes.data(), top_refs.data(),
+         instances.data()},
         table);
 }
 
