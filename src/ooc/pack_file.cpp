@@ -391,8 +391,10 @@ size_t PackFile::read_page(uint64_t index, std::span<uint8_t> out, std::vector<u
 
 void PackFile::finish_page(uint64_t index, std::span<const uint8_t> stored, std::span<uint8_t> out) const {
     const PageEntry& e = entry(index);
-    if (out.size() < e.raw_bytes || stored.size() != e.stored_bytes)
-        throw Error(path_ + ": page " + std::to_string(index) + " is larger than its cache slot");
+    if (out.size() < e.raw_bytes) throw Error(path_ + ": page " + std::to_string(index) + " is larger than its cache slot");
+    if (stored.size() != e.stored_bytes)
+        throw Error(path_ + ": page " + std::to_string(index) + ": " + std::to_string(stored.size()) +
+                    " stored bytes given, the directory says " + std::to_string(e.stored_bytes));
     if (crc32c(stored.data(), stored.size()) != e.checksum)
         throw file_byte_error(path_, e.offset, "page " + std::to_string(index) + " checksum mismatch (corrupted file)");
     if (e.codec != Codec::None &&

@@ -145,7 +145,6 @@ bool take_triangles(std::span<const uint8_t> in, size_t& at, std::vector<uint32_
 struct PaddedVertex {
     int16_t v[3];
     int16_t pad = 0;
-    bool operator==(const PaddedVertex& o) const { return v[0] == o.v[0] && v[1] == o.v[1] && v[2] == o.v[2]; }
 };
 
 // Quads as their distinct vertices (in first use order, so neighbouring
