@@ -11,8 +11,11 @@
 # device call's carry limit). A cold build on the device takes longer than
 # one 10-minute call (renderer.cu alone compiles for well over 5 minutes).
 # Also stages compressed benchmark scenes in .gpu-scenes/ (about 14 MB).
-# Then, on the device: scripts/gpu-run.sh [tests|sanitizers|bench|builds|all]
-# with .gpu-prebuilt and .gpu-scenes carried; it uses the staged binaries when they were
+# Then, on the device: scripts/gpu-run.sh [STEP...] (no step: the one-call
+# order, changed tests, their sanitizers, ab and profile, within 8 minutes;
+# docs/gpu.md) with .gpu-prebuilt and .gpu-scenes carried (ab's larger-than-L2
+# scenes need nothing more: dragon-x15 copies the staged Dragon and
+# generate:terrain-statues@12M is generated there); it uses the staged binaries when they were
 # built from the sources it finds there (a digest of src, include, apps,
 # bench, tests and the CMake files), else it builds.
 #   scripts/gpu-prebuild.sh            (build folder: build-gpu-prebuilt/)

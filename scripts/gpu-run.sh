@@ -1,8 +1,26 @@
 #!/usr/bin/env bash
 # The GPU pass, on a CUDA machine without package access (the device
 # machine), writing its logs to $OUT (or ./gpu-out):
-#   scripts/gpu-run.sh [STEP...]      default: all
-# Steps, in the order of a first GPU run (docs/gpu.md says what to read off each):
+#   scripts/gpu-run.sh [STEP...]      default: the one-call order below
+# Steps (docs/gpu.md, "The device script", says what to read off each):
+#   changed     the changed kernels' and builders' gpu tests (RAYFORGE_CHANGED_TESTS,
+#               a gtest filter of broad patterns); fails when any fails or is skipped
+#   memcheck-changed    memcheck on the changed kernels' tests (RAYFORGE_CHANGED_MEMCHECK)
+#   racecheck-changed, synccheck-changed   on the changed builders (RAYFORGE_CHANGED_BUILDERS)
+#   ab          A/B timings in one call, old and new variants side by side: Sponza
+#               1024x768 primary (scanline and Morton) and diffuse with aila-laine,
+#               aila-laine-fma, cwbvh and cwbvh-fma (those the binary knows) on binned
+#               and SBVH trees; the same on 15 Dragons and a 12M-triangle generated
+#               scene (larger than L2); lbvh30, hlbvh2, ploc and hploc on the Dragon
+#               (with and without --treelets where the CLI has it); path tracing
+#               passes/s and trace share per kernel (ab.txt, ab.json)
+#   profile     cuobjdump resource usage and the trace kernels' SASS, Nsight Compute on
+#               single launches (primary and diffuse per kernel), Nsight Systems on the
+#               device builds; each tool where `command -v` finds it (profile.txt, sass.txt)
+#   default     changed memcheck-changed racecheck-changed synccheck-changed ab profile:
+#               the one-call order, in priority order, within RAYFORGE_GPU_RUN_BUDGET
+#               seconds (480): each of these steps gets its own timeout, cut to what is
+#               left; a step with no time left reads UNAVAILABLE (out of the time budget)
 #   tests       every gpu test; fails when any test fails or is skipped
 #   sanitizers  memcheck, synccheck and racecheck (each a step of its own)
 #   memcheck | synccheck | racecheck   one compute-sanitizer tool
@@ -19,42 +37,63 @@
 #   python      the Python module staged by gpu-prebuild.sh: CUDA scenes against the CPU, device
 #               arrays through __cuda_array_interface__ and DLPack, threads, 10M rays' Mrays/s
 #               (python/tests/gpu_check.py, into builds.txt; UNAVAILABLE where it cannot import)
-#   all         tests sanitizers bench builds world animate python
-# Every run first checks the runtime (`rayforge info --devices`). Each step
-# prints one line, "gpu-run: STEP: ok|FAIL|UNAVAILABLE[: why]", also kept in
-# $OUT/summary.txt. RAYFORGE_REQUIRE_GPU=1 is exported: a gpu test that finds
+#   all         tests sanitizers bench builds world animate python (several calls: no budget)
+# Every run first checks the runtime (`rayforge info --devices`) and prints
+# the card's clocks once (nvidia-smi --query-gpu=name,clocks.sm,clocks.mem).
+# Each step prints one line, "gpu-run: STEP: ok|FAIL|UNAVAILABLE[: why]", also
+# kept in $OUT/summary.txt, as soon as it ends; each step writes its files
+# under $OUT as it goes, so a run cut off by the call's limit still returns
+# what finished. RAYFORGE_REQUIRE_GPU=1 is exported: a gpu test that finds
 # no device fails instead of skipping. Exit status: 0 when every step is ok,
-# 1 when one failed, 3 when none failed but a sanitizer was unavailable on
-# this runtime.
+# 1 when one failed, 3 when none failed but a sanitizer or tool was
+# unavailable on this runtime or a step ran out of the time budget.
 # Binaries: those staged in .gpu-prebuilt/ by scripts/gpu-prebuild.sh when
 # they were built from these sources (carry .gpu-prebuilt: no build here);
 # otherwise it unpacks .gpu-debs/ (scripts/gpu-bundle.sh) into a private
 # prefix and builds the CLI and the gpu tests in build-gpu/. A cold build
 # may not fit one 10-minute call: build-gpu/ stays while the machine is
 # warm, so run the same command again.
-# RAYFORGE_SANITIZER_TIMEOUT: seconds per sanitizer tool (default 150).
+# RAYFORGE_SANITIZER_TIMEOUT: seconds per sanitizer tool of the sanitizers
+# steps (default 150).
 set -uo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 out="${OUT:-$ROOT/gpu-out}"
 mkdir -p "$out"
 export RAYFORGE_REQUIRE_GPU=1
-# At most 8 files come back from a device call: $out holds summary.txt
-# (the step lines, nvidia-smi, the device listing), build.txt, gpu-tests.txt,
-# sanitizers.txt, bench-rays.txt and .json, bench-render.txt and builds.txt;
-# the rest goes to a scratch folder.
+# At most 8 files come back from a device call. The default order writes
+# summary.txt (the step lines, nvidia-smi, the device listing), build.txt
+# (only when it builds), gpu-tests.txt, sanitizers.txt, ab.txt, ab.json,
+# profile.txt and sass.txt; `all` writes summary.txt, build.txt,
+# gpu-tests.txt, sanitizers.txt, bench-rays.txt and .json, bench-render.txt
+# and builds.txt (so do not mix the two in one call); the rest goes to a
+# scratch folder.
 scratch=$(mktemp -d)
 summary="$out/summary.txt"
 : > "$summary"
 
 steps=()
-for arg in "${@:-all}"; do
+for arg in "${@:-default}"; do
   case "$arg" in
+    default) steps+=(changed memcheck-changed racecheck-changed synccheck-changed ab profile) ;;
     all) steps+=(tests memcheck synccheck racecheck bench builds world animate python) ;;
     sanitizers) steps+=(memcheck synccheck racecheck) ;;
-    tests | memcheck | synccheck | racecheck | bench | builds | world | animate | python) steps+=("$arg") ;;
-    *) echo "usage: $0 [tests|sanitizers|memcheck|synccheck|racecheck|bench|builds|world|animate|python|all]..." >&2; exit 2 ;;
+    changed | memcheck-changed | racecheck-changed | synccheck-changed | ab | profile | tests | memcheck | \
+      synccheck | racecheck | bench | builds | world | animate | python) steps+=("$arg") ;;
+    *)
+      echo "usage: $0 [default|changed|memcheck-changed|racecheck-changed|synccheck-changed|ab|profile|tests|sanitizers|memcheck|synccheck|racecheck|bench|builds|world|animate|python|all]..." >&2
+      exit 2
+      ;;
   esac
 done
+
+# The one-call budget of the default order's steps (SECONDS counts from the start).
+budget="${RAYFORGE_GPU_RUN_BUDGET:-480}"
+# step_limit WANT: WANT seconds, or what is left of the budget (less a margin
+# for the step's own reporting) when that is less; 0 when nothing is left.
+step_limit() {
+  local left=$((budget - SECONDS - 5))
+  if ((left < 10)); then echo 0; elif ((left < $1)); then echo "$left"; else echo "$1"; fi
+}
 
 failed=0 unavailable=0
 # report STEP ok|FAIL|UNAVAILABLE [WHY]: the step's one line.
@@ -82,7 +121,8 @@ cpu_runs_prebuilt() {
 
 # Sets $rf and $gpu_tests: the staged binaries, or a build here.
 # RAYFORGE_GPU_RUN_BINARIES=DIR (for tests/gpu_run_script_test.sh) takes
-# DIR/rayforge and DIR/rayforge_gpu_tests as they are.
+# DIR/rayforge and DIR/rayforge_gpu_tests as they are (and DIR/librayforge.so
+# for the profile step when the CLI does not load one).
 find_binaries() {
   if [[ -n "${RAYFORGE_GPU_RUN_BINARIES:-}" ]]; then
     rf="$RAYFORGE_GPU_RUN_BINARIES/rayforge"
@@ -143,11 +183,22 @@ build_here() {
 }
 
 # Sets $no_device: "" when the runtime lists a device, else why not.
+# Also sets $card (the device's name) and $clocks (nvidia-smi's name, SM and
+# memory clocks, CSV), printed once and kept in summary.txt and the JSON.
 check_runtime() {
   { echo "== nvidia-smi"; nvidia-smi 2>&1; echo "== rayforge info --devices"; } >> "$summary"
+  if command -v nvidia-smi > /dev/null; then
+    clocks=$(nvidia-smi --query-gpu=name,clocks.sm,clocks.mem --format=csv 2>&1)
+  else
+    clocks="nvidia-smi not found"
+  fi
+  echo "$clocks"
+  { echo "== nvidia-smi --query-gpu=name,clocks.sm,clocks.mem --format=csv"; echo "$clocks"; } >> "$summary"
+  card=$(nvidia-smi --query-gpu=name --format=csv,noheader 2> /dev/null | head -1)
   local listing
   listing=$("$rf" info --devices 2>&1)
   echo "$listing" | tee -a "$summary"
+  [[ -n "$card" ]] || card=$(sed -n 's/^cuda:[0-9]*  *\(.*\)$/\1/p' <<< "$listing" | head -1)
   if grep -q '^cuda:[0-9]' <<< "$listing"; then
     no_device=""
     report runtime ok "$(grep -m1 '^cuda:' <<< "$listing")"
@@ -165,22 +216,57 @@ gtest_count() {
   sed -n "s/^\[  $label\] \([0-9]*\) tests\{0,1\}[,.].*/\1/p" "$1" | tail -1
 }
 
+# step_tests [STEP FILTER LIMIT]: every gpu test (the tests step), or those
+# of FILTER within LIMIT seconds (the changed step, appended to the same log).
 step_tests() {
-  local log="$out/gpu-tests.txt"
-  (cd "$ROOT" && "$gpu_tests") > "$log" 2>&1
+  local step=${1:-tests} filter=${2:-} limit=${3:-0} log="$out/gpu-tests.txt"
+  if [[ -z "$filter" ]]; then
+    (cd "$ROOT" && "$gpu_tests") > "$log" 2>&1
+  else
+    if [[ -n "$no_device" ]]; then
+      report "$step" FAIL "not run: no CUDA device: $no_device"
+      return
+    fi
+    if ((limit == 0)); then
+      report "$step" UNAVAILABLE "out of the time budget (RAYFORGE_GPU_RUN_BUDGET=$budget s)"
+      return
+    fi
+    local run="$scratch/tests-$step.txt"
+    (cd "$ROOT" && timeout "$limit" "$gpu_tests" --gtest_filter="$filter") > "$run" 2>&1
+    local status=$?
+    { echo "== $step: --gtest_filter=$filter (exit $status)"; cat "$run"; } >> "$log"
+    if ((status == 124)); then
+      report "$step" FAIL "timed out after $limit s (gpu-tests.txt)"
+      return
+    fi
+    log=$run
+    (exit $status)
+  fi
   local rc=$? passed skipped failures first
   passed=$(gtest_count "$log" PASSED) skipped=$(gtest_count "$log" SKIPPED) failures=$(gtest_count "$log" FAILED)
   passed=${passed:-0} skipped=${skipped:-0} failures=${failures:-0}
   local counts="$passed passed, $failures failed, $skipped skipped"
   if ((rc == 0 && skipped == 0 && passed > 0)); then
-    report tests ok "$counts"
+    report "$step" ok "$counts"
   elif ((rc == 0 && skipped > 0)); then
-    report tests FAIL "$counts: a skipped gpu test tested nothing ($(grep -m1 -o 'no CUDA device: .*' "$log" || echo see gpu-tests.txt))"
+    report "$step" FAIL "$counts: a skipped gpu test tested nothing ($(grep -m1 -o 'no CUDA device: .*' "$log" || echo see gpu-tests.txt))"
+  elif ((rc == 0)); then
+    report "$step" FAIL "$counts: no test matched"
   else
     first=$(grep -m1 -o 'no CUDA device: .*' "$log" || grep -m1 -B1 '^\[  FAILED  \]' "$log" | head -1)
-    report tests FAIL "$counts, exit $rc (${first:-see gpu-tests.txt})"
+    report "$step" FAIL "$counts, exit $rc (${first:-see gpu-tests.txt})"
   fi
 }
+
+# The changed kernels' and builders' tests (issue 33): broad name patterns,
+# so tests added under these names are picked up. The sanitizers take the
+# new kernels' and builders' own tests and the two builder tests whose
+# kernels hold shared-memory and warp code; GpuDeviceTracer's every-kernel
+# tests (72 s and more under memcheck) and the brute-force hit checks (host
+# work) run natively only.
+changed_tests="${RAYFORGE_CHANGED_TESTS:-*AilaLaine*:*Cwbvh*:*Fma*:*Tracer*:*Hploc*:*HPloc*:*Treelet*:*Ploc*:*Hlbvh2*:*RawTree*:*Emit*:*LayoutConvert*:*DeviceBuild*:GpuBenchFigures.*:GpuProbe.*}"
+changed_memcheck="${RAYFORGE_CHANGED_MEMCHECK:-*Fma*:*Hploc*:*Treelet*:*RawTree*:*Emit*:GpuPlocBuild.DeviceClusteringAndNodeBoxes:GpuHlbvh2Build.DeviceTopLevelIsTheCpuTopLevel:GpuBenchFigures.*:-*HitsEqualBruteForce*}"
+changed_builders="${RAYFORGE_CHANGED_BUILDERS:-*Hploc*:*Treelet*:*RawTree*:*Emit*:GpuPlocBuild.DeviceClusteringAndNodeBoxes:GpuHlbvh2Build.DeviceTopLevelIsTheCpuTopLevel:-*HitsEqualBruteForce*}"
 
 # The tests each sanitizer tool runs: the tracers and renderer (global
 # memory), and the builders, whose kernels hold the shared-memory and
@@ -197,48 +283,62 @@ sanitizer_filter() {
   esac
 }
 
+# step_sanitizer TOOL [STEP FILTER LIMIT]: TOOL over sanitizer_filter's
+# selection within RAYFORGE_SANITIZER_TIMEOUT, or over FILTER within LIMIT
+# seconds (the -changed steps; the probe's time counts against LIMIT too).
 step_sanitizer() {
-  local tool=$1 log="$out/sanitizers.txt" limit="${RAYFORGE_SANITIZER_TIMEOUT:-150}"
+  local tool=$1 step=${2:-$1} log="$out/sanitizers.txt" limit="${4:-${RAYFORGE_SANITIZER_TIMEOUT:-150}}"
   if [[ -n "$no_device" ]]; then
-    report "$tool" FAIL "not run: no CUDA device: $no_device"
+    report "$step" FAIL "not run: no CUDA device: $no_device"
     return
   fi
+  if ((limit == 0)); then
+    report "$step" UNAVAILABLE "out of the time budget (RAYFORGE_GPU_RUN_BUDGET=$budget s)"
+    return
+  fi
+  local started=$SECONDS
   local sanitizer
   sanitizer=$(command -v compute-sanitizer || ls /usr/local/cuda/bin/compute-sanitizer \
     /usr/local/cuda/compute-sanitizer/compute-sanitizer 2> /dev/null | head -1)
   if [[ -z "$sanitizer" ]]; then
-    report "$tool" UNAVAILABLE "compute-sanitizer not found (it ships with the CUDA toolkit)"
+    report "$step" UNAVAILABLE "compute-sanitizer not found (it ships with the CUDA toolkit)"
     return
   fi
   # A trivial run first: some sandboxed runtimes refuse the sanitizer ("device
   # not supported", then error 999 at the first allocation). That is the
   # runtime's limit, not a memory error of ours.
   local probe="$scratch/probe-$tool.txt"
-  (cd "$ROOT" && timeout 120 "$sanitizer" --tool "$tool" --error-exitcode 3 "$gpu_tests" \
+  local probe_limit=$((limit < 120 ? limit : 120))
+  (cd "$ROOT" && timeout "$probe_limit" "$sanitizer" --tool "$tool" --error-exitcode 3 "$gpu_tests" \
     --gtest_filter=GpuProbe.UploadLaunchDownload) > "$probe" 2>&1
   local rc=$?
-  { echo "== $tool probe (exit $rc)"; cat "$probe"; } >> "$log"
+  { echo "== $step: $tool probe (exit $rc)"; cat "$probe"; } >> "$log"
   if ((rc != 0)); then
     if grep -qiE 'not supported|error 999|cudaErrorUnknown|unknown error|unable to attach|injection' "$probe"; then
-      report "$tool" UNAVAILABLE "compute-sanitizer unavailable on this runtime ($(grep -m1 -iE 'not supported|999|unknown error|unable to attach|injection' "$probe" | cut -c1-160))"
+      report "$step" UNAVAILABLE "compute-sanitizer unavailable on this runtime ($(grep -m1 -iE 'not supported|999|unknown error|unable to attach|injection' "$probe" | cut -c1-160))"
     else
-      report "$tool" FAIL "the sanitizer's probe run failed, exit $rc (sanitizers.txt)"
+      report "$step" FAIL "the sanitizer's probe run failed, exit $rc (sanitizers.txt)"
     fi
     return
   fi
-  local run="$scratch/run-$tool.txt" filter
-  filter=$(sanitizer_filter "$tool")
+  local run="$scratch/run-$step.txt" filter=${3:-} why="RAYFORGE_SANITIZER_TIMEOUT"
+  [[ -n "$filter" ]] || filter=$(sanitizer_filter "$tool")
+  if [[ -n "${3:-}" ]]; then
+    limit=$((limit - (SECONDS - started)))
+    why="its share of RAYFORGE_GPU_RUN_BUDGET"
+    ((limit >= 10)) || limit=10
+  fi
   (cd "$ROOT" && timeout "$limit" "$sanitizer" --tool "$tool" --error-exitcode 3 "$gpu_tests" \
     --gtest_filter="$filter") > "$run" 2>&1
   rc=$?
-  { echo "== $tool on $filter (exit $rc)"; cat "$run"; } >> "$log"
+  { echo "== $step: $tool on $filter (exit $rc)"; cat "$run"; } >> "$log"
   local errors
   errors=$(sed -n 's/.*ERROR SUMMARY: \([0-9]*\) error.*/\1/p' "$run" | tail -1)
   case $rc in
-    0) report "$tool" ok "ERROR SUMMARY: ${errors:-0} errors" ;;
-    124) report "$tool" FAIL "timed out after $limit s (RAYFORGE_SANITIZER_TIMEOUT)" ;;
-    3) report "$tool" FAIL "${errors:-some} errors reported (sanitizers.txt)" ;;
-    *) report "$tool" FAIL "a test failed under the sanitizer, exit $rc (sanitizers.txt)" ;;
+    0) report "$step" ok "ERROR SUMMARY: ${errors:-0} errors" ;;
+    124) report "$step" FAIL "timed out after $limit s ($why)" ;;
+    3) report "$step" FAIL "${errors:-some} errors reported (sanitizers.txt)" ;;
+    *) report "$step" FAIL "a test failed under the sanitizer, exit $rc (sanitizers.txt)" ;;
   esac
 }
 
@@ -275,6 +375,259 @@ step_bench() {
   else
     report bench FAIL "failed: ${why[*]} (bench-rays.txt, bench-render.txt)"
   fi
+}
+
+# ---- The A/B and profile steps (issue 33): one call, old and new variants
+# side by side, each run under its own timeout cut to the budget, results
+# written under $out as each run ends.
+
+# The A/B's kernels this binary knows: the old ones and their new variants.
+ab_kernels() {
+  local listing kernel known=()
+  listing=$("$rf" bench --list 2> /dev/null)
+  for kernel in aila-laine aila-laine-fma cwbvh cwbvh-fma; do
+    grep -qE "^  $kernel  \(traces" <<< "$listing" && known+=("$kernel")
+  done
+  (IFS=,; echo "${known[*]}")
+}
+
+# A JSON string of $1 (other control characters than tab and newline dropped).
+json_string() {
+  local text
+  text=$(printf '%s' "$1" | tr -d '\000-\010\013-\037')
+  text=${text//\\/\\\\}
+  text=${text//\"/\\\"}
+  text=${text//$'\t'/\\t}
+  text=${text//$'\r'/}
+  printf '"%s"' "${text//$'\n'/\\n}"
+}
+
+# ab.json: the card, its clocks and every run so far (a bench's own JSON, or
+# a command's text output), rewritten after each run.
+ab_runs=()
+write_ab_json() {
+  local entry name kind file first=1
+  {
+    printf '{"tool": "scripts/gpu-run.sh ab", "card": %s, "clocks": %s, "date": "%s", "runs": [' \
+      "$(json_string "${card:-}")" "$(json_string "${clocks:-}")" "$(date -u +%Y-%m-%dT%H:%M:%SZ)"
+    for entry in "${ab_runs[@]}"; do
+      IFS='|' read -r name kind file <<< "$entry"
+      ((first)) || printf ', '
+      first=0
+      printf '{"name": %s, ' "$(json_string "$name")"
+      if [[ "$kind" == json ]]; then
+        printf '"bench": '
+        cat "$file"
+      else
+        printf '"text": %s' "$(json_string "$(cat "$file")")"
+      fi
+      printf '}'
+    done
+    printf ']}\n'
+  } > "$out/ab.json"
+}
+
+# ab_run NAME WANT COMMAND...: COMMAND (a rayforge bench with --json FILE
+# placeholder "@JSON", or any command) within min(WANT, the budget left);
+# its output appended to ab.txt, its JSON (or text) added to ab.json. Adds
+# NAME to ab_failed when it fails, to ab_skipped when no time is left for it.
+ab_failed=() ab_skipped=()
+ab_run() {
+  local name=$1 want=$2 limit
+  shift 2
+  limit=$(step_limit "$want")
+  if ((limit == 0)); then
+    echo "== $name: not run: out of the time budget" >> "$out/ab.txt"
+    ab_skipped+=("$name")
+    return
+  fi
+  local json="$scratch/ab-$name.json" text="$scratch/ab-$name.txt" args=() arg
+  for arg in "$@"; do args+=("${arg//@JSON/$json}"); done
+  rm -f "$json"
+  echo "== $name (limit $limit s): ${args[*]}" >> "$out/ab.txt"
+  timeout "$limit" "${args[@]}" > "$text" 2>&1
+  local rc=$?
+  cat "$text" >> "$out/ab.txt"
+  ((rc == 0)) || ab_failed+=("$name ($( ((rc == 124)) && echo "timed out after $limit s" || echo "exit $rc"))")
+  if [[ -s "$json" ]]; then ab_runs+=("$name|json|$json"); else ab_runs+=("$name|text|$text"); fi
+  write_ab_json
+}
+
+step_ab() {
+  if [[ -n "$no_device" ]]; then
+    report ab FAIL "not run: no CUDA device: $no_device"
+    return
+  fi
+  if (($(step_limit 30) == 0)); then
+    report ab UNAVAILABLE "out of the time budget (RAYFORGE_GPU_RUN_BUDGET=$budget s)"
+    return
+  fi
+  : > "$out/ab.txt"
+  ab_runs=() ab_failed=() ab_skipped=()
+  local kernels scenes=(--scene builtin:cornell) scenes_dir=() dragon="$ROOT/shared/scenes/stanford-dragon/dragon_vrip.ply"
+  kernels=$(ab_kernels)
+  [[ -n "$kernels" ]] || kernels=aila-laine,cwbvh
+  if [[ -f "$ROOT/shared/scenes/views.json" ]]; then
+    scenes_dir=(--scenes-dir "$ROOT/shared/scenes")
+    scenes=("${scenes_dir[@]}" --scene sponza)
+  fi
+  {
+    echo "gpu-run.sh ab: kernels $kernels on ${card:-an unnamed card}"
+    echo "$clocks"
+  } >> "$out/ab.txt"
+  local rays=(--device cuda --gpu-kernel "$kernels" --rays "primary,diffuse" --res 1024x768 --embree none --reps 5
+    --build-reps 1 --json @JSON)
+  # Scanline and Morton primaries and diffuse rays, binned and SBVH trees.
+  ab_run sponza-kernels 100 "$rf" bench "${scenes[@]}" --builder binned,sbvh "${rays[@]}"
+  # Larger than L2: 15 Dragons (13.1M triangles), a 12M-triangle generated scene.
+  if [[ -f "$dragon" ]]; then
+    ab_run dragon-x15-kernels 75 "$rf" bench "${scenes_dir[@]}" --scene dragon-x15 --builder binned "${rays[@]}"
+  else
+    echo "== dragon-x15-kernels: not run: no $dragon (carry .gpu-scenes)" >> "$out/ab.txt"
+  fi
+  ab_run generated-12m-kernels 75 "$rf" bench "${scenes_dir[@]}" --scene generate:terrain-statues@12M \
+    --builder binned "${rays[@]}"
+  # The device builders on the Dragon: device time and time to first ray.
+  if [[ -f "$dragon" ]]; then
+    local treelets=("") builder variant
+    "$rf" build --help 2>&1 | grep -q -- '--treelets' && treelets=("" --treelets)
+    for builder in lbvh30 hlbvh2 ploc hploc; do
+      for variant in "${treelets[@]}"; do
+        ab_run "dragon-$builder${variant:+-treelets}" 20 "$rf" build "$dragon" --device cuda --builder "$builder" \
+          ${variant:+"$variant"} --reps 5
+      done
+    done
+  fi
+  # Path tracing, depth 4: passes/s and the trace share per kernel.
+  ab_run sponza-path 60 "$rf" bench "${scenes[@]}" --device cuda --gpu-kernel "$kernels" --integrator path \
+    --max-depth 4 --res 1024x768 --reps 20 --json @JSON
+  if ((${#ab_failed[@]} > 0)); then
+    report ab FAIL "failed: ${ab_failed[*]}${ab_skipped:+; out of time: ${ab_skipped[*]}} (ab.txt)"
+  elif ((${#ab_skipped[@]} > 0)); then
+    report ab UNAVAILABLE "${#ab_runs[@]} runs; cut by the time budget: ${ab_skipped[*]} (ab.txt, ab.json)"
+  else
+    report ab ok "${#ab_runs[@]} runs, kernels $kernels (ab.txt, ab.json)"
+  fi
+}
+
+# A CUDA tool: on PATH, else in the toolkit's and Nsight's usual folders
+# (RAYFORGE_GPU_RUN_TOOL_DIRS, space-separated globs; "" for PATH alone).
+find_tool() {
+  local dirs dir
+  dirs=${RAYFORGE_GPU_RUN_TOOL_DIRS-/usr/local/cuda/bin /usr/local/cuda/nsight-compute* /usr/local/cuda/nsight-systems*/bin /opt/nvidia/nsight-compute/* /opt/nvidia/nsight-systems/*/bin}
+  command -v "$1" 2> /dev/null && return
+  for dir in $dirs; do
+    [[ -x "$dir/$1" ]] && { echo "$dir/$1"; return; }
+  done
+}
+
+# The mangled names of the trace kernels in the resource-usage dump $1.
+trace_kernel_names() {
+  sed -n 's/^ *Function \([^ :]*\):.*/\1/p' "$1" |
+    grep -E 'intersect_kernel|occluded_kernel|aila_laine_persistent|cwbvh_fma|extend_kernel|connect_kernel' | sort -u
+}
+
+# Per function of a SASS dump: loads from global (LDG) and local memory (LDL),
+# local stores (STL), branches (BRA) and byte-select conversions (I2F), the
+# review's (section 7a) counts.
+sass_counts() {
+  awk '/Function :/ { name = $3 }
+       / LDG/ { ldg[name]++ } / LDL/ { ldl[name]++ } / STL/ { stl[name]++ } / BRA/ { bra[name]++ } / I2F/ { i2f[name]++ }
+       / \/\*[0-9a-f]+\*\// { n[name]++ }
+       END { for (f in n) printf "%-8d instr %5d LDG %5d LDL %5d STL %5d BRA %5d I2F  %s\n", n[f], ldg[f], ldl[f], stl[f], bra[f], i2f[f], f }' "$1"
+}
+
+# Nsight Compute's sections and metrics of the review's section 7(b).
+ncu_sections=(LaunchStats Occupancy SchedulerStats WarpStateStats ComputeWorkloadAnalysis MemoryWorkloadAnalysis
+  InstructionStats SourceCounters)
+ncu_metrics=smsp__thread_inst_executed.sum,smsp__issue_active.avg.pct_of_peak_sustained_active,smsp__thread_inst_executed_per_inst_executed.ratio,smsp__average_warps_issue_stalled_long_scoreboard_per_issue_active.ratio,smsp__average_warps_issue_stalled_math_pipe_throttle_per_issue_active.ratio,smsp__average_warps_issue_stalled_wait_per_issue_active.ratio,smsp__average_warps_issue_stalled_lg_throttle_per_issue_active.ratio,smsp__average_warps_issue_stalled_no_instruction_per_issue_active.ratio,l1tex__t_sectors_pipe_lsu_mem_local_op_ld.sum,smsp__sass_inst_executed_op_local_ld.sum,l1tex__t_sector_hit_rate.pct,lts__t_sector_hit_rate.pct,dram__bytes_read.sum
+
+step_profile() {
+  if [[ -n "$no_device" ]]; then
+    report profile FAIL "not run: no CUDA device: $no_device"
+    return
+  fi
+  if (($(step_limit 30) == 0)); then
+    report profile UNAVAILABLE "out of the time budget (RAYFORGE_GPU_RUN_BUDGET=$budget s)"
+    return
+  fi
+  local log="$out/profile.txt" ran=() missing=() refused=() lib limit
+  : > "$log"
+  lib=$(ldd "$rf" 2> /dev/null | awk '/librayforge/ {print $3; exit}')
+  [[ -z "$lib" && -f "${RAYFORGE_GPU_RUN_BINARIES:-/nonexistent}/librayforge.so" ]] && lib="$RAYFORGE_GPU_RUN_BINARIES/librayforge.so"
+  echo "gpu-run.sh profile on ${card:-an unnamed card}; library ${lib:-not found}" >> "$log"
+  echo "$clocks" >> "$log"
+  local cuobjdump ncu nsys
+  cuobjdump=$(find_tool cuobjdump) ncu=$(find_tool ncu) nsys=$(find_tool nsys)
+  # (a) Registers, stack and spills of every kernel; the trace kernels' SASS.
+  if [[ -n "$cuobjdump" && -n "$lib" ]]; then
+    local usage="$scratch/resource-usage.txt" name
+    limit=$(step_limit 60)
+    if ((limit > 0)) && timeout "$limit" "$cuobjdump" --dump-resource-usage "$lib" > "$usage" 2>&1; then
+      { echo "== cuobjdump --dump-resource-usage $lib"; cat "$usage"; } >> "$log"
+      : > "$out/sass.txt"
+      for name in $(trace_kernel_names "$usage"); do
+        limit=$(step_limit 20)
+        ((limit > 0)) || break
+        timeout "$limit" "$cuobjdump" -sass -fun "$name" "$lib" >> "$out/sass.txt" 2>&1
+      done
+      { echo "== SASS counts per trace kernel (sass.txt)"; sass_counts "$out/sass.txt"; } >> "$log"
+      ran+=(cuobjdump)
+    else
+      refused+=("cuobjdump ($(tail -1 "$usage" 2> /dev/null | cut -c1-100))")
+    fi
+  else
+    missing+=(cuobjdump)
+  fi
+  # (b) Nsight Compute on one launch per kernel and ray set: the first timed
+  # launch (--launch-skip 1 passes the warm-up), binned Sponza.
+  if [[ -n "$ncu" ]]; then
+    local kernel set scenes=(--scene builtin:cornell) sections=() section output
+    [[ -f "$ROOT/shared/scenes/views.json" ]] && scenes=(--scenes-dir "$ROOT/shared/scenes" --scene sponza)
+    for section in "${ncu_sections[@]}"; do sections+=(--section "$section"); done
+    local kernels
+    kernels=$(ab_kernels)
+    # The review's pair first (aila-laine, cwbvh), then the new variants.
+    for kernel in aila-laine cwbvh aila-laine-fma cwbvh-fma; do
+      [[ ",$kernels," == *",$kernel,"* ]] || continue
+      for set in primary diffuse; do
+        limit=$(step_limit 60)
+        ((limit > 0)) || break 2
+        output="$scratch/ncu-$kernel-$set.txt"
+        echo "== ncu: $kernel $set (limit $limit s)" >> "$log"
+        timeout "$limit" "$ncu" --launch-skip 1 --launch-count 1 \
+          -k 'regex:intersect_kernel|occluded_kernel|aila_laine|cwbvh' "${sections[@]}" --metrics "$ncu_metrics" \
+          "$rf" bench "${scenes[@]}" --device cuda --gpu-kernel "$kernel" --builder binned --rays "$set" \
+          --res 1024x768 --embree none --reps 1 --build-reps 1 --no-counts -q > "$output" 2>&1
+        cat "$output" >> "$log"
+        if grep -qE 'ERR_NVGPUCTRPERM|permission to access NVIDIA GPU Performance Counters' "$output"; then
+          refused+=("ncu (no permission for the performance counters: ERR_NVGPUCTRPERM)")
+          break 2
+        fi
+      done
+    done
+    grep -q '^== ncu' "$log" && ! grep -q 'ERR_NVGPUCTRPERM' "$log" && ran+=(ncu)
+  else
+    missing+=(ncu)
+  fi
+  # (d) Nsight Systems on the device builds of the Dragon: kernels, memcpys, gaps.
+  local dragon="$ROOT/shared/scenes/stanford-dragon/dragon_vrip.ply"
+  if [[ -n "$nsys" && -f "$dragon" ]]; then
+    local builder
+    for builder in lbvh30 hlbvh2 ploc hploc; do
+      limit=$(step_limit 45)
+      ((limit > 0)) || break
+      echo "== nsys: build dragon --builder $builder (limit $limit s)" >> "$log"
+      timeout "$limit" "$nsys" profile -t cuda --stats=true --force-overwrite true -o "$scratch/nsys-$builder" \
+        "$rf" build "$dragon" --device cuda --builder "$builder" --reps 1 >> "$log" 2>&1
+    done
+    ran+=(nsys)
+  elif [[ -z "$nsys" ]]; then
+    missing+=(nsys)
+  fi
+  local result="ran: ${ran[*]:-none}${missing:+; not found: ${missing[*]}}${refused:+; refused: ${refused[*]}}"
+  ((SECONDS < budget)) || result+="; cut by the time budget"
+  if ((${#ran[@]} > 0)); then report profile ok "$result (profile.txt, sass.txt)"; else report profile UNAVAILABLE "$result"; fi
 }
 
 # Garanzha 2014's table 5.1 sizes: 871K (Dragon), 1.74M (2 dragons; the table's
@@ -399,6 +752,12 @@ if find_binaries; then
   for step in "${steps[@]}"; do
     case "$step" in
       tests) step_tests ;;
+      changed) step_tests changed "$changed_tests" "$(step_limit 90)" ;;
+      memcheck-changed) step_sanitizer memcheck "$step" "$changed_memcheck" "$(step_limit 90)" ;;
+      racecheck-changed) step_sanitizer racecheck "$step" "$changed_builders" "$(step_limit 45)" ;;
+      synccheck-changed) step_sanitizer synccheck "$step" "$changed_builders" "$(step_limit 40)" ;;
+      ab) step_ab ;;
+      profile) step_profile ;;
       memcheck | synccheck | racecheck) step_sanitizer "$step" ;;
       bench) step_bench ;;
       builds) step_builds ;;

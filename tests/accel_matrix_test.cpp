@@ -170,7 +170,8 @@ TEST(AccelMatrix, EveryImplementedCombinationReportsStats) {
 TEST(AccelMatrix, NamesRoundTrip) {
     for (const char* name : {"bvh", "grid", "grid-proximity", "kdtree", "brute"})
         EXPECT_EQ(to_string(parse_structure(name)), name);
-    for (const char* name : {"binned", "sweep", "sbvh", "lbvh30", "lbvh63", "hlbvh2", "gridbvh", "gridbvh-split", "ploc"})
+    for (const char* name :
+         {"binned", "sweep", "sbvh", "lbvh30", "lbvh63", "hlbvh2", "gridbvh", "gridbvh-split", "ploc", "hploc"})
         EXPECT_EQ(to_string(parse_builder(name)), name);
     EXPECT_EQ(parse_builder("lbvh"), Builder::Lbvh30);
     for (const char* name : {"bvh2", "bvh4", "bvh8"}) EXPECT_EQ(to_string(parse_layout(name)), name);

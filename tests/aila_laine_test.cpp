@@ -16,6 +16,7 @@
 #include "accel/bvh/builders/build_bvh.h"
 #include "accel/bvh/layout/aila_laine_layout.h"
 #include "accel_test_rays.h"
+#include "aila_laine_test_support.h"
 #include "accel_test_scenes.h"
 #include "rayforge/accel/accel.h"
 #include "rayforge/core/error.h"
@@ -38,80 +39,11 @@ bool same_bits(const Vec3f& a, float x, float y, float z) {
 // components and [tmin, tmax] limits (as in bvh_traversal_test.cpp).
 using test::make_rays;
 
-// A warp whose other rays never find a leaf: the ray postpones its first leaf
-// and walks on until its stack is empty or a second leaf stops it, the most
-// speculation the device traversal can ever do.
-struct NeverReadyWarp {
-    static bool any_searching(bool) { return true; }
-    static bool yield_for_refill() { return false; }
-};
-
-// A warp whose refill vote fires after every leaf phase (the device's
-// dynamic fetch at its most eager) and one where it fires pseudo-randomly,
-// both with speculation, so that rays stop and resume mid-traversal.
-struct AlwaysRefillWarp {
-    static inline uint64_t yields = 0;
-    static bool any_searching(bool) { return true; }
-    static bool yield_for_refill() {
-        ++yields;
-        return true;
-    }
-};
-struct RandomRefillWarp {
-    static inline uint32_t step = 0;
-    static bool any_searching(bool searching) { return searching; }
-    static bool yield_for_refill() {
-        step = step * 1664525u + 1013904223u;
-        return (step >> 28) < 5;  // about a third of the leaf phases
-    }
-};
-
-// Traces `rays` the way the persistent kernel does, on one host "warp" of
-// 32 lanes: idle lanes take the next rays, every lane resumes, finished
-// lanes write their result; each ray's result is written exactly once.
-template <bool kAnyHit, class Vote>
-std::vector<Hit> trace_like_persistent_warp(const AilaLaineView& view, const std::vector<Ray>& rays,
-                                            std::vector<int>& writes) {
-    constexpr int kLanes = 32;
-    std::vector<Hit> out(rays.size());
-    writes.assign(rays.size(), 0);
-    std::vector<AilaLaineRayState> state(kLanes);
-    std::vector<int64_t> ray_of(kLanes, -1);
-    size_t next = 0;
-    for (;;) {
-        bool any = false;
-        for (int lane = 0; lane < kLanes; ++lane) {
-            if (ray_of[lane] < 0 && next < rays.size()) {
-                ray_of[lane] = int64_t(next);
-                aila_laine_begin(view, rays[next++], state[lane]);
-            }
-            if (ray_of[lane] < 0) continue;
-            any = true;
-            if (aila_laine_resume<kAnyHit, false, Vote>(view, state[lane], nullptr)) {
-                out[size_t(ray_of[lane])] = state[lane].hit;
-                ++writes[size_t(ray_of[lane])];
-                ray_of[lane] = -1;
-            }
-        }
-        if (!any) break;
-    }
-    return out;
-}
-
-void expect_same_closest(const Hit& got, const Hit& brute, const Ray& ray) {
-    ASSERT_EQ(got.found(), brute.found());
-    if (!brute.found()) return;
-    if (got.prim != brute.prim) {
-        // Another triangle at (almost) the same distance: shared edges, duplicates.
-        EXPECT_NEAR(got.t, brute.t, 1e-5f * std::fabs(brute.t)) << "prim " << got.prim << " brute " << brute.prim;
-    } else {
-        EXPECT_EQ(got.t, brute.t);
-        EXPECT_EQ(got.u, brute.u);
-        EXPECT_EQ(got.v, brute.v);
-    }
-    EXPECT_GE(got.t, ray.tmin);
-    EXPECT_LE(got.t, ray.tmax);
-}
+using test::AlwaysRefillWarp;
+using test::expect_same_closest;
+using test::NeverReadyWarp;
+using test::RandomRefillWarp;
+using test::trace_like_persistent_warp;
 
 // Checks the converted layout against the canonical BVH it came from: the
 // node pair of every canonical inner node holds its children's boxes
@@ -222,6 +154,7 @@ void compare_with_brute_force(const SceneGeometry& g, const BuildOptions& option
         const Hit counted = aila_laine_intersect_counted(view, ray, counters);
         EXPECT_EQ(counted.prim, got.prim);
         EXPECT_EQ(counted.t, got.t);
+        EXPECT_EQ(counters.nodes_visited, 2 * counters.node_fetches);  // one fetch per node pair
         EXPECT_EQ(aila_laine_occluded_counted(view, ray, counters), expected.found());
         const Hit speculative = detail::aila_laine_traverse<false, false, NeverReadyWarp>(view, ray, nullptr);
         expect_same_closest(speculative, expected, ray);

@@ -3,11 +3,13 @@
 // force, candidate selection, views.json parsing and the `bench` command.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <utility>
 
 #include <nlohmann/json.hpp>
 
@@ -24,6 +26,8 @@
 #include "gpu_candidates.h"
 #include "presets.h"
 #include "ray_sets.h"
+#include "render_bench.h"
+#include "rayforge/backend/device.h"
 #include "rayforge/core/error.h"
 #include "rayforge/io/scene_io.h"
 #include "test_paths.h"
@@ -203,7 +207,88 @@ TEST(BenchRaySets, JitteredSamplesStayInsideTheirPixel) {
     EXPECT_NEAR(sum_u / n, 0.5, 5.0 * std::sqrt(1.0 / 12.0 / n));
 }
 
+TEST(BenchRaySets, MortonOrderIsAPermutationInAlignedTiles) {
+    for (const auto& [w, h] : std::vector<std::pair<int, int>>{{64, 48}, {13, 7}, {1, 1}, {1, 40}, {1024, 768}}) {
+        const std::vector<uint32_t> order = bench::morton_pixel_order(w, h);
+        ASSERT_EQ(order.size(), size_t(w) * size_t(h));
+        std::vector<uint32_t> sorted = order;
+        std::sort(sorted.begin(), sorted.end());
+        for (size_t i = 0; i < sorted.size(); ++i) ASSERT_EQ(sorted[i], i) << w << "x" << h;
+    }
+    // Where the sides are multiples of 8 and 4, every warp of 32 is one aligned 8x4 tile.
+    const int w = 64, h = 48;
+    const std::vector<uint32_t> order = bench::morton_pixel_order(w, h);
+    for (size_t warp = 0; warp < order.size() / 32; ++warp) {
+        const uint32_t x0 = order[warp * 32] % w, y0 = order[warp * 32] / w;
+        EXPECT_EQ(x0 % 8, 0u);
+        EXPECT_EQ(y0 % 4, 0u);
+        for (size_t lane = 0; lane < 32; ++lane) {
+            const uint32_t x = order[warp * 32 + lane] % w, y = order[warp * 32 + lane] / w;
+            EXPECT_TRUE(x >= x0 && x < x0 + 8 && y >= y0 && y < y0 + 4) << "warp " << warp << " lane " << lane;
+        }
+    }
+    EXPECT_THROW(bench::morton_pixel_order(0, 4), Error);
+}
+
+TEST(BenchRaySets, MortonPrimariesAreTheScanlinePrimariesPermuted) {
+    CornellFixture f;
+    const auto accel = build_accel(f.geometry);
+    bench::ViewSetup view = small_view(f.scene);
+    view.width = 37;  // not a power of two, not a multiple of 8
+    view.height = 21;
+    view.samples_per_pixel = 2;
+    const auto sets = bench::make_ray_sets(f.geometry, *accel, view, {RaySetKind::Primary, RaySetKind::PrimaryMorton});
+    ASSERT_EQ(sets.size(), 2u);
+    EXPECT_EQ(sets[1].kind, RaySetKind::PrimaryMorton);
+    const std::vector<Ray>& scan = sets[0].rays;
+    const std::vector<Ray>& morton = sets[1].rays;
+    ASSERT_EQ(morton.size(), scan.size());
+    EXPECT_FALSE(same_bits(morton, scan));  // reordered
+    // The same rays as a multiset.
+    const auto bytes_less = [](const Ray& a, const Ray& b) { return std::memcmp(&a, &b, sizeof(Ray)) < 0; };
+    std::vector<Ray> a = scan, b = morton;
+    std::sort(a.begin(), a.end(), bytes_less);
+    std::sort(b.begin(), b.end(), bytes_less);
+    EXPECT_TRUE(same_bits(a, b));
+    // Hits of the Morton set, permuted back, are the scanline set's.
+    std::vector<Hit> scan_hits(scan.size()), morton_hits(morton.size());
+    accel->intersect(scan, scan_hits);
+    accel->intersect(morton, morton_hits);
+    const std::vector<uint32_t> order = bench::morton_pixel_order(view.width, view.height);
+    const size_t pixels = order.size();
+    size_t found = 0;
+    for (size_t sample = 0; sample < 2; ++sample)
+        for (size_t i = 0; i < pixels; ++i) {
+            const Hit& m = morton_hits[sample * pixels + i];
+            const Hit& s = scan_hits[sample * pixels + order[i]];
+            ASSERT_EQ(m.found(), s.found());
+            if (!m.found()) continue;
+            ++found;
+            EXPECT_EQ(m.prim, s.prim);
+            EXPECT_EQ(m.t, s.t);
+            EXPECT_EQ(m.u, s.u);
+            EXPECT_EQ(m.v, s.v);
+        }
+    EXPECT_GT(found, pixels / 2);  // most camera rays hit the box
+    // A set that is not the view's primaries is refused.
+    bench::RaySet wrong = sets[0];
+    wrong.rays.pop_back();
+    EXPECT_THROW(bench::make_morton_primary_rays(wrong, view), Error);
+}
+
+TEST(BenchRaySets, GpuRowsAddMortonPrimariesOnce) {
+    using K = RaySetKind;
+    EXPECT_EQ(bench::with_morton_primaries({K::Primary, K::Diffuse}),
+              (std::vector<K>{K::Primary, K::PrimaryMorton, K::Diffuse}));
+    EXPECT_EQ(bench::with_morton_primaries({K::Diffuse}), (std::vector<K>{K::Diffuse}));
+    EXPECT_EQ(bench::with_morton_primaries({K::PrimaryMorton, K::Primary}),
+              (std::vector<K>{K::PrimaryMorton, K::Primary}));
+}
+
 TEST(BenchRaySets, NamesRoundTrip) {
+    EXPECT_EQ(bench::parse_ray_set("primary-morton"), RaySetKind::PrimaryMorton);
+    EXPECT_FALSE(bench::is_any_hit(RaySetKind::PrimaryMorton));
+    for (RaySetKind kind : bench::kAllRaySets) EXPECT_NE(kind, RaySetKind::PrimaryMorton);  // the protocol's five
     for (RaySetKind kind : bench::kAllRaySets) EXPECT_EQ(bench::parse_ray_set(bench::ray_set_name(kind)), kind);
     EXPECT_FALSE(bench::parse_ray_set("primaries").has_value());
     EXPECT_TRUE(bench::is_any_hit(RaySetKind::Shadow));
@@ -395,6 +480,84 @@ TEST(BenchScenes, SharedViewsJsonNamesLoad) {
     EXPECT_GT(spec.ao_radius, 0.0f);
 }
 
+TEST(BenchScenes, CopiesOfAViewsJsonSceneFormAGrid) {
+    const std::string dir = test::temp_dir("bench_copies");
+    {
+        std::ofstream out(dir + "/views.json");
+        out << R"({"scenes": {"tri": {"file": "tri.obj", "views": [{"eye": [0, 0, 3], "target": [0, 0, 0]}],
+                                      "light": [1, 2, 3], "ao_radius": 0.25}}})";
+    }
+    {
+        std::ofstream out(dir + "/tri.obj");
+        out << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    }
+    const bench::SceneSpec spec = bench::resolve_scene("tri-x5", dir);
+    EXPECT_EQ(spec.name, "tri-x5");
+    EXPECT_EQ(spec.copies, 5);
+    EXPECT_TRUE(spec.views.empty());  // framed from +z, not the single model's view
+    EXPECT_FALSE(spec.has_light);
+    EXPECT_EQ(spec.ao_radius, 0.25f);
+    const bench::LoadedScene loaded = bench::load_bench_scene(spec);
+    ASSERT_EQ(loaded.geometry.triangles.size(), 5u);
+    // 3 columns of unit cells fill a 4:3 frame best (2 or 4 would leave more of it empty); 1.05 apart.
+    EXPECT_EQ(bench::scene_copy_columns(Box3f(Vec3f(0, 0, 0), Vec3f(1, 1, 0)), 5), 3);
+    EXPECT_EQ(bench::scene_copy_columns(Box3f(Vec3f(0, 0, 0), Vec3f(4, 1, 0)), 6), 1);  // wide models stack
+    for (size_t i = 0; i < 5; ++i) {
+        const Vec3f offset = bench::scene_copy_offset(Box3f(Vec3f(0, 0, 0), Vec3f(1, 1, 0)), int(i), 5);
+        EXPECT_EQ(loaded.geometry.triangles[i].v0, offset) << i;
+        EXPECT_FLOAT_EQ(offset.x, 1.05f * float(i % 3));
+        EXPECT_FLOAT_EQ(offset.y, -1.05f * float(i / 3));
+    }
+    // The camera frames the grid: at 4:3 a third of the rays hit (5 half-square triangles in a 3x2 grid).
+    bench::ViewSetup view = bench::make_view_setup(loaded, 0, 64, 48);
+    EXPECT_EQ(view.camera.target, loaded.geometry.bounds.center());
+    const auto accel = build_accel(loaded.geometry);
+    const bench::RaySet primary = bench::make_primary_rays(view);
+    std::vector<Hit> hits(primary.rays.size());
+    accel->intersect(primary.rays, hits);
+    size_t found = 0;
+    for (const Hit& h : hits) found += h.found() ? 1 : 0;
+    EXPECT_GT(double(found), 0.25 * double(hits.size()));
+    EXPECT_THROW(bench::resolve_scene("tri-x1", dir), Error);
+    EXPECT_THROW(bench::resolve_scene("tri-x65", dir), Error);
+    EXPECT_THROW(bench::resolve_scene("nothing-x3", dir), Error);
+}
+
+TEST(BenchScenes, GeneratedScenesLoadByName) {
+    const bench::SceneSpec spec = bench::resolve_scene("generate:terrain-statues@5K#7", "");
+    EXPECT_EQ(spec.name, "generate:terrain-statues@5K#7");
+    EXPECT_TRUE(spec.statue_dir.empty());
+    const bench::LoadedScene loaded = bench::load_bench_scene(spec);
+    EXPECT_NEAR(double(loaded.geometry.triangles.size()), 5000.0, 0.05 * 5000.0);
+    // Deterministic from the seed, and the seed matters.
+    const bench::LoadedScene again = bench::load_bench_scene(spec);
+    ASSERT_EQ(again.geometry.triangles.size(), loaded.geometry.triangles.size());
+    EXPECT_EQ(std::memcmp(again.geometry.triangles.data(), loaded.geometry.triangles.data(),
+                          loaded.geometry.triangles.size() * sizeof(Triangle)),
+              0);
+    const bench::LoadedScene other = bench::load_bench_scene(bench::resolve_scene("generate:terrain-statues@5K#8", ""));
+    EXPECT_FALSE(other.geometry.triangles.size() == loaded.geometry.triangles.size() &&
+                 std::memcmp(other.geometry.triangles.data(), loaded.geometry.triangles.data(),
+                             loaded.geometry.triangles.size() * sizeof(Triangle)) == 0);
+    for (const char* bad : {"generate:terrain-statues", "generate:nope@1M", "generate:terrain@", "generate:terrain@12Q",
+                            "generate:terrain@1M#x", "generate:terrain#3@1M"})
+        EXPECT_THROW(bench::resolve_scene(bad, ""), Error) << bad;
+}
+
+TEST(BenchScenes, FifteenDragonsResolveFromSharedScenes) {
+    const std::string views = test::shared_path("scenes/views.json");
+    if (views.empty()) GTEST_SKIP() << "../shared/scenes is absent: dragon-x15 cannot be checked";
+    const std::string dir = views.substr(0, views.size() - std::strlen("/views.json"));
+    const bench::SceneSpec fifteen = bench::resolve_scene("dragon-x15", dir);
+    EXPECT_EQ(fifteen.copies, 15);
+    EXPECT_EQ(fifteen.path, bench::resolve_scene("dragon", dir).path);
+    // Loading 15 copies (13.1M triangles) is the device script's job; two show the replication.
+    const bench::LoadedScene two = bench::load_bench_scene(bench::resolve_scene("dragon-x2", dir));
+    EXPECT_EQ(two.geometry.triangles.size(), 2u * 871414u);
+    // The generated scene takes the Stanford statues from there.
+    EXPECT_EQ(bench::resolve_scene("generate:terrain-statues@12M", dir).statue_dir, dir);
+}
+
 TEST(BenchRunner, RecordsEveryRaySetAndAgreesWithThePeer) {
     bench::BenchConfig config;
     config.scenes = {"builtin:cornell"};
@@ -450,20 +613,23 @@ TEST(BenchGpuCandidates, PresetStructuresMapToTheirKernels) {
     EXPECT_EQ(rows001[1].kernel, GpuKernel::Grid);
     EXPECT_EQ(rows001[4].build.options.structure, Structure::ProximityGrid);
     EXPECT_EQ(rows001[4].kernel, GpuKernel::ProximityGrid);
-    const auto rows000 = bench::gpu_candidates(bench::find_preset("garanzha2014").gpu_kernels,
-                                               bench::candidates_by_label(bench::find_preset("garanzha2014").candidates, nullptr));
-    EXPECT_EQ(rows000.size(), 2u * 8u);  // eight builders, each traced by aila-laine and cwbvh
+    const bench::Preset& garanzha = bench::find_preset("garanzha2014");
+    const auto rows000 = bench::gpu_candidates(garanzha.gpu_kernels, bench::candidates_by_label(garanzha.candidates, nullptr));
+    // Every builder (one candidate each), each traced by aila-laine and cwbvh.
+    EXPECT_EQ(garanzha.gpu_kernels, (std::vector<GpuKernel>{GpuKernel::AilaLaine, GpuKernel::Cwbvh}));
+    EXPECT_EQ(rows000.size(), 2u * garanzha.candidates.size());
 }
 
 TEST(BenchGpuCandidates, EveryKernelGetsABuildAndBuildersMultiplyRows) {
     const auto bvh = bench::select_candidates({"bvh"}, {"binned", "sbvh"}, {"all"}, nullptr);
     const auto rows = bench::gpu_candidates(all_gpu_kernels(), bvh);
-    // Three BVH kernels x two builders, then the default kd-tree and grids.
+    // Five BVH kernels (two of them FMA variants) x two builders, then the default kd-tree and grids.
     EXPECT_EQ(labels_of(rows),
               (std::vector<std::string>{"bvh/binned/bvh2", "bvh/sbvh/bvh2", "bvh/binned/aila-laine",
-                                        "bvh/sbvh/aila-laine", "bvh/binned/cwbvh", "bvh/sbvh/cwbvh",
-                                        "kdtree/sah/kd-short-stack", "kdtree/sah/kd-restart", "grid/uniform-auto/grid",
-                                        "grid-proximity/uniform-auto/grid-proximity"}));
+                                        "bvh/sbvh/aila-laine", "bvh/binned/aila-laine-fma", "bvh/sbvh/aila-laine-fma",
+                                        "bvh/binned/cwbvh", "bvh/sbvh/cwbvh", "bvh/binned/cwbvh-fma",
+                                        "bvh/sbvh/cwbvh-fma", "kdtree/sah/kd-short-stack", "kdtree/sah/kd-restart",
+                                        "grid/uniform-auto/grid", "grid-proximity/uniform-auto/grid-proximity"}));
     EXPECT_EQ(rows[1].build.options.builder, Builder::Sbvh);
     for (GpuKernel kernel : all_gpu_kernels())
         EXPECT_NE(bench::gpu_kernel_structure(kernel), "?") << to_string(kernel);
@@ -517,6 +683,9 @@ TEST(BenchGpu, DeviceBuildLineListsTheStagesThatRan) {
     for (const char* part : {"device build 5.000 ms", "bounds 0.500", "boxes 0.750", "peak 3.00 MiB", "123 nodes",
                              "SAH 45.50", "7 clusters", "host 7.00 ms"})
         EXPECT_NE(line.find(part), std::string::npos) << part << " in " << line;
+    EXPECT_EQ(line.find("first ray"), std::string::npos);  // no tracer placed it
+    b.report.first_ray_ms = 12.5;
+    EXPECT_NE(bench::format_device_build(b).find("first ray after 12.500 ms"), std::string::npos);
     // Grids have no SAH; host builds say so.
     b.sah_cost = std::nan("");
     EXPECT_EQ(bench::format_device_build(b).find("SAH"), std::string::npos);
@@ -556,6 +725,24 @@ TEST(BenchReport, GpuRowsNameTheirDeviceSamplesAndAgreement) {
     EXPECT_NE(text.find("3,072"), std::string::npos) << text;
 
     const std::string path = test::temp_dir("bench_report_gpu") + "/out.json";
+    EXPECT_EQ(text.find("kernel resources"), std::string::npos) << text;  // none listed
+    GpuKernelResources closest;
+    closest.kernel = "cwbvh closest (grid-stride)";
+    closest.registers = 64;
+    closest.local_bytes = 512;
+    closest.block_size = 128;
+    closest.blocks_per_sm = 8;
+    closest.occupancy = 0.5;
+    gpu.kernel_resources = {closest};
+    std::ostringstream with_resources;
+    bench::print_scene_tables(with_resources, {cpu, gpu, gpu}, 2, 5, 3);
+    const std::string resources = with_resources.str();
+    const size_t line = resources.find("cwbvh closest (grid-stride)");
+    ASSERT_NE(line, std::string::npos) << resources;
+    EXPECT_EQ(resources.find("cwbvh closest (grid-stride)", line + 1), std::string::npos) << "printed once";
+    EXPECT_NE(resources.find("64 regs    512 B local"), std::string::npos) << resources;
+    EXPECT_NE(resources.find("occupancy  50.0%"), std::string::npos) << resources;
+
     bench::RunInfo info;
     info.devices = {"cpu", "cuda:0"};
     info.gpu = "Test GPU";
@@ -574,6 +761,59 @@ TEST(BenchReport, GpuRowsNameTheirDeviceSamplesAndAgreement) {
     EXPECT_EQ(gpu_json["gpu_kernel"], "cwbvh");
     EXPECT_EQ(gpu_json["samples_per_pixel"], 4);
     EXPECT_DOUBLE_EQ(gpu_json["reference"]["agreement"].get<double>(), 0.995);
+    EXPECT_TRUE(cpu_json["kernel_resources"].is_null());
+    ASSERT_EQ(gpu_json["kernel_resources"].size(), 1u);
+    EXPECT_EQ(gpu_json["kernel_resources"][0]["kernel"], "cwbvh closest (grid-stride)");
+    EXPECT_EQ(gpu_json["kernel_resources"][0]["registers"], 64);
+    EXPECT_EQ(gpu_json["kernel_resources"][0]["local_bytes"], 512);
+    EXPECT_DOUBLE_EQ(gpu_json["kernel_resources"][0]["occupancy"].get<double>(), 0.5);
+}
+
+TEST(BenchGpu, KernelResourcesNeedACudaDevice) {
+    EXPECT_THROW(gpu_kernel_resources(GpuKernel::AilaLaine, Device{}), Error);
+    if (cuda_backend_built()) GTEST_SKIP() << "built with the CUDA backend: tests/gpu checks the figures";
+    try {
+        gpu_kernel_resources(GpuKernel::AilaLaine, Device{Device::Kind::Cuda, 0});
+        FAIL() << "no error without the backend";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("without the CUDA backend"), std::string::npos) << e.what();
+    }
+}
+
+TEST(BenchRender, TraceShareOfAPassAndItsJson) {
+    bench::RenderBenchConfig config;
+    config.integrators = {"path"};
+    config.width = 32;
+    config.height = 24;
+    config.max_depth = 2;
+    config.repetitions = 1;
+    config.threads = 2;
+    const bench::LoadedScene scene = bench::load_bench_scene(bench::resolve_scene("builtin:cornell", ""));
+    std::ostringstream progress;
+    const std::vector<bench::RenderBenchRecord> records = bench::run_render_bench(scene, config, progress);
+    ASSERT_EQ(records.size(), 1u);
+    const bench::RenderBenchRecord& r = records.front();
+    ASSERT_GT(r.pass_ms, 0.0);
+    EXPECT_DOUBLE_EQ(r.trace_share, r.trace_ms / r.pass_ms);
+    EXPECT_DOUBLE_EQ(r.shading_fraction, 1.0 - r.trace_share);
+    std::ostringstream table;
+    bench::print_render_table(table, records);
+    EXPECT_NE(table.str().find("trace share"), std::string::npos) << table.str();
+
+    bench::RenderBenchRecord device = r;  // a device row whose integrator has no trace launches
+    device.device = "cuda:0";
+    device.gpu = "Test GPU";
+    device.trace_ms = device.batch_trace_ms = device.trace_share = device.shading_fraction = std::nan("");
+    const std::string path = test::temp_dir("bench_render_json") + "/render.json";
+    bench::write_render_json(path, {r, device}, "rayforge bench --integrator path");
+    std::ifstream in(path);
+    const nlohmann::json root = nlohmann::json::parse(in);
+    EXPECT_EQ(root["machine"]["gpu"], "Test GPU");
+    EXPECT_EQ(root["command"], "rayforge bench --integrator path");
+    ASSERT_EQ(root["records"].size(), 2u);
+    EXPECT_DOUBLE_EQ(root["records"][0]["trace_share"].get<double>(), r.trace_share);
+    EXPECT_TRUE(root["records"][1]["trace_share"].is_null());
+    EXPECT_EQ(root["records"][1]["device"], "cuda:0");
 }
 
 }  // namespace

@@ -1,5 +1,5 @@
 // Morton-ordered BVH builders: LBVH (Karras 2012, 30/63-bit), HLBVH2
-// (Garanzha 2014 ch. 5) and PLOC (Meister and Bittner 2018). Morton encoders
+// (Garanzha 2014 ch. 5), PLOC (Meister and Bittner 2018) and H-PLOC (Benthin et al. 2024). Morton encoders
 // and the radix sort against simple references; structural invariants of the
 // canonical BVH; the depth limit on pathological input; determinism across
 // thread counts; traversal against brute force; SAH comparisons.
@@ -43,7 +43,8 @@ Bvh build_with(Builder builder, std::span<const Triangle> triangles, BuildOption
         case Builder::Lbvh30:
         case Builder::Lbvh63:
         case Builder::Hlbvh2:
-        case Builder::Ploc: options.builder = builder; return build_bvh(triangles, options);
+        case Builder::Ploc:
+        case Builder::Hploc: options.builder = builder; return build_bvh(triangles, options);
         default: ADD_FAILURE() << "not a Morton builder"; return {};
     }
 }
@@ -503,6 +504,11 @@ TEST(Ploc, DepthStaysWithinLimitOnPathologicalInput) { check_depth_limit(Builder
 TEST(Ploc, SameTreeForEveryThreadCount) { check_deterministic(Builder::Ploc); }
 TEST(Ploc, EmptySingleAndPair) { check_empty_and_single(Builder::Ploc); }
 TEST(Ploc, MatchesBruteForce) { check_traversal(Builder::Ploc); }
+TEST(Hploc, InvariantsHoldForScenesLeafSizesAndThreads) { check_invariants(Builder::Hploc); }
+TEST(Hploc, DepthStaysWithinLimitOnPathologicalInput) { check_depth_limit(Builder::Hploc); }
+TEST(Hploc, SameTreeForEveryThreadCountOnSoup) { check_deterministic(Builder::Hploc); }
+TEST(Hploc, EmptySingleAndPair) { check_empty_and_single(Builder::Hploc); }
+TEST(Hploc, MatchesBruteForce) { check_traversal(Builder::Hploc); }
 
 
 // Triangles of varying size in Gaussian clusters. (On a uniform volumetric

@@ -37,7 +37,7 @@ TEST(Device, RejectsMalformedNames) {
 
 TEST(DeviceGpuKernel, NamesRoundTripAndAreDistinct) {
     const auto kernels = all_gpu_kernels();
-    EXPECT_EQ(kernels.size(), 7u);
+    EXPECT_EQ(kernels.size(), 9u);
     std::set<std::string> names;
     for (GpuKernel kernel : kernels) {
         const std::string name = to_string(kernel);
@@ -45,9 +45,9 @@ TEST(DeviceGpuKernel, NamesRoundTripAndAreDistinct) {
         names.insert(name);
     }
     EXPECT_EQ(names.size(), kernels.size());
-    for (const char* name : {"bvh2", "aila-laine", "cwbvh", "kd-short-stack", "kd-restart", "grid", "grid-proximity"})
+    for (const char* name : {"bvh2", "aila-laine", "aila-laine-fma", "cwbvh", "cwbvh-fma", "kd-short-stack", "kd-restart", "grid", "grid-proximity"})
         EXPECT_EQ(names.count(name), 1u) << name;
-    EXPECT_EQ(to_string(kDefaultGpuKernel), "cwbvh");
+    EXPECT_EQ(to_string(kDefaultGpuKernel), "aila-laine");
 }
 
 TEST(DeviceGpuKernel, RejectsUnknownNames) {

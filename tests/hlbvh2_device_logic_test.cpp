@@ -1,13 +1,18 @@
-// The per-task logic of the CUDA HLBVH2 (Garanzha 2014 ch. 5; src/accel/bvh/
-// build/hlbvh2_bottom_steps.h) run on the CPU the way the kernels run it: one
-// launch per level, each "warp" dequeuing 32 tasks at once from the input
-// queue, its lanes splitting with process_task, new tasks placed by the
-// warp-local prefix sum (enqueue_offset) after one add on the output tail,
-// queues ping-pong; warps are scheduled in a shuffled order. Checks the
-// forest against an independent top-down reference (same node indices, same
-// children), that every primitive is in exactly one leaf, the level-wise
-// bottom-up boxes, and that the host emission (emit_hlbvh2_forest, the
-// device build's host half) gives build_hlbvh2's BVH. A wrong split must fail.
+// The per-thread logic of the CUDA HLBVH2 (Garanzha 2014 ch. 5; src/accel/bvh/
+// builders/hlbvh2_bottom_steps.h) run on the CPU the way the kernels run it.
+// The bottom trees' one launch: a thread per split position (node_of_split,
+// build_split_node) and one per cluster root, in shuffled orders. Checks the
+// forest against an independent top-down reference (every slot, so the same
+// node indices and children; unused slots untouched), on scenes and on
+// random codes with long runs of equal codes and leaf sizes up to 255, that
+// every primitive is in exactly one leaf, that the parent links invert the
+// references, and that the host emission (emit_hlbvh2_forest, the device
+// build's host half) gives build_hlbvh2's BVH. A moved split and a lost
+// thread must fail. The one-launch box passes (boxes_from_leaf over the
+// bottom trees, top_boxes_from_node over the top level) run their walks in
+// shuffled orders with arrival counters and must give the level-wise pass's
+// boxes bit for bit (signed zeros included); a walk that goes on at the
+// first arrival must fail.
 // The top level (hlbvh2_top_steps.h; backend/cuda/hlbvh2_top_level.cu) is run
 // the same way: one launch per level, 4 tasks per warp, 8 lanes per task
 // whose shuffles (butterfly bounds, prefix/suffix bin scans, the candidate
@@ -21,6 +26,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cstring>
 #include <numeric>
@@ -74,91 +80,98 @@ SortedClusters sort_and_cluster(std::span<const Triangle> triangles) {
     return s;
 }
 
-// A task step with the split moved one position right where possible: the bug the checks must catch.
-uint32_t process_task_wrong_split(const uint32_t* codes, const Task& task, uint32_t leaf_size, uint32_t* refs,
-                                  uint8_t* leaf_runs, Task* inner_children, uint32_t* node) {
-    const uint32_t inner = hlbvh2::process_task(codes, task, leaf_size, refs, leaf_runs, inner_children, node);
-    if (*node == hlbvh2::kNoNode) return inner;
-    const uint32_t mid = *node + 2;  // the right split is *node + 1
-    if (mid >= task.end) return inner;
-    // Redo the node with mid + 1.
-    const uint32_t index = mid - 1;
-    refs[task.slot] = index;
-    *node = index;
-    const Task halves[2] = {{task.first, mid, 2 * index}, {mid, task.end, 2 * index + 1}};
-    uint32_t count = 0;
-    for (const Task& h : halves) {
-        if (h.end - h.first <= leaf_size) {
-            refs[h.slot] = kLeafRef | h.first;
-            leaf_runs[h.first] = static_cast<uint8_t>(h.end - h.first);
-        } else {
-            inner_children[count++] = h;
-        }
-    }
-    return count;
+// One split thread of the bottom trees' launch with its node's split moved
+// one position right where possible: the bug the checks must catch.
+void build_split_node_wrong(const uint32_t* codes, uint32_t n, uint32_t i, uint32_t leaf_size,
+                            const hlbvh2::BottomTrees& out) {
+    uint32_t first = 0, end = 0;
+    if (!hlbvh2::node_of_split(codes, n, i, leaf_size, &first, &end)) return;
+    const uint32_t mid = i + 2 < end ? i + 2 : i + 1;
+    out.refs[2 * i] = hlbvh2::subtree_reference(codes, first, mid, leaf_size, i, out);
+    out.refs[2 * i + 1] = hlbvh2::subtree_reference(codes, mid, end, leaf_size, i, out);
 }
 
-using ProcessTask = uint32_t (*)(const uint32_t*, const Task&, uint32_t, uint32_t*, uint8_t*, Task*, uint32_t*);
+using SplitThread = void (*)(const uint32_t*, uint32_t, uint32_t, uint32_t, const hlbvh2::BottomTrees&);
 
-struct QueueForest {
+struct BottomForest {
     std::vector<uint32_t> refs;
     std::vector<uint8_t> leaf_runs;
-    std::vector<std::vector<uint32_t>> level_nodes;  // per level, one entry per task (kNoNode for leaves)
-    std::vector<uint32_t> level_sizes;
+    std::vector<uint32_t> inner_parent, leaf_parent;
+    [[nodiscard]] hlbvh2::BottomTrees view() {
+        return {refs.data(), leaf_runs.data(), inner_parent.data(), leaf_parent.data()};
+    }
 };
 
-// The work-queue kernels, level by level, warps in a shuffled order.
-QueueForest run_work_queues(const SortedClusters& s, uint32_t leaf_size, uint32_t seed,
-                            ProcessTask process = hlbvh2::process_task) {
+// The bottom trees' launch (hlbvh2_build.cu bottom_trees_kernel): n - 1
+// split threads, then one per cluster, run in a shuffled order (each
+// writes only its own node's slots). `lost`: a split thread that never
+// runs (a bug to catch), none by default.
+BottomForest run_bottom_launch(const SortedClusters& s, uint32_t leaf_size, uint32_t seed,
+                               SplitThread split = hlbvh2::build_split_node, uint32_t lost = kUnset) {
     const uint32_t n = static_cast<uint32_t>(s.keys.size());
     const uint32_t clusters = static_cast<uint32_t>(s.cluster_prefix.size());
-    QueueForest f;
+    BottomForest f;
     f.refs.assign(2 * size_t{n - 1} + clusters, kUnset);
     f.leaf_runs.assign(n, 0);
-    std::vector<Task> queue[2];
-    for (uint32_t c = 0; c < clusters; ++c) {
-        queue[0].push_back({s.cluster_begin[c], s.cluster_begin[c + 1], 2 * (n - 1) + c});  // level 0: the clusters
-    }
-    std::mt19937 rng(seed);
-    int in = 0;
-    while (!queue[in].empty()) {
-        const std::vector<Task>& input = queue[in];
-        std::vector<Task>& output = queue[1 - in];
-        output.assign(2 * input.size(), Task{kUnset, kUnset, kUnset});
-        uint32_t tail = 0;  // the output queue's atomic counter
-        std::vector<uint32_t> nodes(input.size(), kUnset);
-        // Warps dequeue 32 tasks each (one add on the head); which warp gets
-        // which chunk is up to the hardware: shuffle.
-        std::vector<uint32_t> chunks((input.size() + kWarp - 1) / kWarp);
-        std::iota(chunks.begin(), chunks.end(), 0u);
-        std::shuffle(chunks.begin(), chunks.end(), rng);
-        for (uint32_t chunk : chunks) {
-            Task children[kWarp][2];
-            uint32_t counts[kWarp] = {};
-            uint32_t one_or_more = 0, two = 0;
-            for (uint32_t lane = 0; lane < kWarp; ++lane) {
-                const size_t at = size_t{chunk} * kWarp + lane;
-                if (at >= input.size()) continue;
-                counts[lane] = process(s.keys.data(), input[at], leaf_size, f.refs.data(), f.leaf_runs.data(),
-                                       children[lane], &nodes[at]);
-                one_or_more |= (counts[lane] >= 1 ? 1u : 0u) << lane;
-                two |= (counts[lane] == 2 ? 1u : 0u) << lane;
-            }
-            const uint32_t base = tail;  // lane 0's atomicAdd
-            tail += hlbvh2::enqueue_total(one_or_more, two);
-            for (uint32_t lane = 0; lane < kWarp; ++lane) {
-                const uint32_t offset = hlbvh2::enqueue_offset(one_or_more, two, static_cast<int>(lane));
-                for (uint32_t k = 0; k < counts[lane]; ++k) output[base + offset + k] = children[lane][k];
-            }
+    f.inner_parent.assign(n - 1, kUnset);
+    f.leaf_parent.assign(n, hlbvh2::kNoParent);  // the device's memset
+    const hlbvh2::BottomTrees out = f.view();
+    std::vector<uint32_t> threads(n - 1 + clusters);
+    std::iota(threads.begin(), threads.end(), 0u);
+    std::shuffle(threads.begin(), threads.end(), std::mt19937(seed));
+    for (uint32_t t : threads) {
+        if (t < n - 1) {
+            if (t != lost) split(s.keys.data(), n, t, leaf_size, out);
+        } else {
+            const uint32_t c = t - (n - 1);
+            hlbvh2::build_cluster_root(s.keys.data(), n, c, s.cluster_begin[c], s.cluster_begin[c + 1], leaf_size,
+                                       out);
         }
-        output.resize(tail);
-        f.level_sizes.push_back(static_cast<uint32_t>(input.size()));
-        f.level_nodes.push_back(std::move(nodes));
-        queue[in].clear();
-        in = 1 - in;
     }
     return f;
 }
+
+// Thread orders of the box pass: which walk reaches a node second is up to
+// the hardware.
+std::vector<uint32_t> shuffled(uint32_t count, uint32_t seed) {
+    std::vector<uint32_t> order(count);
+    std::iota(order.begin(), order.end(), 0u);
+    std::shuffle(order.begin(), order.end(), std::mt19937(seed));
+    return order;
+}
+
+// The bottom boxes' launch (hlbvh2_build.cu bottom_boxes_kernel): one walk
+// per sorted position, in a shuffled order, inner boxes poisoned before.
+template <class Arrival>
+void run_bottom_box_pass(const SortedClusters& s, const BottomForest& f, uint32_t seed, std::vector<Box3f>& inner_boxes,
+                         std::vector<Box3f>& cluster_boxes) {
+    const uint32_t n = static_cast<uint32_t>(s.keys.size());
+    Box3f poison;
+    poison.lo = Vec3f(1e30f);
+    poison.hi = Vec3f(-1e30f);
+    inner_boxes.assign(n - 1, poison);
+    cluster_boxes.assign(s.cluster_prefix.size(), poison);
+    std::vector<uint32_t> arrivals(n - 1, 0);
+    const hlbvh2::BottomBoxPass pass{{f.refs.data(), f.leaf_runs.data(), s.order.data(), s.triangle_boxes.data(),
+                                      inner_boxes.data()},
+                                     f.inner_parent.data(), f.leaf_parent.data(), arrivals.data(),
+                                     cluster_boxes.data()};
+    for (uint32_t position : shuffled(n, seed)) hlbvh2::boxes_from_leaf<Arrival>(pass, position);
+}
+
+// The level-wise pass the one-launch pass replaces, as a recursion: each
+// inner node's box union(left, right), a leaf's its run's fold.
+Box3f expected_box(const hlbvh2::BoxView& v, uint32_t ref, std::vector<Box3f>& inner_boxes) {
+    if ((ref & kLeafRef) != 0) return hlbvh2::reference_box(v, ref);
+    const Box3f left = expected_box(v, v.refs[2 * ref], inner_boxes);
+    const Box3f right = expected_box(v, v.refs[2 * ref + 1], inner_boxes);
+    return inner_boxes[ref] = hlbvh2::box_union(left, right);
+}
+
+// A walk that goes on at the first arrival: its sibling may not be final (a bug to catch).
+struct FirstArrivalContinues {
+    static uint32_t arrive(uint32_t* counter) { return (*counter)++ == 0 ? 1u : 0u; }
+};
 
 // Independent reference: the bottom trees top-down, the split found by a
 // linear scan for the first code with the highest differing bit set.
@@ -229,7 +242,7 @@ std::vector<NamedScene> scenes() {
     return out;
 }
 
-Hlbvh2Forest to_forest(const SortedClusters& s, const QueueForest& f, std::vector<uint32_t> top_refs = {}) {
+Hlbvh2Forest to_forest(const SortedClusters& s, const BottomForest& f, std::vector<uint32_t> top_refs = {}) {
     return {s.order, f.refs, s.cluster_begin, s.cluster_prefix, std::move(top_refs)};
 }
 
@@ -238,84 +251,169 @@ bool same_bvh(const Bvh& a, const Bvh& b) {
            (a.nodes.empty() || std::memcmp(a.nodes.data(), b.nodes.data(), a.nodes.size() * sizeof(a.nodes[0])) == 0);
 }
 
-TEST(Hlbvh2DeviceLogic, WorkQueuesBuildTheCpuBottomTrees) {
+// The reference forest over every cluster (kUnset where no node is).
+std::vector<uint32_t> reference_forest(const SortedClusters& s, uint32_t leaf_size) {
+    const uint32_t n = static_cast<uint32_t>(s.keys.size());
+    const uint32_t clusters = static_cast<uint32_t>(s.cluster_prefix.size());
+    std::vector<uint32_t> expected(2 * size_t{n - 1} + clusters, kUnset);
+    for (uint32_t c = 0; c < clusters; ++c) {
+        reference_range(s.keys, s.cluster_begin[c], s.cluster_begin[c + 1], 2 * (n - 1) + c, leaf_size, expected);
+    }
+    return expected;
+}
+
+// The launch's forest against the reference: every slot (unused ones
+// untouched), each primitive in one leaf, and parent links that invert the
+// child references.
+void expect_reference_forest(const SortedClusters& s, const BottomForest& f, uint32_t leaf_size) {
+    const uint32_t n = static_cast<uint32_t>(s.keys.size());
+    const uint32_t clusters = static_cast<uint32_t>(s.cluster_prefix.size());
+    const std::vector<uint32_t> expected = reference_forest(s, leaf_size);
+    EXPECT_EQ(f.refs, expected);
+    std::vector<uint32_t> seen(n, 0);
+    size_t wrong = 0;
+    for (uint32_t c = 0; c < clusters; ++c) walk(f.refs, f.leaf_runs, expected, f.refs[2 * (n - 1) + c], seen, wrong);
+    EXPECT_EQ(wrong, 0u);
+    EXPECT_EQ(std::count(seen.begin(), seen.end(), 1u), static_cast<long>(n)) << "primitives not in exactly one leaf";
+    size_t bad_links = 0, leaves = 0;
+    auto parent_of = [&](uint32_t ref) {
+        return (ref & kLeafRef) != 0 ? f.leaf_parent[ref & ~kLeafRef] : f.inner_parent[ref];
+    };
+    for (uint32_t c = 0; c < clusters; ++c) bad_links += parent_of(f.refs[2 * (n - 1) + c]) != (hlbvh2::kClusterRootOf | c);
+    for (uint32_t i = 0; i + 1 < n; ++i) {
+        if (expected[2 * i] == kUnset) continue;
+        for (int side = 0; side < 2; ++side) bad_links += parent_of(f.refs[2 * i + side]) != i;
+    }
+    for (uint32_t p : f.leaf_parent) leaves += p != hlbvh2::kNoParent;
+    EXPECT_EQ(bad_links, 0u);
+    EXPECT_EQ(leaves, static_cast<size_t>(std::count_if(expected.begin(), expected.end(), [](uint32_t r) {
+                  return r != kUnset && (r & kLeafRef) != 0;
+              })));
+}
+
+// Sorted codes as the device sees them, without triangles (order and
+// boxes left empty): for the bottom trees' structure alone.
+SortedClusters clusters_of_codes(std::vector<uint32_t> keys) {
+    std::sort(keys.begin(), keys.end());
+    SortedClusters s;
+    s.keys = std::move(keys);
+    const uint32_t n = static_cast<uint32_t>(s.keys.size());
+    for (uint32_t i = 0; i < n; ++i) {
+        if (i == 0 || (s.keys[i] >> hlbvh2::kClusterShift) != (s.keys[i - 1] >> hlbvh2::kClusterShift)) {
+            s.cluster_begin.push_back(i);
+            s.cluster_prefix.push_back(s.keys[i] >> hlbvh2::kClusterShift);
+        }
+    }
+    s.cluster_begin.push_back(n);
+    return s;
+}
+
+TEST(Hlbvh2DeviceLogic, OneLaunchBuildsTheCpuBottomTrees) {
     for (const NamedScene& scene : scenes()) {
+        if (scene.geometry.triangles.size() < 2) continue;  // the host builds those
         for (uint32_t leaf_size : {1u, 4u}) {
             SCOPED_TRACE(scene.name + ", leaves of " + std::to_string(leaf_size));
             const SortedClusters s = sort_and_cluster(scene.geometry.triangles);
+            for (uint32_t seed : {1u, 2u}) expect_reference_forest(s, run_bottom_launch(s, leaf_size, seed), leaf_size);
+        }
+    }
+}
+
+// Codes with long runs of equal values, clusters of every size, and leaf
+// sizes up to 255: the halvings of runs and the radix ranges around them.
+TEST(Hlbvh2DeviceLogic, OneLaunchOnCodesWithRuns) {
+    std::mt19937 rng(17);
+    for (int round = 0; round < 60; ++round) {
+        const uint32_t n = 2 + rng() % 3000;
+        const uint32_t distinct = 1 + rng() % (round % 3 == 0 ? 4 : 400);
+        const uint32_t clusters = 1 + rng() % 6;
+        std::vector<uint32_t> values(distinct);
+        for (uint32_t& v : values) v = ((rng() % clusters) << hlbvh2::kClusterShift) | (rng() & ((1u << 15) - 1));
+        std::vector<uint32_t> keys(n);
+        for (uint32_t& k : keys) k = values[rng() % distinct] & ((1u << hlbvh2::kCodeBits) - 1);
+        const SortedClusters s = clusters_of_codes(std::move(keys));
+        for (uint32_t leaf_size : {1u, 2u, 3u, 8u, 255u}) {
+            SCOPED_TRACE("round " + std::to_string(round) + ", leaves of " + std::to_string(leaf_size));
+            expect_reference_forest(s, run_bottom_launch(s, leaf_size, static_cast<uint32_t>(round)), leaf_size);
+        }
+    }
+}
+
+TEST(Hlbvh2DeviceLogic, OneLaunchBoxesAreTheLevelWiseBoxes) {
+    std::vector<NamedScene> all = scenes();
+    SceneGeometry zeros;  // bounds of both signs of zero: the union's order shows
+    std::mt19937 rng(3);
+    for (int i = 0; i < 400; ++i) {
+        const float x = (rng() & 1) ? -0.0f : 0.0f, y = static_cast<float>(rng() % 7), z = (rng() & 1) ? -0.0f : 0.0f;
+        test::append(zeros, {Vec3f(x, y, z), Vec3f(z, y + 1.0f, x), Vec3f(x, y, 1.0f)});
+    }
+    all.push_back({"signed zeros", std::move(zeros)});
+    for (const NamedScene& scene : all) {
+        if (scene.geometry.triangles.size() < 2) continue;
+        for (uint32_t leaf_size : {1u, 4u}) {
+            SCOPED_TRACE(scene.name + ", leaves of " + std::to_string(leaf_size));
+            const SortedClusters s = sort_and_cluster(scene.geometry.triangles);
+            const BottomForest f = run_bottom_launch(s, leaf_size, 5);
             const uint32_t n = static_cast<uint32_t>(s.keys.size());
-            const uint32_t clusters = static_cast<uint32_t>(s.cluster_prefix.size());
-            std::vector<uint32_t> expected(2 * size_t{n - 1} + clusters, kUnset);
-            for (uint32_t c = 0; c < clusters; ++c) {
-                reference_range(s.keys, s.cluster_begin[c], s.cluster_begin[c + 1], 2 * (n - 1) + c, leaf_size,
-                                expected);
+            std::vector<Box3f> expected_inner(n - 1);
+            const hlbvh2::BoxView expected_view{f.refs.data(), f.leaf_runs.data(), s.order.data(),
+                                                s.triangle_boxes.data(), expected_inner.data()};
+            std::vector<Box3f> expected_clusters;
+            for (size_t c = 0; c < s.cluster_prefix.size(); ++c) {
+                expected_clusters.push_back(expected_box(expected_view, f.refs[2 * (n - 1) + c], expected_inner));
             }
-            for (uint32_t seed : {1u, 2u}) {
-                const QueueForest f = run_work_queues(s, leaf_size, seed);
-                std::vector<uint32_t> seen(n, 0);
+            for (uint32_t seed : {1u, 2u, 3u}) {
+                std::vector<Box3f> inner, cluster_boxes;
+                run_bottom_box_pass<karras::AtomicArrival>(s, f, seed, inner, cluster_boxes);
                 size_t wrong = 0;
-                for (uint32_t c = 0; c < clusters; ++c) {
-                    const uint32_t slot = 2 * (n - 1) + c;
-                    wrong += f.refs[slot] != expected[slot];
-                    walk(f.refs, f.leaf_runs, expected, f.refs[slot], seen, wrong);
-                }
-                EXPECT_EQ(wrong, 0u) << "references that differ from the reference";
-                EXPECT_EQ(std::count(seen.begin(), seen.end(), 1u), static_cast<long>(n)) << "primitives not in exactly one leaf";
-                EXPECT_EQ(f.level_sizes.front(), clusters);
-                // Level l >= 1 holds only inner tasks, each a distinct node.
-                size_t inner = 0;
-                for (const auto& level : f.level_nodes) {
-                    inner += std::count_if(level.begin(), level.end(), [](uint32_t v) { return v != hlbvh2::kNoNode; });
-                }
-                const size_t expected_inner = std::count_if(expected.begin(), expected.end(), [](uint32_t r) {
-                    return r != kUnset && (r & kLeafRef) == 0;
-                });
-                EXPECT_EQ(inner, expected_inner);
+                for (uint32_t i = 0; i + 1 < n; ++i) wrong += f.inner_parent[i] != kUnset && !same_box(inner[i], expected_inner[i]);
+                for (size_t c = 0; c < cluster_boxes.size(); ++c) wrong += !same_box(cluster_boxes[c], expected_clusters[c]);
+                EXPECT_EQ(wrong, 0u) << "seed " << seed;
             }
         }
     }
 }
 
-TEST(Hlbvh2DeviceLogic, LevelWiseBoxesAreUnionsOfChildren) {
+TEST(Hlbvh2DeviceLogic, FirstArrivalContinuingIsCaught) {
     const SortedClusters s = sort_and_cluster(test::make_triangle_soup(5000, 3, {Vec3f(-1.0f), Vec3f(1.0f)}, 0.1f).triangles);
-    const QueueForest f = run_work_queues(s, 4, 7);
-    const uint32_t n = static_cast<uint32_t>(s.keys.size());
-    Box3f poison;
-    poison.lo = Vec3f(1e30f);
-    poison.hi = Vec3f(-1e30f);
-    std::vector<Box3f> inner_boxes(n - 1, poison);
-    const hlbvh2::BoxView view{f.refs.data(), f.leaf_runs.data(), s.order.data(), s.triangle_boxes.data(),
-                               inner_boxes.data()};
-    for (size_t l = f.level_nodes.size(); l-- > 0;) {  // deepest level first, one launch each
-        for (uint32_t node : f.level_nodes[l]) {
-            if (node != hlbvh2::kNoNode) hlbvh2::node_box(view, node);
-        }
-    }
-    // Against the boxes of the primitives below each cluster root.
-    size_t wrong = 0;
-    for (size_t c = 0; c + 1 < s.cluster_begin.size(); ++c) {
-        Box3f expected = s.triangle_boxes[s.order[s.cluster_begin[c]]];
-        for (uint32_t i = s.cluster_begin[c]; i < s.cluster_begin[c + 1]; ++i) {
-            expected = hlbvh2::box_union(expected, s.triangle_boxes[s.order[i]]);
-        }
-        wrong += !same_box(hlbvh2::reference_box(view, f.refs[2 * (n - 1) + c]), expected);
-    }
-    EXPECT_EQ(wrong, 0u);
+    const BottomForest f = run_bottom_launch(s, 1, 1);
+    std::vector<Box3f> good_inner, good_clusters, bad_inner, bad_clusters;
+    run_bottom_box_pass<karras::AtomicArrival>(s, f, 4, good_inner, good_clusters);
+    run_bottom_box_pass<FirstArrivalContinues>(s, f, 4, bad_inner, bad_clusters);
+    size_t differ = 0;
+    for (size_t c = 0; c < good_clusters.size(); ++c) differ += !same_box(good_clusters[c], bad_clusters[c]);
+    EXPECT_GT(differ, 0u);
 }
 
 TEST(Hlbvh2DeviceLogic, HostEmissionIsBuildHlbvh2) {
     for (const NamedScene& scene : scenes()) {
+        if (scene.geometry.triangles.size() < 2) continue;
         for (int leaf_size : {1, 4, 8}) {
             SCOPED_TRACE(scene.name + ", leaves of " + std::to_string(leaf_size));
             const BvhBuildConfig config{.max_leaf_size = leaf_size};
             const SortedClusters s = sort_and_cluster(scene.geometry.triangles);
-            const QueueForest f = run_work_queues(s, static_cast<uint32_t>(leaf_size), 11);
+            const BottomForest f = run_bottom_launch(s, static_cast<uint32_t>(leaf_size), 11);
             Hlbvh2Stages stages;
             const Bvh got = emit_hlbvh2_forest(scene.geometry.triangles, config, to_forest(s, f), &stages);
             EXPECT_TRUE(same_bvh(build_hlbvh2(scene.geometry.triangles, config), got));
         }
     }
     EXPECT_TRUE(emit_hlbvh2_forest({}, {}, Hlbvh2Forest{}).nodes.empty());
+}
+
+// The top level's records on the device: a level that fits opens the next
+// one after its entries; one that overflows its queues or the node list
+// (or follows a fault) runs nothing and faults the next, whose counts stay
+// 0, which ends the host's loop.
+TEST(Hlbvh2DeviceLogic, LevelRecordsFaultInsteadOfOverrunning) {
+    const hlbvh2::TopQueueCapacity capacity{4, 2, 10};
+    hlbvh2::TopQueueLevel top_next{};
+    EXPECT_TRUE(hlbvh2::open_next_top_level({0, 4, 2, 4, 0}, &top_next, capacity));
+    EXPECT_EQ(top_next.base, 10u);
+    EXPECT_FALSE(hlbvh2::open_next_top_level({0, 5, 0, 0, 0}, &top_next, capacity));
+    EXPECT_FALSE(hlbvh2::open_next_top_level({0, 1, 3, 0, 0}, &top_next, capacity));
+    EXPECT_FALSE(hlbvh2::open_next_top_level({0, 4, 2, 5, 0}, &top_next, capacity));
+    EXPECT_EQ(top_next.fault, 1u);
 }
 
 TEST(Hlbvh2DeviceLogic, EnqueueOffsetsArePrefixSums) {
@@ -339,25 +437,28 @@ TEST(Hlbvh2DeviceLogic, WrongSplitIsCaught) {
     const SceneGeometry g = test::make_triangle_soup(3000, 9, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f);
     const BvhBuildConfig config{.max_leaf_size = 1};
     const SortedClusters s = sort_and_cluster(g.triangles);
-    const QueueForest f = run_work_queues(s, 1, 3, process_task_wrong_split);
-    const uint32_t n = static_cast<uint32_t>(s.keys.size());
-    size_t differ = 0;
-    for (size_t c = 0; c + 1 < s.cluster_begin.size(); ++c) {
-        std::vector<uint32_t> expected(f.refs.size(), kUnset);
-        reference_range(s.keys, s.cluster_begin[c], s.cluster_begin[c + 1], 2 * (n - 1) + c, 1, expected);
-        std::vector<uint32_t> seen(n, 0);
-        differ += f.refs[2 * (n - 1) + c] != expected[2 * (n - 1) + c];
-        walk(f.refs, f.leaf_runs, expected, f.refs[2 * (n - 1) + c], seen, differ);
+    const BottomForest f = run_bottom_launch(s, 1, 3, build_split_node_wrong);
+    EXPECT_NE(f.refs, reference_forest(s, 1));
+    bool same = false;  // a moved split gives another BVH, or a forest the host's check rejects
+    try {
+        same = same_bvh(build_hlbvh2(g.triangles, config), emit_hlbvh2_forest(g.triangles, config, to_forest(s, f)));
+    } catch (const Error&) {
     }
-    EXPECT_GT(differ, 0u);
-    EXPECT_FALSE(same_bvh(build_hlbvh2(g.triangles, config),
-                          emit_hlbvh2_forest(g.triangles, config, to_forest(s, f))));
+    EXPECT_FALSE(same);
+}
+
+TEST(Hlbvh2DeviceLogic, LostSplitThreadIsCaught) {
+    const SortedClusters s = sort_and_cluster(test::make_triangle_soup(3000, 9, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f).triangles);
+    const std::vector<uint32_t> expected = reference_forest(s, 1);
+    uint32_t some_node = 0;
+    while (expected[2 * some_node] == kUnset) ++some_node;
+    EXPECT_NE(run_bottom_launch(s, 1, 3, hlbvh2::build_split_node, some_node).refs, expected);
 }
 
 TEST(Hlbvh2DeviceLogic, MalformedForestThrows) {
     const SceneGeometry g = test::make_triangle_soup(500, 4, {Vec3f(-1.0f), Vec3f(1.0f)}, 0.2f);
     const SortedClusters s = sort_and_cluster(g.triangles);
-    const QueueForest f = run_work_queues(s, 1, 1);
+    const BottomForest f = run_bottom_launch(s, 1, 1);
     const uint32_t n = static_cast<uint32_t>(s.keys.size());
     Hlbvh2Forest bad = to_forest(s, f);
     // A cluster root pointing at a leaf that is not its range's start.
@@ -422,6 +523,41 @@ hlbvh2::TopSplit emulate_split_lanes(const TopBin bins[kLanes][3], const hlbvh2:
 
 // process_top_task of hlbvh2_top_level.cu, its 8 lanes in lockstep: each
 // shuffle reads the other lanes' values from before the step.
+enum class ScatterBug { None, KeepSent };
+
+// strided_bins_lanes of hlbvh2_top_level.cu, its 8 lanes in lockstep: each
+// bins every 8th cluster, then per xor step every lane's sent bins are read
+// (the shuffle) before any lane merges them into its kept ones.
+void strided_bins_lanes(const TopCluster* in, const TopTask& task, const hlbvh2::CellBounds& bounds,
+                        TopBin out[kLanes][3], ScatterBug bug = ScatterBug::None) {
+    std::vector<std::array<std::array<TopBin, hlbvh2::kTopBins>, 3>> all(kLanes);
+    for (uint32_t lane = 0; lane < kLanes; ++lane) {
+        TopBin lane_bins[3][hlbvh2::kTopBins];
+        hlbvh2::strided_bins_lane(in, task.first, task.end, bounds, lane, lane_bins);
+        for (int axis = 0; axis < 3; ++axis) std::copy(lane_bins[axis], lane_bins[axis] + hlbvh2::kTopBins, all[lane][axis].begin());
+    }
+    for (uint32_t d = kLanes / 2; d > 0; d /= 2) {
+        for (uint32_t j = 0; j < d; ++j) {
+            TopBin sent[kLanes][3];
+            for (uint32_t lane = 0; lane < kLanes; ++lane) {
+                const uint32_t k = hlbvh2::scatter_pair(lane, d, j);
+                for (int axis = 0; axis < 3; ++axis) sent[lane][axis] = all[lane][axis][hlbvh2::scatter_sent(lane, d, k)];
+            }
+            for (uint32_t lane = 0; lane < kLanes; ++lane) {
+                const uint32_t k = hlbvh2::scatter_pair(lane, d, j);
+                const uint32_t kept = bug == ScatterBug::KeepSent ? hlbvh2::scatter_sent(lane, d, k)
+                                                                  : hlbvh2::scatter_kept(lane, d, k);
+                for (int axis = 0; axis < 3; ++axis) {
+                    all[lane][axis][kept] = hlbvh2::merge_bins(all[lane][axis][kept], sent[lane ^ d][axis]);
+                }
+            }
+        }
+    }
+    for (uint32_t lane = 0; lane < kLanes; ++lane) {
+        for (int axis = 0; axis < 3; ++axis) out[lane][axis] = all[lane][axis][lane];
+    }
+}
+
 uint32_t emulate_top_task(const TopTask& task, const TopCluster* in, TopCluster* out, uint32_t top_base,
                           uint32_t* top_refs, TopTask children[2], Consider consider) {
     const uint32_t count = task.end - task.first;
@@ -438,8 +574,12 @@ uint32_t emulate_top_task(const TopTask& task, const TopCluster* in, TopCluster*
         std::copy(next, next + kLanes, bounds);
     }
     TopBin bins[kLanes][3];
-    for (uint32_t lane = 0; lane < kLanes; ++lane) {
-        hlbvh2::bin_task_lane(in, task.first, task.end, bounds[lane], lane, bins[lane]);
+    if (count > hlbvh2::kTopStridedBinMin) {
+        strided_bins_lanes(in, task, bounds[0], bins);
+    } else {
+        for (uint32_t lane = 0; lane < kLanes; ++lane) {
+            hlbvh2::bin_task_lane(in, task.first, task.end, bounds[lane], lane, bins[lane]);
+        }
     }
     uint32_t left_count = 0;
     const hlbvh2::TopSplit split = emulate_split_lanes(bins, bounds[0], count, consider, &left_count);
@@ -596,31 +736,55 @@ struct TopSchedule {
 };
 
 // The task-queue launches of hlbvh2_top_level.cu: per level, the large
-// tasks' blocks in a shuffled order, then the small tasks' warps in a
-// shuffled order; two queues (small, large) ping-pong.
+// tasks' blocks in a shuffled order (the first block opening the next level
+// record), then the small tasks' warps in a shuffled order; two queues
+// (small, large) ping-pong with the device's capacities; every level's
+// sizes and node-list base come from its record (hlbvh2::TopQueueLevel),
+// and `extra_levels` launches after the last must do nothing. (The device
+// runs the levels after the last large task in one block, level after
+// level with the same records; the order of its warps is what the
+// shuffles here stand for.)
 QueueTop run_top_task_queues(std::vector<TopCluster> clusters, uint32_t top_base, uint32_t seed,
-                             Consider consider = hlbvh2::consider, TopSchedule schedule = {}) {
+                             Consider consider = hlbvh2::consider, TopSchedule schedule = {},
+                             uint32_t extra_levels = 3) {
     const uint32_t count = static_cast<uint32_t>(clusters.size());
     QueueTop top;
     if (count < 2) return top;
     top.refs.assign(2 * size_t{count - 1}, kUnset);
     std::vector<TopCluster> buffer[2] = {std::move(clusters), std::vector<TopCluster>(count)};
     const bool root_is_large = count > schedule.block_min;
+    const hlbvh2::TopQueueCapacity capacity{count / 2, std::max(1u, count / (schedule.block_min + 1)), count - 1};
     std::vector<TopTask> queue[2], large_queue[2];
-    (root_is_large ? large_queue[0] : queue[0]).push_back(TopTask{0, count, 0});
-    const size_t large_capacity = std::max(1u, count / (schedule.block_min + 1));
+    for (int side = 0; side < 2; ++side) {
+        queue[side].assign(capacity.small, TopTask{kUnset, kUnset, kUnset});
+        large_queue[side].assign(capacity.large, TopTask{kUnset, kUnset, kUnset});
+    }
+    std::vector<hlbvh2::TopQueueLevel> records(size_t{count} + 1, hlbvh2::TopQueueLevel{0, 0, 0, 0, 0});
+    (root_is_large ? large_queue[0] : queue[0])[0] = TopTask{0, count, 0};
+    (root_is_large ? records[0].large : records[0].small) = 1;
+    std::vector<uint32_t> level_nodes(capacity.nodes, kUnset);
     std::mt19937 rng(seed);
-    int side = 0;
-    while (!queue[side].empty() || !large_queue[side].empty()) {
+    uint32_t after_last = 0;
+    for (uint32_t level = 0; level + 1 < records.size() && after_last <= extra_levels; ++level) {
+        const uint32_t side = level & 1;
+        const hlbvh2::TopQueueLevel self = records[level];
+        hlbvh2::TopQueueLevel& next = records[level + 1];
+        if (!hlbvh2::open_next_top_level(self, &next, capacity)) {
+            ADD_FAILURE() << "top level " << level << " does not fit";
+            break;
+        }
+        if (self.small + self.large == 0) ++after_last;
+        // The one-block launch of the last levels relies on this: once a
+        // level has no large task, no later level has one.
+        if (level > 0 && records[level - 1].large == 0) {
+            EXPECT_EQ(self.large, 0u) << "a large task after a level without one";
+        }
         const std::vector<TopTask>& input = queue[side];
         const std::vector<TopTask>& large_input = large_queue[side];
         std::vector<TopTask>& output = queue[1 - side];
         std::vector<TopTask>& large_output = large_queue[1 - side];
-        output.assign(count / 2, TopTask{kUnset, kUnset, kUnset});
-        large_output.clear();
-        uint32_t tail = 0;
-        std::vector<uint32_t> nodes(large_input.size() + input.size(), kUnset);  // large tasks' first
-        std::vector<uint32_t> blocks(large_input.size());
+        uint32_t* nodes = level_nodes.data() + self.base;  // large tasks' first
+        std::vector<uint32_t> blocks(self.large);
         std::iota(blocks.begin(), blocks.end(), 0u);
         std::shuffle(blocks.begin(), blocks.end(), rng);
         for (uint32_t block : blocks) {
@@ -630,15 +794,14 @@ QueueTop run_top_task_queues(std::vector<TopCluster> clusters, uint32_t top_base
                                                           children, consider, schedule.block_stride, rng, top.block);
             nodes[block] = large_input[block].node;
             for (uint32_t k = 0; k < inner; ++k) {
-                if (children[k].end - children[k].first > schedule.block_min) {
-                    large_output.push_back(children[k]);
-                } else {
-                    output[tail++] = children[k];
-                }
+                const bool large = children[k].end - children[k].first > schedule.block_min;
+                uint32_t& tail = large ? next.large : next.small;
+                std::vector<TopTask>& to = large ? large_output : output;
+                if (tail < to.size()) to[tail] = children[k];
+                ++tail;
             }
         }
-        EXPECT_LE(large_output.size(), large_capacity);
-        std::vector<uint32_t> warps((input.size() + kTasksPerWarp - 1) / kTasksPerWarp);
+        std::vector<uint32_t> warps((self.small + kTasksPerWarp - 1) / kTasksPerWarp);
         std::iota(warps.begin(), warps.end(), 0u);
         std::shuffle(warps.begin(), warps.end(), rng);
         for (uint32_t warp : warps) {
@@ -646,46 +809,43 @@ QueueTop run_top_task_queues(std::vector<TopCluster> clusters, uint32_t top_base
             uint32_t inner[kTasksPerWarp] = {};
             uint32_t one_or_more = 0, two = 0;  // ballots of the tasks' lane 0s
             for (uint32_t group = 0; group < kTasksPerWarp; ++group) {
-                const size_t at = size_t{warp} * kTasksPerWarp + group;
-                if (at >= input.size()) continue;
+                const uint32_t at = warp * kTasksPerWarp + group;
+                if (at >= self.small) continue;
                 EXPECT_LE(input[at].end - input[at].first, schedule.block_min) << "a large task in the small queue";
                 inner[group] = emulate_top_task(input[at], buffer[side].data(), buffer[1 - side].data(), top_base,
                                                 top.refs.data(), children[group], consider);
-                nodes[large_input.size() + at] = input[at].node;
+                nodes[self.large + at] = input[at].node;
                 one_or_more |= (inner[group] >= 1 ? 1u : 0u) << (group * kLanes);
                 two |= (inner[group] == 2 ? 1u : 0u) << (group * kLanes);
             }
-            const uint32_t base = tail;
-            tail += hlbvh2::enqueue_total(one_or_more, two);
+            const uint32_t base = next.small;  // the warp's atomicAdd on the next record's small count
+            next.small += hlbvh2::enqueue_total(one_or_more, two);
             for (uint32_t group = 0; group < kTasksPerWarp; ++group) {
                 const uint32_t offset = base + hlbvh2::enqueue_offset(one_or_more, two, static_cast<int>(group * kLanes));
-                for (uint32_t k = 0; k < inner[group]; ++k) output[offset + k] = children[group][k];
+                for (uint32_t k = 0; k < inner[group]; ++k) {
+                    if (offset + k < output.size()) output[offset + k] = children[group][k];
+                }
             }
         }
-        output.resize(tail);
-        top.level_nodes.push_back(std::move(nodes));
-        queue[side].clear();
-        large_queue[side].clear();
-        side = 1 - side;
+    }
+    // What the host reads back once.
+    for (const hlbvh2::TopQueueLevel& r : records) {
+        EXPECT_EQ(r.fault, 0u);
+        if (r.small + r.large == 0) break;
+        top.level_nodes.emplace_back(level_nodes.begin() + r.base, level_nodes.begin() + r.base + r.small + r.large);
     }
     return top;
 }
 
 // The clusters as the device's top level sees them, after the bottom levels.
-std::vector<TopCluster> top_clusters(const SortedClusters& s, const QueueForest& f, std::vector<Box3f>& inner_boxes) {
+std::vector<TopCluster> top_clusters(const SortedClusters& s, const BottomForest& f, std::vector<Box3f>& inner_boxes) {
     const uint32_t n = static_cast<uint32_t>(s.keys.size());
-    inner_boxes.assign(n > 0 ? n - 1 : 0, Box3f{});
-    const hlbvh2::BoxView view{f.refs.data(), f.leaf_runs.data(), s.order.data(), s.triangle_boxes.data(),
-                               inner_boxes.data()};
-    for (size_t l = f.level_nodes.size(); l-- > 0;) {
-        for (uint32_t node : f.level_nodes[l]) {
-            if (node != hlbvh2::kNoNode) hlbvh2::node_box(view, node);
-        }
-    }
+    std::vector<Box3f> cluster_boxes;
+    run_bottom_box_pass<karras::AtomicArrival>(s, f, 1, inner_boxes, cluster_boxes);
     std::vector<TopCluster> clusters;
     for (size_t c = 0; c < s.cluster_prefix.size(); ++c) {
         const uint32_t root = f.refs[2 * (n - 1) + c];
-        clusters.push_back({hlbvh2::reference_box(view, root), hlbvh2::pack_cells(s.cluster_prefix[c]),
+        clusters.push_back({cluster_boxes[c], hlbvh2::pack_cells(s.cluster_prefix[c]),
                             s.cluster_begin[c + 1] - s.cluster_begin[c], root});
     }
     return clusters;
@@ -748,7 +908,7 @@ TEST(Hlbvh2DeviceLogic, TopLevelTaskQueuesBuildTheCpuTopLevel) {
             const SortedClusters s = sort_and_cluster(scene.geometry.triangles);
             if (s.keys.size() < 2) continue;
             const uint32_t n = static_cast<uint32_t>(s.keys.size());
-            const QueueForest f = run_work_queues(s, leaf_size, 5);
+            const BottomForest f = run_bottom_launch(s, leaf_size, 5);
             std::vector<Box3f> inner_boxes;
             const std::vector<TopCluster> clusters = top_clusters(s, f, inner_boxes);
             if (scene.name == "one point") EXPECT_EQ(clusters.size(), 1u);
@@ -805,6 +965,37 @@ TEST(Hlbvh2DeviceLogic, TopLevelOfRandomAndExtremeClusters) {
     }
 }
 
+// The strided binning's reduce-scatter hands lane L bin L of each axis,
+// equal to bin_task's (up to zero signs); a scatter that keeps the bins it
+// sends is caught.
+TEST(Hlbvh2DeviceLogic, StridedLaneBinsEqualTheSerialBins) {
+    size_t checked = 0, caught = 0;
+    for (uint32_t count : {33u, 40u, 64u, 200u, 256u}) {
+        for (uint32_t seed = 1; seed <= 6; ++seed) {
+            const std::vector<TopCluster> clusters = random_clusters(count, seed, seed % 2 ? 1.0f : 1e-3f);
+            const TopTask task{0, count, 0};
+            hlbvh2::CellBounds bounds = hlbvh2::empty_cell_bounds();
+            for (const TopCluster& c : clusters) hlbvh2::grow(bounds, c.cells);
+            TopBin serial[3][hlbvh2::kTopBins];
+            hlbvh2::bin_task(clusters.data(), 0, count, bounds, serial);
+            TopBin lanes[kLanes][3], wrong[kLanes][3];
+            strided_bins_lanes(clusters.data(), task, bounds, lanes);
+            strided_bins_lanes(clusters.data(), task, bounds, wrong, ScatterBug::KeepSent);
+            bool wrong_differs = false;
+            for (uint32_t lane = 0; lane < kLanes; ++lane) {
+                for (int axis = 0; axis < 3; ++axis) {
+                    EXPECT_TRUE(same_bin_value(lanes[lane][axis], serial[axis][lane]))
+                        << count << " clusters, seed " << seed << ", lane " << lane << ", axis " << axis;
+                    wrong_differs |= !same_bin_value(wrong[lane][axis], serial[axis][lane]);
+                }
+            }
+            ++checked;
+            caught += wrong_differs;
+        }
+    }
+    EXPECT_EQ(caught, checked);
+}
+
 TEST(Hlbvh2DeviceLogic, TopLevelBlockPathIgnoresSignsOfZero) {
     // Flat clusters whose z bounds are zeros of mixed signs: the key bins'
     // min / max may pick another zero than the CPU's unions (-0 orders below
@@ -833,7 +1024,7 @@ TEST(Hlbvh2DeviceLogic, TopLevelBlockPathIgnoresSignsOfZero) {
 struct SpreadSoup {
     SceneGeometry geometry;
     SortedClusters sorted;
-    QueueForest forest;
+    BottomForest forest;
     std::vector<TopCluster> clusters;
 };
 const SpreadSoup& spread_soup() {
@@ -841,7 +1032,7 @@ const SpreadSoup& spread_soup() {
         SpreadSoup s;
         s.geometry = test::make_triangle_soup(60000, 11, {Vec3f(-20.0f), Vec3f(20.0f)}, 0.1f);
         s.sorted = sort_and_cluster(s.geometry.triangles);
-        s.forest = run_work_queues(s.sorted, 4, 3);
+        s.forest = run_bottom_launch(s.sorted, 4, 3);
         std::vector<Box3f> inner_boxes;
         s.clusters = top_clusters(s.sorted, s.forest, inner_boxes);
         return s;
@@ -883,33 +1074,55 @@ TEST(Hlbvh2DeviceLogic, WrongBlockStrideIsCaught) {
     }
 }
 
-TEST(Hlbvh2DeviceLogic, TopLevelBoxesAreUnionsOfClusters) {
+// The top boxes' launches (hlbvh2_top_level.cu): the parent links, then one
+// walk per top node, in a shuffled order, top boxes poisoned before.
+template <class Arrival>
+std::vector<Box3f> run_top_box_pass(const hlbvh2::BoxView& bottom, const std::vector<uint32_t>& top_refs, uint32_t n,
+                                    uint32_t seed) {
+    const uint32_t top_nodes = static_cast<uint32_t>(top_refs.size() / 2);
+    Box3f poison;
+    poison.lo = Vec3f(1e30f);
+    poison.hi = Vec3f(-1e30f);
+    std::vector<Box3f> top_boxes(top_nodes, poison);
+    std::vector<uint32_t> parents(top_nodes, kUnset), arrivals(top_nodes, 0);
+    const hlbvh2::TopBoxView view{bottom, top_refs.data(), n - 1, top_boxes.data()};
+    for (uint32_t k : shuffled(top_nodes, seed)) hlbvh2::link_top_children(view, k, parents.data());
+    for (uint32_t k : shuffled(top_nodes, seed + 1)) {
+        hlbvh2::top_boxes_from_node<Arrival>(view, parents.data(), arrivals.data(), k);
+    }
+    return top_boxes;
+}
+
+TEST(Hlbvh2DeviceLogic, TopLevelBoxesAreTheLevelWiseBoxes) {
     const SortedClusters s = sort_and_cluster(test::make_triangle_soup(20000, 8, {Vec3f(-5.0f), Vec3f(5.0f)}, 0.2f).triangles);
     const uint32_t n = static_cast<uint32_t>(s.keys.size());
-    const QueueForest f = run_work_queues(s, 4, 2);
+    const BottomForest f = run_bottom_launch(s, 4, 2);
     std::vector<Box3f> inner_boxes;
     const std::vector<TopCluster> clusters = top_clusters(s, f, inner_boxes);
     ASSERT_GT(clusters.size(), 100u);
     const QueueTop top = run_top_task_queues(clusters, n - 1, 4);
-    std::vector<Box3f> top_boxes(clusters.size() - 1);
-    const hlbvh2::TopBoxView view{{f.refs.data(), f.leaf_runs.data(), s.order.data(), s.triangle_boxes.data(),
-                                   inner_boxes.data()},
-                                  top.refs.data(), n - 1, top_boxes.data()};
-    for (size_t l = top.level_nodes.size(); l-- > 0;) {  // deepest level first, one launch each
-        for (uint32_t k : top.level_nodes[l]) hlbvh2::top_node_box(view, k);
+    const hlbvh2::BoxView bottom{f.refs.data(), f.leaf_runs.data(), s.order.data(), s.triangle_boxes.data(),
+                                 inner_boxes.data()};
+    // The level-wise pass it replaces: union(left, right), children (numbered above their parent) first.
+    std::vector<Box3f> expected(clusters.size() - 1);
+    const hlbvh2::TopBoxView expected_view{bottom, top.refs.data(), n - 1, expected.data()};
+    for (size_t k = expected.size(); k-- > 0;) {
+        expected[k] = hlbvh2::box_union(hlbvh2::top_child_box(expected_view, top.refs[2 * k]),
+                                        hlbvh2::top_child_box(expected_view, top.refs[2 * k + 1]));
     }
-    // The root's box is the union of every cluster's; every box holds its children's.
     Box3f all = clusters[0].box;
     for (const TopCluster& c : clusters) all = hlbvh2::box_union(all, c.box);
-    EXPECT_TRUE(same_box(top_boxes[0], all));
-    size_t wrong = 0;
-    for (size_t k = 0; k < top_boxes.size(); ++k) {
-        for (int side = 0; side < 2; ++side) {
-            const Box3f child = hlbvh2::top_reference_box(view, top.refs[2 * k + side]);
-            wrong += !same_box(hlbvh2::box_union(top_boxes[k], child), top_boxes[k]);
-        }
+    EXPECT_TRUE(same_box(expected[0], all));
+    for (uint32_t seed : {1u, 5u, 9u}) {
+        const std::vector<Box3f> got = run_top_box_pass<karras::AtomicArrival>(bottom, top.refs, n, seed);
+        size_t wrong = 0;
+        for (size_t k = 0; k < got.size(); ++k) wrong += !same_box(got[k], expected[k]);
+        EXPECT_EQ(wrong, 0u) << "seed " << seed;
     }
-    EXPECT_EQ(wrong, 0u);
+    const std::vector<Box3f> bad = run_top_box_pass<FirstArrivalContinues>(bottom, top.refs, n, 1);
+    size_t differ = 0;
+    for (size_t k = 0; k < bad.size(); ++k) differ += !same_box(bad[k], expected[k]);
+    EXPECT_GT(differ, 0u) << "a walk going on at the first arrival must be caught";
 }
 
 TEST(Hlbvh2DeviceLogic, WrongTopTieRuleIsCaught) {
@@ -917,7 +1130,7 @@ TEST(Hlbvh2DeviceLogic, WrongTopTieRuleIsCaught) {
     const SceneGeometry& g = all.back().geometry;  // equal costs
     const SortedClusters s = sort_and_cluster(g.triangles);
     const uint32_t n = static_cast<uint32_t>(s.keys.size());
-    const QueueForest f = run_work_queues(s, 1, 1);
+    const BottomForest f = run_bottom_launch(s, 1, 1);
     std::vector<Box3f> inner_boxes;
     const std::vector<TopCluster> clusters = top_clusters(s, f, inner_boxes);
     std::vector<TopCluster> cpu = clusters;
@@ -932,7 +1145,7 @@ TEST(Hlbvh2DeviceLogic, MalformedTopLevelThrows) {
     const SceneGeometry g = test::make_triangle_soup(2000, 4, {Vec3f(-1.0f), Vec3f(1.0f)}, 0.2f);
     const SortedClusters s = sort_and_cluster(g.triangles);
     const uint32_t n = static_cast<uint32_t>(s.keys.size());
-    const QueueForest f = run_work_queues(s, 1, 1);
+    const BottomForest f = run_bottom_launch(s, 1, 1);
     std::vector<Box3f> inner_boxes;
     const std::vector<uint32_t> good = run_top_task_queues(top_clusters(s, f, inner_boxes), n - 1, 1).refs;
     ASSERT_GT(good.size(), 4u);

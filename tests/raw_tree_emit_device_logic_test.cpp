@@ -3,7 +3,8 @@
 // the CPU the way the kernels run it: parents scattered per node slot, one
 // bottom-up walker per leaf with "second arrival continues" counters, and
 // the top-down emission one level (launch) at a time, each launch's threads
-// in shuffled order. The result must be morton::RawTree::emit's, bit for bit, on random
+// in shuffled order; and the device's one-launch form (emit_node: each node
+// slot sums its position over its ancestors) must equal it bit for bit. The result must be morton::RawTree::emit's, bit for bit, on random
 // trees (any leaf order, as PLOC makes; leaf runs, as HLBVH2 makes; unused
 // node slots and a separate top-level array, as HLBVH2 numbers them) and on
 // the LBVH's Karras trees; trees deeper than kBvhMaxDepth must be refused
@@ -66,7 +67,9 @@ using morton::triangle_box;
 
 struct Emulated {
     bool fits = false;
-    Bvh bvh;
+    Bvh bvh;         // the per-level emission
+    Bvh one_launch;  // emit_node over every node slot (node roots only)
+    size_t wrong_positions = 0;  // node slots whose locate_node differs from the item the levels queued
     std::vector<raw_emit::NodeInfo> info;  // per node slot, after the bottom-up pass
 };
 
@@ -150,18 +153,34 @@ Emulated emulate(std::span<const Triangle> triangles, const BvhBuildConfig& conf
     const raw_emit::NodeInfo root = raw_emit::node_info(view, in.root);
     const uint32_t levels = raw_emit::emit_levels(root);
     std::vector<raw_emit::EmitItem> items{raw_emit::root_item(in.root)};
+    const raw_emit::EmitItem none{kNoChild, 0, 0, 0};
+    std::vector<raw_emit::EmitItem> queued(slots, none);  // per node slot, the item a level gave it
     for (uint32_t level = 0; level < levels; ++level) {
         std::vector<raw_emit::EmitItem> next(root.out_size);
         uint32_t next_count = 0;
         for (uint32_t i : shuffled(static_cast<uint32_t>(items.size()))) {
             raw_emit::emit_item<SequentialCounter>(view, items[i], out.bvh.nodes.data(), out.bvh.prim_indices.data(),
                                                    next.data(), &next_count);
+            if (!raw_emit::is_leaf_ref(items[i].ref)) queued[items[i].ref] = items[i];
         }
         EXPECT_LE(next_count, (root.out_size + 1) / 2) << "a level wider than the device's buffers";
         next.resize(next_count);
         items = std::move(next);
     }
     EXPECT_TRUE(items.empty()) << "items queued below the root's height";
+    // The device's form: one launch, a thread per node slot in shuffled order.
+    out.one_launch.nodes.assign(out.bvh.nodes.size(), poison);
+    out.one_launch.prim_indices.assign(n, 0xdeadbeefu);
+    for (uint32_t s : shuffled(slots)) {
+        raw_emit::emit_node(view, s, out.one_launch.nodes.data(), out.one_launch.prim_indices.data());
+    }
+    // Each node slot's position from its ancestors: the queued item, or none
+    // (unused, or below a collapsed node).
+    for (uint32_t s = 0; s < slots; ++s) {
+        raw_emit::EmitItem located = none;
+        if (!raw_emit::locate_node(view, s, &located)) located = none;
+        out.wrong_positions += std::memcmp(&located, &queued[s], sizeof located) != 0;
+    }
     return out;
 }
 
@@ -311,6 +330,10 @@ void check_against_host(const SceneGeometry& g, const BvhBuildConfig& config, co
         ASSERT_EQ(device.fits, !host.needs_rebuild) << case_name;
         if (device.fits) {
             EXPECT_TRUE(same_bvh(device.bvh, host.bvh)) << case_name;
+            if (!raw_emit::is_leaf_ref(in.root)) {
+                EXPECT_TRUE(same_bvh(device.one_launch, device.bvh)) << case_name << ": one launch";
+                EXPECT_EQ(device.wrong_positions, 0u) << case_name << ": one-launch positions";
+            }
         }
     }
 }
@@ -385,6 +408,7 @@ TEST(RawTreeEmitDeviceLogic, KarrasTreesEqualTheLbvhEmission) {
             ASSERT_TRUE(device.fits);
             const Bvh expected = emit_karras_tree(tris, config, std::vector<uint32_t>(in.order), in.children);
             EXPECT_TRUE(same_bvh(device.bvh, expected)) << "n " << n << " leaf " << leaf_size;
+            EXPECT_TRUE(same_bvh(device.one_launch, expected)) << "n " << n << " leaf " << leaf_size << ", one launch";
         }
     }
 }

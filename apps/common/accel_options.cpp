@@ -13,8 +13,10 @@ void add_accel_options(CLI::App* cmd, BuildOptions& build) {
                          to_string(defaults.structure) + "; with --device cuda the --gpu-kernel's when not given)")
         ->group(group);
     add_named_option(cmd, "--builder", build.builder, parse_builder,
-                     {"binned", "sweep", "sbvh", "lbvh", "lbvh30", "lbvh63", "hlbvh2", "gridbvh", "gridbvh-split", "ploc"},
-                     "BVH builder: binned | sweep | sbvh | lbvh30 | lbvh63 | hlbvh2 | gridbvh | gridbvh-split | ploc "
+                     {"binned", "sweep", "sbvh", "lbvh", "lbvh30", "lbvh63", "hlbvh2", "gridbvh", "gridbvh-split", "ploc",
+                      "hploc"},
+                     "BVH builder: binned | sweep | sbvh | lbvh30 | lbvh63 | hlbvh2 | gridbvh | gridbvh-split | ploc | "
+                     "hploc "
                      "(default " + to_string(defaults.builder) + ")")
         ->group(group);
     add_named_option(cmd, "--layout", build.layout, parse_layout, {"bvh2", "bvh4", "bvh8"},
@@ -26,6 +28,15 @@ void add_accel_options(CLI::App* cmd, BuildOptions& build) {
                     "Reinsertion rounds (default 0 = until it stops improving)")
         ->check(CLI::Range(0, 1000))
         ->group(group);
+    cmd->add_flag("--treelets", build.treelets.enabled,
+                  "Optimise the BVH by treelet restructuring after building (Karras and Aila 2013)")
+        ->group(group);
+    cmd->add_option("--treelet-leaves", build.treelets.treelet_leaves, "Treelet restructuring: leaves per treelet (default 7)")
+        ->check(CLI::Range(3, 7))
+        ->group(group);
+    cmd->add_option("--treelet-rounds", build.treelets.rounds, "Treelet restructuring: rounds (default 3)")
+        ->check(CLI::Range(1, 16))
+        ->group(group);
     cmd->add_option("--bins", build.binned.bin_count, "SAH bins per axis of binned builders (default 16)")
         ->check(CLI::Range(2, 256))
         ->group(group);
@@ -36,7 +47,7 @@ void add_accel_options(CLI::App* cmd, BuildOptions& build) {
                     "SBVH: try spatial splits above this overlap / root area (default 1e-5)")
         ->check(CLI::Range(0.0f, 1.0f))
         ->group(group);
-    cmd->add_option("--ploc-radius", build.ploc.radius, "PLOC nearest-neighbour search radius (default 16)")
+    cmd->add_option("--ploc-radius", build.ploc.radius, "PLOC and H-PLOC nearest-neighbour search radius (default 16; H-PLOC: at most 31)")
         ->check(CLI::Range(1, 256))
         ->group(group);
     cmd->add_option("--split-budget", build.grid_bvh.split_budget,

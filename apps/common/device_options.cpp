@@ -32,7 +32,8 @@ CLI::Option* add_gpu_kernel_option(CLI::App* cmd, BuildOptions& build) {
     return cmd
         ->add_option_function<std::string>(
             "--gpu-kernel", [&build](const std::string& name) { build.gpu_kernel = parse_gpu_kernel(name); },
-            "GPU traversal kernel with --device cuda: bvh2 | aila-laine | cwbvh | kd-short-stack | kd-restart | "
+            "GPU traversal kernel with --device cuda: bvh2 | aila-laine | aila-laine-fma | cwbvh | cwbvh-fma | "
+            "kd-short-stack | kd-restart | "
             "grid | grid-proximity (default " + to_string(kDefaultGpuKernel) + " for a bvh, else the structure's "
             "own); the structure is built with the --builder / --grid-res options")
         ->check(gpu_kernel_validator());
@@ -43,7 +44,7 @@ CLI::Option* add_build_on_option(CLI::App* cmd, bool& build_on_device) {
         ->add_option_function<std::string>(
             "--build-on", [&build_on_device](const std::string& where) { build_on_device = where == "device"; },
             "With --device cuda: where the structure is built, device (default: the device builders lbvh30, "
-            "lbvh63, hlbvh2, ploc, gridbvh, gridbvh-split and uniform grids, and the layout conversions; other "
+            "lbvh63, hlbvh2, ploc, hploc, gridbvh, gridbvh-split and uniform grids, and the layout conversions; other "
             "builders run on the CPU) or host (everything on the CPU, then uploaded)")
         ->check(CLI::IsMember({"device", "host"}));
 }

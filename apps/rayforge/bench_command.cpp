@@ -55,7 +55,8 @@ std::vector<bench::RaySetKind> parse_ray_sets(const std::vector<std::string>& na
     for (const std::string& name : names) {
         if (name == "all") return {std::begin(bench::kAllRaySets), std::end(bench::kAllRaySets)};
         const auto kind = bench::parse_ray_set(name);
-        if (!kind) throw Error("--rays: unknown ray set '" + name + "' (primary, shadow, ao, diffuse, reflection, all)");
+        if (!kind) throw Error("--rays: unknown ray set '" + name +
+                                "' (primary, shadow, ao, diffuse, reflection, primary-morton, all)");
         kinds.push_back(*kind);
     }
     return kinds;
@@ -116,7 +117,8 @@ void print_list(const std::string& scenes_dir) {
     std::cout << "scenes (views.json in " << (scenes_dir.empty() ? "<not found>" : scenes_dir) << "):\n";
     for (const std::string& name : bench::views_json_scene_names(scenes_dir)) std::cout << "  " << name << '\n';
     std::cout << "  builtin:sphereflake, builtin:terrain, builtin:instances, ... (rayforge info --help), or any "
-                 "scene file\n\nstructure/builder/layout:\n";
+                 "scene file\n  larger than a GPU's L2: NAME-xN (N copies of a views.json scene, e.g. dragon-x15), "
+                 "generate:GENERATOR@COUNT[#SEED] (e.g. generate:terrain-statues@12M)\n\nstructure/builder/layout:\n";
     for (const bench::Candidate& c : bench::candidate_catalogue())
         std::cout << "  " << c.label() << (c.implemented ? "" : "  [not implemented yet]")
                   << (c.in_all ? "" : "  [only when named]") << "  (" << c.source << ")\n";
@@ -132,7 +134,7 @@ void print_list(const std::string& scenes_dir) {
 }
 
 // `--integrator`: rendering throughput of each scene's first view.
-int run_render_bench(const BenchArgs& a, const bench::BenchConfig& config) {
+int run_render_bench(const BenchArgs& a, const bench::BenchConfig& config, const std::string& command_line) {
     bench::RenderBenchConfig render;
     render.cpu = config.cpu;
     if (!config.gpu.empty()) {
@@ -162,6 +164,10 @@ int run_render_bench(const BenchArgs& a, const bench::BenchConfig& config) {
             records.push_back(std::move(r));
     }
     bench::print_render_table(std::cout, records);
+    if (!a.json.empty()) {
+        bench::write_render_json(a.json, records, command_line);
+        std::cout << "\nwrote " << records.size() << " records to " << a.json << '\n';
+    }
     return 0;
 }
 
@@ -382,13 +388,18 @@ CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
     CLI::App* cmd = app.add_subcommand(
         "bench", "Benchmark structures and builders on the standard ray sets, with Embree side by side");
     cmd->add_option("--scene", a.scenes,
-                    "Scenes: views.json names (e.g. sponza), files, builtin:NAME, or all; comma-separated or "
-                    "repeated (default: sponza,conference,bunny, or three builtin scenes without ../shared)");
+                    "Scenes: views.json names (e.g. sponza), files, builtin:NAME, NAME-xN (N copies of a views.json "
+                    "scene, e.g. dragon-x15), generate:GENERATOR@COUNT[#SEED] (e.g. generate:terrain-statues@12M), "
+                    "or all; comma-separated or repeated (default: sponza,conference,bunny, or three builtin scenes "
+                    "without ../shared)");
     cmd->add_option("--scenes-dir", a.scenes_dir,
                     "Folder with views.json (default: $RAYFORGE_SCENES_DIR, else shared/scenes found upwards)");
     cmd->add_option("--view", a.views, "View indices of views.json, comma-separated, or all (default all)");
     cmd->add_option("--res", a.resolutions, "Image sizes WxH, comma-separated (default 1024x768)");
-    cmd->add_option("--rays", a.ray_sets, "Ray sets: primary, shadow, ao, diffuse, reflection, all (default all)");
+    cmd->add_option("--rays", a.ray_sets,
+                    "Ray sets: primary, shadow, ao, diffuse, reflection, all (the protocol's five; default all), "
+                    "primary-morton (the primaries in Morton order of their pixels; GPU rows trace it beside "
+                    "every primary set)");
     cmd->add_option("--structure", a.structures, "Structures, or all (default bvh; brute only when named)");
     cmd->add_option("--builder", a.builders, "Builders, or all (default: the default builder, binned)");
     cmd->add_option("--layout", a.layouts, "Layouts, or all (default all)");
@@ -418,7 +429,7 @@ CLI::App* add_bench_command(CLI::App& app, BenchArgs& a) {
         ->delimiter(',')
         ->check(device_validator());
     cmd->add_option("--gpu-kernel", a.gpu_kernels,
-                    "GPU kernels for --device cuda: bvh2, aila-laine, cwbvh, kd-short-stack, kd-restart, grid, "
+                    "GPU kernels for --device cuda: bvh2, aila-laine, aila-laine-fma, cwbvh, cwbvh-fma, kd-short-stack, kd-restart, grid, "
                     "grid-proximity, or all (default all; a preset's for its structures; with --integrator " +
                         to_string(kDefaultGpuKernel) + ")")
         ->delimiter(',')
@@ -635,7 +646,7 @@ int run_bench(const BenchArgs& a, const std::string& command_line) {
     if (config.candidates.empty())
         throw Error("nothing to run: no implemented combination matches --structure, --builder and --layout "
                     "(see --list)");
-    if (!a.integrators.empty()) return run_render_bench(a, config);
+    if (!a.integrators.empty()) return run_render_bench(a, config, command_line);
 
     const std::vector<bench::BenchRecord> records =
         bench::run_bench(config, std::cerr, [&](const std::vector<bench::BenchRecord>& scene_records) {

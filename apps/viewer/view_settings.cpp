@@ -74,7 +74,7 @@ Setting enum_setting(std::string key, std::string group, Effect effect, std::vec
 }
 
 std::vector<std::string> builder_names() {
-    return {"binned", "sweep", "sbvh", "lbvh30", "lbvh63", "hlbvh2", "gridbvh", "gridbvh-split", "ploc"};
+    return {"binned", "sweep", "sbvh", "lbvh30", "lbvh63", "hlbvh2", "gridbvh", "gridbvh-split", "ploc", "hploc"};
 }
 
 std::vector<std::string> gpu_kernel_names() {

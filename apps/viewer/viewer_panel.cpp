@@ -47,7 +47,7 @@ bool relevant(const SettingInfo& info, const ViewSettings& s, SceneKind scene) {
     if (key == "optimize-iterations") return bvh && s.world.build.reinsertion.enabled;
     if (key == "bins") return (bvh && b == Builder::BinnedSah) || s.world.build.structure == Structure::KdTree;
     if (key == "sbvh-alpha") return bvh && b == Builder::Sbvh;
-    if (key == "ploc-radius") return bvh && b == Builder::Ploc;
+    if (key == "ploc-radius") return bvh && (b == Builder::Ploc || b == Builder::Hploc);
     if (key == "split-budget") return bvh && b == Builder::GridBvhSplit;
     if (key == "grid-res") return s.world.build.structure == Structure::Grid || s.world.build.structure == Structure::ProximityGrid;
     if (key == "kd-traversal") return s.world.build.structure == Structure::KdTree;

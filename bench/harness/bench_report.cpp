@@ -37,6 +37,47 @@ const PeerFigures* peer(const BenchRecord& record, EmbreeQuality quality) {
     return nullptr;
 }
 
+Json number_or_null(double value) { return std::isfinite(value) ? Json(value) : Json(nullptr); }
+
+// One line per GPU trace launch of the records' kernels (each once).
+void print_kernel_resources(std::ostream& out, const std::vector<BenchRecord>& records) {
+    std::map<std::string, bool> shown;
+    bool header = false;
+    for (const BenchRecord& r : records) {
+        for (const GpuKernelResources& k : r.kernel_resources) {
+            if (shown[k.kernel]) continue;
+            shown[k.kernel] = true;
+            if (!header) {
+                out << "kernel resources (CUDA function attributes; occupancy: resident threads per SM at the "
+                       "launch's block size, theoretical):\n";
+                header = true;
+            }
+            char line[256];
+            std::snprintf(line, sizeof line,
+                          "  %-40s %3d regs %6zu B local %6zu B shared  block %4d  %2d blocks/SM  occupancy %5.1f%%\n",
+                          k.kernel.c_str(), k.registers, k.local_bytes, k.shared_bytes, k.block_size, k.blocks_per_sm,
+                          100.0 * k.occupancy);
+            out << line;
+        }
+    }
+}
+
+Json resources_json(const std::vector<GpuKernelResources>& resources) {
+    Json list = Json::array();
+    for (const GpuKernelResources& k : resources)
+        list.push_back({{"kernel", k.kernel},
+                        {"registers", k.registers},
+                        {"local_bytes", k.local_bytes},
+                        {"shared_bytes", k.shared_bytes},
+                        {"max_threads_per_block", k.max_threads_per_block},
+                        {"block_size", k.block_size},
+                        {"blocks_per_sm", k.blocks_per_sm},
+                        {"occupancy", k.occupancy}});
+    return list;
+}
+
+}  // namespace
+
 std::string iso_date_utc() {
     const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
     std::tm tm{};
@@ -45,10 +86,6 @@ std::string iso_date_utc() {
     std::strftime(buffer, sizeof(buffer), "%Y-%m-%dT%H:%M:%SZ", &tm);
     return buffer;
 }
-
-Json number_or_null(double value) { return std::isfinite(value) ? Json(value) : Json(nullptr); }
-
-}  // namespace
 
 MachineInfo machine_info() {
     MachineInfo info;
@@ -130,22 +167,23 @@ void print_scene_tables(std::ostream& out, const std::vector<BenchRecord>& recor
         described[row_label(r)] = true;
         out << "  " << row_label(r) << ": " << format_device_build(r.device_build) << '\n';
     }
+    print_kernel_resources(out, records);
 
     // Traces: Mrays/s; Embree columns and ratios when the peer ran; the
     // agreement of CPU rows with Embree medium, of GPU rows with the CPU reference.
     const std::vector<PeerFigures> no_peers;
     const std::vector<PeerFigures>& peer_columns = first_cpu ? first_cpu->embree : no_peers;
-    out << '\n' << pad("trace", 11, true) << pad("res", 10, true) << pad("structure", label_width, true)
+    out << '\n' << pad("trace", 15, true) << pad("res", 10, true) << pad("structure", label_width, true)
         << pad("rays", 12) << pad("Mrays/s", 9);
     for (const PeerFigures& f : peer_columns) out << pad(std::string("E-") + embree_quality_name(f.quality), 9);
     for (const PeerFigures& f : peer_columns) out << pad(std::string("/E-") + embree_quality_name(f.quality), 10);
     const bool agreement_columns = has_peer || first_gpu;
     if (agreement_columns) out << pad(first_gpu ? "agree" : "agree(M)", 10) << pad(first_gpu ? "max dt" : "max dt(M)", 10);
-    out << pad("nodes/ray", 10) << pad("tris/ray", 9) << '\n';
+    out << pad("nodes/ray", 10) << pad("fetches/ray", 12) << pad("tris/ray", 9) << '\n';
     for (const BenchRecord& r : records) {
         const std::string res = std::to_string(r.width) + "x" + std::to_string(r.height) +
                                 (r.view ? "/v" + std::to_string(r.view) : "");
-        out << pad(ray_set_name(r.ray_set), 11, true) << pad(res, 10, true) << pad(row_label(r), label_width, true)
+        out << pad(ray_set_name(r.ray_set), 15, true) << pad(res, 10, true) << pad(row_label(r), label_width, true)
             << pad(thousands(r.rays), 12) << pad(format("%.2f", r.mrays_per_s), 9);
         for (size_t p = 0; p < peer_columns.size(); ++p)
             out << pad(p < r.embree.size() ? format("%.2f", r.embree[p].mrays_per_s) : "-", 9);
@@ -167,6 +205,7 @@ void print_scene_tables(std::ostream& out, const std::vector<BenchRecord>& recor
             }
         }
         out << pad(r.has_counts ? format("%.1f", r.steps_per_ray) : "-", 10)
+            << pad(r.has_counts && r.fetches_per_ray > 0 ? format("%.1f", r.fetches_per_ray) : "-", 12)
             << pad(r.has_counts ? format("%.2f", r.prims_per_ray) : "-", 9) << '\n';
     }
     if (first_gpu) {
@@ -264,6 +303,7 @@ void write_json(const std::string& path, const std::vector<BenchRecord>& records
         rec["triangle_bytes"] = r.triangle_bytes;
         rec["device_bytes"] = r.is_gpu() ? Json(r.device_bytes) : Json(nullptr);
         rec["nodes_per_ray"] = r.has_counts ? Json(r.steps_per_ray) : Json(nullptr);
+        rec["fetches_per_ray"] = r.has_counts && r.fetches_per_ray > 0 ? Json(r.fetches_per_ray) : Json(nullptr);
         rec["prims_per_ray"] = r.has_counts ? Json(r.prims_per_ray) : Json(nullptr);
         rec["restarts_per_ray"] = r.has_counts ? Json(r.restarts_per_ray) : Json(nullptr);
         Json peers = Json::object();
@@ -285,12 +325,14 @@ void write_json(const std::string& path, const std::vector<BenchRecord>& records
                                 {"max_rel_t_diff", r.reference->max_rel_t_diff}};
         else
             rec["reference"] = nullptr;
+        rec["kernel_resources"] = r.is_gpu() ? resources_json(r.kernel_resources) : Json(nullptr);
         if (r.is_gpu() && r.device_build.report.on_device) {
             const BuildReport& b = r.device_build.report;
             Json stages = Json::object();
             for (const auto& [name, ms] : b.device_stages) stages[name] = ms;
             rec["device_build"] = {{"device_ms", b.device_ms},     {"stages_ms", stages},
                                    {"layout_ms", b.layout_ms},     {"upload_ms", b.upload_ms},
+                                   {"first_ray_ms", b.first_ray_ms},
                                    {"download_ms", b.download_ms}, {"host_ms", b.host_ms},
                                    {"peak_device_bytes", b.peak_device_bytes}, {"detail", b.detail}};
         } else {

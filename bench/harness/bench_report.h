@@ -17,6 +17,9 @@ struct MachineInfo {
 };
 MachineInfo machine_info();
 
+// Now, as 2026-12-07T14:40:01Z (the JSON files' "date").
+std::string iso_date_utc();
+
 // The tables of one scene's records: builds (ours, Embree's, the GPU rows'),
 // then one row per (ray set, device, candidate) with Embree columns, ratios,
 // agreement (GPU rows: with the CPU reference) and per-ray traversal counts.

@@ -61,6 +61,7 @@ struct BuiltGpu {
     std::unique_ptr<Accel> accel;    // on the CUDA device
     std::vector<double> build_runs;  // AccelStats::build_ms of each build
     DeviceBuildSummary median_build; // the stages of the build with the median build_ms
+    std::vector<GpuKernelResources> kernel_resources;
 };
 
 // Per-ray traversal work of an instrumented pass, into `rec`.
@@ -71,6 +72,7 @@ void count_work(const Accel& accel, const RaySet& set, BenchRecord& rec) {
         rec.steps_per_ray = double(totals.steps) / double(totals.rays);
         rec.prims_per_ray = double(totals.prim_tests) / double(totals.rays);
         rec.restarts_per_ray = double(totals.restarts) / double(totals.rays);
+        rec.fetches_per_ray = double(totals.node_fetches) / double(totals.rays);
     }
 }
 
@@ -110,6 +112,7 @@ void trace_gpu_rows(const RaySet& set, const Accel& reference, const std::string
         rec.layout_ms = rec.stats.layout_ms;
         rec.device_bytes = rec.stats.device_bytes;
         rec.device_build = g.median_build;
+        rec.kernel_resources = g.kernel_resources;
         ReferenceAgreement agreement;
         agreement.reference = reference_label;
         if (any_hit) agreement_any_hit(out.occluded, expected.occluded, agreement.agreement);
@@ -167,6 +170,18 @@ std::vector<BuiltPeer> build_peers(const SceneGeometry& geometry, const BenchCon
     return peers;
 }
 
+// The registers, local memory and occupancy of a kernel's trace launches;
+// none (and a progress line saying why) when the backend cannot tell.
+std::vector<GpuKernelResources> kernel_resources_of(GpuKernel kernel, const Device& device,
+                                                    const std::function<void(const std::string&)>& say) {
+    try {
+        return gpu_kernel_resources(kernel, device);
+    } catch (const Error& e) {
+        say("  no kernel resources for " + to_string(kernel) + ": " + e.what());
+        return {};
+    }
+}
+
 std::vector<BuiltGpu> build_gpus(const SceneGeometry& geometry, const BenchConfig& config,
                                  const std::function<void(const std::string&)>& say) {
     std::vector<BuiltGpu> gpus;
@@ -174,7 +189,7 @@ std::vector<BuiltGpu> build_gpus(const SceneGeometry& geometry, const BenchConfi
     for (const GpuCandidate& candidate : config.gpu) {
         say("  building " + to_string(device) + " " + candidate.label() + " x" +
             std::to_string(config.build_repetitions));
-        BuiltGpu g{candidate, nullptr, {}, {}};
+        BuiltGpu g{candidate, nullptr, {}, {}, {}};
         BuildOptions options = candidate.build.options;
         options.threads = config.threads;
         options.device = device;
@@ -192,6 +207,7 @@ std::vector<BuiltGpu> build_gpus(const SceneGeometry& geometry, const BenchConfi
             std::sort(stage_runs.begin(), stage_runs.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
             g.median_build = stage_runs[stage_runs.size() / 2].second;
         }
+        g.kernel_resources = kernel_resources_of(candidate.kernel, device, say);
         gpus.push_back(std::move(g));
     }
     return gpus;
@@ -262,6 +278,16 @@ void trace_cpu_rows(const RaySet& set, const SceneBuilds& builds, const BenchCon
 
 }  // namespace
 
+std::vector<RaySetKind> with_morton_primaries(const std::vector<RaySetKind>& kinds) {
+    std::vector<RaySetKind> out;
+    const bool named = std::find(kinds.begin(), kinds.end(), RaySetKind::PrimaryMorton) != kinds.end();
+    for (RaySetKind kind : kinds) {
+        out.push_back(kind);
+        if (kind == RaySetKind::Primary && !named) out.push_back(RaySetKind::PrimaryMorton);
+    }
+    return out;
+}
+
 double median(std::vector<double> values) {
     if (values.empty()) return 0.0;
     std::sort(values.begin(), values.end());
@@ -328,25 +354,35 @@ void trace_scene(const LoadedScene& scene, SceneBuilds& builds, const BenchConfi
                        std::to_string(view_index) + ")";
             };
             ViewSetup view = make_view_setup(scene, view_index, res.width, res.height);
+            // The GPU rows also trace the Morton-ordered primaries beside the scanline ones.
+            const std::vector<RaySetKind> gpu_kinds =
+                builds.gpus.empty() ? std::vector<RaySetKind>{} : with_morton_primaries(config.ray_sets);
             std::vector<RaySet> cpu_sets, gpu_sets;
             if (config.cpu) {
                 view.samples_per_pixel = config.cpu_samples_per_pixel;
                 cpu_sets = make_ray_sets(geometry, reference, view, config.ray_sets);
             }
-            const bool shared_sets = config.cpu && config.cpu_samples_per_pixel == config.gpu_samples_per_pixel;
+            const bool shared_sets = config.cpu && config.cpu_samples_per_pixel == config.gpu_samples_per_pixel &&
+                                     gpu_kinds == config.ray_sets;
             if (!builds.gpus.empty() && !shared_sets) {
                 view.samples_per_pixel = config.gpu_samples_per_pixel;
-                gpu_sets = make_ray_sets(geometry, reference, view, config.ray_sets);
+                gpu_sets = make_ray_sets(geometry, reference, view, gpu_kinds);
             }
             const std::vector<RaySet>& device_sets = shared_sets ? cpu_sets : gpu_sets;
-            for (size_t k = 0; k < config.ray_sets.size(); ++k) {
+            const std::vector<RaySetKind>& kinds = builds.gpus.empty() ? config.ray_sets : gpu_kinds;
+            for (RaySetKind kind : kinds) {
                 if (config.cpu) {
-                    say(describe(cpu_sets[k], config.cpu_samples_per_pixel, "cpu"));
-                    trace_cpu_rows(cpu_sets[k], builds, config, new_record(cpu_sets[k], config.cpu_samples_per_pixel),
-                                   records);
+                    const auto cpu_set = std::find_if(cpu_sets.begin(), cpu_sets.end(),
+                                                      [&](const RaySet& s) { return s.kind == kind; });
+                    if (cpu_set != cpu_sets.end()) {
+                        say(describe(*cpu_set, config.cpu_samples_per_pixel, "cpu"));
+                        trace_cpu_rows(*cpu_set, builds, config, new_record(*cpu_set, config.cpu_samples_per_pixel),
+                                       records);
+                    }
                 }
                 if (builds.gpus.empty()) continue;
-                const RaySet& set = device_sets[k];
+                const RaySet& set = *std::find_if(device_sets.begin(), device_sets.end(),
+                                                  [&](const RaySet& s) { return s.kind == kind; });
                 say(describe(set, config.gpu_samples_per_pixel, gpu_device));
                 BenchRecord prototype = new_record(set, config.gpu_samples_per_pixel);
                 prototype.device = gpu_device;

@@ -6,7 +6,9 @@
 // gpu_samples_per_pixel jittered camera rays per pixel so that a set fills
 // the device, resident on the device; a figure is the median kernel time of
 // repetitions launches after one warm-up, and hits are compared with the
-// first candidate's on the CPU.
+// first candidate's on the CPU. GPU rows also trace primary-morton beside
+// every primary set (with_morton_primaries) and carry the registers, local
+// memory and occupancy of their kernel's launches (BenchRecord::kernel_resources).
 #pragma once
 
 #include <functional>
@@ -95,13 +97,22 @@ struct BenchRecord {
     size_t device_bytes = 0;             // GPU rows: everything the tracer holds on the device
     bool has_counts = false;
     double steps_per_ray = 0.0, prims_per_ray = 0.0, restarts_per_ray = 0.0;
+    double fetches_per_ray = 0.0;        // BVH node fetches (0: the structure has no BVH nodes)
     std::vector<PeerFigures> embree;     // CPU rows
     std::optional<ReferenceAgreement> reference;  // GPU rows
     DeviceBuildSummary device_build;     // GPU rows: the stages of the median build (on_device: built there)
+    // GPU rows: registers, local memory and occupancy of the kernel's trace
+    // launches (closest and any hit; empty where the backend does not list them).
+    std::vector<GpuKernelResources> kernel_resources;
     [[nodiscard]] bool is_gpu() const { return device != "cpu"; }
 };
 
 double median(std::vector<double> values);
+
+// The ray sets of the GPU rows: `kinds` with primary-morton right after
+// primary (unless named already), so every GPU primary figure has its
+// Morton-ordered twin (the protocol's scanline order stays the headline).
+std::vector<RaySetKind> with_morton_primaries(const std::vector<RaySetKind>& kinds);
 
 // The name the driver gives CUDA device `device`, "" when it cannot be used.
 std::string gpu_device_name(int device);

@@ -14,7 +14,8 @@ namespace {
 // here. Flip entries on as structures land.
 bool builder_implemented(const std::string& builder) {
     static const std::set<std::string> names = {"binned",  "sweep",   "sbvh",          "lbvh30", "lbvh63",
-                                                "hlbvh2",  "gridbvh", "gridbvh-split", "ploc",   "+opt"};
+                                                "hlbvh2",  "gridbvh", "gridbvh-split", "ploc",   "hploc", "+opt",
+                                                "+treelets"};
     return names.count(builder) != 0;
 }
 bool layout_implemented(const std::string& layout) {
@@ -54,21 +55,26 @@ std::vector<Candidate> make_catalogue() {
         {"gridbvh", Builder::GridBvh, "Garanzha 2014, ch. 4 (GridBvh)"},
         {"gridbvh-split", Builder::GridBvhSplit, "Garanzha 2014, ch. 4 (GridBvhSplit, partial triangles)"},
         {"ploc", Builder::Ploc, "Meister and Bittner 2018"},
+        {"hploc", Builder::Hploc, "Benthin et al. 2024 (H-PLOC)"},
     };
     const std::pair<const char*, Layout> layouts[] = {
         {"bvh2", Layout::Bvh2}, {"bvh4", Layout::Bvh4}, {"bvh8", Layout::Bvh8}};
     for (const auto& [layout_name, layout] : layouts) {
         for (const BuilderInfo& info : builders) {
-            for (const bool optimize : {false, true}) {
+            // The builder alone, then with each post-build optimizer.
+            for (const std::string optimizer : {"", "+opt", "+treelets"}) {
+                const bool optimize = !optimizer.empty();
                 BuildOptions options;
                 options.structure = Structure::Bvh;
                 options.builder = info.builder;
                 options.layout = layout;
-                options.reinsertion.enabled = optimize;
-                Candidate c = make("bvh", std::string(info.name) + (optimize ? "+opt" : ""), layout_name,
-                                   std::string(info.source) + (optimize ? ", then reinsertion" : ""), options);
+                options.reinsertion.enabled = optimizer == "+opt";
+                options.treelets.enabled = optimizer == "+treelets";
+                const char* then = optimizer == "+opt" ? ", then reinsertion" : optimize ? ", then treelet restructuring" : "";
+                Candidate c = make("bvh", std::string(info.name) + optimizer, layout_name, std::string(info.source) + then,
+                                   options);
                 c.implemented = builder_implemented(info.name) && layout_implemented(layout_name) &&
-                                (!optimize || builder_implemented("+opt"));
+                                (!optimize || builder_implemented(optimizer));
                 // Optimised variants run only when named (they double a bench's length).
                 c.in_all = !optimize;
                 c.named_by = &Candidate::builder;

@@ -26,6 +26,10 @@ std::string format_device_build(const DeviceBuildSummary& summary) {
         std::snprintf(buffer, sizeof(buffer), " + layout %.3f ms", b.layout_ms);
         line += buffer;
     }
+    if (b.first_ray_ms > 0.0) {  // a tracer's device build: triangles on the device to the first ray
+        std::snprintf(buffer, sizeof(buffer), "; first ray after %.3f ms", b.first_ray_ms);
+        line += buffer;
+    }
     std::snprintf(buffer, sizeof(buffer), "; peak %.2f MiB on the device; %zu nodes", double(b.peak_device_bytes) / (1024.0 * 1024.0), summary.nodes);
     line += buffer;
     if (std::isfinite(summary.sah_cost)) {

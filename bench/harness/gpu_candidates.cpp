@@ -20,7 +20,9 @@ std::string gpu_kernel_structure(GpuKernel kernel) {
     switch (kernel) {
         case GpuKernel::Bvh2:
         case GpuKernel::AilaLaine:
-        case GpuKernel::Cwbvh: return "bvh";
+        case GpuKernel::AilaLaineFma:
+        case GpuKernel::Cwbvh:
+        case GpuKernel::CwbvhFma: return "bvh";
         case GpuKernel::KdShortStack:
         case GpuKernel::KdRestart: return "kdtree";
         case GpuKernel::Grid: return "grid";

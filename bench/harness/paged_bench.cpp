@@ -664,15 +664,6 @@ double memory_gib() {
     return 0.0;
 }
 
-std::string iso_date_utc() {
-    const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
-    std::tm tm{};
-    gmtime_r(&now, &tm);
-    char buffer[32];
-    std::strftime(buffer, sizeof(buffer), "%Y-%m-%dT%H:%M:%SZ", &tm);
-    return buffer;
-}
-
 int threads_used(const PagedBenchConfig& config) {
     return config.threads > 0 ? config.threads : machine_info().cores;
 }

@@ -57,7 +57,8 @@ std::vector<Preset> make_presets() {
         p.resolutions = {{1024, 768}};
         p.ray_sets = {RaySetKind::Primary, RaySetKind::Diffuse};
         p.candidates = {"bvh/binned/bvh2", "bvh/sweep/bvh2",  "bvh/sbvh/bvh2",         "bvh/lbvh30/bvh2",
-                        "bvh/hlbvh2/bvh2", "bvh/gridbvh/bvh2", "bvh/gridbvh-split/bvh2", "bvh/ploc/bvh2"};
+                        "bvh/hlbvh2/bvh2", "bvh/gridbvh/bvh2", "bvh/gridbvh-split/bvh2", "bvh/ploc/bvh2",
+                        "bvh/hploc/bvh2"};
         p.gpu_kernels = {GpuKernel::AilaLaine, GpuKernel::Cwbvh};
         p.stage_breakdown = true;
         p.notes = {"the dissertation's builds ran on a GTX 480; these are CPU builds on this machine",

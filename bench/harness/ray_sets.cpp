@@ -1,6 +1,8 @@
 #include "ray_sets.h"
 
+#include <algorithm>
 #include <cmath>
+#include <utility>
 
 #include "core/parallel.h"
 #include "rayforge/core/error.h"
@@ -16,6 +18,7 @@ const char* ray_set_name(RaySetKind kind) {
         case RaySetKind::Ao: return "ao";
         case RaySetKind::Diffuse: return "diffuse";
         case RaySetKind::Reflection: return "reflection";
+        case RaySetKind::PrimaryMorton: return "primary-morton";
     }
     return "?";
 }
@@ -23,6 +26,7 @@ const char* ray_set_name(RaySetKind kind) {
 std::optional<RaySetKind> parse_ray_set(const std::string& name) {
     for (RaySetKind kind : kAllRaySets)
         if (name == ray_set_name(kind)) return kind;
+    if (name == ray_set_name(RaySetKind::PrimaryMorton)) return RaySetKind::PrimaryMorton;
     return std::nullopt;
 }
 
@@ -54,6 +58,50 @@ RaySet make_primary_rays(const ViewSetup& view) {
             }
         }
     });
+    return set;
+}
+
+namespace {
+
+// The low 16 bits of v moved to the even bits 0, 2, ... 30.
+uint32_t spread_bits_by_2(uint32_t v) {
+    v &= 0xFFFFu;
+    v = (v | (v << 8)) & 0x00FF00FFu;
+    v = (v | (v << 4)) & 0x0F0F0F0Fu;
+    v = (v | (v << 2)) & 0x33333333u;
+    v = (v | (v << 1)) & 0x55555555u;
+    return v;
+}
+
+}  // namespace
+
+std::vector<uint32_t> morton_pixel_order(int width, int height) {
+    if (width < 1 || height < 1 || width > 65536 || height > 65536)
+        throw Error("ray sets: Morton order needs image sides in [1, 65536]");
+    const size_t pixels = size_t(width) * size_t(height);
+    if (pixels > size_t(UINT32_MAX)) throw Error("ray sets: too many pixels for a Morton order");
+    std::vector<std::pair<uint32_t, uint32_t>> keyed(pixels);  // (code, pixel); codes are distinct
+    for (uint32_t y = 0; y < uint32_t(height); ++y)
+        for (uint32_t x = 0; x < uint32_t(width); ++x) {
+            const uint32_t pixel = y * uint32_t(width) + x;
+            keyed[pixel] = {spread_bits_by_2(x) | (spread_bits_by_2(y) << 1), pixel};
+        }
+    std::sort(keyed.begin(), keyed.end());
+    std::vector<uint32_t> order(pixels);
+    for (size_t i = 0; i < pixels; ++i) order[i] = keyed[i].second;
+    return order;
+}
+
+RaySet make_morton_primary_rays(const RaySet& primary, const ViewSetup& view) {
+    const std::vector<uint32_t> order = morton_pixel_order(view.width, view.height);
+    const size_t pixels = order.size();
+    if (primary.kind != RaySetKind::Primary || primary.rays.size() != pixels * size_t(view.samples_per_pixel))
+        throw Error("ray sets: the Morton set needs the view's primary set");
+    RaySet set;
+    set.kind = RaySetKind::PrimaryMorton;
+    set.rays.resize(primary.rays.size());
+    for (size_t s = 0; s < size_t(view.samples_per_pixel); ++s)
+        for (size_t i = 0; i < pixels; ++i) set.rays[s * pixels + i] = primary.rays[s * pixels + order[i]];
     return set;
 }
 
@@ -104,6 +152,10 @@ std::vector<RaySet> make_ray_sets(const SceneGeometry& geometry, const Accel& re
             sets.push_back(primary);
             continue;
         }
+        if (kind == RaySetKind::PrimaryMorton) {
+            sets.push_back(make_morton_primary_rays(primary, view));
+            continue;
+        }
         RaySet set;
         set.kind = kind;
         const size_t per_hit = rays_per_hit(kind);
@@ -147,7 +199,8 @@ std::vector<RaySet> make_ray_sets(const SceneGeometry& geometry, const Accel& re
                         out->tmax = kInfinity;
                         break;
                     }
-                    case RaySetKind::Primary: break;
+                    case RaySetKind::Primary:
+                    case RaySetKind::PrimaryMorton: break;
                 }
             }
         });

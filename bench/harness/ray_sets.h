@@ -15,13 +15,19 @@
 
 namespace rf::bench {
 
-enum class RaySetKind : uint8_t { Primary, Shadow, Ao, Diffuse, Reflection };
+// PrimaryMorton ("primary-morton") is the primary set in Morton (Z) order
+// of the pixel coordinates: the same rays, permuted (morton_pixel_order), as
+// the published Aila-Laine figures trace them. It is reported beside the
+// protocol's scanline primaries, never instead of them, and is not part of
+// kAllRaySets (the protocol's five): it runs when named, and GPU rows add it
+// to every primary set (bench_runner.h).
+enum class RaySetKind : uint8_t { Primary, Shadow, Ao, Diffuse, Reflection, PrimaryMorton };
 
 inline constexpr RaySetKind kAllRaySets[] = {RaySetKind::Primary, RaySetKind::Shadow, RaySetKind::Ao,
                                              RaySetKind::Diffuse, RaySetKind::Reflection};
 
 const char* ray_set_name(RaySetKind kind);
-std::optional<RaySetKind> parse_ray_set(const std::string& name);  // "primary", "shadow", ...
+std::optional<RaySetKind> parse_ray_set(const std::string& name);  // "primary", "shadow", ..., "primary-morton"
 // Shadow and ao rays ask for any hit; the others for the closest hit.
 bool is_any_hit(RaySetKind kind);
 
@@ -61,6 +67,17 @@ Vec2f pixel_sample_position(uint32_t pixel, uint32_t sample);
 // so sample 0 is exactly the one-sample set of pixel centres.
 RaySet make_primary_rays(const ViewSetup& view);
 
+// The row-major indices of a width x height image's pixels in Morton order
+// of (x, y), x in the even bits: every aligned 8x4 block of pixels is 32
+// consecutive entries (one warp), every aligned 2^k x 2^k square a run.
+// Pixels outside the largest power-of-two square are not skipped but keep
+// their Morton rank among the image's pixels (the order of their codes).
+std::vector<uint32_t> morton_pixel_order(int width, int height);
+
+// The primary set of `view` with each sample's pixels in morton_pixel_order:
+// ray s * pixels + i is sample s of pixel morton_pixel_order(...)[i].
+RaySet make_morton_primary_rays(const RaySet& primary, const ViewSetup& view);
+
 // The secondary sets, from the closest hits of the primary rays (found by
 // `reference`, which must hold `geometry`). For every primary hit, in pixel order:
 //  - the hit point is offset by 1e-4 x scene diagonal along the geometric
@@ -73,7 +90,8 @@ RaySet make_primary_rays(const ViewSetup& view);
 // from rf::RandomStream(p, s * kAoSamplesPerHit + k, kRaySetSeed) (PCG hash,
 // src/math/random.h), so any run regenerates the identical arrays, and the
 // one-sample sets do not change with samples_per_pixel. Secondary rays follow
-// the order of their primaries. Only the kinds listed are produced (in that order).
+// the order of their (scanline) primaries. Only the kinds listed are produced
+// (in that order); PrimaryMorton is make_morton_primary_rays of the primaries.
 std::vector<RaySet> make_ray_sets(const SceneGeometry& geometry, const Accel& reference, const ViewSetup& view,
                                   const std::vector<RaySetKind>& kinds);
 

@@ -1,10 +1,15 @@
 #include "render_bench.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <iomanip>
 
+#include <nlohmann/json.hpp>
+
+#include "bench_report.h"
 #include "bench_runner.h"
 #include "core/parallel.h"
 #include "rayforge/io/scene_io.h"
@@ -81,6 +86,14 @@ RenderBenchRecord new_record(const LoadedScene& loaded, const std::string& integ
     return rec;
 }
 
+// The index of the median of `values` (of the upper middle one for an even count).
+size_t median_index(const std::vector<double>& values) {
+    std::vector<size_t> order(values.size());
+    for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return values[a] < values[b]; });
+    return order[order.size() / 2];
+}
+
 // One device row per GPU candidate: passes timed as the renderer reports them.
 void gpu_rows(const LoadedScene& loaded, const Scene& scene, const ViewSetup& view, const std::string& integrator,
               const RenderOptions& base, const RenderBenchConfig& config, std::ostream& progress,
@@ -99,12 +112,14 @@ void gpu_rows(const LoadedScene& loaded, const Scene& scene, const ViewSetup& vi
         const std::unique_ptr<World> world = make_world(scene, world_options);
         const std::unique_ptr<Renderer> renderer = make_renderer(*world, view.camera, base);
         renderer->render_pass();  // warm-up
-        std::vector<double> pass_ms;
+        std::vector<double> pass_ms, trace_ms;
         uint64_t rays = 0;
         for (int r = 0; r < config.repetitions; ++r) {
             renderer->render_pass();
-            pass_ms.push_back(renderer->last_pass().pass_ms);
-            rays += renderer->last_pass().closest_rays + renderer->last_pass().shadow_rays;
+            const PassStats& pass = renderer->last_pass();
+            pass_ms.push_back(pass.pass_ms);
+            if (pass.trace_ms >= 0.0) trace_ms.push_back(pass.trace_ms);
+            rays += pass.closest_rays + pass.shadow_rays;
         }
         RenderBenchRecord rec = new_record(loaded, integrator, config);
         rec.accel = world->accel().stats().name;
@@ -114,7 +129,11 @@ void gpu_rows(const LoadedScene& loaded, const Scene& scene, const ViewSetup& vi
         rec.samples_per_s = pixels / (rec.pass_ms * 1e-3);
         rec.rays_per_sample = double(rays) / (pixels * double(config.repetitions));
         rec.rays_per_s = rec.samples_per_s * rec.rays_per_sample;
-        rec.trace_ms = rec.batch_trace_ms = rec.shading_fraction = std::nan("");
+        rec.batch_trace_ms = std::nan("");
+        // The pass whose time is the median (an even count: the upper one), with its own trace time.
+        rec.trace_ms = trace_ms.size() == pass_ms.size() ? trace_ms[median_index(pass_ms)] : std::nan("");
+        rec.trace_share = rec.trace_ms / rec.pass_ms;
+        rec.shading_fraction = 1.0 - rec.trace_share;
         records.push_back(rec);
     }
 }
@@ -146,7 +165,8 @@ RenderBenchRecord cpu_row(const LoadedScene& loaded, World& world, const ViewSet
     rec.rays_per_s = rec.samples_per_s * rec.rays_per_sample;
     rec.trace_ms = median(trace_ms);
     rec.batch_trace_ms = median(batch_ms);
-    rec.shading_fraction = 1.0 - rec.trace_ms / rec.pass_ms;
+    rec.trace_share = rec.trace_ms / rec.pass_ms;
+    rec.shading_fraction = 1.0 - rec.trace_share;
     return rec;
 }
 
@@ -183,8 +203,9 @@ std::vector<RenderBenchRecord> run_render_bench(const LoadedScene& loaded, const
 
 void print_render_table(std::ostream& out, const std::vector<RenderBenchRecord>& records) {
     if (records.empty()) return;
-    out << "\nrendering throughput (1 sample per pixel per pass; medians; trace = the pass's own queries replayed "
-           "without shading, CPU only)\n";
+    out << "\nrendering throughput (1 sample per pixel per pass; medians; trace: on the CPU the pass's own queries "
+           "replayed without shading, on a device the path tracer's trace launches (extension + shadow) within the "
+           "pass; trace share = trace / pass)\n";
     const auto ms = [](double value, const char* fmt) {
         char text[32];
         if (std::isnan(value)) return std::string("-");
@@ -192,16 +213,18 @@ void print_render_table(std::ostream& out, const std::vector<RenderBenchRecord>&
         return std::string(text);
     };
     char line[512];
-    std::snprintf(line, sizeof line, "%-14s %-8s %-7s %-22s %-10s %5s %9s %10s %10s %9s %10s %10s %10s %8s\n",
+    std::snprintf(line, sizeof line, "%-14s %-8s %-7s %-22s %-10s %5s %9s %10s %10s %9s %10s %10s %10s %12s %8s\n",
                   "scene", "integr.", "device", "accel", "res", "depth", "passes/s", "pass ms", "Msamp/s",
-                  "rays/smp", "Mrays/s", "trace ms", "batch ms", "shading");
+                  "rays/smp", "Mrays/s", "trace ms", "batch ms", "trace share", "shading");
     out << line;
     for (const RenderBenchRecord& r : records) {
-        std::snprintf(line, sizeof line, "%-14s %-8s %-7s %-22s %4dx%-5d %5d %9.2f %10.2f %10.3f %9.2f %10.2f %10s %10s %8s\n",
+        std::snprintf(line, sizeof line,
+                      "%-14s %-8s %-7s %-22s %4dx%-5d %5d %9.2f %10.2f %10.3f %9.2f %10.2f %10s %10s %12s %8s\n",
                       r.scene.c_str(), r.integrator.c_str(), r.device.c_str(), r.accel.c_str(), r.width, r.height,
                       r.max_depth, r.pass_ms > 0.0 ? 1e3 / r.pass_ms : 0.0, r.pass_ms, r.samples_per_s * 1e-6,
-                      r.rays_per_sample, r.rays_per_s * 1e-6, ms(r.trace_ms, "%.1f").c_str(),
-                      ms(r.batch_trace_ms, "%.1f").c_str(), ms(100.0 * r.shading_fraction, "%.1f%%").c_str());
+                      r.rays_per_sample, r.rays_per_s * 1e-6, ms(r.trace_ms, "%.2f").c_str(),
+                      ms(r.batch_trace_ms, "%.1f").c_str(), ms(100.0 * r.trace_share, "%.1f%%").c_str(),
+                      ms(100.0 * r.shading_fraction, "%.1f%%").c_str());
         out << line;
     }
     for (const RenderBenchRecord& r : records) {
@@ -209,6 +232,48 @@ void print_render_table(std::ostream& out, const std::vector<RenderBenchRecord>&
         out << r.device << ": " << r.gpu << " (pass ms as the device renderer times a pass)\n";
         break;
     }
+}
+
+void write_render_json(const std::string& path, const std::vector<RenderBenchRecord>& records,
+                       const std::string& command) {
+    using Json = nlohmann::json;
+    const MachineInfo machine = machine_info();
+    const auto number = [](double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); };
+    std::string gpu;
+    for (const RenderBenchRecord& r : records)
+        if (gpu.empty()) gpu = r.gpu;
+    Json root;
+    root["tool"] = "rayforge bench --integrator";
+    root["rayforge_version"] = RAYFORGE_VERSION;
+    root["date"] = iso_date_utc();
+    root["command"] = command;
+    root["machine"] = {{"cpu", machine.cpu}, {"cores", machine.cores}, {"gpu", gpu.empty() ? Json(nullptr) : Json(gpu)}};
+    Json list = Json::array();
+    for (const RenderBenchRecord& r : records)
+        list.push_back({{"scene", r.scene},
+                        {"integrator", r.integrator},
+                        {"accel", r.accel},
+                        {"device", r.device},
+                        {"gpu", r.gpu.empty() ? Json(nullptr) : Json(r.gpu)},
+                        {"view", r.view},
+                        {"width", r.width},
+                        {"height", r.height},
+                        {"max_depth", r.max_depth},
+                        {"threads", r.threads},
+                        {"pass_ms", r.pass_ms},
+                        {"passes_per_s", r.pass_ms > 0.0 ? Json(1e3 / r.pass_ms) : Json(nullptr)},
+                        {"samples_per_s", r.samples_per_s},
+                        {"rays_per_sample", r.rays_per_sample},
+                        {"rays_per_s", r.rays_per_s},
+                        {"trace_ms", number(r.trace_ms)},
+                        {"batch_trace_ms", number(r.batch_trace_ms)},
+                        {"trace_share", number(r.trace_share)},
+                        {"shading_fraction", number(r.shading_fraction)}});
+    root["records"] = list;
+    std::ofstream out(path);
+    if (!out) throw Error(path + ": cannot open for writing");
+    out << root.dump(1) << '\n';
+    if (!out) throw Error(path + ": write failed");
 }
 
 }  // namespace rf::bench

@@ -6,7 +6,10 @@
 // difference between the two times is what shading, sampling, texture
 // filtering and light selection cost. On a CUDA device (rf::make_renderer
 // with a CUDA device: a wavefront path tracer) a pass is timed as the
-// renderer reports it; there is no replay there.
+// renderer reports it; there is no replay there: the path tracer's trace
+// time is the summed kernel time of its trace launches (extension and
+// shadow connections, CUDA events; PassStats::trace_ms), so the trace share
+// of a pass separates kernel gains from shading costs.
 #pragma once
 
 #include <ostream>
@@ -42,15 +45,21 @@ struct RenderBenchRecord {
     double samples_per_s = 0.0;      // camera samples
     double rays_per_sample = 0.0;    // closest + any-hit queries per camera sample
     double rays_per_s = 0.0;         // all queries, all bounces
-    // CPU only (NaN on a device):
-    double trace_ms = 0.0;           // median: the recorded queries, single-ray calls, no shading
-    double batch_trace_ms = 0.0;     // median: the same queries through the batch interface
-    double shading_fraction = 0.0;   // 1 - trace_ms / pass_ms
+    // CPU: the recorded queries replayed; CUDA path tracing: the trace
+    // launches' kernel time within the pass; NaN where not measured.
+    double trace_ms = 0.0;           // median (CPU: single-ray calls, no shading)
+    double batch_trace_ms = 0.0;     // CPU only, median: the same queries through the batch interface
+    double trace_share = 0.0;        // trace_ms / pass_ms
+    double shading_fraction = 0.0;   // 1 - trace_share
 };
 
 // Renders view 0 (or each of `views`) of `scene` with each integrator.
 std::vector<RenderBenchRecord> run_render_bench(const LoadedScene& scene, const RenderBenchConfig& config,
                                                 std::ostream& progress);
 void print_render_table(std::ostream& out, const std::vector<RenderBenchRecord>& records);
+// `--json` of the render bench: one record per (scene, integrator, device,
+// structure); throws rf::Error when the file cannot be written.
+void write_render_json(const std::string& path, const std::vector<RenderBenchRecord>& records,
+                       const std::string& command);
 
 }  // namespace rf::bench

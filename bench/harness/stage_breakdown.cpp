@@ -122,8 +122,8 @@ DeviceBuildSummary device_accel_build(const SceneGeometry& geometry, BuildOption
 std::vector<StageBreakdown> measure_device_stage_breakdowns(const LoadedScene& scene, int device, int repetitions) {
     const std::span<const Triangle> triangles = scene.geometry.triangles;
     std::vector<StageBreakdown> rows;
-    for (const Builder builder : {Builder::Lbvh30, Builder::Lbvh63, Builder::Hlbvh2, Builder::Ploc, Builder::GridBvh,
-                                  Builder::GridBvhSplit}) {
+    for (const Builder builder : {Builder::Lbvh30, Builder::Lbvh63, Builder::Hlbvh2, Builder::Ploc, Builder::Hploc,
+                                  Builder::GridBvh, Builder::GridBvhSplit}) {
         BuildOptions options;
         options.builder = builder;
         options.device = Device{Device::Kind::Cuda, device};

@@ -42,7 +42,8 @@ std::unique_ptr<Accel> cpu::build_accel(const SceneGeometry& geometry, const Bui
             meter.finish();
             const double build_ms =
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-            std::string name = "bvh/" + to_string(options.builder) + (options.reinsertion.enabled ? "+opt" : "") +
+            std::string name = "bvh/" + to_string(options.builder) + (options.treelets.enabled ? "+treelets" : "") +
+                               (options.reinsertion.enabled ? "+opt" : "") +
                                "/" + to_string(options.layout);
             if (options.layout == Layout::Bvh2)
                 return std::make_unique<BvhAccel>(geometry, std::move(bvh), std::move(name), build_ms);

@@ -35,6 +35,14 @@ void validate_build_options(const BuildOptions& options) {
         throw Error("build options: reinsertion.iterations must be in [0, 1000], got " +
                     std::to_string(options.reinsertion.iterations));
     }
+    if (options.treelets.treelet_leaves < 3 || options.treelets.treelet_leaves > 7) {
+        throw Error("build options: treelets.treelet_leaves must be in [3, 7], got " +
+                    std::to_string(options.treelets.treelet_leaves));
+    }
+    if (options.treelets.rounds < 1 || options.treelets.rounds > 16) {
+        throw Error("build options: treelets.rounds must be in [1, 16], got " +
+                    std::to_string(options.treelets.rounds));
+    }
     if (!(options.sbvh.alpha >= 0.0f && options.sbvh.alpha <= 1.0f)) {
         throw Error("build options: sbvh.alpha must be in [0, 1], got " + std::to_string(options.sbvh.alpha));
     }
@@ -97,7 +105,9 @@ Structure structure_of(GpuKernel kernel) {
         case GpuKernel::ProximityGrid: return Structure::ProximityGrid;
         case GpuKernel::Bvh2:
         case GpuKernel::AilaLaine:
-        case GpuKernel::Cwbvh: break;
+        case GpuKernel::AilaLaineFma:
+        case GpuKernel::Cwbvh:
+        case GpuKernel::CwbvhFma: break;
     }
     return Structure::Bvh;
 }
@@ -129,7 +139,7 @@ constexpr std::pair<const char*, Builder> kBuilderNames[] = {
     {"binned", Builder::BinnedSah}, {"sweep", Builder::SweepSah},   {"sbvh", Builder::Sbvh},
     {"lbvh30", Builder::Lbvh30},    {"lbvh63", Builder::Lbvh63},    {"lbvh", Builder::Lbvh30},
     {"hlbvh2", Builder::Hlbvh2},    {"gridbvh", Builder::GridBvh},  {"gridbvh-split", Builder::GridBvhSplit},
-    {"ploc", Builder::Ploc},
+    {"ploc", Builder::Ploc},        {"hploc", Builder::Hploc},
 };
 constexpr std::pair<const char*, Layout> kLayoutNames[] = {
     {"bvh2", Layout::Bvh2}, {"bvh4", Layout::Bvh4}, {"bvh8", Layout::Bvh8}};

@@ -70,6 +70,7 @@ public:
                 acc.steps += c.steps;
                 acc.prim_tests += c.prim_tests;
                 acc.restarts += c.restarts;
+                acc.node_fetches += c.node_fetches;
             });
             return true;
         } else {

@@ -9,6 +9,7 @@
 
 #include <memory>
 #include <span>
+#include <vector>
 
 #include "rayforge/accel/accel.h"
 #include "rayforge/accel/build_report.h"
@@ -59,6 +60,8 @@ std::unique_ptr<Renderer> make_renderer(std::shared_ptr<WorldCore> world, const 
                                         const RenderOptions& options);
 // OpenGL buffer `gl_buffer` of the current context registered on device `index`.
 std::unique_ptr<GlPixelBuffer> register_gl_pixel_buffer(int index, unsigned int gl_buffer);
+// rf::gpu_kernel_resources on a CUDA device (backend/cuda/kernel_resources.cu).
+std::vector<GpuKernelResources> gpu_kernel_resources(GpuKernel kernel, const Device& device);
 
 }  // namespace cuda
 }  // namespace rf

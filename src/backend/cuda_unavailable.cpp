@@ -26,6 +26,9 @@ std::unique_ptr<Renderer> make_renderer(std::shared_ptr<WorldCore>, const Camera
 std::unique_ptr<GlPixelBuffer> register_gl_pixel_buffer(int index, unsigned int) {
     throw Error("cuda:" + std::to_string(index) + ": " + kCudaNotBuilt);
 }
+std::vector<GpuKernelResources> gpu_kernel_resources(GpuKernel, const Device& device) {
+    throw Error(to_string(device) + ": " + kCudaNotBuilt);
+}
 
 DeviceRefitTimes refit_bvh_on_device(Bvh&, std::span<const Triangle>, int, int device) {
     throw Error("cuda:" + std::to_string(device) + ": " + kCudaNotBuilt);

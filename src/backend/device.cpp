@@ -14,7 +14,9 @@ namespace {
 constexpr std::pair<const char*, GpuKernel> kKernelNames[] = {
     {"bvh2", GpuKernel::Bvh2},
     {"aila-laine", GpuKernel::AilaLaine},
+    {"aila-laine-fma", GpuKernel::AilaLaineFma},
     {"cwbvh", GpuKernel::Cwbvh},
+    {"cwbvh-fma", GpuKernel::CwbvhFma},
     {"kd-short-stack", GpuKernel::KdShortStack},
     {"kd-restart", GpuKernel::KdRestart},
     {"grid", GpuKernel::Grid},

@@ -88,9 +88,12 @@ struct AilaLaineDynamicFetchVote : AilaLaineWarpVote {
 };
 
 // Everything one ray's traversal needs to stop and resume: the transformed
-// ray, the link stack, the current and postponed links and the hit so far.
-struct AilaLaineRayState {
-    detail::SlabRay slab;
+// ray (BoxRay for the box test: detail::SlabRay here, the FMA form's in
+// trace/aila_laine_fma_traversal.h), the link stack, the current and
+// postponed links and the hit so far.
+template <class BoxRay>
+struct AilaLaineState {
+    BoxRay slab;
     WatertightRay tri_ray;
     float tmin;
     float tmax;
@@ -106,8 +109,13 @@ struct AilaLaineRayState {
     RF_HDI bool finished() const { return node == kAilaLaineEntrySentinel && postponed >= 0; }
 };
 
-RF_HDI void aila_laine_begin(const AilaLaineView& bvh, const Ray& ray, AilaLaineRayState& s) {
-    s.slab = detail::SlabRay::make(ray);
+using AilaLaineRayState = AilaLaineState<detail::SlabRay>;
+
+namespace detail {
+
+// Everything of a fresh state but its box ray.
+template <class BoxRay>
+RF_HDI void aila_laine_start(const AilaLaineView& bvh, const Ray& ray, AilaLaineState<BoxRay>& s) {
     s.tri_ray = WatertightRay::make(ray);
     s.tmin = ray.tmin;
     s.tmax = ray.tmax;
@@ -118,13 +126,59 @@ RF_HDI void aila_laine_begin(const AilaLaineView& bvh, const Ray& ray, AilaLaine
     s.hit = Hit{};
 }
 
-// Runs the traversal in `s` until it is finished (returns true; s.hit is the
-// result) or Vote::yield_for_refill() asks it to stop after a leaf phase
-// (returns false; call again to resume). Closest hit (kAnyHit = false) or
-// first hit (kAnyHit = true); Vote::any_searching decides when the inner loop
-// hands its postponed leaf to the leaf loop.
-template <bool kAnyHit, bool kCount, class Vote = AilaLaineWarpVote>
-RF_HDI bool aila_laine_resume(const AilaLaineView& bvh, AilaLaineRayState& s, TraversalCounters* counters) {
+// Where the inner loop goes after a node pair's box tests: the nearer child
+// hit (ties go to child 0, as in the canonical traversal), the farther one
+// pushed; the stack's top when neither is hit.
+RF_HDI int32_t aila_laine_step(bool hit0, bool hit1, float entry0, float entry1, const int32_t (&link)[2],
+                               int32_t* stack, int& top) {
+    if (!hit0 && !hit1) return stack[top--];
+    int32_t near_link = hit0 ? link[0] : link[1];
+    if (hit0 && hit1) {
+        int32_t far_link = link[1];
+        if (entry1 < entry0) {
+            far_link = near_link;
+            near_link = link[1];
+        }
+        stack[++top] = far_link;
+    }
+    return near_link;
+}
+
+// Tests the triangles of the leaf list behind `leaf` (a negative link) up to
+// its sentinel, shrinking tmax and filling `hit`; with kAnyHit it stops at,
+// and returns true on, the first hit.
+template <bool kAnyHit, bool kCount>
+RF_HDI bool aila_laine_test_leaf(const AilaLaineView& bvh, int32_t leaf, const WatertightRay& tri_ray,
+                                 const float& tmin, float& tmax, Hit& hit, TraversalCounters* counters) {
+    for (int32_t i = ~leaf;; i += kAilaLaineTriangleStride) {
+        const AilaLaineFloat4 a = bvh.triangles[i];
+        const uint32_t prim = float_to_bits(a.w);
+        if (prim == kAilaLaineLeafEndW) return false;
+        const AilaLaineFloat4 b = bvh.triangles[i + 1];
+        const AilaLaineFloat4 c = bvh.triangles[i + 2];
+        const Triangle tri{Vec3f(a.x, a.y, a.z), Vec3f(b.x, b.y, b.z), Vec3f(c.x, c.y, c.z)};
+        if constexpr (kCount) ++counters->prims_tested;
+        TriangleHit candidate;
+        if (intersect_triangle(tri_ray, tri, tmin, tmax, candidate)) {
+            hit.t = candidate.t;
+            hit.u = candidate.u;
+            hit.v = candidate.v;
+            hit.prim = prim;
+            if constexpr (kAnyHit) return true;  // any-hit: the first hit ends it
+            tmax = candidate.t;  // later boxes and triangles must beat it
+        }
+    }
+}
+
+// The while-while loop over a state's links: runs until the traversal is
+// finished (true) or Vote::yield_for_refill() asks it to stop after a leaf
+// phase (false). Pairs::step tests a node pair and returns the next link
+// (detail::aila_laine_step). The ray (pairs, tri_ray, tmin) and the hit are
+// passed by reference: the classic traversal hands the state's own fields
+// (read from memory as before), the FMA variant local copies (registers).
+template <bool kAnyHit, bool kCount, class Vote, class Pairs, class BoxRay>
+RF_HDI bool aila_laine_run(const AilaLaineView& bvh, const Pairs& pairs, const WatertightRay& tri_ray,
+                           const float& tmin, Hit& hit, AilaLaineState<BoxRay>& s, TraversalCounters* counters) {
     int32_t* const stack = s.stack;
     int top = s.top;
     int32_t node = s.node;
@@ -135,25 +189,7 @@ RF_HDI bool aila_laine_resume(const AilaLaineView& bvh, AilaLaineRayState& s, Tr
         // Inner loop: node >= 0 and below the sentinel is a node pair (a
         // negative link is huge as unsigned, so leaves end the loop too).
         while (static_cast<uint32_t>(node) < static_cast<uint32_t>(kAilaLaineEntrySentinel)) {
-            const AilaLaineNode& pair = bvh.nodes[node];
-            float entry0, entry1;
-            const bool hit0 = detail::slab_test(s.slab, detail::aila_laine_child_box(pair, 0), s.tmin, tmax, entry0);
-            const bool hit1 = detail::slab_test(s.slab, detail::aila_laine_child_box(pair, 1), s.tmin, tmax, entry1);
-            if constexpr (kCount) counters->nodes_visited += 2;
-            if (!hit0 && !hit1) {
-                node = stack[top--];
-            } else {
-                int32_t near_link = hit0 ? pair.link[0] : pair.link[1];
-                if (hit0 && hit1) {
-                    int32_t far_link = pair.link[1];
-                    if (entry1 < entry0) {  // ties go to child 0, as in the canonical traversal
-                        far_link = near_link;
-                        near_link = pair.link[1];
-                    }
-                    stack[++top] = far_link;
-                }
-                node = near_link;
-            }
+            node = pairs.template step<kCount>(bvh, node, tmin, tmax, stack, top, counters);
             // Postpone the first leaf met and keep descending; a second leaf ends the loop.
             if (node < 0 && postponed >= 0) {
                 postponed = node;
@@ -169,27 +205,10 @@ RF_HDI bool aila_laine_resume(const AilaLaineView& bvh, AilaLaineRayState& s, Tr
             node = stack[top--];
         }
         while (postponed < 0) {
-            for (int32_t i = ~postponed;; i += kAilaLaineTriangleStride) {
-                const AilaLaineFloat4 a = bvh.triangles[i];
-                const uint32_t prim = float_to_bits(a.w);
-                if (prim == kAilaLaineLeafEndW) break;
-                const AilaLaineFloat4 b = bvh.triangles[i + 1];
-                const AilaLaineFloat4 c = bvh.triangles[i + 2];
-                const Triangle tri{Vec3f(a.x, a.y, a.z), Vec3f(b.x, b.y, b.z), Vec3f(c.x, c.y, c.z)};
-                if constexpr (kCount) ++counters->prims_tested;
-                TriangleHit candidate;
-                if (intersect_triangle(s.tri_ray, tri, s.tmin, tmax, candidate)) {
-                    s.hit.t = candidate.t;
-                    s.hit.u = candidate.u;
-                    s.hit.v = candidate.v;
-                    s.hit.prim = prim;
-                    if constexpr (kAnyHit) {  // any-hit: the first hit ends it
-                        s.node = kAilaLaineEntrySentinel;
-                        s.postponed = 0;
-                        return true;
-                    }
-                    tmax = candidate.t;  // later boxes and triangles must beat it
-                }
+            if (aila_laine_test_leaf<kAnyHit, kCount>(bvh, postponed, tri_ray, tmin, tmax, hit, counters)) {
+                s.node = kAilaLaineEntrySentinel;
+                s.postponed = 0;
+                return true;
             }
             postponed = node;  // a leaf the inner loop stopped on, or ">= 0": done
             if (node < 0) node = stack[top--];
@@ -210,6 +229,55 @@ RF_HDI bool aila_laine_resume(const AilaLaineView& bvh, AilaLaineRayState& s, Tr
     s.tmax = tmax;
     return true;
 }
+
+// The classic node-pair test: the pair read where it lies, both children by
+// the canonical robust slab test.
+struct AilaLaineSlabPairs {
+    const SlabRay& slab;
+
+    template <bool kCount>
+    RF_HDI int32_t step(const AilaLaineView& bvh, int32_t node, const float& tmin, float tmax, int32_t* stack,
+                        int& top, TraversalCounters* counters) const {
+        const AilaLaineNode& pair = bvh.nodes[node];
+        float entry0, entry1;
+        const bool hit0 = slab_test(slab, aila_laine_child_box(pair, 0), tmin, tmax, entry0);
+        const bool hit1 = slab_test(slab, aila_laine_child_box(pair, 1), tmin, tmax, entry1);
+        if constexpr (kCount) {
+            counters->nodes_visited += 2;
+            ++counters->node_fetches;
+        }
+        return aila_laine_step(hit0, hit1, entry0, entry1, pair.link, stack, top);
+    }
+};
+
+}  // namespace detail
+
+RF_HDI void aila_laine_begin(const AilaLaineView& bvh, const Ray& ray, AilaLaineRayState& s) {
+    s.slab = detail::SlabRay::make(ray);
+    detail::aila_laine_start(bvh, ray, s);
+}
+
+// Runs the traversal in `s` until it is finished (returns true; s.hit is the
+// result) or Vote::yield_for_refill() asks it to stop after a leaf phase
+// (returns false; call again to resume). Closest hit (kAnyHit = false) or
+// first hit (kAnyHit = true); Vote::any_searching decides when the inner loop
+// hands its postponed leaf to the leaf loop.
+template <bool kAnyHit, bool kCount, class Vote = AilaLaineWarpVote>
+RF_HDI bool aila_laine_resume(const AilaLaineView& bvh, AilaLaineRayState& s, TraversalCounters* counters) {
+    const detail::AilaLaineSlabPairs pairs{s.slab};
+    return detail::aila_laine_run<kAnyHit, kCount, Vote>(bvh, pairs, s.tri_ray, s.tmin, s.hit, s, counters);
+}
+
+// The traversal as the persistent kernel (backend/cuda/device_tracer.cu)
+// and its host replays take it: a state, begin and resume.
+struct AilaLaineTraversal {
+    using State = AilaLaineRayState;
+    RF_HDI static void begin(const AilaLaineView& bvh, const Ray& ray, State& s) { aila_laine_begin(bvh, ray, s); }
+    template <bool kAnyHit, bool kCount, class Vote>
+    RF_HDI static bool resume(const AilaLaineView& bvh, State& s, TraversalCounters* counters) {
+        return aila_laine_resume<kAnyHit, kCount, Vote>(bvh, s, counters);
+    }
+};
 
 namespace detail {
 

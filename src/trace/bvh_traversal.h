@@ -14,6 +14,7 @@
 // plane) leaves the interval unchanged instead of poisoning it.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 
 #include "rayforge/accel/bvh/bvh.h"
@@ -37,6 +38,11 @@ struct BvhView {
 struct TraversalCounters {
     uint32_t nodes_visited = 0;  // box tests
     uint32_t prims_tested = 0;   // triangle tests
+    // Node fetches, whatever a node's width, so that layouts with different
+    // box counts per node compare: the binary BVH one per inner node entered
+    // (its two children's adjacent records) and one for the root's box, a
+    // node pair (64 bytes) or a CWBVH node (80 bytes) one each.
+    uint32_t node_fetches = 0;
 };
 
 namespace detail {
@@ -80,6 +86,82 @@ RF_HDI bool slab_test(const SlabRay& r, const Box3f& box, float tmin, float tmax
     return t_near <= t_far;
 }
 
+// The slab test in the FMA min/max form of Aila and Laine's kernels (2009,
+// and the 2012 addendum's): per ray idir = 1/dir and ood = org * idir, per
+// plane t = fma(p, idir, -ood), one rounding instead of a subtraction and a
+// product; near and far by min/max, so no octant selects. Kept conservative
+// (never culls a box the exact ray enters within [tmin, tmax]) by the Ize far
+// scale and per-axis pads. With u = 2^-24, gamma(n) = n u / (1 - n u), the
+// exact t* = (p - org) / dir and idir = (1/dir)(1 + d1):
+//   fma(p, idir, -o) = ((p - org) idir - (o - org idir))(1 + d3),
+// so t = t* (1 + d1)(1 + d3) (within gamma(2) of t*, relatively) as soon as
+// o - org idir has the right sign: the absolute error of the FMA form comes
+// from ood's rounding, |ood - org idir| <= u |ood| / (1 - u). Each axis
+// therefore gets two offsets, moved apart by pad_a = 2^-22 |ood_a| = 4u |ood_a|
+// (more than that error plus the offsets' own rounding, u |ood_a + pad_a|):
+// the near plane's t (lo for idir > 0, hi for idir < 0) uses ood + pad_a and
+// can only come out lower, the far plane's ood - pad_a and only higher:
+//   near <= N* + gamma(2) |N*|,  far >= F* - gamma(2) |F*|
+// for every axis, and through the min/max (x +- gamma(2)|x| are increasing)
+// for the clipped t_near, t_far of the box and [tmin, tmax]. When the ray
+// enters (N* <= F*):
+//  - F* >= 0: t_near <= F*(1 + gamma(2)) <= t_far (1 + gamma(2)) / (1 - gamma(2))
+//    = t_far / (1 - 4u) <= fl(t_far s) with Ize's s = 1 + 2 gamma(3);
+//  - F* < 0 (only with tmin < 0; |F*| <= T = -tmin): t_near - t_far s is at
+//    most about 11u T, covered by pad = 2^-20 T = 16u T.
+// Hence: enter iff t_near <= fma(t_far, s, pad), pad = 2^-20 max(0, -tmin), at
+// least FLT_MIN for the absolute rounding of results in the subnormal range.
+// The offsets add one register per axis, not an instruction per box. Assumes
+// no t overflows (|t| < 2^127).
+// The form needs idir and the offsets finite: a zero (or subnormal) direction
+// component gives idir = inf and then inf - inf = NaN planes, which min/max
+// cannot order. FmaSlabRay::make says so (usable = false); such rays take
+// slab_test above instead (trace/aila_laine_fma_traversal.h does).
+inline constexpr float kFmaSlabAxisPad = 0x1p-22f;
+inline constexpr float kFmaSlabTminPad = 0x1p-20f;
+inline constexpr float kFmaSlabPadFloor = 0x1p-126f;  // FLT_MIN
+
+struct FmaSlabRay {
+    Vec3f idir;
+    Vec3f ood_lo;  // org * idir, offset for the box's lo planes
+    Vec3f ood_hi;  // and for its hi planes
+    float pad = 0.0f;
+    bool usable = false;  // everything above finite
+
+    RF_HDI static FmaSlabRay make(const Ray& ray) {
+        FmaSlabRay r;
+        r.idir = Vec3f(1.0f / ray.dir.x, 1.0f / ray.dir.y, 1.0f / ray.dir.z);
+        bool finite = fabsf(r.idir.x) <= kInfinity && fabsf(r.idir.y) <= kInfinity && fabsf(r.idir.z) <= kInfinity;
+        for (int a = 0; a < 3; ++a) {
+            const float ood = ray.org[a] * r.idir[a];
+            // +pad moves a plane's t down: the lo plane's when it is the near one (idir > 0).
+            const float pad = r.idir[a] > 0.0f ? kFmaSlabAxisPad * fabsf(ood) : -kFmaSlabAxisPad * fabsf(ood);
+            r.ood_lo[a] = ood + pad;
+            r.ood_hi[a] = ood - pad;
+            finite = finite && fabsf(r.ood_lo[a]) <= kInfinity && fabsf(r.ood_hi[a]) <= kInfinity;
+        }
+        r.pad = fmaxf(kFmaSlabTminPad * fmaxf(-ray.tmin, 0.0f), kFmaSlabPadFloor);
+        r.usable = finite && r.pad <= kInfinity;
+        return r;
+    }
+};
+
+// True when the ray overlaps `box` within [tmin, tmax] (conservatively, see
+// above); `entry` is where it enters. r.usable must hold. fminf / fmaxf
+// return the other operand for a NaN one, on the device and the host alike.
+RF_HDI bool fma_slab_test(const FmaSlabRay& r, const Box3f& box, float tmin, float tmax, float& entry) {
+    const float tx0 = fmaf(box.lo.x, r.idir.x, -r.ood_lo.x);
+    const float tx1 = fmaf(box.hi.x, r.idir.x, -r.ood_hi.x);
+    const float ty0 = fmaf(box.lo.y, r.idir.y, -r.ood_lo.y);
+    const float ty1 = fmaf(box.hi.y, r.idir.y, -r.ood_hi.y);
+    const float tz0 = fmaf(box.lo.z, r.idir.z, -r.ood_lo.z);
+    const float tz1 = fmaf(box.hi.z, r.idir.z, -r.ood_hi.z);
+    const float t_near = fmaxf(fmaxf(fminf(tx0, tx1), fminf(ty0, ty1)), fmaxf(fminf(tz0, tz1), tmin));
+    const float t_far = fminf(fminf(fmaxf(tx0, tx1), fmaxf(ty0, ty1)), fminf(fmaxf(tz0, tz1), tmax));
+    entry = t_near;
+    return t_near <= fmaf(t_far, kSlabFarScale, r.pad);
+}
+
 struct StackEntry {
     uint32_t node;
     float entry;  // distance at which the ray enters the node's box
@@ -96,7 +178,10 @@ RF_HDI Hit traverse(const BvhView& bvh, const Ray& ray, TraversalCounters* count
     float tmax = ray.tmax;
 
     float entry;
-    if constexpr (kCount) ++counters->nodes_visited;
+    if constexpr (kCount) {
+        ++counters->nodes_visited;
+        ++counters->node_fetches;
+    }
     if (!slab_test(slab, bvh.nodes[0].bounds, tmin, tmax, entry)) return hit;
 
     StackEntry stack[kBvhMaxDepth];  // one far child per inner node on the path
@@ -105,6 +190,7 @@ RF_HDI Hit traverse(const BvhView& bvh, const Ray& ray, TraversalCounters* count
     for (;;) {
         const BvhNode& node = bvh.nodes[current];
         if (!node.is_leaf()) {
+            if constexpr (kCount) ++counters->node_fetches;  // the children's adjacent records
             const uint32_t left = node.first;
             RF_ASSERT(left + 1 < bvh.node_count, "an inner node's children lie beyond the node array");
             float entry_left, entry_right;

@@ -49,8 +49,11 @@
 // Boxes: the dequantised child box (cwbvh_child_box, the one the builder
 // checked to contain the exact box) goes through the robust slab test of
 // trace/bvh_traversal.h (Ize 2013), where the paper uses a cheaper per-node
-// transformed ray; triangles through the scalar watertight test on the
-// original vertices, so t, u, v equal the canonical traversal's.
+// transformed ray (that is the cwbvh-fma variant, trace/cwbvh_fma_traversal.h,
+// which shares this file's loop: detail::cwbvh_resume, resumable for
+// persistent threads, over a node visit found by overload); triangles through
+// the scalar watertight test on the original vertices, so t, u, v equal the
+// canonical traversal's.
 #pragma once
 
 #include <cstdint>
@@ -105,7 +108,8 @@ RF_HDI int cwbvh_lowest_bit(uint32_t x) {
 
 // base: first inner child (node group) of the node the bits came from;
 // hits: bits 24..31 children left to visit, bits 0..7 that node's imask.
-struct CwbvhGroup {
+// (8-byte aligned: one 64-bit stack load or store.)
+struct alignas(8) CwbvhGroup {
     uint32_t base;
     uint32_t hits;
 };
@@ -133,8 +137,42 @@ RF_HDI uint32_t cwbvh_child_hits(const CwbvhNode& node, const SlabRay& slab, flo
     return hits;
 }
 
+// What visiting a node hands the loop: the child hit mask (as above), the
+// node's child and triangle bases and its imask.
+struct CwbvhNodeHits {
+    uint32_t hits;
+    uint32_t base_child;
+    uint32_t base_triangle;
+    uint32_t imask;
+};
+
+// The node visit of this traversal: one copy of the whole 80-byte node, its
+// child boxes through the robust slab test. (The cwbvh-fma variant,
+// trace/cwbvh_fma_traversal.h, overloads this on its own per-ray data.)
+template <class Counters>
+RF_HDI CwbvhNodeHits cwbvh_visit_node(const CwbvhView& bvh, uint32_t index, const SlabRay& slab, uint32_t oct_inv,
+                                      float tmin, float tmax, Counters* counters) {
+    const CwbvhNode node = bvh.nodes[index];
+    if constexpr (Counters::kCount) counters->node();
+    return {cwbvh_child_hits(node, slab, tmin, tmax, oct_inv, counters), node.base_index_child,
+            node.base_index_triangle, node.imask};
+}
+
+// The traversal stack as a plain array (host, and device threads without
+// shared memory set aside for it).
+struct CwbvhLocalStack {
+    CwbvhGroup entries[kCwbvhTraversalStackSize];
+    RF_HDI void store(int i, CwbvhGroup g) { entries[i] = g; }
+    RF_HDI CwbvhGroup load(int i) const { return entries[i]; }
+};
+
+// A ray that never steps aside (see cwbvh_resume).
+struct CwbvhNeverYield {
+    RF_HDI static bool yield_for_refill() { return false; }
+};
+
 // Counter adapters: none, TraversalCounters (nodes_visited = box tests, as
-// in the other traversals) or CwbvhCounters.
+// in the other traversals, node_fetches = nodes) or CwbvhCounters.
 struct CwbvhNoCount {
     static constexpr bool kCount = false;
     RF_HDI void node() {}
@@ -144,7 +182,7 @@ struct CwbvhNoCount {
 struct CwbvhCountBoxes {
     static constexpr bool kCount = true;
     TraversalCounters* c;
-    RF_HDI void node() {}
+    RF_HDI void node() { ++c->node_fetches; }
     RF_HDI void box() { ++c->nodes_visited; }
     RF_HDI void prim() { ++c->prims_tested; }
 };
@@ -182,25 +220,56 @@ struct CwbvhPostponeOnFewActiveLanes {
     RF_HDI void pushed(int) {}
 };
 
+// Everything one ray's traversal needs to stop and resume (the stack's
+// entries live in the caller's Stack, its size here): `box` is the per-ray
+// data of the variant's box test, tri_ray the watertight test's, `group` the
+// node or triangle group to go on with.
+template <class BoxRay>
+struct CwbvhRayState {
+    BoxRay box;
+    WatertightRay tri_ray;
+    float tmin;
+    float tmax;
+    uint32_t oct_inv;  // 7 - octant: the XOR that orders the inner children
+    detail::CwbvhGroup group;
+    int stack_size;
+    Hit hit;
+};
+
+// The ray's state before its first step; `box` must be set by the caller.
+// octant: the direction's sign bits (bit a set = negative along axis a).
+template <class BoxRay>
+RF_HDI void cwbvh_begin(const CwbvhView& bvh, const Ray& ray, uint32_t octant, CwbvhRayState<BoxRay>& s) {
+    s.tri_ray = WatertightRay::make(ray);
+    s.tmin = ray.tmin;
+    s.tmax = ray.tmax;
+    s.oct_inv = 7u - octant;
+    // The root as the only child (slot 0, inner) of a virtual parent at base
+    // 0; an empty BVH starts with nothing to do.
+    s.group = {0u, bvh.node_count == 0 ? 0u : (1u << (24u + s.oct_inv)) | 1u};
+    s.stack_size = 0;
+    s.hit = Hit{};
+}
+
 namespace detail {
 
-// Shared loop: closest hit (kAnyHit = false) or first hit (kAnyHit = true).
-template <bool kAnyHit, class Counters, class Postpone>
-RF_HDI Hit cwbvh_traverse(const CwbvhView& bvh, const Ray& ray, Counters* counters, Postpone* postpone) {
-    Hit hit;
-    if (bvh.node_count == 0) return hit;
-    const SlabRay slab = SlabRay::make(ray);
-    const WatertightRay tri_ray = WatertightRay::make(ray);
-    const float tmin = ray.tmin;
-    float tmax = ray.tmax;
-    // Sign bits of the direction (bit set = negative, -0 included via 1 / dir).
-    const uint32_t octant = (slab.neg_x ? 1u : 0u) | (slab.neg_y ? 2u : 0u) | (slab.neg_z ? 4u : 0u);
-    const uint32_t oct_inv = 7u - octant;
-
-    CwbvhGroup stack[kCwbvhTraversalStackSize];
-    int stack_size = 0;
-    // The root as the only child (slot 0, inner) of a virtual parent at base 0.
-    CwbvhGroup group{0u, (1u << (24u + oct_inv)) | 1u};
+// Algorithm 1's loop, shared by the variants (the node visit is found by
+// overload on BoxRay): runs until the ray is done (returns true; s.hit is
+// the closest hit, or the first for kAnyHit) or, between two iterations
+// (no triangle group in flight), until yield.yield_for_refill() asks it to
+// step aside (returns false; call again to resume).
+template <bool kAnyHit, class BoxRay, class Stack, class Counters, class Postpone, class Yield>
+RF_HDI bool cwbvh_resume(const CwbvhView& bvh, CwbvhRayState<BoxRay>& s, Stack& stack, Counters* counters,
+                         Postpone* postpone, Yield& yield) {
+    // Working copies (registers); the state is written back on leaving.
+    const BoxRay box = s.box;
+    const WatertightRay tri_ray = s.tri_ray;
+    const float tmin = s.tmin;
+    const uint32_t oct_inv = s.oct_inv;
+    float tmax = s.tmax;
+    CwbvhGroup group = s.group;
+    int stack_size = s.stack_size;
+    Hit hit = s.hit;
     for (;;) {
         postpone->begin_iteration();
         CwbvhGroup triangles;
@@ -214,17 +283,13 @@ RF_HDI Hit cwbvh_traverse(const CwbvhView& bvh, const Ray& ray, Counters* counte
             const uint32_t index = group.base + cwbvh_popc(below);
             if (group.hits & kCwbvhNodeBits) {
                 RF_ASSERT(stack_size < kCwbvhTraversalStackSize, "CWBVH traversal stack overflow");
-                stack[stack_size++] = group;
+                stack.store(stack_size++, group);
                 postpone->pushed(stack_size);
             }
 
-            // One copy of the whole 80-byte node: five 16-byte loads on the GPU
-            // instead of a byte load per field.
-            const CwbvhNode node = bvh.nodes[index];
-            if constexpr (Counters::kCount) counters->node();
-            const uint32_t hits = cwbvh_child_hits(node, slab, tmin, tmax, oct_inv, counters);
-            group = {node.base_index_child, (hits & kCwbvhNodeBits) | node.imask};
-            triangles = {node.base_index_triangle, hits & kCwbvhTriangleBits};
+            const CwbvhNodeHits node = cwbvh_visit_node(bvh, index, box, oct_inv, tmin, tmax, counters);
+            group = {node.base_child, (node.hits & kCwbvhNodeBits) | node.imask};
+            triangles = {node.base_triangle, node.hits & kCwbvhTriangleBits};
             may_postpone = (group.hits & kCwbvhNodeBits) != 0;
         } else {
             // A postponed triangle group, tested now.
@@ -237,7 +302,7 @@ RF_HDI Hit cwbvh_traverse(const CwbvhView& bvh, const Ray& ray, Counters* counte
         while (triangles.hits != 0) {
             if (may_postpone && postpone->postpone()) {
                 RF_ASSERT(stack_size < kCwbvhTraversalStackSize, "CWBVH traversal stack overflow");
-                stack[stack_size++] = triangles;
+                stack.store(stack_size++, triangles);
                 postpone->pushed(stack_size);
                 break;
             }
@@ -253,16 +318,41 @@ RF_HDI Hit cwbvh_traverse(const CwbvhView& bvh, const Ray& ray, Counters* counte
                 hit.u = candidate.u;
                 hit.v = candidate.v;
                 hit.prim = float_to_bits(t.v0.w);
-                if constexpr (kAnyHit) return hit;  // any hit: the first ends it
-                tmax = candidate.t;                 // later boxes and triangles must beat it
+                if constexpr (kAnyHit) {  // any hit: the first ends it
+                    s.hit = hit;
+                    s.group = {0u, 0u};
+                    s.stack_size = 0;
+                    return true;
+                }
+                tmax = candidate.t;  // later boxes and triangles must beat it
             }
         }
 
-        if ((group.hits & kCwbvhNodeBits) == 0) {
-            if (stack_size == 0) return hit;
-            group = stack[--stack_size];  // a node group or a triangle group
+        const bool done = (group.hits & kCwbvhNodeBits) == 0 && stack_size == 0;
+        if (!done && (group.hits & kCwbvhNodeBits) == 0) group = stack.load(--stack_size);  // node or triangle group
+        if (done || yield.yield_for_refill()) {
+            s.tmax = tmax;
+            s.group = done ? CwbvhGroup{0u, 0u} : group;
+            s.stack_size = stack_size;
+            s.hit = hit;
+            return done;
         }
     }
+}
+
+// One ray from start to end with the plain stack and no yields.
+template <bool kAnyHit, class Counters, class Postpone>
+RF_HDI Hit cwbvh_traverse(const CwbvhView& bvh, const Ray& ray, Counters* counters, Postpone* postpone) {
+    if (bvh.node_count == 0) return Hit{};
+    CwbvhRayState<SlabRay> s;
+    s.box = SlabRay::make(ray);
+    // Sign bits of the direction (bit set = negative, -0 included via 1 / dir).
+    const uint32_t octant = (s.box.neg_x ? 1u : 0u) | (s.box.neg_y ? 2u : 0u) | (s.box.neg_z ? 4u : 0u);
+    cwbvh_begin(bvh, ray, octant, s);
+    CwbvhLocalStack stack;
+    CwbvhNeverYield never;
+    cwbvh_resume<kAnyHit>(bvh, s, stack, counters, postpone, never);
+    return s.hit;
 }
 
 }  // namespace detail

@@ -11,8 +11,10 @@
 #include "accel/bvh/layout/aila_laine_layout.h"
 #include "accel/bvh/layout/cwbvh_layout.h"
 #include "rayforge/core/host_device.h"
+#include "trace/aila_laine_fma_traversal.h"
 #include "trace/aila_laine_traversal.h"
 #include "trace/bvh_traversal.h"
+#include "trace/cwbvh_fma_traversal.h"
 #include "trace/cwbvh_traversal.h"
 #include "trace/grid_traversal.h"
 #include "trace/kdtree_traversal.h"
@@ -25,12 +27,14 @@ struct RayCounters {
     uint32_t steps = 0;       // node or cell visits
     uint32_t prim_tests = 0;  // triangle tests
     uint32_t restarts = 0;    // kd-tree restarts
+    uint32_t node_fetches = 0;  // BVH node fetches (TraversalCounters::node_fetches)
 };
 
 // Each traversal's own counters, added to a RayCounters.
 RF_HDI void add_counts(const TraversalCounters& t, RayCounters& c) {
     c.steps += t.nodes_visited;
     c.prim_tests += t.prims_tested;
+    c.node_fetches += t.node_fetches;
 }
 RF_HDI void add_counts(const KdTraversalCounters& t, RayCounters& c) {
     c.steps += t.nodes_visited;
@@ -77,6 +81,18 @@ struct AilaLaineTracer {
     }
 };
 
+// The aila-laine-fma variant (GpuKernel::AilaLaineFma) over the same node pairs.
+struct AilaLaineFmaTracer {
+    AilaLaineView bvh;
+    RF_HDI Hit intersect(const Ray& ray) const { return aila_laine_fma_intersect(bvh, ray); }
+    RF_HDI bool occluded(const Ray& ray) const { return aila_laine_fma_occluded(bvh, ray); }
+    RF_HDI Hit counted(const Ray& ray, bool any_hit, RayCounters& c) const {
+        return counted_query<TraversalCounters>(
+            any_hit, c, [&](TraversalCounters& t) { return aila_laine_fma_intersect_counted(bvh, ray, t); },
+            [&](TraversalCounters& t) { return aila_laine_fma_occluded_counted(bvh, ray, t); });
+    }
+};
+
 struct CwbvhTracer {
     CwbvhView bvh;
     RF_HDI Hit intersect(const Ray& ray) const { return cwbvh_intersect(bvh, ray); }
@@ -85,6 +101,18 @@ struct CwbvhTracer {
         return counted_query<TraversalCounters>(
             any_hit, c, [&](TraversalCounters& t) { return cwbvh_intersect_counted(bvh, ray, t); },
             [&](TraversalCounters& t) { return cwbvh_occluded_counted(bvh, ray, t); });
+    }
+};
+
+// The cwbvh-fma variant (GpuKernel::CwbvhFma) over the same compressed nodes.
+struct CwbvhFmaTracer {
+    CwbvhView bvh;
+    RF_HDI Hit intersect(const Ray& ray) const { return cwbvh_fma_intersect(bvh, ray); }
+    RF_HDI bool occluded(const Ray& ray) const { return cwbvh_fma_occluded(bvh, ray); }
+    RF_HDI Hit counted(const Ray& ray, bool any_hit, RayCounters& c) const {
+        return counted_query<TraversalCounters>(
+            any_hit, c, [&](TraversalCounters& t) { return cwbvh_fma_intersect_counted(bvh, ray, t); },
+            [&](TraversalCounters& t) { return cwbvh_fma_occluded_counted(bvh, ray, t); });
     }
 };
 

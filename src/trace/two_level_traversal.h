@@ -111,7 +111,10 @@ RF_HDI Hit two_level_traverse(const TwoLevelView<BlasView>& view, const Ray& ray
     const float tmin = ray.tmin;
     float tmax = ray.tmax;
     float entry;
-    if (counters) ++counters->nodes_visited;
+    if (counters) {
+        ++counters->nodes_visited;
+        ++counters->node_fetches;
+    }
     if (!slab_test(slab, view.top_nodes[0].bounds, tmin, tmax, entry)) return hit;
 
     StackEntry stack[kBvhMaxDepth];
@@ -125,7 +128,10 @@ RF_HDI Hit two_level_traverse(const TwoLevelView<BlasView>& view, const Ray& ray
             float entry_left, entry_right;
             const bool hit_left = slab_test(slab, view.top_nodes[left].bounds, tmin, tmax, entry_left);
             const bool hit_right = slab_test(slab, view.top_nodes[left + 1].bounds, tmin, tmax, entry_right);
-            if (counters) counters->nodes_visited += 2;
+            if (counters) {
+                counters->nodes_visited += 2;
+                ++counters->node_fetches;  // the children's adjacent records, as in bvh_traversal.h
+            }
             if (hit_left && hit_right) {
                 const bool left_first = entry_left <= entry_right;
                 current = left_first ? left : left + 1;

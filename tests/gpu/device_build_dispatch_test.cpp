@@ -18,8 +18,8 @@ namespace {
 
 using gpu_build_test::expect_same_bvh;
 
-constexpr Builder kDeviceBuilders[] = {Builder::Lbvh30, Builder::Lbvh63,  Builder::Hlbvh2,
-                                       Builder::Ploc,   Builder::GridBvh, Builder::GridBvhSplit};
+constexpr Builder kDeviceBuilders[] = {Builder::Lbvh30,  Builder::Lbvh63, Builder::Hlbvh2,      Builder::Ploc,
+                                       Builder::Hploc,   Builder::GridBvh, Builder::GridBvhSplit};
 
 TEST(GpuDeviceBuild, WhichBuildersHaveADeviceVersion) {
     for (const Builder b : kDeviceBuilders) EXPECT_TRUE(cuda::has_device_builder(b)) << to_string(b);

@@ -1,7 +1,8 @@
 // The CUDA PLOC (Meister and Bittner 2018; backend/cuda/ploc_build.cu)
 // against the CPU PLOC: the same BVH (nodes and primitive order) on soups,
 // spheres and degenerate inputs, with the shared-memory window search
-// (radius 1, 16) and the plain one (radius 300); the device's clustering
+// (radius 1, 16) and the plain one (radius 300), scenes small enough for
+// the single-block tail alone and large enough for grid iterations first; the device's clustering
 // checked directly (the CPU's Morton order, node boxes the unions of their
 // children, every node made once); hits equal brute force; the stage report
 // is filled. Skips with a message when no CUDA device is present.
@@ -37,6 +38,12 @@ std::vector<NamedScene> test_scenes() {
         test::append(nested, {Vec3f(-s, -s, 0), Vec3f(s, -s, 0), Vec3f(0, s, 0)});
     }
     scenes.push_back({"equal codes", std::move(nested)});
+    // More clusters than the single-block tail holds (3,072): grid iterations
+    // first, also with the plain search (radius 300, scenes up to 5,000).
+    scenes.push_back({"grid phase", test::make_triangle_soup(4500, 6, {Vec3f(-10.0f), Vec3f(10.0f)}, 0.5f)});
+    SceneGeometry crowd;  // equal boxes through the grid phase and the tail
+    for (int i = 0; i < 4000; ++i) test::append(crowd, {Vec3f(2.0f), Vec3f(2.0f), Vec3f(2.0f)});
+    scenes.push_back({"one point, grid phase", std::move(crowd)});
     append_degenerate_scenes(scenes);
     return scenes;
 }

@@ -37,6 +37,7 @@ enum class Builder : uint8_t {
     GridBvh,       // Garanzha 2014, ch. 4
     GridBvhSplit,  // Garanzha 2014, ch. 4, with partial triangles
     Ploc,          // Meister and Bittner 2018
+    Hploc,         // Benthin et al. 2024, hierarchical PLOC (radius: PlocOptions)
 };
 
 // How a BVH is laid out for tracing: the canonical binary nodes, or 4/8-wide
@@ -62,7 +63,8 @@ struct BinnedSahOptions {
 struct SbvhOptions {
     float alpha = 1e-5f;
 };
-// PLOC: nearest-neighbour search radius along the Morton curve.
+// PLOC and H-PLOC: nearest-neighbour search radius along the Morton curve
+// (H-PLOC clamps it to 31: a range's clusters fit one 32-lane warp).
 struct PlocOptions {
     int radius = 16;
 };
@@ -74,6 +76,14 @@ struct GridBvhOptions {
 struct ReinsertionOptions {
     bool enabled = false;
     int iterations = 0;  // 0 = the optimizer's default
+};
+// Post-build optimizer for any BVH builder (treelet restructuring, Karras and
+// Aila 2013): treelets of up to treelet_leaves leaves re-linked to their
+// SAH-optimal topology, bottom up, in `rounds` rounds.
+struct TreeletOptions {
+    bool enabled = false;
+    int treelet_leaves = 7;  // the paper's n, 3 .. 7
+    int rounds = 3;          // 1 .. 16; round r restructures subtrees of at least treelet_leaves * 2^r primitives
 };
 // Uniform grids.
 struct UniformGridOptions {
@@ -103,10 +113,11 @@ struct BuildOptions {
     PlocOptions ploc;
     GridBvhOptions grid_bvh;
     ReinsertionOptions reinsertion;
+    TreeletOptions treelets;
     UniformGridOptions grid;
     KdTreeOptions kdtree;
     // CUDA backend only: build on the device where a device builder exists
-    // (lbvh30, lbvh63, hlbvh2, ploc, gridbvh, gridbvh-split, uniform grids)
+    // (lbvh30, lbvh63, hlbvh2, ploc, hploc, gridbvh, gridbvh-split, uniform grids)
     // and convert to the GPU layouts there; false builds on the CPU. Every
     // device builder yields the same structure as its CPU version.
     bool build_on_device = true;
@@ -131,11 +142,13 @@ struct TraversalTotals {
     uint64_t steps = 0;        // node visits (box tests) in trees, cells visited in grids
     uint64_t prim_tests = 0;   // ray-triangle tests
     uint64_t restarts = 0;     // kd-tree restarts (0 elsewhere)
+    uint64_t node_fetches = 0; // BVH nodes fetched, whatever their width (0 for kd-trees and grids)
     TraversalTotals& operator+=(const TraversalTotals& o) {
         rays += o.rays;
         steps += o.steps;
         prim_tests += o.prim_tests;
         restarts += o.restarts;
+        node_fetches += o.node_fetches;
         return *this;
     }
 };
@@ -191,7 +204,7 @@ std::unique_ptr<Accel> build_accel(const SceneGeometry& geometry, const BuildOpt
 
 // The canonical BVH of options.builder over `triangles` (the reinsertion
 // optimizer after it when asked), on options.device: a CUDA device runs the
-// builder's device version (lbvh30, lbvh63, hlbvh2, ploc, gridbvh,
+// builder's device version (lbvh30, lbvh63, hlbvh2, ploc, hploc, gridbvh,
 // gridbvh-split have one; rf::Error for the others) and gives the same BVH.
 // `report`, when given, gets the build's stages.
 Bvh build_bvh(std::span<const Triangle> triangles, const BuildOptions& options, BuildReport* report = nullptr);
@@ -207,7 +220,8 @@ void validate_build_options(const BuildOptions& options);
 
 // Names for the CLI, the bench and scene files; parse_* throw rf::Error when unknown.
 //   structures: bvh, grid, grid-proximity, kdtree, brute
-//   builders:   binned, sweep, sbvh, lbvh30, lbvh63 (lbvh = lbvh30), hlbvh2, gridbvh, gridbvh-split, ploc
+//   builders:   binned, sweep, sbvh, lbvh30, lbvh63 (lbvh = lbvh30), hlbvh2, gridbvh, gridbvh-split, ploc,
+//               hploc
 //   layouts:    bvh2, bvh4, bvh8
 //   kd-tree traversals: stack, short-stack, restart, pushdown
 Structure parse_structure(const std::string& name);

@@ -27,18 +27,27 @@ std::string to_string(const Device& device);
 // a CUDA device):
 //   bvh2            the canonical binary BVH, one thread per ray (the CPU's own traversal code)
 //   aila-laine      node pairs with persistent "while-while" threads (Aila and Laine 2009)
+//   aila-laine-fma  the same, the ray kept in registers and the box test in FMA min/max form
+//                   (a variant until a device measures it against aila-laine)
 //   cwbvh           the compressed 8-wide BVH (Ylitie, Karras and Laine 2017)
+//   cwbvh-fma       the same nodes traced as the paper does: the ray transformed once per node into
+//                   its quantised frame, octant-ordered child masks, persistent threads (a variant
+//                   until a device measures it against cwbvh)
 //   kd-short-stack  kd-tree, short stack with restart fallback (Horn et al. 2007)
 //   kd-restart      kd-tree, kd-restart (Foley and Sugerman 2005)
 //   grid            uniform grid, 3D-DDA (Amanatides and Woo 1987)
 //   grid-proximity  uniform grid with proximity clouds (Bogolepov et al.)
-enum class GpuKernel : uint8_t { Bvh2, AilaLaine, Cwbvh, KdShortStack, KdRestart, Grid, ProximityGrid };
+enum class GpuKernel : uint8_t {
+    Bvh2, AilaLaine, Cwbvh, KdShortStack, KdRestart, Grid, ProximityGrid, AilaLaineFma, CwbvhFma
+};
 
 GpuKernel parse_gpu_kernel(const std::string& name);  // throws rf::Error for an unknown name
 std::string to_string(GpuKernel kernel);
 std::vector<GpuKernel> all_gpu_kernels();
-// The kernel the renderers and the bench use unless told otherwise.
-inline constexpr GpuKernel kDefaultGpuKernel = GpuKernel::Cwbvh;
+// The kernel the renderers and the bench use unless told otherwise: the
+// fastest on Sponza's diffuse rays where a device last measured them
+// (docs/gpu.md; H200, 2026-11-27: aila-laine 807 Mrays/s, cwbvh 606).
+inline constexpr GpuKernel kDefaultGpuKernel = GpuKernel::AilaLaine;
 
 // Whether this build of rayforge contains the CUDA backend (nvcc was found at configure time).
 bool cuda_backend_built();
@@ -71,5 +80,22 @@ DeviceListing list_cuda_devices();
 // Throws rf::Error saying why `device` cannot be used (a build without the
 // CUDA backend, no driver, no such device); the CPU always can.
 void require_device(const Device& device);
+
+// The resources of one GPU trace kernel as compiled for the device (CUDA's
+// function attributes) and the occupancy of the launch shape its tracer uses.
+struct GpuKernelResources {
+    std::string kernel;             // which launch: e.g. "aila-laine closest (persistent)"
+    int registers = 0;              // per thread
+    size_t local_bytes = 0;         // per thread: spills and the stack frame (local memory)
+    size_t shared_bytes = 0;        // shared memory per block: static, plus the launch's dynamic
+    int max_threads_per_block = 0;  // what the compiled kernel allows
+    int block_size = 0;             // what the tracer launches
+    int blocks_per_sm = 0;          // resident blocks per multiprocessor at that block size
+    double occupancy = 0.0;         // resident threads / the multiprocessor's maximum, in [0, 1]
+};
+// The closest-hit and any-hit launches of `kernel` on CUDA device `device`
+// (the bench's resource lines); empty for a kernel whose launches are not
+// listed yet. Throws rf::Error as require_device does, and for the CPU.
+std::vector<GpuKernelResources> gpu_kernel_resources(GpuKernel kernel, const Device& device);
 
 }  // namespace rf

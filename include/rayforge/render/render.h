@@ -82,6 +82,11 @@ struct PassStats {
     uint64_t closest_rays = 0, shadow_rays = 0;
     std::vector<WavefrontWave> waves;   // wavefront path tracing: index = extension round, 0 = camera rays
     double sort_ms = 0.0;               // wavefront ray sorting (sort_rays)
+    // Device path tracing: the summed kernel time of the pass's trace
+    // launches (extension and shadow connections), from CUDA events; so
+    // trace_ms / pass_ms is the trace share of a pass. < 0: not measured
+    // (the CPU renderers, and the device's one-kernel integrators).
+    double trace_ms = -1.0;
 };
 
 // Progressive rendering of a world on its device: each pass adds one sample

@@ -317,7 +317,10 @@ inline Hit traverse(const WideBvhView<N>& bvh, const Ray& ray, TraversalCounters
         bool reached_leaf = true;
         while (!wide_is_leaf(ref)) {
             const WideNode<N>& node = bvh.nodes[ref];
-            if constexpr (kCount) ++counters->nodes_visited;
+            if constexpr (kCount) {
+                ++counters->nodes_visited;
+                ++counters->node_fetches;  // one wide node, all its boxes
+            }
             vfloat<N> near_v;
             unsigned mask = box_hits(node, box_ray, tmin_v, tmax_far_v, near_v);
             if (mask == 0) {

@@ -10,11 +10,16 @@
 
 namespace rf::cuda {
 
+struct DeviceBvh;
+
 struct BuildContext {
     explicit BuildContext(DeviceBuildStages& build_stages) : stages(build_stages) {}
     MemoryMeter meter;
     EventTimer timer;
     DeviceBuildStages& stages;
+    // Set: the device emission leaves the canonical BVH here (device_bvh.h)
+    // instead of downloading it.
+    DeviceBvh* resident = nullptr;
 };
 
 }  // namespace rf::cuda

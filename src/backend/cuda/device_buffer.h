@@ -108,6 +108,29 @@ private:
     MemoryMeter* meter_ = nullptr;
 };
 
+// Page-locked host memory for `count` values: the target of asynchronous
+// device-to-host copies, read by the host once an event says they landed.
+template <class T>
+class PinnedValues {
+public:
+    explicit PinnedValues(size_t count) {
+        RF_CUDA_CHECK(cudaHostAlloc(reinterpret_cast<void**>(&data_), count * sizeof(T), cudaHostAllocDefault));
+        count_ = count;
+    }
+    ~PinnedValues() {
+        if (data_) cudaFreeHost(data_);
+    }
+    PinnedValues(const PinnedValues&) = delete;
+    PinnedValues& operator=(const PinnedValues&) = delete;
+    [[nodiscard]] T* data() const { return data_; }
+    [[nodiscard]] size_t size() const { return count_; }
+    T& operator[](size_t i) const { return data_[i]; }
+
+private:
+    T* data_ = nullptr;
+    size_t count_ = 0;
+};
+
 // The first `count` elements, on the host.
 template <class T>
 std::vector<T> download_all(const DeviceBuffer<T>& buffer, size_t count) {

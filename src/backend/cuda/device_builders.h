@@ -42,6 +42,8 @@ struct DeviceBuildStages {
     // PLOC only:
     double ploc_ms = 0.0;         // all iterations: nearest neighbours, merges, compaction
     uint32_t ploc_iterations = 0; // iterations until one cluster is left
+    // H-PLOC only:
+    double hploc_ms = 0.0;        // the single launch: LBVH climb and PLOC per range, with its slot clears
     // GridBvh / GridBvhSplit only (Garanzha 2014 ch. 4; sort_ms: the cell-key sort):
     double partial_triangles_ms = 0.0; // references and their splitting (§4.4)
     double grid0_ms = 0.0;        // TopGrid0 and the 8^3 bottom grids by compaction (§4.2)
@@ -56,33 +58,44 @@ struct DeviceBuildStages {
     double proximity_ms = 0.0;    // proximity-cloud distance transform
 
     // Any builder:
+    double treelet_ms = 0.0;      // device: treelet restructuring (options.treelets), its emission included
     double optimize_ms = 0.0;     // host: reinsertion optimizer (options.reinsertion) after a device build
     double layout_ms = 0.0;       // device layout conversion (node pairs, CWBVH) when a tracer asked for one
+    double first_ray_ms = 0.0;    // a tracer's device build: host wall time from the start of the build to the
+                                  // traced layout in the tracer's buffers, synchronized, less the triangles'
+                                  // uploads (the device-resident chain: no tree download in it; issue 33)
+    double build_span_ms = 0.0;   // a tracer's device build: one CUDA event pair around the whole build (the
+                                  // per-stage timers' host syncs and the builder's triangle upload inside it)
     bool on_device = false;       // false: this structure was built on the host (no device builder, or asked so)
 
     // The build on the device alone: every stage above that runs there (not
     // the transfers, the host's emission and optimizer, or a layout conversion).
     [[nodiscard]] double device_total_ms() const {
-        return bounds_ms + morton_ms + sort_ms + inner_nodes_ms + clusters_ms + bottom_ms + top_ms + boxes_ms + ploc_ms +
+        return bounds_ms + morton_ms + sort_ms + inner_nodes_ms + clusters_ms + bottom_ms + top_ms + boxes_ms + ploc_ms + hploc_ms +
                device_emit_ms + partial_triangles_ms + grid0_ms + coarse_levels_ms + hierarchy_ms + leaf_finish_ms + cell_pairs_ms +
-               cell_ranges_ms + proximity_ms;
+               cell_ranges_ms + proximity_ms + treelet_ms;
     }
 };
 
 // The stages that ran, as the public report.
 BuildReport describe_device_build(const DeviceBuildStages& stages, const Device& device);
 
+struct DeviceBvh;
+
 // Whether options.builder has a device version: lbvh30, lbvh63, hlbvh2,
-// ploc, gridbvh, gridbvh-split.
+// ploc, hploc, gridbvh, gridbvh-split.
 bool has_device_builder(Builder builder);
 
 // The BVH of options.builder built on device `device` with its options
-// group (then the host's reinsertion optimizer when
-// options.reinsertion.enabled is set), the host's share on at most
+// group (then treelet restructuring on the device when
+// options.treelets.enabled is set, and the host's reinsertion optimizer when
+// options.reinsertion.enabled is), the host's share on at most
 // options.threads threads: the same BVH as rf::build_bvh. Throws rf::Error
-// for a builder without a device version.
+// for a builder without a device version. `resident` (device_bvh.h): the
+// tree kept on the device when the builder emitted it there and no
+// optimizer runs (the returned Bvh then empty), see device_bvh_builders.h.
 Bvh build_bvh_on_device(std::span<const Triangle> triangles, const BuildOptions& options,
-                        DeviceBuildStages* stages = nullptr, int device = 0);
+                        DeviceBuildStages* stages = nullptr, int device = 0, DeviceBvh* resident = nullptr);
 
 }  // namespace rf::cuda
 
@@ -109,5 +122,14 @@ AilaLaineBvh convert_to_aila_laine_on_device(const Bvh& bvh, std::span<const Tri
                                              double* device_ms = nullptr, int device = 0);
 CwbvhBvh build_cwbvh_on_device(const Bvh& bvh, std::span<const Triangle> triangles, double* device_ms = nullptr,
                                int device = 0);
+
+// The device-resident chain that DeviceTracer runs for a device build
+// (device_bvh.h, layout_convert.h): options.builder on device `device`, the
+// tree kept there, converted there; the layout downloaded only at the end,
+// to compare it with the host chain's (build_bvh_on_device, then the
+// functions above). Throws rf::Error for a builder without a device version.
+AilaLaineBvh resident_aila_laine_on_device(std::span<const Triangle> triangles, const BuildOptions& options,
+                                           int device = 0);
+CwbvhBvh resident_cwbvh_on_device(std::span<const Triangle> triangles, const BuildOptions& options, int device = 0);
 
 }  // namespace rf::cuda

@@ -3,6 +3,11 @@
 // costs of BvhBuildConfig, and its own options group) and gives the same BVH;
 // build_bvh_on_device (backend/cuda/device_builders.h) dispatches to them, as
 // build_bvh does on the CPU.
+//
+// `resident` (device_bvh.h; LBVH, HLBVH2, PLOC, H-PLOC): when given and the
+// device emitted the tree, the canonical BVH stays in *resident and the
+// returned Bvh is empty (no download); when the host emitted it (too deep,
+// fewer than 2 triangles), *resident stays empty and the Bvh is returned.
 #pragma once
 
 #include <span>
@@ -14,6 +19,8 @@
 
 namespace rf::cuda {
 
+struct DeviceBvh;
+
 // LBVH (Karras 2012) on device `device`: the same BVH as rf::build_lbvh with
 // the same config and Morton bits (30 or 63): same nodes, same primitive
 // order. The device computes boxes, codes, the sort, the radix tree and its
@@ -21,7 +28,7 @@ namespace rf::cuda {
 // (the host does the last two when the tree is deeper than kBvhMaxDepth).
 // Throws rf::Error for invalid bits or CUDA failures (out of memory names the buffer).
 Bvh build_lbvh_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config, int morton_bits,
-                         DeviceBuildStages* stages = nullptr, int device = 0);
+                         DeviceBuildStages* stages = nullptr, int device = 0, DeviceBvh* resident = nullptr);
 
 // HLBVH2 (Garanzha, Pantaleoni and McAllister 2011; Garanzha 2014 ch. 5) on
 // device `device`: the same BVH as rf::build_hlbvh2 with the same config.
@@ -33,12 +40,20 @@ Bvh build_lbvh_on_device(std::span<const Triangle> triangles, const BvhBuildConf
 // and checks the forest then). 0 and 1 triangles are handled on the host. Throws
 // rf::Error for CUDA failures (out of memory names the buffer).
 Bvh build_hlbvh2_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config,
-                           DeviceBuildStages* stages = nullptr, int device = 0);
+                           DeviceBuildStages* stages = nullptr, int device = 0, DeviceBvh* resident = nullptr);
 
 // PLOC (Meister and Bittner 2018) on device `device`: the same BVH as
 // rf::build_ploc with the same config and radius.
 Bvh build_ploc_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config,
-                         const PlocOptions& ploc_options, DeviceBuildStages* stages = nullptr, int device = 0);
+                         const PlocOptions& ploc_options, DeviceBuildStages* stages = nullptr, int device = 0,
+                         DeviceBvh* resident = nullptr);
+
+// H-PLOC (Benthin et al. 2024) on device `device`: the same BVH as
+// rf::build_hploc with the same config and radius (clamped to 1 .. 31). One
+// launch after the sort builds the whole clustering (hploc_build.cu).
+Bvh build_hploc_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config,
+                          const PlocOptions& ploc_options, DeviceBuildStages* stages = nullptr, int device = 0,
+                          DeviceBvh* resident = nullptr);
 
 // GridBvh, or GridBvhSplit with `partial_triangles` (Garanzha 2014 ch. 4), on
 // device `device`: the same BVH as rf::build_grid_bvh with the same config

@@ -8,9 +8,10 @@
 //    (sec. 3): just enough warps to fill the device, taking rays from a
 //    global counter with one atomic per warp, so that warps finishing early
 //    take more work instead of idling while slow warps finish, with the
-//    speculative while-while traversal (trace/aila_laine_traversal.h) and
-//    the 2012 addendum's dynamic fetch, which refills a warp's terminated
-//    lanes once most of them are idle.
+//    speculative while-while traversal (trace/aila_laine_traversal.h, or its
+//    aila-laine-fma variant, trace/aila_laine_fma_traversal.h) and the 2012
+//    addendum's dynamic fetch, which refills a warp's terminated lanes once
+//    most of them are idle.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -23,10 +24,14 @@
 #include "accel/grid/uniform_grid.h"
 #include "accel/kdtree/kdtree_build.h"
 #include "backend/backends.h"
+#include "backend/cuda/cwbvh_fma_trace.h"
 #include "backend/cuda/device_builders.h"
+#include "backend/cuda/device_bvh.h"
 #include "backend/cuda/device_tracer_impl.h"
 #include "backend/cuda/event_timer.h"
+#include "backend/cuda/kernel_resources.h"
 #include "backend/cuda/launch.h"
+#include "backend/cuda/layout_convert.h"
 
 namespace rf::cuda {
 
@@ -56,13 +61,15 @@ __global__ void occluded_kernel(Tracer tracer, const Ray* rays, uint8_t* flags, 
 // is done or, via AilaLaineDynamicFetchVote, when fewer than
 // kAilaLaineDynamicFetchThreshold lanes are still traversing, so the warp
 // refills its idle lanes instead of running nearly empty. A lane exits the
-// kernel once the ray pool is exhausted and it has no ray.
-template <bool kAnyHit>
+// kernel once the ray pool is exhausted and it has no ray. Traversal is the
+// node-pair traversal's state, begin and resume: AilaLaineTraversal
+// (aila-laine) or AilaLaineFmaTraversal (aila-laine-fma).
+template <bool kAnyHit, class Traversal = AilaLaineTraversal>
 __global__ void aila_laine_persistent_kernel(AilaLaineView bvh, const Ray* rays, Hit* hits, uint8_t* flags,
                                              uint32_t count, uint32_t* next_ray) {
     const uint32_t lane = threadIdx.x & 31u;
     const uint32_t lanes_below = (1u << lane) - 1u;
-    AilaLaineRayState state;
+    typename Traversal::State state;
     uint32_t ray_index = 0;
     bool has_ray = false;
     for (;;) {
@@ -76,11 +83,11 @@ __global__ void aila_laine_persistent_kernel(AilaLaineView bvh, const Ray* rays,
             if (!has_ray) {
                 ray_index = base + uint32_t(__popc(needing & lanes_below));
                 if (ray_index >= count) return;  // nothing left for this lane
-                aila_laine_begin(bvh, rays[ray_index], state);
+                Traversal::begin(bvh, rays[ray_index], state);
                 has_ray = true;
             }
         }
-        if (aila_laine_resume<kAnyHit, false, AilaLaineDynamicFetchVote>(bvh, state, nullptr)) {
+        if (Traversal::template resume<kAnyHit, false, AilaLaineDynamicFetchVote>(bvh, state, nullptr)) {
             if constexpr (kAnyHit) flags[ray_index] = state.hit.found() ? 1 : 0;
             else hits[ray_index] = state.hit;
             has_ray = false;
@@ -88,7 +95,8 @@ __global__ void aila_laine_persistent_kernel(AilaLaineView bvh, const Ray* rays,
     }
 }
 
-// Instrumented traversal: per-ray counters summed in a warp, one atomic per warp.
+// Instrumented traversal: per-ray counters summed in a warp, one atomic per
+// warp; totals: steps, triangle tests, restarts, node fetches.
 template <class Tracer>
 __global__ void count_kernel(Tracer tracer, const Ray* rays, uint32_t count, bool any_hit,
                              unsigned long long* totals) {
@@ -96,16 +104,18 @@ __global__ void count_kernel(Tracer tracer, const Ray* rays, uint32_t count, boo
         const uint32_t i = base + threadIdx.x;
         RayCounters c;
         if (i < count) (void)tracer.counted(rays[i], any_hit, c);
-        unsigned long long steps = c.steps, tests = c.prim_tests, restarts = c.restarts;
+        unsigned long long steps = c.steps, tests = c.prim_tests, restarts = c.restarts, fetches = c.node_fetches;
         for (int offset = 16; offset > 0; offset >>= 1) {
             steps += __shfl_down_sync(0xFFFFFFFFu, steps, offset);
             tests += __shfl_down_sync(0xFFFFFFFFu, tests, offset);
             restarts += __shfl_down_sync(0xFFFFFFFFu, restarts, offset);
+            fetches += __shfl_down_sync(0xFFFFFFFFu, fetches, offset);
         }
         if ((threadIdx.x & 31u) == 0) {
             atomicAdd(&totals[0], steps);
             atomicAdd(&totals[1], tests);
             atomicAdd(&totals[2], restarts);
+            atomicAdd(&totals[3], fetches);
         }
     }
 }
@@ -114,16 +124,29 @@ double ms_since(std::chrono::steady_clock::time_point start) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
+// Blocks of the node-pair persistent kernel that fit one multiprocessor,
+// closest hit and any hit.
+template <class Traversal>
+void persistent_blocks_per_sm(int (&per_sm)[2]) {
+    RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(
+        &per_sm[0], aila_laine_persistent_kernel<false, Traversal>, kTraceBlock, 0));
+    RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(
+        &per_sm[1], aila_laine_persistent_kernel<true, Traversal>, kTraceBlock, 0));
+}
+
 // The persistent kernel's grid sizes (enough warps to fill every
 // multiprocessor), closest and any hit, queried once whatever thread asks.
 void query_persistent_blocks(DeviceTracer::Impl& impl) {
-    if (impl.kernel != GpuKernel::AilaLaine) return;
+    if (!uses_ray_counter(impl.kernel)) return;
     std::call_once(impl.persistent_once, [&] {
         int per_sm[2] = {0, 0};
-        RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm[0], aila_laine_persistent_kernel<false>,
-                                                                   kTraceBlock, 0));
-        RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_sm[1], aila_laine_persistent_kernel<true>,
-                                                                   kTraceBlock, 0));
+        if (impl.kernel == GpuKernel::CwbvhFma) {
+            for (int any_hit = 0; any_hit < 2; ++any_hit) per_sm[any_hit] = cwbvh_fma_blocks_per_sm(any_hit != 0);
+        } else if (impl.kernel == GpuKernel::AilaLaineFma) {
+            persistent_blocks_per_sm<AilaLaineFmaTraversal>(per_sm);
+        } else {
+            persistent_blocks_per_sm<AilaLaineTraversal>(per_sm);
+        }
         for (int i = 0; i < 2; ++i) impl.persistent_blocks[i] = std::max(1, per_sm[i]) * impl.multiprocessors;
     });
 }
@@ -131,34 +154,38 @@ void query_persistent_blocks(DeviceTracer::Impl& impl) {
 // Work done before the bench's timed launch, so that it is not timed: the
 // persistent kernel's ray counter is reset and its grid size known.
 void prepare_trace(DeviceTracer::Impl& impl) {
-    if (impl.kernel != GpuKernel::AilaLaine) return;
+    if (!uses_ray_counter(impl.kernel)) return;
     impl.work_counter.reserve(1);
     RF_CUDA_CHECK(cudaMemset(impl.work_counter.data(), 0, sizeof(uint32_t)));
     query_persistent_blocks(impl);
 }
 
-// Where one trace reads and writes: device rays, the answers (hits for
-// the closest hit, flags for any hit), the persistent kernel's ray counter
-// (reset to 0 before the launch), the stream.
-struct TraceTarget {
-    const Ray* rays = nullptr;
-    Hit* hits = nullptr;
-    uint8_t* flags = nullptr;
-    uint32_t* counter = nullptr;
-    cudaStream_t stream = nullptr;
-};
+// The node-pair persistent kernel over `bvh` with Traversal (its grid size known).
+template <class Traversal>
+void launch_aila_laine_persistent(const DeviceTracer::Impl& impl, const AilaLaineView& bvh, bool any_hit,
+                                  uint32_t count, const TraceTarget& t) {
+    const LaunchShape persistent{uint32_t(impl.persistent_blocks[any_hit ? 1 : 0]), kTraceBlock};
+    if (any_hit)
+        launch_shaped_on(t.stream, aila_laine_persistent_kernel<true, Traversal>, persistent, bvh, t.rays, nullptr,
+                         t.flags, count, t.counter);
+    else
+        launch_shaped_on(t.stream, aila_laine_persistent_kernel<false, Traversal>, persistent, bvh, t.rays, t.hits,
+                         nullptr, count, t.counter);
+}
 
 // Launches the trace of `count` rays with the kernel's scheduling (the
 // persistent grid size known).
 void launch_trace(const DeviceTracer::Impl& impl, bool any_hit, uint32_t count, const TraceTarget& t) {
+    if (impl.kernel == GpuKernel::CwbvhFma) {
+        launch_cwbvh_fma_trace(impl, any_hit, count, t);
+        return;
+    }
     if (impl.kernel == GpuKernel::AilaLaine) {
-        const LaunchShape persistent{uint32_t(impl.persistent_blocks[any_hit ? 1 : 0]), kTraceBlock};
-        if (any_hit)
-            launch_shaped_on(t.stream, aila_laine_persistent_kernel<true>, persistent, impl.aila_laine.bvh, t.rays,
-                             nullptr, t.flags, count, t.counter);
-        else
-            launch_shaped_on(t.stream, aila_laine_persistent_kernel<false>, persistent, impl.aila_laine.bvh, t.rays,
-                             t.hits, nullptr, count, t.counter);
+        launch_aila_laine_persistent<AilaLaineTraversal>(impl, impl.aila_laine.bvh, any_hit, count, t);
+        return;
+    }
+    if (impl.kernel == GpuKernel::AilaLaineFma) {
+        launch_aila_laine_persistent<AilaLaineFmaTraversal>(impl, impl.aila_laine_fma.bvh, any_hit, count, t);
         return;
     }
     impl.with_tracer([&](const auto& tracer) {
@@ -259,30 +286,123 @@ Placed place_layout(DeviceTracer::Impl& impl, const Bvh& bvh, std::span<const Tr
     }
     const Triangle* device_triangles = upload_triangles(impl, triangles);
     switch (impl.kernel) {
-        case GpuKernel::AilaLaine: return place_aila_laine(impl, bvh, triangles, impl.convert_on_device);
-        case GpuKernel::Cwbvh: return place_cwbvh(impl, bvh, triangles, impl.convert_on_device);
+        case GpuKernel::AilaLaine:
+        case GpuKernel::AilaLaineFma: {
+            const Placed placed = place_aila_laine(impl, bvh, triangles, impl.convert_on_device);
+            impl.aila_laine_fma.bvh = impl.aila_laine.bvh;
+            return placed;
+        }
+        case GpuKernel::Cwbvh:
+        case GpuKernel::CwbvhFma: {
+            const Placed placed = place_cwbvh(impl, bvh, triangles, impl.convert_on_device);
+            impl.cwbvh_fma.bvh = impl.cwbvh.bvh;
+            return placed;
+        }
         default: return place_bvh2(impl, bvh, device_triangles);
     }
+}
+
+// The BVH's stats, from its host copy.
+void set_bvh_stats(DeviceTracer::Impl& impl, const Bvh& bvh, Builder builder) {
+    AccelStats& stats = impl.stats;
+    stats.name += "/" + to_string(builder);
+    stats.sah_cost = bvh.sah_cost(1.0f, 1.0f);
+    stats.quality_cost = bvh.quality_cost(2.0);
+    stats.leaf_count = bvh.leaf_count();
+}
+
+// A device-resident canonical BVH in the kernel's layout, converted on the
+// device straight into the tracer's buffers (bvh2: the tree's own buffers
+// taken over). device_triangles: the tracer's.
+Placed place_resident_layout(DeviceTracer::Impl& impl, DeviceBvh& bvh, const Triangle* device_triangles,
+                             size_t triangle_count) {
+    const DeviceCanonicalView view = canonical_view(bvh, device_triangles, triangle_count);
+    const auto start = std::chrono::steady_clock::now();
+    switch (impl.kernel) {
+        case GpuKernel::AilaLaine:
+        case GpuKernel::AilaLaineFma: {
+            const ResidentAilaLaine al = convert_to_aila_laine_resident(
+                view, impl.aila_laine_nodes, impl.aila_laine_triangles, &impl.build_stages.layout_ms, impl.device);
+            impl.aila_laine.bvh = {impl.aila_laine_nodes.data(), impl.aila_laine_triangles.data(), al.root,
+                                   al.node_count};
+            impl.aila_laine_fma.bvh = impl.aila_laine.bvh;
+            impl.stats.node_count = al.node_count;
+            return {al.memory_bytes(), ms_since(start)};
+        }
+        case GpuKernel::Cwbvh:
+        case GpuKernel::CwbvhFma: {
+            const ResidentCwbvh cw = build_cwbvh_resident(view, impl.cwbvh_nodes, impl.cwbvh_triangles,
+                                                          &impl.build_stages.layout_ms, impl.device);
+            impl.cwbvh.bvh = {impl.cwbvh_nodes.data(), impl.cwbvh_triangles.data(), cw.node_count,
+                              cw.triangle_count};
+            impl.cwbvh_fma.bvh = impl.cwbvh.bvh;
+            impl.stats.node_count = cw.node_count;
+            return {cw.memory_bytes(), ms_since(start)};
+        }
+        default: {
+            const uint32_t nodes = view.node_count;
+            impl.bvh_nodes = std::move(bvh.nodes);
+            impl.prim_indices = std::move(bvh.prim_indices);
+            impl.bvh2.bvh = {impl.bvh_nodes.data(), impl.prim_indices.data(), device_triangles, nodes};
+            impl.stats.node_count = nodes;
+            return {impl.bvh_nodes.bytes() + impl.prim_indices.bytes(), 0.0};
+        }
+    }
+}
+
+// A device build kept on the device (issue 33 item 3): built, converted
+// into the tracer's buffers, synchronized: the first ray is possible, and
+// first_ray_ms is the host time to here less the triangles' uploads (the
+// builder's and the tracer's). Only then does the tree come to the host,
+// for the stats.
+Placed place_resident_bvh(DeviceTracer::Impl& impl, std::span<const Triangle> triangles, const BuildOptions& build) {
+    DeviceBuildStages& stages = impl.build_stages;
+    const auto start = std::chrono::steady_clock::now();
+    DeviceBvh bvh = build_resident_bvh(triangles, build, stages, impl.device);
+    const auto upload_start = std::chrono::steady_clock::now();
+    const Triangle* device_triangles = upload_triangles(impl, triangles);
+    const double triangle_upload_ms = ms_since(upload_start);
+    impl.convert_on_device = true;
+    const Placed placed = place_resident_layout(impl, bvh, device_triangles, triangles.size());
+    RF_CUDA_CHECK(cudaDeviceSynchronize());
+    stages.first_ray_ms = ms_since(start) - stages.upload_ms - triangle_upload_ms;
+
+    Bvh host;
+    if (impl.kernel == GpuKernel::Bvh2) {  // the tracer took the tree's buffers
+        host.nodes = download_all(impl.bvh_nodes, impl.bvh_nodes.size());
+        host.prim_indices = download_all(impl.prim_indices, impl.prim_indices.size());
+    } else {
+        host = download_bvh(bvh);
+    }
+    set_bvh_stats(impl, host, build.builder);
+    return placed;
 }
 
 // A BVH from build.builder (on the device where it has a device builder), in the kernel's layout.
 Placed place_bvh(DeviceTracer::Impl& impl, std::span<const Triangle> triangles, const BuildOptions& build,
                  Refittable refittable) {
     const bool device_build = build.build_on_device && has_device_builder(build.builder);
+    // A refittable structure keeps its host tree and converts from it (the host chain).
+    if (device_build && refittable == Refittable::No) return place_resident_bvh(impl, triangles, build);
+    const auto start = std::chrono::steady_clock::now();
     Bvh bvh = device_build ? build_bvh_on_device(triangles, build, &impl.build_stages, impl.device)
                            : build_bvh_on_cpu(triangles, build);
-    AccelStats& stats = impl.stats;
-    stats.name += "/" + to_string(build.builder);
-    stats.sah_cost = bvh.sah_cost(1.0f, 1.0f);
-    stats.quality_cost = bvh.quality_cost(2.0);
-    stats.leaf_count = bvh.leaf_count();
+    set_bvh_stats(impl, bvh, build.builder);
     impl.convert_on_device = build.build_on_device;
     if (refittable == Refittable::Yes) {
         impl.refitter = std::make_unique<DeviceBvhRefit>(bvh, impl.device);
         (void)impl.refitter->refit(triangles);  // uploads the triangles, recomputes the boxes from them
         if (impl.kernel != GpuKernel::Bvh2) impl.host_bvh = bvh;
     }
-    return place_layout(impl, bvh, triangles);
+    const Placed placed = place_layout(impl, bvh, triangles);
+    // Time to first ray on the host chain (refittable): everything after the
+    // builder's triangle upload until the traced layout is resident,
+    // downloads and re-uploads included.
+    if (device_build) {
+        RF_CUDA_CHECK(cudaDeviceSynchronize());
+        impl.build_stages.first_ray_ms = ms_since(start) - impl.build_stages.upload_ms;
+    }
+    return placed;
 }
 
 // The SAH kd-tree, built on the CPU (it has no device builder).
@@ -502,19 +622,21 @@ void DeviceTracer::count_traversal(std::span<const Ray> rays, bool any_hit, Trav
     const uint32_t count = checked_ray_count(rays.size());
     RF_CUDA_CHECK(cudaSetDevice(impl.device));
     impl.rays.upload(rays);
-    impl.totals.reserve(3);
-    RF_CUDA_CHECK(cudaMemset(impl.totals.data(), 0, 3 * sizeof(unsigned long long)));
+    constexpr int kTotals = 4;  // count_kernel's: steps, triangle tests, restarts, node fetches
+    impl.totals.reserve(kTotals);
+    RF_CUDA_CHECK(cudaMemset(impl.totals.data(), 0, kTotals * sizeof(unsigned long long)));
     impl.with_tracer([&](const auto& tracer) {
         using Tracer = std::decay_t<decltype(tracer)>;
         launch_shaped(count_kernel<Tracer>, trace_shape(count), tracer, impl.rays.data(), count, any_hit,
                       impl.totals.data());
     });
-    unsigned long long sums[3] = {0, 0, 0};
+    unsigned long long sums[kTotals] = {0, 0, 0, 0};
     RF_CUDA_CHECK(cudaMemcpy(sums, impl.totals.data(), sizeof sums, cudaMemcpyDeviceToHost));
     totals.rays += count;
     totals.steps += sums[0];
     totals.prim_tests += sums[1];
     totals.restarts += sums[2];
+    totals.node_fetches += sums[3];
 }
 
 GpuKernel DeviceTracer::kernel() const { return impl_->kernel; }
@@ -522,6 +644,55 @@ int DeviceTracer::device() const { return impl_->device; }
 AccelStats DeviceTracer::stats() const { return impl_->stats; }
 void DeviceTracer::set_stats(const AccelStats& stats) { impl_->stats = stats; }
 const DeviceBuildStages& DeviceTracer::build_stages() const { return impl_->build_stages; }
+
+// ---- The bench's per-kernel resources (kernel_resources.cu; added with issue
+// 33's bench work). The kernels launch_trace launches for `kernel`, closest
+// and any hit, at the block size it launches them with: keep in step with
+// launch_trace. The trace kernels live in this file's anonymous namespace,
+// hence this function here.
+namespace {
+
+template <class Tracer>
+void add_grid_stride_resources(std::vector<GpuKernelResources>& out, const std::string& name, int device) {
+    out.push_back(kernel_resources_of(reinterpret_cast<const void*>(intersect_kernel<Tracer>),
+                                      name + " closest (grid-stride)", int(kTraceBlock), device));
+    out.push_back(kernel_resources_of(reinterpret_cast<const void*>(occluded_kernel<Tracer>),
+                                      name + " any (grid-stride)", int(kTraceBlock), device));
+}
+
+}  // namespace
+
+std::vector<GpuKernelResources> trace_kernel_resources(GpuKernel kernel, int device) {
+    using Impl = DeviceTracer::Impl;
+    std::vector<GpuKernelResources> out;
+    const std::string name = to_string(kernel);
+    switch (kernel) {
+        case GpuKernel::AilaLaine:
+            out.push_back(kernel_resources_of(reinterpret_cast<const void*>(aila_laine_persistent_kernel<false>),
+                                              name + " closest (persistent)", int(kTraceBlock), device));
+            out.push_back(kernel_resources_of(reinterpret_cast<const void*>(aila_laine_persistent_kernel<true>),
+                                              name + " any (persistent)", int(kTraceBlock), device));
+            break;
+        case GpuKernel::CwbvhFma: break;  // its launches live in cwbvh_fma_trace.cu
+        case GpuKernel::Bvh2: add_grid_stride_resources<decltype(Impl::bvh2)>(out, name, device); break;
+        case GpuKernel::AilaLaineFma:
+            out.push_back(kernel_resources_of(
+                reinterpret_cast<const void*>(aila_laine_persistent_kernel<false, AilaLaineFmaTraversal>),
+                name + " closest (persistent)", int(kTraceBlock), device));
+            out.push_back(kernel_resources_of(
+                reinterpret_cast<const void*>(aila_laine_persistent_kernel<true, AilaLaineFmaTraversal>),
+                name + " any (persistent)", int(kTraceBlock), device));
+            break;
+        case GpuKernel::Cwbvh: add_grid_stride_resources<decltype(Impl::cwbvh)>(out, name, device); break;
+        case GpuKernel::KdShortStack:
+            add_grid_stride_resources<decltype(Impl::kd_short_stack)>(out, name, device);
+            break;
+        case GpuKernel::KdRestart: add_grid_stride_resources<decltype(Impl::kd_restart)>(out, name, device); break;
+        case GpuKernel::Grid:
+        case GpuKernel::ProximityGrid: add_grid_stride_resources<decltype(Impl::grid)>(out, name, device); break;
+    }
+    return out;
+}
 
 
 }  // namespace rf::cuda

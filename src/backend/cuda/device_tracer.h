@@ -15,7 +15,9 @@
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <vector>
 
+#include "backend/backends.h"
 #include "backend/cuda/device_builders.h"
 #include "backend/cuda/two_level_trace.h"
 #include "rayforge/accel/accel.h"
@@ -88,5 +90,10 @@ public:
 private:
     std::unique_ptr<Impl> impl_;
 };
+
+// The registers, local memory and occupancy of the trace launches of
+// `kernel` (closest and any hit) on `device`, as launch_trace launches them
+// (device_tracer.cu; empty for a kernel whose launches live elsewhere).
+std::vector<GpuKernelResources> trace_kernel_resources(GpuKernel kernel, int device);
 
 }  // namespace rf::cuda

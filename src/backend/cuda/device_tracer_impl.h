@@ -71,13 +71,29 @@ private:
     std::unique_ptr<BatchScratch> scratch_;
 };
 
+// Where one trace reads and writes: device rays, the answers (hits for
+// the closest hit, flags for any hit), the persistent kernels' ray counter
+// (reset to 0 before the launch), the stream.
+struct TraceTarget {
+    const Ray* rays = nullptr;
+    Hit* hits = nullptr;
+    uint8_t* flags = nullptr;
+    uint32_t* counter = nullptr;
+    cudaStream_t stream = nullptr;
+};
+
+// Kernels scheduled as persistent threads taking rays from TraceTarget::counter.
+inline bool uses_ray_counter(GpuKernel kernel) {
+    return kernel == GpuKernel::AilaLaine || kernel == GpuKernel::AilaLaineFma || kernel == GpuKernel::CwbvhFma;
+}
+
 struct DeviceTracer::Impl {
     GpuKernel kernel = GpuKernel::Bvh2;
     int device = 0;
     AccelStats stats;
     DeviceBuildStages build_stages;  // of the structure's build and layout conversion (on_device: where)
     int multiprocessors = 1;
-    int persistent_blocks[2] = {0, 0};  // Aila-Laine grid size, closest / any hit (set once, under persistent_once)
+    int persistent_blocks[2] = {0, 0};  // persistent kernels' grid size, closest / any hit (set once, under persistent_once)
     std::once_flag persistent_once;
 
     DeviceBuffer<Triangle> triangles{"triangles"};
@@ -105,7 +121,9 @@ struct DeviceTracer::Impl {
 
     Bvh2Tracer bvh2{};
     AilaLaineTracer aila_laine{};
+    AilaLaineFmaTracer aila_laine_fma{};  // the same arrays as aila_laine
     CwbvhTracer cwbvh{};
+    CwbvhFmaTracer cwbvh_fma{};           // the same arrays as cwbvh
     KdTracer<KdTraversal::ShortStack> kd_short_stack{};
     KdTracer<KdTraversal::Restart> kd_restart{};
     GridTracer grid{};
@@ -129,7 +147,9 @@ struct DeviceTracer::Impl {
         switch (kernel) {
             case GpuKernel::Bvh2: return f(bvh2);
             case GpuKernel::AilaLaine: return f(aila_laine);
+            case GpuKernel::AilaLaineFma: return f(aila_laine_fma);
             case GpuKernel::Cwbvh: return f(cwbvh);
+            case GpuKernel::CwbvhFma: return f(cwbvh_fma);
             case GpuKernel::KdShortStack: return f(kd_short_stack);
             case GpuKernel::KdRestart: return f(kd_restart);
             case GpuKernel::Grid:

@@ -41,4 +41,20 @@ private:
     cudaEvent_t start_ = nullptr, stop_ = nullptr;
 };
 
+// One untimed event on the default stream: the host waits on it for the
+// work enqueued before record() (an asynchronous copy landing) and no more.
+class StreamEvent {
+public:
+    StreamEvent() { RF_CUDA_CHECK(cudaEventCreateWithFlags(&event_, cudaEventDisableTiming)); }
+    ~StreamEvent() { cudaEventDestroy(event_); }
+    StreamEvent(const StreamEvent&) = delete;
+    StreamEvent& operator=(const StreamEvent&) = delete;
+
+    void record() { RF_CUDA_CHECK(cudaEventRecord(event_)); }
+    void synchronize() { RF_CUDA_CHECK(cudaEventSynchronize(event_)); }
+
+private:
+    cudaEvent_t event_ = nullptr;
+};
+
 }  // namespace rf::cuda

@@ -5,22 +5,29 @@
 //     (morton_sort.cu, shared with the LBVH).
 //  2. clusters: a flag per sorted position where the top 15 bits change,
 //     cub::DeviceSelect::Flagged of the positions (the cluster starts), then
-//     one thread per cluster writes its level-0 task and 15-bit prefix.
-//  3. bottom levels by work queues, one launch per level: each warp takes 32
-//     tasks with one atomicAdd on the input queue's head (lane 0, broadcast
-//     by shuffle); each thread splits its task with the shared HD step
-//     (hlbvh2_bottom_steps.h process_task: binary search for the first 1 of the
-//     highest differing bit; the node is written at index mid - 1, as the CPU
-//     numbers it, so the trees are the CPU's by construction); inner children
-//     are enqueued at a warp-local prefix sum (two ballots + popc) after one
-//     atomicAdd per warp on the output queue's tail. The queues ping-pong;
-//     no global scan. Each level's node indices are recorded (kNoNode for
-//     leaves) for the box pass.
-//  4. boxes bottom-up per level, deepest first, one launch per level, one
-//     thread per recorded node (node_box), then the cluster boxes.
+//     one thread per cluster writes its 15-bit prefix.
+//  3. every bottom tree in ONE launch (the paper's work queues, one launch
+//     per level, replaced by the radix-tree rule of Karras 2012, sec. 3-4,
+//     which HLBVH2's "first 1 of the highest differing bit" split is): one
+//     thread per split position i finds, from i alone, the range of the
+//     node that splits at i + 1 (hlbvh2_bottom_steps.h node_of_split: the
+//     maximal range sharing the bits above the first one where codes i and
+//     i + 1 differ, or the halvings of a run of equal codes) and, when that
+//     range is over leaf_size, writes inner node i's children (the inner
+//     child at its own split_position - 1, or a leaf run) and their parent
+//     links; one thread per cluster writes its root. Node i is the CPU's
+//     node i (numbered mid - 1), so the trees are the CPU's by
+//     construction, whatever the threads' order.
+//  4. boxes bottom-up in ONE launch: one thread per leaf walks its parent
+//     links, an arrival counter per inner node letting the second child's
+//     walk go on (Karras 2012 sec. 4; karras::AtomicArrival, acq_rel), the
+//     box union(left, right) as the CPU refit's; a walk reaching a cluster
+//     root writes the cluster's box.
 //  5. the top level over the clusters by task queues (hlbvh2_top_level.cu:
 //     the grid SAH of ch. 4 with the top grid only, 8 lanes per task, the
-//     CPU's tree by construction), then the top nodes' boxes bottom-up.
+//     CPU's tree by construction), then the top nodes' boxes bottom-up in
+//     one launch (the top level's SAH reads the cluster boxes, so the top
+//     boxes cannot join step 4's pass).
 //  6. emission on the device (raw_tree_emit.cu): box, count, SAH cost and
 //     leaf collapse per node bottom-up, the canonical layout, and the BVH
 //     back to the host. Slots no split used are marked (references set to
@@ -57,12 +64,6 @@
 namespace rf::cuda {
 namespace {
 
-using hlbvh2::Task;
-
-constexpr uint32_t kWarp = 32;  // kBlockSize (launch.h) is a multiple: full-mask ballots are valid
-constexpr uint32_t kFullMask = 0xffffffffu;
-constexpr uint32_t kMaxQueueBlocks = 4096;  // warps loop over the queue beyond this
-
 // Stage 2a: 1 where a cluster starts (the top 15 bits change).
 __global__ void cluster_flags_kernel(const uint32_t* keys, uint32_t n, uint8_t* flags) {
     const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
@@ -70,59 +71,33 @@ __global__ void cluster_flags_kernel(const uint32_t* keys, uint32_t n, uint8_t* 
     flags[i] = i == 0 || (keys[i] >> hlbvh2::kClusterShift) != (keys[i - 1] >> hlbvh2::kClusterShift);
 }
 
-// Stage 2b: one thread per cluster: its level-0 task (slot: its root) and prefix.
-__global__ void level0_tasks_kernel(const uint32_t* keys, uint32_t n, const uint32_t* cluster_begin, uint32_t clusters,
-                                    Task* tasks, uint32_t* prefix) {
+// Stage 2b: one thread per cluster: its 15-bit prefix.
+__global__ void cluster_prefix_kernel(const uint32_t* keys, const uint32_t* cluster_begin, uint32_t clusters,
+                                      uint32_t* prefix) {
     const uint32_t c = blockIdx.x * kBlockSize + threadIdx.x;
-    if (c >= clusters) return;
-    const uint32_t first = cluster_begin[c];
-    const uint32_t end = c + 1 < clusters ? cluster_begin[c + 1] : n;
-    tasks[c] = Task{first, end, 2 * (n - 1) + c};
-    prefix[c] = keys[first] >> hlbvh2::kClusterShift;
+    if (c < clusters) prefix[c] = keys[cluster_begin[c]] >> hlbvh2::kClusterShift;
 }
 
-// Stage 3: one level of the bottom trees. counters[0]: the input head,
-// counters[1]: the output tail; both zero at launch.
-__global__ void bottom_level_kernel(const uint32_t* keys, const Task* input, uint32_t count, Task* output,
-                                    uint32_t* counters, uint32_t leaf_size, uint32_t* refs, uint8_t* leaf_runs,
-                                    uint32_t* level_nodes) {
-    const int lane = static_cast<int>(threadIdx.x % kWarp);
-    for (;;) {
-        uint32_t base = 0;
-        if (lane == 0) base = atomicAdd(&counters[0], kWarp);  // one dequeue per warp
-        base = __shfl_sync(kFullMask, base, 0);
-        if (base >= count) return;  // uniform over the warp
-        const uint32_t at = base + static_cast<uint32_t>(lane);
-        Task children[2];
-        uint32_t inner = 0;
-        if (at < count) {
-            uint32_t node = hlbvh2::kNoNode;
-            inner = hlbvh2::process_task(keys, input[at], leaf_size, refs, leaf_runs, children, &node);
-            level_nodes[at] = node;
-        }
-        const uint32_t one_or_more = __ballot_sync(kFullMask, inner >= 1), two = __ballot_sync(kFullMask, inner == 2);
-        const uint32_t total = hlbvh2::enqueue_total(one_or_more, two);
-        uint32_t out_base = 0;
-        if (lane == 0 && total != 0) out_base = atomicAdd(&counters[1], total);  // one enqueue per warp
-        out_base = __shfl_sync(kFullMask, out_base, 0);
-        const uint32_t offset = out_base + hlbvh2::enqueue_offset(one_or_more, two, lane);
-        for (uint32_t k = 0; k < inner; ++k) output[offset + k] = children[k];
+// Stage 3: every bottom tree at once: threads 0 .. n - 2 the split
+// positions (inner node i, if any, writes its children), then one per
+// cluster (its root's reference).
+__global__ void bottom_trees_kernel(const uint32_t* keys, uint32_t n, const uint32_t* cluster_begin,
+                                    uint32_t clusters, uint32_t leaf_size, hlbvh2::BottomTrees out) {
+    const uint32_t t = blockIdx.x * kBlockSize + threadIdx.x;
+    if (t < n - 1) {
+        hlbvh2::build_split_node(keys, n, t, leaf_size, out);
+    } else if (t - (n - 1) < clusters) {
+        const uint32_t c = t - (n - 1);
+        const uint32_t end = c + 1 < clusters ? cluster_begin[c + 1] : n;
+        hlbvh2::build_cluster_root(keys, n, c, cluster_begin[c], end, leaf_size, out);
     }
 }
 
-// Stage 4a: one level's boxes; the deeper levels are final.
-__global__ void level_boxes_kernel(hlbvh2::BoxView view, const uint32_t* level_nodes, uint32_t count) {
+// Stage 4: the bottom trees' boxes and the clusters', one thread per sorted
+// position (those that start a leaf walk up).
+__global__ void bottom_boxes_kernel(hlbvh2::BottomBoxPass pass, uint32_t n) {
     const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
-    if (i >= count) return;
-    const uint32_t node = level_nodes[i];
-    if (node != hlbvh2::kNoNode) hlbvh2::node_box(view, node);
-}
-
-// Stage 4b: the clusters' boxes (a root may be a leaf).
-__global__ void cluster_boxes_kernel(hlbvh2::BoxView view, const uint32_t* roots, uint32_t clusters, Box3f* boxes) {
-    const uint32_t c = blockIdx.x * kBlockSize + threadIdx.x;
-    if (c >= clusters) return;
-    boxes[c] = hlbvh2::reference_box(view, roots[c]);
+    if (i < n) hlbvh2::boxes_from_leaf<karras::AtomicArrival>(pass, i);
 }
 
 // What lives to the end of a build: the sorted triangles, the bottom
@@ -132,28 +107,21 @@ struct ForestOnDevice {
     DeviceMortonOrder<uint32_t> sorted;
     DeviceBuffer<uint32_t> refs;  // 2 (n - 1) split slots, then the cluster roots
     DeviceBuffer<uint8_t> leaf_runs;
-    std::vector<uint32_t> level_sizes;  // bottom tasks per work-queue level
     DeviceTopLevel top;
     [[nodiscard]] size_t ref_count() const { return 2 * (size_t{n} - 1) + clusters; }
     [[nodiscard]] const uint32_t* cluster_roots() const { return refs.data() + 2 * (size_t{n} - 1); }
-};
-
-// The bottom levels' task queues, ping-ponged; level 0 (the clusters) in buffers[0].
-struct TaskQueues {
-    DeviceBuffer<Task> buffers[2];
-    uint32_t capacity = 0;
 };
 
 // Runs of equal 15-bit prefixes of the sorted codes.
 struct Clusters {
     DeviceBuffer<uint32_t> begin;   // first sorted position of each
     DeviceBuffer<uint32_t> prefix;  // 15-bit prefix of each
-    TaskQueues queues;
 };
 
-// Stage 2a: flags where the prefix changes, compacted into the cluster
-// starts (`begin`, room for n); the flags, the count and the scratch are
-// freed on return. Starts the stage's timer; returns the cluster count.
+// Stage 2a, timed: flags where the prefix changes, compacted into the
+// cluster starts (`begin`, room for n). The flags, the count and the
+// scratch are allocated before the timer and freed after it. Returns the
+// cluster count (read once the timed work is done).
 uint32_t compact_cluster_starts(const ForestOnDevice& f, DeviceBuffer<uint32_t>& begin, BuildContext& build) {
     const uint32_t n = f.n;
     DeviceBuffer<uint8_t> flags(build.meter, "HLBVH2: cluster flags", n);
@@ -167,61 +135,51 @@ uint32_t compact_cluster_starts(const ForestOnDevice& f, DeviceBuffer<uint32_t>&
     build.timer.start();
     launch(cluster_flags_kernel, n, f.sorted.keys.data(), n, flags.data());
     cub_run(scratch, select);
+    build.stages.clusters_ms = build.timer.stop_ms();
     return download_value(selected.data());
 }
 
-// Stage 2, timed as clusters_ms: the clusters, their prefixes and the
-// level-0 tasks in the first queue. A later task has more than leaf_size
-// primitives, disjoint from the others', so a level holds at most
-// n / (leaf_size + 1) tasks.
-Clusters find_clusters(ForestOnDevice& f, uint32_t leaf_size, BuildContext& build) {
+// Stage 2, timed as clusters_ms: the clusters and their prefixes.
+// Allocations stay outside the timed work.
+Clusters find_clusters(ForestOnDevice& f, BuildContext& build) {
     Clusters found;
     found.begin = DeviceBuffer<uint32_t>(build.meter, "HLBVH2: cluster starts", f.n);  // at most one per triangle
     f.clusters = compact_cluster_starts(f, found.begin, build);
     build.stages.cluster_count = f.clusters;
-    TaskQueues& queues = found.queues;
-    queues.capacity = std::max(f.clusters, f.n / (leaf_size + 1) + 1);
-    queues.buffers[0] = DeviceBuffer<Task>(build.meter, "HLBVH2: task queue A", queues.capacity);
-    queues.buffers[1] = DeviceBuffer<Task>(build.meter, "HLBVH2: task queue B", queues.capacity);
     found.prefix = DeviceBuffer<uint32_t>(build.meter, "HLBVH2: cluster prefixes", f.clusters);
-    launch(level0_tasks_kernel, f.clusters, f.sorted.keys.data(), f.n, found.begin.data(), f.clusters,
-           queues.buffers[0].data(), found.prefix.data());
-    build.stages.clusters_ms = build.timer.stop_ms();
+    build.timer.start();
+    launch(cluster_prefix_kernel, f.clusters, f.sorted.keys.data(), found.begin.data(), f.clusters,
+           found.prefix.data());
+    build.stages.clusters_ms += build.timer.stop_ms();
     return found;
 }
 
-// Stage 3, timed as bottom_ms: the bottom levels, one launch per level,
-// into f.refs and f.leaf_runs. Returns the levels' recorded nodes (every
-// level-0 task, then distinct inner nodes; level_base: each level's first);
-// the sorted codes and the queues are spent, freed on return.
-DeviceBuffer<uint32_t> build_bottom_levels(ForestOnDevice& f, DeviceBuffer<uint32_t> sorted_keys, TaskQueues queues,
-                                           uint32_t leaf_size, BuildContext& build,
-                                           std::vector<uint32_t>& level_base) {
+// The bottom trees' parent links, for the box pass.
+struct ParentLinks {
+    DeviceBuffer<uint32_t> inner;  // per inner node index
+    DeviceBuffer<uint32_t> leaf;   // per sorted position: kNoParent unless a leaf starts there
+};
+
+// Stage 3, timed as bottom_ms: every bottom tree in one launch into f.refs
+// and f.leaf_runs (hlbvh2_bottom_steps.h build_split_node: the node numbers
+// are the CPU's by construction, whatever the threads' order). The sorted
+// codes are spent, freed on return. Returns the parent links.
+ParentLinks build_bottom_trees(ForestOnDevice& f, DeviceBuffer<uint32_t> sorted_keys, const Clusters& found,
+                               uint32_t leaf_size, BuildContext& build) {
     f.refs = DeviceBuffer<uint32_t>(build.meter, "HLBVH2: child references", f.ref_count());
-    DeviceBuffer<uint32_t> level_nodes(build.meter, "HLBVH2: level nodes", size_t{f.clusters} + f.n - 1);
-    DeviceBuffer<uint32_t> counters(build.meter, "HLBVH2: queue counters", 2);  // input head, output tail
     f.leaf_runs = DeviceBuffer<uint8_t>(build.meter, "HLBVH2: leaf run sizes", f.n);
-    uint32_t count = f.clusters, base = 0;
-    int in = 0;
+    ParentLinks parents{DeviceBuffer<uint32_t>(build.meter, "HLBVH2: inner node parents", f.n - 1),
+                        DeviceBuffer<uint32_t>(build.meter, "HLBVH2: leaf parents", f.n)};
+    const hlbvh2::BottomTrees out{f.refs.data(), f.leaf_runs.data(), parents.inner.data(), parents.leaf.data()};
     build.timer.start();
-    // Split positions no task reaches leave their node slot unused: marked for the emission.
+    // Split positions no node has leave their slots unused: marked for the emission.
     RF_CUDA_CHECK(cudaMemsetAsync(f.refs.data(), 0xff, f.refs.bytes()));
-    while (count != 0) {
-        if (base + size_t{count} > level_nodes.size()) throw Error("HLBVH2: bottom levels overran their node list");
-        f.level_sizes.push_back(count);
-        level_base.push_back(base);
-        RF_CUDA_CHECK(cudaMemsetAsync(counters.data(), 0, counters.bytes()));
-        launch_shaped(bottom_level_kernel, {strided_blocks_for(count, kMaxQueueBlocks)}, sorted_keys.data(),
-                      queues.buffers[in].data(), count, queues.buffers[1 - in].data(), counters.data(), leaf_size,
-                      f.refs.data(), f.leaf_runs.data(), level_nodes.data() + base);
-        base += count;
-        count = download_value(counters.data() + 1);  // the next level's size (waits for this one)
-        if (count > queues.capacity) throw Error("HLBVH2: work queue overflow");
-        in = 1 - in;
-    }
+    RF_CUDA_CHECK(cudaMemsetAsync(parents.leaf.data(), 0xff, parents.leaf.bytes()));  // kNoParent
+    launch(bottom_trees_kernel, uint64_t{f.n} - 1 + f.clusters, sorted_keys.data(), f.n, found.begin.data(),
+           f.clusters, leaf_size, out);
     build.stages.bottom_ms = build.timer.stop_ms();
-    build.stages.bottom_levels = static_cast<uint32_t>(f.level_sizes.size());
-    return level_nodes;
+    build.stages.bottom_levels = 1;  // one launch for every level
+    return parents;
 }
 
 // The bottom trees' boxes.
@@ -233,18 +191,18 @@ struct ForestBoxes {
     }
 };
 
-// Stage 4, timed as boxes_ms: boxes level by level, deepest first, then the
-// clusters'; the recorded level nodes are spent, freed on return.
-ForestBoxes box_bottom_levels(const ForestOnDevice& f, DeviceBuffer<uint32_t> level_nodes,
-                              const std::vector<uint32_t>& level_base, BuildContext& build) {
+// Stage 4, timed as boxes_ms: the bottom trees' and the clusters' boxes in
+// one bottom-up launch with an arrival counter per inner node; the parent
+// links are spent, freed on return.
+ForestBoxes box_bottom_trees(const ForestOnDevice& f, ParentLinks parents, BuildContext& build) {
     ForestBoxes boxes{DeviceBuffer<Box3f>(build.meter, "HLBVH2: inner node boxes", f.n - 1),
                       DeviceBuffer<Box3f>(build.meter, "HLBVH2: cluster boxes", f.clusters)};
-    const hlbvh2::BoxView view = boxes.view(f);
+    DeviceBuffer<uint32_t> arrivals(build.meter, "HLBVH2: inner node arrival counters", f.n - 1);
+    const hlbvh2::BottomBoxPass pass{boxes.view(f), parents.inner.data(), parents.leaf.data(), arrivals.data(),
+                                     boxes.clusters.data()};
     build.timer.start();
-    for (size_t l = f.level_sizes.size(); l-- > 0;) {
-        launch(level_boxes_kernel, f.level_sizes[l], view, level_nodes.data() + level_base[l], f.level_sizes[l]);
-    }
-    launch(cluster_boxes_kernel, f.clusters, view, f.cluster_roots(), f.clusters, boxes.clusters.data());
+    RF_CUDA_CHECK(cudaMemsetAsync(arrivals.data(), 0, arrivals.bytes()));
+    launch(bottom_boxes_kernel, f.n, pass, f.n);
     build.stages.boxes_ms = build.timer.stop_ms();
     return boxes;
 }
@@ -298,7 +256,6 @@ void download_forest(const ForestOnDevice& f, const Clusters* found, const Fores
     if (f.clusters >= 2) out.forest.top_refs = download_all(f.top.top_refs, 2 * (size_t{f.clusters} - 1));
     if (raw_boxes != nullptr) {
         out.cluster_boxes = download_all(raw_boxes->clusters, f.clusters);
-        out.level_sizes = f.level_sizes;
         if (f.clusters >= 2) out.top_boxes = download_all(f.top.top_boxes, f.clusters - 1);
         out.top_level_sizes = f.top.level_sizes;
     }
@@ -310,8 +267,10 @@ void download_forest(const ForestOnDevice& f, const Clusters* found, const Fores
 // and returns true; false when it could not (too deep, or one leaf), and
 // then the forest came back in `out`.
 bool build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, DeviceBuildStages& stages,
-                  DeviceHlbvh2Forest& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
+                  DeviceHlbvh2Forest& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr,
+                  DeviceBvh* resident = nullptr) {
     BuildContext build(stages);
+    build.resident = resident;
     ForestOnDevice f;
     f.n = static_cast<uint32_t>(triangles.size());
     // 1. Boxes, bounds, codes, the sort.
@@ -319,11 +278,9 @@ bool build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
     uint32_t root = f.n - 1;
     {
         // 2-5. The clusters and the boxes live in this scope: the device emission reads neither.
-        Clusters found = find_clusters(f, leaf_size, build);
-        std::vector<uint32_t> level_base;
-        DeviceBuffer<uint32_t> level_nodes =
-            build_bottom_levels(f, std::move(f.sorted.keys), std::move(found.queues), leaf_size, build, level_base);
-        const ForestBoxes boxes = box_bottom_levels(f, std::move(level_nodes), level_base, build);
+        Clusters found = find_clusters(f, build);
+        ParentLinks parents = build_bottom_trees(f, std::move(f.sorted.keys), found, leaf_size, build);
+        const ForestBoxes boxes = box_bottom_trees(f, std::move(parents), build);
         if (f.clusters >= 2) f.top = build_top_level(f, found, boxes, build);
         stages.peak_device_bytes = build.meter.peak();
         if (!raw && f.clusters < 2) root = download_value(f.cluster_roots());
@@ -343,13 +300,14 @@ bool build_forest(std::span<const Triangle> triangles, uint32_t leaf_size, Devic
 
 // Returns true when the device emitted the BVH into *bvh (config and bvh given).
 bool build_raw(std::span<const Triangle> triangles, uint32_t leaf_size, DeviceBuildStages& stages, int device,
-               DeviceHlbvh2Forest& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
+               DeviceHlbvh2Forest& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr,
+               DeviceBvh* resident = nullptr) {
     if (triangles.size() >= hlbvh2::kLeafRef / 2) throw Error("HLBVH2 device build: more than 2^30-1 triangles");
     if (leaf_size < 1 || leaf_size > 255) throw Error("HLBVH2 device build: leaf size must be in [1, 255]");
     if (triangles.size() < 2) return false;  // no inner nodes: the host does it
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
-    return build_forest(triangles, leaf_size, stages, out, raw, config, bvh);
+    return build_forest(triangles, leaf_size, stages, out, raw, config, bvh, resident);
 }
 
 }  // namespace
@@ -363,7 +321,7 @@ DeviceHlbvh2Forest build_hlbvh2_forest_on_device(std::span<const Triangle> trian
 }
 
 Bvh build_hlbvh2_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config,
-                           DeviceBuildStages* stages, int device) {
+                           DeviceBuildStages* stages, int device, DeviceBvh* resident) {
     DeviceBuildStages local;
     DeviceBuildStages& s = stages ? *stages : local;
     s = {};
@@ -371,7 +329,7 @@ Bvh build_hlbvh2_on_device(std::span<const Triangle> triangles, const BvhBuildCo
     DeviceHlbvh2Forest raw;
     Bvh bvh;
     if (build_raw(triangles, static_cast<uint32_t>(std::max(config.max_leaf_size, 1)), s, device, raw, false,
-                  &config, &bvh)) {
+                  &config, &bvh, resident)) {
         s.emitted_on_device = true;
         return bvh;
     }

@@ -17,7 +17,6 @@ namespace rf::cuda {
 struct DeviceHlbvh2Forest {
     Hlbvh2Forest forest;                   // empty arrays for n < 2; top_refs empty for 1 cluster
     std::vector<Box3f> cluster_boxes;      // per cluster, from the device's bottom-up pass
-    std::vector<uint32_t> level_sizes;     // tasks per work-queue level, level 0 = the clusters
     std::vector<Box3f> top_boxes;          // per top node k, from the device's bottom-up pass
     std::vector<uint32_t> top_level_sizes; // tasks per top task-queue level, level 0 = the root
 };

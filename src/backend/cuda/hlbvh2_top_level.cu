@@ -4,11 +4,18 @@
 // from the shared steps of accel/bvh/builders/hlbvh2_top_steps.h:
 //  1. one thread per cluster: its cell in the 32^3 grid, triangle count,
 //     box and root, in cluster order; the root task (all clusters, node 0).
-//  2. task queues, one launch per level: each warp takes 4 tasks with one
+//  2. task queues, one launch per level (two with large tasks), each
+//     reading its sizes from a level record on the device
+//     (hlbvh2::TopQueueLevel, zeroed once; no memset or host read per
+//     level: the host stops on a lagging copy, lagged_rounds.h, and the
+//     large tasks' grid is the large queue's capacity, idle blocks
+//     returning): each warp takes 4 tasks with one
 //     atomicAdd on the input queue's head (lane 0, broadcast by shuffle);
 //     each task is processed by 8 lanes, as in ch. 4 (one lane per bin):
 //     the cell bounds (strided over the clusters, a min/max reduction by
-//     shuffles), the bin each lane owns on every axis, prefix and suffix
+//     shuffles), the bin each lane owns on every axis (tasks of more than
+//     32 clusters: strided binning and a reduce-scatter by xor shuffles,
+//     not every lane reading every cluster), prefix and suffix
 //     unions of the bins by shuffles (the box union is exact, so the bins
 //     and areas are the CPU's), each lane's plane cost (rounded step by step:
 //     the CPU's values), then every lane folds the 21 candidates in the CPU's
@@ -27,7 +34,17 @@
 //     atomics on order-preserving float keys, 8 lanes choosing the split as
 //     above, a block-wide scan (cub::BlockScan) ranking the stable
 //     partition. The tree is the same: only who computes each step changes.
-//  3. the top nodes' boxes bottom-up, one launch per level, deepest first.
+//     Once no large task is left (the host sees it on its lagging copy),
+//     every remaining level runs in ONE launch of one block of 1024 threads
+//     (top_small_levels_kernel): its warps take the small tasks level after
+//     level from the device-side queues, one thread opening each next
+//     record, __syncthreads between levels, until a level is empty.
+//  3. the top nodes' boxes bottom-up in one launch (after one that links
+//     each top node to its parent): one thread per top node, the walks
+//     starting at the nodes with a cluster child, an arrival counter per
+//     node letting the second walk go on (Karras 2012 sec. 4;
+//     hlbvh2_top_steps.h top_boxes_from_node); the boxes are the level-wise
+//     pass's, union(left, right) at every node.
 #include <cuda_runtime.h>
 
 #include <cub/block/block_scan.cuh>
@@ -38,6 +55,7 @@
 
 #include "accel/bvh/builders/hlbvh2_top_steps.h"
 #include "backend/cuda/hlbvh2_top_level.h"
+#include "backend/cuda/lagged_rounds.h"
 #include "backend/cuda/launch.h"
 #include "rayforge/core/error.h"
 
@@ -55,13 +73,19 @@ constexpr uint32_t kTasksPerWarp = kWarp / kLanes;
 constexpr uint32_t kMaxQueueBlocks = 1024;         // warps loop over the queue beyond this
 constexpr uint32_t kTopTaskBlock = 256;            // threads per large task (the block path)
 constexpr uint32_t kTaskBlockWarps = kTopTaskBlock / kWarp;
+constexpr uint32_t kSmallLevelsThreads = 1024;     // the one block of the last, small-only levels
 static_assert(kTopTaskBlock % kWarp == 0, "the block path's warps are full");
 static_assert(kWarp % kLanes == 0, "tasks do not straddle warps");
 
-// Stage 1: the clusters as top-level primitives, and the root task.
-__global__ void top_clusters_kernel(DeviceTopLevelInput in, TopCluster* clusters, TopTask* root_task) {
+// Stage 1: the clusters as top-level primitives, the root task and level
+// 0's record (the records zeroed before).
+__global__ void top_clusters_kernel(DeviceTopLevelInput in, TopCluster* clusters, TopTask* root_task,
+                                    hlbvh2::TopQueueLevel* levels, bool root_is_large) {
     const uint32_t c = blockIdx.x * kBlockSize + threadIdx.x;
-    if (c == 0) *root_task = TopTask{0, in.clusters, 0};
+    if (c == 0) {
+        *root_task = TopTask{0, in.clusters, 0};
+        (root_is_large ? levels[0].large : levels[0].small) = 1;
+    }
     if (c >= in.clusters) return;
     const uint32_t end = c + 1 < in.clusters ? in.cluster_begin[c + 1] : in.n;
     clusters[c] = TopCluster{in.cluster_boxes[c], hlbvh2::pack_cells(in.cluster_prefix[c]), end - in.cluster_begin[c],
@@ -90,6 +114,37 @@ __device__ TopBin shuffle_bin_down(uint32_t mask, const TopBin& b, uint32_t delt
     r.triangles = __shfl_down_sync(mask, b.triangles, delta, kLanes);
     r.clusters = __shfl_down_sync(mask, b.clusters, delta, kLanes);
     return r;
+}
+
+__device__ TopBin shuffle_bin_xor(uint32_t mask, const TopBin& b, uint32_t delta) {
+    TopBin r;
+    r.box.lo = Vec3f(__shfl_xor_sync(mask, b.box.lo.x, delta, kLanes), __shfl_xor_sync(mask, b.box.lo.y, delta, kLanes),
+                     __shfl_xor_sync(mask, b.box.lo.z, delta, kLanes));
+    r.box.hi = Vec3f(__shfl_xor_sync(mask, b.box.hi.x, delta, kLanes), __shfl_xor_sync(mask, b.box.hi.y, delta, kLanes),
+                     __shfl_xor_sync(mask, b.box.hi.z, delta, kLanes));
+    r.triangles = __shfl_xor_sync(mask, b.triangles, delta, kLanes);
+    r.clusters = __shfl_xor_sync(mask, b.clusters, delta, kLanes);
+    return r;
+}
+
+// Bin `lane` of each axis for a task of more than kTopStridedBinMin
+// clusters: strided binning, then the reduce-scatter by xor shuffles
+// (hlbvh2_top_steps.h strided_bins_lane, scatter_*).
+__device__ void strided_bins_lanes(uint32_t mask, uint32_t lane, const TopCluster* in, const TopTask& task,
+                                   const hlbvh2::CellBounds& bounds, TopBin out[3]) {
+    TopBin all[3][hlbvh2::kTopBins];
+    hlbvh2::strided_bins_lane(in, task.first, task.end, bounds, lane, all);
+    for (uint32_t d = kLanes / 2; d > 0; d /= 2) {
+        for (uint32_t j = 0; j < d; ++j) {
+            const uint32_t k = hlbvh2::scatter_pair(lane, d, j);
+            for (int axis = 0; axis < 3; ++axis) {
+                const TopBin received = shuffle_bin_xor(mask, all[axis][hlbvh2::scatter_sent(lane, d, k)], d);
+                TopBin& kept = all[axis][hlbvh2::scatter_kept(lane, d, k)];
+                kept = hlbvh2::merge_bins(kept, received);
+            }
+        }
+    }
+    for (int axis = 0; axis < 3; ++axis) out[axis] = all[axis][lane];
 }
 
 // The split of a task from its bins, by its 8 lanes (`mask`: theirs;
@@ -150,7 +205,11 @@ __device__ uint32_t process_top_task(uint32_t mask, uint32_t lane, uint32_t grou
     }
     // This lane's bin on each axis.
     TopBin bins[3];
-    hlbvh2::bin_task_lane(in, task.first, task.end, bounds, lane, bins);
+    if (count > hlbvh2::kTopStridedBinMin) {
+        strided_bins_lanes(mask, lane, in, task, bounds, bins);
+    } else {
+        hlbvh2::bin_task_lane(in, task.first, task.end, bounds, lane, bins);
+    }
     uint32_t left_count = 0;
     const hlbvh2::TopSplit split = choose_split_lanes(mask, lane, bins, bounds, count, &left_count);
     // Stable partition into `out`, 8 clusters at a time.
@@ -187,19 +246,22 @@ __device__ uint32_t process_top_task(uint32_t mask, uint32_t lane, uint32_t grou
     return inner;
 }
 
-// Stage 2a: the level's small tasks (at most kTopBlockTaskMin clusters:
-// their children are small too). counters[0]: the input head, counters[1]:
-// the small output tail; both zero at launch. Clusters of the level's tasks
-// are read from `in` and partitioned into `out`.
-__global__ void top_level_kernel(const TopCluster* in, TopCluster* out, const TopTask* input, uint32_t count,
-                                 TopTask* output, uint32_t* counters, uint32_t top_base, uint32_t* top_refs,
-                                 uint32_t* level_nodes) {
+// Stage 2a: level `level`'s small tasks (at most kTopBlockTaskMin
+// clusters: their children are small too), their number and place read
+// from levels[level], their children counted into levels[level + 1].
+// Clusters of the level's tasks are read from `in` and partitioned into `out`.
+__device__ void small_tasks_of_level(const TopCluster* in, TopCluster* out, const TopTask* input, TopTask* output,
+                                     const hlbvh2::TopQueueLevel& self, uint32_t* head, uint32_t* tail,
+                                     const hlbvh2::TopQueueCapacity& capacity, uint32_t top_base, uint32_t* top_refs,
+                                     uint32_t* all_level_nodes) {
+    const uint32_t count = self.small;
+    uint32_t* level_nodes = all_level_nodes + self.base + self.large;  // after the level's large tasks
     const uint32_t warp_lane = threadIdx.x % kWarp;
     const uint32_t group = warp_lane / kLanes, lane = warp_lane % kLanes;
     const uint32_t group_mask = ((1u << kLanes) - 1u) << (group * kLanes);
     for (;;) {
         uint32_t base = 0;
-        if (warp_lane == 0) base = atomicAdd(&counters[0], kTasksPerWarp);  // one dequeue per warp
+        if (warp_lane == 0) base = atomicAdd(head, kTasksPerWarp);  // one dequeue per warp
         base = __shfl_sync(kFullMask, base, 0);
         if (base >= count) return;  // uniform over the warp
         const uint32_t at = base + group;
@@ -216,12 +278,58 @@ __global__ void top_level_kernel(const TopCluster* in, TopCluster* out, const To
         const uint32_t two = __ballot_sync(kFullMask, leader && inner == 2);
         const uint32_t total = hlbvh2::enqueue_total(one_or_more, two);
         uint32_t out_base = 0;
-        if (warp_lane == 0 && total != 0) out_base = atomicAdd(&counters[1], total);  // one enqueue per warp
+        if (warp_lane == 0 && total != 0) out_base = atomicAdd(tail, total);  // one enqueue per warp
         out_base = __shfl_sync(kFullMask, out_base, 0);
         if (leader) {
             const uint32_t offset = out_base + hlbvh2::enqueue_offset(one_or_more, two, static_cast<int>(warp_lane));
-            for (uint32_t k = 0; k < inner; ++k) output[offset + k] = children[k];
+            for (uint32_t k = 0; k < inner; ++k) {
+                if (offset + k < capacity.small) output[offset + k] = children[k];  // else the next level faults
+            }
         }
+    }
+}
+
+__global__ void top_level_kernel(const TopCluster* in, TopCluster* out, const TopTask* input, TopTask* output,
+                                 hlbvh2::TopQueueLevel* levels, uint32_t level, hlbvh2::TopQueueCapacity capacity,
+                                 uint32_t top_base, uint32_t* top_refs, uint32_t* all_level_nodes) {
+    const hlbvh2::TopQueueLevel self = levels[level];
+    if (!hlbvh2::top_level_runs(self, capacity)) return;
+    small_tasks_of_level(in, out, input, output, self, &levels[level].small_head, &levels[level + 1].small, capacity,
+                         top_base, top_refs, all_level_nodes);
+}
+
+// A level record another thread of the block wrote or counted into (L1
+// bypassed: the counts are atomics at L2).
+__device__ hlbvh2::TopQueueLevel load_record(const hlbvh2::TopQueueLevel* p) {
+    const uint32_t* w = reinterpret_cast<const uint32_t*>(p);
+    return hlbvh2::TopQueueLevel{__ldcg(w + 0), __ldcg(w + 1), __ldcg(w + 2), __ldcg(w + 3), __ldcg(w + 4)};
+}
+
+// Stage 2c: once no large task is left (small tasks only have small
+// children), every remaining level in ONE launch of one block: its warps
+// run level after level over the device-side queues, the first thread
+// opening each next record, __syncthreads between levels; it stops at the
+// first empty level (or a fault). Level `first` is the first not launched.
+__global__ void __launch_bounds__(kSmallLevelsThreads)
+    top_small_levels_kernel(TopCluster* cluster_side0, TopCluster* cluster_side1, TopTask* small_side0,
+                            TopTask* small_side1, hlbvh2::TopQueueLevel* levels, uint32_t first, uint32_t last,
+                            hlbvh2::TopQueueCapacity capacity, uint32_t top_base, uint32_t* top_refs,
+                            uint32_t* all_level_nodes) {
+    TopCluster* const clusters[2] = {cluster_side0, cluster_side1};
+    TopTask* const small[2] = {small_side0, small_side1};
+    for (uint32_t level = first; level < last; ++level) {
+        const hlbvh2::TopQueueLevel self = load_record(levels + level);
+        const bool runs = hlbvh2::top_level_runs(self, capacity) && self.large == 0;
+        if (threadIdx.x == 0) {
+            hlbvh2::open_next_top_level(self, levels + level + 1, capacity);
+            if (runs == false && self.fault == 0) levels[level + 1].fault = 1;  // a large task here: a host error
+        }
+        if (!runs || self.small == 0) return;  // uniform: every thread read the same record
+        const uint32_t side = level & 1;
+        small_tasks_of_level(clusters[side], clusters[1 - side], small[side], small[1 - side], self,
+                             &levels[level].small_head, &levels[level + 1].small, capacity, top_base, top_refs,
+                             all_level_nodes);
+        __syncthreads();  // the level's children, clusters and counts are final for the block
     }
 }
 
@@ -242,9 +350,12 @@ struct SharedAtomics {
 // from a block-wide exclusive scan of the left flags. Children of more than
 // kTopBlockTaskMin clusters go to the next level's large queue, the others
 // to its small queue: one atomicAdd on each tail used.
+// The grid is the large queue's capacity (blocks past the level's large
+// tasks idle); its first thread opens levels[level + 1].
 __global__ void __launch_bounds__(kTopTaskBlock) top_large_task_kernel(
     const TopCluster* in, TopCluster* out, const TopTask* large_input, TopTask* small_output, TopTask* large_output,
-    uint32_t* counters, uint32_t top_base, uint32_t* top_refs, uint32_t* level_nodes) {
+    hlbvh2::TopQueueLevel* levels, uint32_t level, hlbvh2::TopQueueCapacity capacity, uint32_t top_base,
+    uint32_t* top_refs, uint32_t* all_level_nodes) {
     using BlockScan = cub::BlockScan<uint32_t, kTopTaskBlock>;
     __shared__ hlbvh2::TopBinKeys warp_bins[kTaskBlockWarps][3][hlbvh2::kTopBins];
     __shared__ uint32_t cell_lo[3], cell_hi[3];
@@ -253,6 +364,11 @@ __global__ void __launch_bounds__(kTopTaskBlock) top_large_task_kernel(
     __shared__ typename BlockScan::TempStorage scan_storage;
 
     const uint32_t tid = threadIdx.x, warp = tid / kWarp, warp_lane = tid % kWarp;
+    const hlbvh2::TopQueueLevel self = levels[level];
+    hlbvh2::TopQueueLevel* next = levels + level + 1;
+    if (blockIdx.x == 0 && tid == 0) hlbvh2::open_next_top_level(self, next, capacity);
+    if (!hlbvh2::top_level_runs(self, capacity) || blockIdx.x >= self.large) return;  // uniform over the block
+    uint32_t* level_nodes = all_level_nodes + self.base;
     const TopTask task = large_input[blockIdx.x];
     const uint32_t count = task.end - task.first;
     hlbvh2::TopBinKeys* flat_bins = &warp_bins[0][0][0];
@@ -345,105 +461,135 @@ __global__ void __launch_bounds__(kTopTaskBlock) top_large_task_kernel(
                 ++small_count;
             }
         }
-        uint32_t small_at = small_count != 0 ? atomicAdd(&counters[1], small_count) : 0;
-        uint32_t large_at = large_count != 0 ? atomicAdd(&counters[2], large_count) : 0;
-        for (int side = 0; side < 2; ++side) {
+        uint32_t small_at = small_count != 0 ? atomicAdd(&next->small, small_count) : 0;
+        uint32_t large_at = large_count != 0 ? atomicAdd(&next->large, large_count) : 0;
+        for (int side = 0; side < 2; ++side) {  // past a capacity: not written, and the next level faults
             if (!inner[side]) continue;
             if (large[side]) {
-                large_output[large_at++] = halves[side];
+                if (large_at < capacity.large) large_output[large_at] = halves[side];
+                ++large_at;
             } else {
-                small_output[small_at++] = halves[side];
+                if (small_at < capacity.small) small_output[small_at] = halves[side];
+                ++small_at;
             }
         }
     }
 }
 
-// Stage 3: one level's top boxes; the deeper levels are final.
-__global__ void top_boxes_kernel(hlbvh2::TopBoxView view, const uint32_t* level_nodes, uint32_t count) {
-    const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
-    if (i < count) hlbvh2::top_node_box(view, level_nodes[i]);
+// Stage 3a: the top nodes' parent links, one thread per top node.
+__global__ void link_top_children_kernel(hlbvh2::TopBoxView view, uint32_t top_nodes, uint32_t* top_parent) {
+    const uint32_t k = blockIdx.x * kBlockSize + threadIdx.x;
+    if (k < top_nodes) hlbvh2::link_top_children(view, k, top_parent);
+}
+
+// Stage 3b: the top boxes bottom-up in one launch, one thread per top node
+// (the walks start at the nodes with a cluster child).
+__global__ void top_boxes_kernel(hlbvh2::TopBoxView view, const uint32_t* top_parent, uint32_t* arrivals,
+                                 uint32_t top_nodes) {
+    const uint32_t k = blockIdx.x * kBlockSize + threadIdx.x;
+    if (k < top_nodes) hlbvh2::top_boxes_from_node<karras::AtomicArrival>(view, top_parent, arrivals, k);
 }
 
 // The top levels' ping-pong buffers: side s holds a level's input, 1 - s
-// its output.
+// its output; the levels' records.
 struct TopQueues {
     DeviceBuffer<TopCluster> clusters[2];
     DeviceBuffer<TopTask> small[2], large[2];
-    DeviceBuffer<uint32_t> counters;  // small head, small tail, large tail
-    uint32_t small_capacity = 0, large_capacity = 0;
+    DeviceBuffer<hlbvh2::TopQueueLevel> levels;  // max_levels + 1, zeroed
+    hlbvh2::TopQueueCapacity capacity{};
+    uint32_t max_levels = 0;
 };
 
+// Allocated and zeroed outside the timed stages.
 TopQueues make_top_queues(uint32_t clusters, MemoryMeter& meter) {
     TopQueues q;
     // Tasks hold >= 2 clusters each, disjoint: a level has at most clusters / 2
-    // small ones and clusters / (kTopBlockTaskMin + 1) large ones.
-    q.small_capacity = clusters / 2;
-    q.large_capacity = std::max(1u, clusters / (hlbvh2::kTopBlockTaskMin + 1));
+    // small ones and clusters / (kTopBlockTaskMin + 1) large ones; every
+    // level makes at least one of the clusters - 1 top nodes.
+    q.capacity.small = clusters / 2;
+    q.capacity.large = std::max(1u, clusters / (hlbvh2::kTopBlockTaskMin + 1));
+    q.capacity.nodes = clusters - 1;
+    q.max_levels = clusters;
     const char* const side_name[2] = {"A", "B"};
     for (int s = 0; s < 2; ++s) {
         q.clusters[s] = DeviceBuffer<TopCluster>(meter, std::string("HLBVH2: top clusters ") + side_name[s], clusters);
         q.small[s] =
-            DeviceBuffer<TopTask>(meter, std::string("HLBVH2: top task queue ") + side_name[s], q.small_capacity);
+            DeviceBuffer<TopTask>(meter, std::string("HLBVH2: top task queue ") + side_name[s], q.capacity.small);
         q.large[s] =
-            DeviceBuffer<TopTask>(meter, std::string("HLBVH2: top large task queue ") + side_name[s], q.large_capacity);
+            DeviceBuffer<TopTask>(meter, std::string("HLBVH2: top large task queue ") + side_name[s], q.capacity.large);
     }
-    q.counters = DeviceBuffer<uint32_t>(meter, "HLBVH2: top queue counters", 3);
+    q.levels = DeviceBuffer<hlbvh2::TopQueueLevel>(meter, "HLBVH2: top level records", size_t{q.max_levels} + 1);
+    RF_CUDA_CHECK(cudaMemset(q.levels.data(), 0, q.levels.bytes()));
     return q;
 }
 
-// One level from side `side`: its large tasks' nodes first, then its small
-// tasks', at level_nodes.
-void launch_top_level(TopQueues& q, int side, uint32_t small, uint32_t large, uint32_t top_base, uint32_t* top_refs,
+// Top levels launched between two looks at the next level's size.
+constexpr uint32_t kTopLevelsPerRound = 4;
+
+// Level `level` from side level % 2: its large tasks' launch (which opens
+// the next record), then its small tasks' (warps looping over the queue;
+// the grid sized for `small_bound`).
+void launch_top_level(TopQueues& q, uint32_t level, uint64_t small_bound, uint32_t top_base, uint32_t* top_refs,
                       uint32_t* level_nodes) {
-    const int next = 1 - side;
-    if (large != 0) {
-        launch_shaped(top_large_task_kernel, {large, kTopTaskBlock}, q.clusters[side].data(), q.clusters[next].data(),
-                      q.large[side].data(), q.small[next].data(), q.large[next].data(), q.counters.data(), top_base,
-                      top_refs, level_nodes);
-    }
-    if (small != 0) {
-        const uint32_t warps = (small + kTasksPerWarp - 1) / kTasksPerWarp;
-        launch_shaped(top_level_kernel, {strided_blocks_for(uint64_t{warps} * kWarp, kMaxQueueBlocks)},
-                      q.clusters[side].data(), q.clusters[next].data(), q.small[side].data(), small,
-                      q.small[next].data(), q.counters.data(), top_base, top_refs, level_nodes + large);
-    }
+    const uint32_t side = level & 1, next = 1 - side;
+    launch_shaped(top_large_task_kernel, {q.capacity.large, kTopTaskBlock}, q.clusters[side].data(),
+                  q.clusters[next].data(), q.large[side].data(), q.small[next].data(), q.large[next].data(),
+                  q.levels.data(), level, q.capacity, top_base, top_refs, level_nodes);
+    const uint64_t warps = (std::min<uint64_t>(small_bound, q.capacity.small) + kTasksPerWarp - 1) / kTasksPerWarp;
+    launch_shaped(top_level_kernel, {strided_blocks_for(std::max<uint64_t>(warps, 1) * kWarp, kMaxQueueBlocks)},
+                  q.clusters[side].data(), q.clusters[next].data(), q.small[side].data(), q.small[next].data(),
+                  q.levels.data(), level, q.capacity, top_base, top_refs, level_nodes);
 }
 
 // Stages 1-2, timed as top_ms: the clusters as top-level primitives, then
-// the task-queue levels, their nodes into `level_nodes` and their sizes into
-// out.level_sizes. Returns each level's first index in `level_nodes`; the
-// queues are freed on return.
-std::vector<uint32_t> split_top_levels(const DeviceTopLevelInput& in, uint32_t* level_nodes, BuildContext& build,
-                                       DeviceTopLevel& out) {
+// the task-queue levels, their sizes on the device (the host stops on a
+// lagging copy, lagged_rounds.h), their nodes into `level_nodes`. The
+// records come back once: out.level_sizes. The queues are freed on return.
+void split_top_levels(const DeviceTopLevelInput& in, uint32_t* level_nodes, BuildContext& build, DeviceTopLevel& out) {
     const uint32_t top_nodes = in.clusters - 1, top_base = in.n - 1;
     TopQueues q = make_top_queues(in.clusters, build.meter);
-    build.timer.start();
     const bool root_is_large = in.clusters > hlbvh2::kTopBlockTaskMin;
+    LaggedCopies<hlbvh2::TopQueueLevel> copies;
+    build.timer.start();
     launch(top_clusters_kernel, in.clusters, in, q.clusters[0].data(),
-           root_is_large ? q.large[0].data() : q.small[0].data());
+           root_is_large ? q.large[0].data() : q.small[0].data(), q.levels.data(), root_is_large);
+    // Multi-block levels while large tasks are about (a block each); the
+    // rest in one launch of one block.
+    const uint32_t grid_levels = launch_in_lagged_rounds<hlbvh2::TopQueueLevel>(
+        copies, kTopLevelsPerRound, q.max_levels,
+        [&](uint32_t level, const hlbvh2::TopQueueLevel* seen, uint32_t seen_level) {
+            // A level's tasks at most double (a large task may leave two small ones).
+            const uint32_t doublings = std::min(level - seen_level, 16u);
+            const uint64_t bound = seen != nullptr ? (uint64_t{seen->small} + 2 * uint64_t{seen->large}) << doublings
+                                                   : uint64_t{1} << std::min(level, 16u);
+            launch_top_level(q, level, bound, top_base, out.top_refs.data(), level_nodes);
+        },
+        [&](uint32_t level) { return q.levels.data() + level; },
+        [](const hlbvh2::TopQueueLevel& next) { return next.large == 0 || next.fault != 0; });
+    if (grid_levels < q.max_levels) {
+        launch_shaped(top_small_levels_kernel, {1, kSmallLevelsThreads}, q.clusters[0].data(), q.clusters[1].data(),
+                      q.small[0].data(), q.small[1].data(), q.levels.data(), grid_levels, q.max_levels, q.capacity,
+                      top_base, out.top_refs.data(), level_nodes);
+    }
+    build.stages.top_ms = build.timer.stop_ms();
+    const uint32_t launched = q.max_levels;  // the records past the last level are empty
+
+    std::vector<hlbvh2::TopQueueLevel> records(size_t{launched} + 1);
+    q.levels.download(records);
     std::vector<uint32_t> level_base;
     out.level_sizes.clear();
-    uint32_t small = root_is_large ? 0 : 1, large = root_is_large ? 1 : 0, base = 0;
-    int side = 0;  // the level's input clusters and queues
-    while (small + large != 0) {
-        const uint32_t count = small + large;
-        if (base + size_t{count} > top_nodes) throw Error("HLBVH2: top levels overran their node list");
-        out.level_sizes.push_back(count);
-        level_base.push_back(base);
-        RF_CUDA_CHECK(cudaMemsetAsync(q.counters.data(), 0, q.counters.bytes()));
-        launch_top_level(q, side, small, large, top_base, out.top_refs.data(), level_nodes + base);
-        base += count;
-        uint32_t next[3] = {};  // the next level's sizes (waits for this one)
-        RF_CUDA_CHECK(cudaMemcpy(next, q.counters.data(), sizeof next, cudaMemcpyDeviceToHost));
-        small = next[1];
-        large = next[2];
-        if (small > q.small_capacity || large > q.large_capacity) throw Error("HLBVH2: top task queue overflow");
-        side = 1 - side;
+    for (const hlbvh2::TopQueueLevel& r : records) {
+        if (r.fault != 0) throw Error("HLBVH2: a top level overflowed its task queues (device fault)");
+        if (r.small + r.large == 0) break;
+        out.level_sizes.push_back(r.small + r.large);
+        level_base.push_back(r.base);
     }
-    if (base != top_nodes) throw Error("HLBVH2: the top levels made the wrong number of nodes");
-    build.stages.top_ms = build.timer.stop_ms();
+    const uint32_t made = level_base.empty() ? 0 : level_base.back() + out.level_sizes.back();
+    if (made != top_nodes || records.back().small + records.back().large != 0) {
+        throw Error("HLBVH2: the top levels made " + std::to_string(made) + " nodes, not " +
+                    std::to_string(top_nodes));
+    }
     build.stages.top_levels = static_cast<uint32_t>(out.level_sizes.size());
-    return level_base;
 }
 
 }  // namespace
@@ -454,16 +600,20 @@ DeviceTopLevel build_top_level_on_device(const DeviceTopLevelInput& in, BuildCon
     DeviceTopLevel out;
     out.top_refs = DeviceBuffer<uint32_t>(build.meter, "HLBVH2: top-level child references", 2 * size_t{top_nodes});
     out.top_boxes = DeviceBuffer<Box3f>(build.meter, "HLBVH2: top node boxes", top_nodes);
-    // Every task is a distinct top node.
-    DeviceBuffer<uint32_t> level_nodes(build.meter, "HLBVH2: top level nodes", top_nodes);
-    const std::vector<uint32_t> level_base = split_top_levels(in, level_nodes.data(), build, out);
-
-    // 3. The top nodes' boxes bottom-up, deepest level first.
-    const hlbvh2::TopBoxView view{in.bottom, out.top_refs.data(), in.n - 1, out.top_boxes.data()};
-    build.timer.start();
-    for (size_t l = out.level_sizes.size(); l-- > 0;) {
-        launch(top_boxes_kernel, out.level_sizes[l], view, level_nodes.data() + level_base[l], out.level_sizes[l]);
+    {
+        // Every task is a distinct top node.
+        DeviceBuffer<uint32_t> level_nodes(build.meter, "HLBVH2: top level nodes", top_nodes);
+        split_top_levels(in, level_nodes.data(), build, out);
     }
+
+    // 3. The top nodes' boxes bottom-up: their parent links, then one pass with arrival counters.
+    const hlbvh2::TopBoxView view{in.bottom, out.top_refs.data(), in.n - 1, out.top_boxes.data()};
+    DeviceBuffer<uint32_t> top_parent(build.meter, "HLBVH2: top node parents", top_nodes);
+    DeviceBuffer<uint32_t> arrivals(build.meter, "HLBVH2: top node arrival counters", top_nodes);
+    build.timer.start();
+    RF_CUDA_CHECK(cudaMemsetAsync(arrivals.data(), 0, arrivals.bytes()));
+    launch(link_top_children_kernel, top_nodes, view, top_nodes, top_parent.data());
+    launch(top_boxes_kernel, top_nodes, view, top_parent.data(), arrivals.data(), top_nodes);
     build.stages.boxes_ms += build.timer.stop_ms();
     return out;
 }

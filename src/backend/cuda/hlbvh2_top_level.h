@@ -33,7 +33,8 @@ struct DeviceTopLevel {
 };
 
 // Builds the top level: per level, one launch for its large tasks (a thread
-// block each) and one for the others (kTopLanes threads per task),
+// block each) and one for the others (kTopLanes threads per task), the
+// levels' sizes kept on the device (no host read per level),
 // the same tree as the CPU's (build_hlbvh2_top_level), then the top nodes'
 // boxes bottom-up, one launch per level, deepest first. Sets stages.top_ms
 // (the task-queue levels) and stages.top_levels, and adds the top boxes'

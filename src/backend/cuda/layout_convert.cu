@@ -32,8 +32,14 @@
 // device_ms: the kernels (CUDA events, from the first kernel to the last,
 // the 8-byte queue-size reads between CWBVH levels included); uploads,
 // downloads and the host's validation of the canonical BVH are not in it.
+//
+// Two entries per layout: from a host Bvh (validated on the host, uploaded,
+// the result downloaded; device_builders.h), and from a canonical BVH
+// already on the device (layout_convert.h: a device builder's, written into
+// the tracer's buffers, no host validation and only counts crossing).
 #include <cuda_runtime.h>
 
+#include <cub/device/device_reduce.cuh>
 #include <cub/device/device_scan.cuh>
 
 #include <algorithm>
@@ -54,6 +60,7 @@
 #include "backend/cuda/device_builders.h"
 #include "backend/cuda/event_timer.h"
 #include "backend/cuda/launch.h"
+#include "backend/cuda/layout_convert.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {
@@ -181,6 +188,13 @@ __global__ void cwbvh_emit_kernel(cwbvh::EmitView view, uint32_t start, uint32_t
     if (k < count) cwbvh::emit(view, start + k);
 }
 
+// The next wide level's size: the last node's first child plus its inner
+// children, so one value crosses to the host per level.
+__global__ void cwbvh_next_level_size_kernel(const uint32_t* first_child, const uint32_t* inner_count, uint32_t last,
+                                             uint32_t* size) {
+    *size = first_child[last] + inner_count[last];
+}
+
 // The canonical BVH and its triangles uploaded, each buffer counted by `meter`.
 struct CanonicalOnDevice {
     DeviceBuffer<BvhNode> nodes;
@@ -194,6 +208,10 @@ struct CanonicalOnDevice {
         prims.upload(bvh.prim_indices);
         triangles.upload(tris);
     }
+    [[nodiscard]] DeviceCanonicalView view() const {
+        return {nodes.data(), static_cast<uint32_t>(nodes.size()), prims.data(), prims.size(), triangles.data(),
+                triangles.size()};
+    }
 };
 
 // The CWBVH build's device arrays, all live to its end: refinement's state,
@@ -206,7 +224,7 @@ struct CwbvhArrays {
     DeviceBuffer<uint32_t> parent, arrivals;
     DeviceBuffer<float> cost;
     DeviceBuffer<cwbvh::Choice> choices;
-    DeviceBuffer<uint32_t> wide_refined, slots, inner_count, first_child, wide_index, counters;
+    DeviceBuffer<uint32_t> wide_refined, slots, inner_count, first_child, wide_index, counters, level_size;
     DeviceBuffer<cwbvh::OwnCounts> own, subtree, before;
     DeviceBuffer<CwbvhNode> out_nodes;
     DeviceBuffer<CwbvhTriangle> out_tris;
@@ -228,6 +246,7 @@ struct CwbvhArrays {
           first_child(m, "CWBVH: first children", n),
           wide_index(m, "CWBVH: wide-node indices", n),
           counters(m, "CWBVH: leaf-slot and error counters", 2),
+          level_size(m, "CWBVH: next level size", 1),
           own(m, "CWBVH: own counts", n),
           subtree(m, "CWBVH: subtree counts", n),
           before(m, "CWBVH: depth-first prefixes", n),
@@ -255,13 +274,27 @@ struct WideLevel {
 };
 
 // CWBVH 0: leaf refinement: sizes, their scan, one thread per canonical node.
-void refine_leaves(const CanonicalOnDevice& input, uint32_t canonical_count, CwbvhArrays& a) {
-    launch(cwbvh_extra_kernel, canonical_count, input.nodes.data(), canonical_count, a.extra.data());
+void refine_leaves(const DeviceCanonicalView& input, CwbvhArrays& a) {
+    const uint32_t canonical_count = input.node_count;
+    launch(cwbvh_extra_kernel, canonical_count, input.nodes, canonical_count, a.extra.data());
     cub_run(a.scan_scratch, [&](void* temp, size_t& bytes) {
         return cub::DeviceScan::ExclusiveSum(temp, bytes, a.extra.data(), a.extra_base.data(), canonical_count);
     });
-    launch(cwbvh_refine_kernel, canonical_count, input.nodes.data(), canonical_count, input.prims.data(),
-           input.triangles.data(), a.extra_base.data(), a.leaf_refs.data(), a.nodes.data());
+    launch(cwbvh_refine_kernel, canonical_count, input.nodes, canonical_count, input.prim_indices, input.triangles,
+           a.extra_base.data(), a.leaf_refs.data(), a.nodes.data());
+}
+
+// The nodes leaf refinement adds, for a tree the host has not walked: the
+// same sizes summed on the device, one value back (the arrays are sized by it).
+size_t refined_extra_on_device(const DeviceCanonicalView& input, MemoryMeter& meter) {
+    DeviceBuffer<uint32_t> extra(meter, "CWBVH: refinement sizes to count", input.node_count);
+    DeviceBuffer<uint32_t> sum(meter, "CWBVH: refined node total", 1);
+    DeviceBuffer<uint8_t> scratch(meter, "CWBVH: reduction temporary storage");
+    launch(cwbvh_extra_kernel, input.node_count, input.nodes, input.node_count, extra.data());
+    cub_run(scratch, [&](void* temp, size_t& bytes) {
+        return cub::DeviceReduce::Sum(temp, bytes, extra.data(), sum.data(), input.node_count);
+    });
+    return download_value(sum.data());
 }
 
 // CWBVH 1-2: parents and the DP, after zeroing the counters and the root's
@@ -279,7 +312,8 @@ void solve_collapse(CwbvhArrays& a, uint32_t n) {
 }
 
 // CWBVH 3: the wide tree level by level from the root; a scan of the inner
-// counts places the next level's nodes.
+// counts places the next level's nodes, whose number comes back in one copy
+// per level (the scan needs it on the host; formerly two).
 std::vector<WideLevel> discover_levels(CwbvhArrays& a, const cwbvh::EmitView& view) {
     std::vector<WideLevel> levels;
     for (WideLevel level{0, 1}; level.count != 0;) {
@@ -291,9 +325,9 @@ std::vector<WideLevel> discover_levels(CwbvhArrays& a, const cwbvh::EmitView& vi
             return cub::DeviceScan::ExclusiveSum(temp, bytes, a.inner_count.data() + level.start,
                                                  a.first_child.data() + level.start, level.count);
         });
-        const uint32_t last = level.start + level.count - 1;
-        const uint32_t next_count = download_value(a.first_child.data() + last) +
-                                    download_value(a.inner_count.data() + last);
+        launch_shaped(cwbvh_next_level_size_kernel, {1, 1}, a.first_child.data(), a.inner_count.data(),
+                      level.start + level.count - 1, a.level_size.data());
+        const uint32_t next_count = download_value(a.level_size.data());  // one copy per level
         launch(cwbvh_enqueue_kernel, level.count, view, level.start, level.count);
         level = {level.start + level.count, next_count};
     }
@@ -307,20 +341,76 @@ void total_and_emit(const std::vector<WideLevel>& levels, const cwbvh::EmitView&
     for (const WideLevel& level : levels) launch(cwbvh_emit_kernel, level.count, view, level.start, level.count);
 }
 
-// The wide BVH back to the host, after the device's consistency checks.
-CwbvhBvh download_cwbvh(const CwbvhArrays& a, uint32_t n, size_t references, size_t depth) {
+// CWBVH 0-5 over `input` (the arrays sized for it), the kernels timed into
+// device_ms; returns the number of wide levels.
+size_t run_cwbvh(const DeviceCanonicalView& input, uint32_t n, CwbvhArrays& a, double* device_ms) {
+    EventTimer timer;
+    const cwbvh::EmitView view = a.view(input.triangles);
+    timer.start();
+    refine_leaves(input, a);
+    solve_collapse(a, n);
+    const std::vector<WideLevel> levels = discover_levels(a, view);
+    total_and_emit(levels, view);
+    const double ms = timer.stop_ms();
+    if (device_ms) *device_ms = ms;
+    return levels.size();
+}
+
+// The wide tree's size after the device's consistency checks (two small copies).
+struct CwbvhSize {
+    uint32_t nodes = 0;
+    size_t leaf_slots = 0;
+};
+
+CwbvhSize checked_cwbvh_size(const CwbvhArrays& a, uint32_t n, size_t references) {
     const cwbvh::OwnCounts total = download_value(a.subtree.data());
     const std::vector<uint32_t> counts = download_all(a.counters, 2);
     if (counts[1] & cwbvh::kErrorQuantize)
         throw Error("build_cwbvh: a box cannot be quantised (coordinates too large)");
     if (total.triangles != references || total.inner + 1u > n)
         throw Error("build_cwbvh_on_device: inconsistent wide tree (device error)");
+    return {total.inner + 1u, counts[0]};
+}
+
+// The wide BVH back to the host.
+CwbvhBvh download_cwbvh(const CwbvhArrays& a, uint32_t n, size_t references, size_t depth) {
+    const CwbvhSize size = checked_cwbvh_size(a, n, references);
     CwbvhBvh out;
-    out.nodes = download_all(a.out_nodes, total.inner + 1u);
+    out.nodes = download_all(a.out_nodes, size.nodes);
     out.triangles = download_all(a.out_tris, references);
-    out.leaf_count = counts[0];
+    out.leaf_count = size.leaf_slots;
     out.depth = static_cast<int>(depth);
     return out;
+}
+
+// Node pairs 1-3 over `input` into out_nodes and out_lists (sized for
+// `expected`), the kernels timed into device_ms; rf::Error unless the
+// device's root sizes are `expected` (one 16-byte copy).
+void run_aila_laine(const DeviceCanonicalView& input, const aila_laine::SubtreeSize& expected,
+                    AilaLaineNode* out_nodes, AilaLaineFloat4* out_lists, MemoryMeter& meter, double* device_ms) {
+    const uint32_t n = input.node_count;
+    DeviceBuffer<uint32_t> parent(meter, "node pairs: parents", n), arrivals(meter, "node pairs: arrival counters", n);
+    DeviceBuffer<aila_laine::SubtreeSize> size(meter, "node pairs: subtree sizes", n);
+    EventTimer timer;
+    timer.start();
+    RF_CUDA_CHECK(cudaMemsetAsync(parent.data(), 0xFF, parent.bytes()));  // root: kNoParent
+    RF_CUDA_CHECK(cudaMemsetAsync(arrivals.data(), 0, arrivals.bytes()));
+    launch(aila_laine_parents_kernel, n, input.nodes, n, parent.data());
+    launch(aila_laine_sizes_kernel, n, input.nodes, n, parent.data(), size.data(), arrivals.data());
+    launch(aila_laine_emit_kernel, n, input.nodes, n, parent.data(), size.data(), input.prim_indices,
+           input.triangles, out_nodes, out_lists);
+    const double ms = timer.stop_ms();
+    if (device_ms) *device_ms = ms;
+    const aila_laine::SubtreeSize root = download_value(size.data());
+    if (root.inner_nodes != expected.inner_nodes || root.float4s != expected.float4s ||
+        root.leaves != expected.leaves || root.triangle_refs != expected.triangle_refs)
+        throw Error("convert_to_aila_laine_on_device: inconsistent subtree sizes (device error or malformed BVH)");
+}
+
+void check_aila_laine_links(size_t inner, size_t float4s) {
+    constexpr size_t kMaxLink = static_cast<size_t>(kAilaLaineEntrySentinel);
+    if (inner >= kMaxLink) throw Error("convert_to_aila_laine: too many nodes for 31-bit links");
+    if (float4s > kMaxLink) throw Error("convert_to_aila_laine: too many leaf triangles for 31-bit links");
 }
 
 }  // namespace
@@ -331,33 +421,16 @@ AilaLaineBvh convert_to_aila_laine_on_device(const Bvh& bvh, std::span<const Tri
     AilaLaineBvh out;
     if (bvh.nodes.empty()) return out;
     const CanonicalTotals checked = validate_canonical(bvh, triangles.size(), "convert_to_aila_laine", kBvhMaxDepth);
-    constexpr size_t kMaxLink = static_cast<size_t>(kAilaLaineEntrySentinel);
-    if (checked.inner >= kMaxLink) throw Error("convert_to_aila_laine: too many nodes for 31-bit links");
-    if (checked.aila_laine_float4s > kMaxLink)
-        throw Error("convert_to_aila_laine: too many leaf triangles for 31-bit links");
+    check_aila_laine_links(checked.inner, checked.aila_laine_float4s);
     const aila_laine::SubtreeSize total{uint32_t(checked.inner), uint32_t(checked.aila_laine_float4s),
                                         uint32_t(checked.leaves), uint32_t(checked.references)};
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
-    const auto n = static_cast<uint32_t>(bvh.nodes.size());
     MemoryMeter meter;
-    EventTimer timer;
-
     const CanonicalOnDevice input(bvh, triangles, meter, "node pairs");
-    DeviceBuffer<uint32_t> parent(meter, "node pairs: parents", n), arrivals(meter, "node pairs: arrival counters", n);
-    DeviceBuffer<aila_laine::SubtreeSize> size(meter, "node pairs: subtree sizes", n);
     DeviceBuffer<AilaLaineNode> out_nodes(meter, "node pairs: nodes", total.inner_nodes);
     DeviceBuffer<AilaLaineFloat4> out_tris(meter, "node pairs: leaf lists", total.float4s);
-
-    timer.start();
-    RF_CUDA_CHECK(cudaMemsetAsync(parent.data(), 0xFF, parent.bytes()));  // root: kNoParent
-    RF_CUDA_CHECK(cudaMemsetAsync(arrivals.data(), 0, arrivals.bytes()));
-    launch(aila_laine_parents_kernel, n, input.nodes.data(), n, parent.data());
-    launch(aila_laine_sizes_kernel, n, input.nodes.data(), n, parent.data(), size.data(), arrivals.data());
-    launch(aila_laine_emit_kernel, n, input.nodes.data(), n, parent.data(), size.data(), input.prims.data(),
-           input.triangles.data(), out_nodes.data(), out_tris.data());
-    const double ms = timer.stop_ms();
-    if (device_ms) *device_ms = ms;
+    run_aila_laine(input.view(), total, out_nodes.data(), out_tris.data(), meter, device_ms);
 
     out.nodes = download_all(out_nodes, total.inner_nodes);
     out.triangles = download_all(out_tris, total.float4s);
@@ -383,19 +456,122 @@ CwbvhBvh build_cwbvh_on_device(const Bvh& bvh, std::span<const Triangle> triangl
     const auto n = static_cast<uint32_t>(canonical_count + checked.refined_extra);  // refined nodes
     const size_t references = checked.references;  // one refined leaf each
     MemoryMeter meter;
-    EventTimer timer;
-
     const CanonicalOnDevice input(bvh, triangles, meter, "CWBVH");
     CwbvhArrays arrays(meter, canonical_count, n, checked.refined_extra, references);
-    const cwbvh::EmitView view = arrays.view(input.triangles.data());
-    timer.start();
-    refine_leaves(input, canonical_count, arrays);
-    solve_collapse(arrays, n);
-    const std::vector<WideLevel> levels = discover_levels(arrays, view);
-    total_and_emit(levels, view);
-    const double ms = timer.stop_ms();
-    if (device_ms) *device_ms = ms;
-    return download_cwbvh(arrays, n, references, levels.size());
+    const size_t depth = run_cwbvh(input.view(), n, arrays, device_ms);
+    return download_cwbvh(arrays, n, references, depth);
+}
+
+ResidentAilaLaine convert_to_aila_laine_resident(const DeviceCanonicalView& in, DeviceBuffer<AilaLaineNode>& nodes,
+                                                 DeviceBuffer<AilaLaineFloat4>& leaf_lists, double* device_ms,
+                                                 int device) {
+    if (device_ms) *device_ms = 0.0;
+    ResidentAilaLaine out;
+    nodes.release();
+    leaf_lists.release();
+    if (in.node_count == 0) return out;
+    // A builder's tree: every inner node has two children, every reference one leaf.
+    if (in.node_count % 2 == 0) throw Error("convert_to_aila_laine_on_device: an even node count is no binary tree");
+    const size_t leaves = (size_t{in.node_count} + 1) / 2, inner = leaves - 1;
+    const size_t float4s = in.prim_count * size_t{kAilaLaineTriangleStride} + leaves;
+    check_aila_laine_links(inner, float4s);
+    const aila_laine::SubtreeSize total{uint32_t(inner), uint32_t(float4s), uint32_t(leaves),
+                                        uint32_t(in.prim_count)};
+    require_device(device);
+    RF_CUDA_CHECK(cudaSetDevice(device));
+    MemoryMeter meter;
+    nodes.allocate(inner);
+    leaf_lists.allocate(float4s);
+    run_aila_laine(in, total, nodes.data(), leaf_lists.data(), meter, device_ms);
+    out.root = inner == 0 ? ~int32_t{0} : 0;
+    out.node_count = uint32_t(inner);
+    out.float4s = float4s;
+    out.leaf_count = leaves;
+    out.triangle_refs = in.prim_count;
+    return out;
+}
+
+ResidentCwbvh build_cwbvh_resident(const DeviceCanonicalView& in, DeviceBuffer<CwbvhNode>& nodes,
+                                   DeviceBuffer<CwbvhTriangle>& triangles, double* device_ms, int device) {
+    if (device_ms) *device_ms = 0.0;
+    ResidentCwbvh out;
+    nodes.release();
+    triangles.release();
+    if (in.node_count == 0) return out;
+    // Below 2^31 references the refined total (at most 2 per reference) fits the device's 32-bit sum.
+    if (in.prim_count >= size_t{0x7FFFFFFF}) throw Error("build_cwbvh: too many triangle references");
+    require_device(device);
+    RF_CUDA_CHECK(cudaSetDevice(device));
+    MemoryMeter meter;
+    const size_t refined_extra = refined_extra_on_device(in, meter);
+    if (size_t{in.node_count} + refined_extra >= std::numeric_limits<uint32_t>::max())
+        throw Error("build_cwbvh: too many nodes after leaf refinement");
+    const auto n = static_cast<uint32_t>(in.node_count + refined_extra);
+    CwbvhArrays arrays(meter, in.node_count, n, refined_extra, in.prim_count);
+    const size_t depth = run_cwbvh(in, n, arrays, device_ms);
+    const CwbvhSize size = checked_cwbvh_size(arrays, n, in.prim_count);
+    // Device to device into the caller's exact-size buffers (the arrays are
+    // sized by upper bounds and freed on return).
+    nodes.allocate(size.nodes);
+    triangles.allocate(in.prim_count);
+    RF_CUDA_CHECK(cudaMemcpy(nodes.data(), arrays.out_nodes.data(), nodes.bytes(), cudaMemcpyDeviceToDevice));
+    RF_CUDA_CHECK(
+        cudaMemcpy(triangles.data(), arrays.out_tris.data(), triangles.bytes(), cudaMemcpyDeviceToDevice));
+    out.node_count = size.nodes;
+    out.triangle_count = uint32_t(in.prim_count);
+    out.leaf_count = size.leaf_slots;
+    out.depth = static_cast<int>(depth);
+    return out;
+}
+
+namespace {
+
+// The resident chain as DeviceTracer runs it: the tree built and kept on
+// the device, the tracer's triangles uploaded after the build.
+struct ResidentInput {
+    DeviceBvh bvh;
+    DeviceBuffer<Triangle> triangles{"resident chain: triangles"};
+    ResidentInput(std::span<const Triangle> tris, const BuildOptions& options, int device) {
+        require_device(device);
+        RF_CUDA_CHECK(cudaSetDevice(device));
+        DeviceBuildStages stages;
+        bvh = build_resident_bvh(tris, options, stages, device);
+        triangles.upload(tris);
+    }
+    [[nodiscard]] DeviceCanonicalView view() const {
+        return canonical_view(bvh, triangles.data(), triangles.size());
+    }
+};
+
+}  // namespace
+
+AilaLaineBvh resident_aila_laine_on_device(std::span<const Triangle> triangles, const BuildOptions& options,
+                                           int device) {
+    const ResidentInput input(triangles, options, device);
+    DeviceBuffer<AilaLaineNode> nodes("resident chain: node pairs");
+    DeviceBuffer<AilaLaineFloat4> lists("resident chain: leaf lists");
+    const ResidentAilaLaine r = convert_to_aila_laine_resident(input.view(), nodes, lists, nullptr, device);
+    AilaLaineBvh out;
+    out.nodes = download_all(nodes, r.node_count);
+    out.triangles = download_all(lists, r.float4s);
+    if (!input.bvh.empty()) out.bounds = download_value(input.bvh.nodes.data()).bounds;
+    out.root = r.root;
+    out.leaf_count = r.leaf_count;
+    out.triangle_refs = r.triangle_refs;
+    return out;
+}
+
+CwbvhBvh resident_cwbvh_on_device(std::span<const Triangle> triangles, const BuildOptions& options, int device) {
+    const ResidentInput input(triangles, options, device);
+    DeviceBuffer<CwbvhNode> nodes("resident chain: CWBVH nodes");
+    DeviceBuffer<CwbvhTriangle> tris("resident chain: CWBVH triangles");
+    const ResidentCwbvh r = build_cwbvh_resident(input.view(), nodes, tris, nullptr, device);
+    CwbvhBvh out;
+    out.nodes = download_all(nodes, r.node_count);
+    out.triangles = download_all(tris, r.triangle_count);
+    out.leaf_count = r.leaf_count;
+    out.depth = r.depth;
+    return out;
 }
 
 }  // namespace rf::cuda

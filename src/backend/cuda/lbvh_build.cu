@@ -129,7 +129,7 @@ bool emit_on_device(const DeviceMortonOrder<Key>& sorted, const KarrasLinks& lin
         out.children = download_all(links.children, 2 * size_t{n - 1});
         build.stages.download_ms += build.timer.stop_ms();
     }
-    build.stages.peak_device_bytes = build.meter.peak();
+    build.stages.peak_device_bytes = std::max(build.stages.peak_device_bytes, build.meter.peak());
     return emitted;
 }
 
@@ -139,9 +139,10 @@ bool emit_on_device(const DeviceMortonOrder<Key>& sorted, const KarrasLinks& lin
 // only the order and the children came back in `out`.
 template <class Key>
 bool build_on_device(std::span<const Triangle> triangles, DeviceBuildStages& stages, DeviceKarrasTree& out, bool raw,
-                     const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
+                     const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr, DeviceBvh* resident = nullptr) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
     BuildContext build(stages);
+    build.resident = resident;
     // 1-3. Boxes, centroid bounds, Morton codes, the sort (morton_sort.cu).
     DeviceMortonOrder<Key> sorted = sort_triangles_by_morton_codes<Key>(triangles, "LBVH", build);
     // 4. Inner nodes and parent links.
@@ -162,7 +163,8 @@ void check_input(std::span<const Triangle> triangles, int morton_bits) {
 
 // Returns true when the device emitted the BVH into *bvh (config and bvh given).
 bool build_raw(std::span<const Triangle> triangles, int morton_bits, DeviceBuildStages& stages, int device,
-               DeviceKarrasTree& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
+               DeviceKarrasTree& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr,
+               DeviceBvh* resident = nullptr) {
     check_input(triangles, morton_bits);
     const size_t n = triangles.size();
     if (n < 2) {  // no inner nodes: nothing for the device to do
@@ -171,8 +173,8 @@ bool build_raw(std::span<const Triangle> triangles, int morton_bits, DeviceBuild
     }
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
-    if (morton_bits == 30) return build_on_device<uint32_t>(triangles, stages, out, raw, config, bvh);
-    return build_on_device<uint64_t>(triangles, stages, out, raw, config, bvh);
+    if (morton_bits == 30) return build_on_device<uint32_t>(triangles, stages, out, raw, config, bvh, resident);
+    return build_on_device<uint64_t>(triangles, stages, out, raw, config, bvh, resident);
 }
 
 }  // namespace
@@ -186,13 +188,13 @@ DeviceKarrasTree build_karras_tree_on_device(std::span<const Triangle> triangles
 }
 
 Bvh build_lbvh_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config, int morton_bits,
-                         DeviceBuildStages* stages, int device) {
+                         DeviceBuildStages* stages, int device, DeviceBvh* resident) {
     DeviceBuildStages local;
     DeviceBuildStages& s = stages ? *stages : local;
     s = {};
     DeviceKarrasTree tree;
     Bvh bvh;
-    if (build_raw(triangles, morton_bits, s, device, tree, false, &config, &bvh)) {
+    if (build_raw(triangles, morton_bits, s, device, tree, false, &config, &bvh, resident)) {
         s.emitted_on_device = true;
         return bvh;
     }

@@ -6,7 +6,11 @@
 //  2. the initial clusters: one thread per sorted position writes its leaf
 //     reference and gathers its triangle's box.
 //  3. per iteration until one cluster is left (sec. 4), over the shared
-//     per-cluster steps of accel/bvh/builders/ploc_steps.h:
+//     per-cluster steps of accel/bvh/builders/ploc_steps.h, with no host
+//     round trip per iteration: the loop state (count, nodes made,
+//     iterations, a fault) lives on the device, every kernel reads it and
+//     one thread advances it (ploc::commit_iteration). Two phases:
+//     GRID PHASE, while the clusters exceed the single block's capacity:
 //     a. nearest neighbours (sec. 4.2): one block per 256 clusters loads their
 //        boxes and radius more on each side into shared memory; every pair
 //        with an end in the block is evaluated once (window_pairs_from) and
@@ -14,14 +18,24 @@
 //        then the tie rule), so the result does not depend on the order of
 //        the atomics. Radii too large for shared memory: one thread per
 //        cluster searches global memory (nearest_neighbour).
-//     b. one thread per cluster writes its (survivor, merge) flags, one more
-//        a zero, and cub::DeviceScan::ExclusiveSum gives every cluster its
-//        new position and node number (sec. 4.3: the order of the clusters,
-//        as the CPU numbers them); the total (8 bytes) comes back to the
-//        host: the next cluster count and the nodes made.
-//     c. merge and compaction: one thread per cluster (compact_cluster):
-//        the lower end of a mutual pair writes the new node (children, box)
-//        and puts it at its position; other survivors move.
+//     b. the (survivor, merge) flags' exclusive prefix sum (sec. 4.3: new
+//        positions and node numbers in cluster order, as the CPU numbers
+//        them) in three passes: block sums, one block scanning them (and
+//        advancing the state), and per block its own scan plus its offset,
+//     c. fused with the merge and compaction (compact_cluster): the lower
+//        end of a mutual pair writes the new node (children, box) and puts it
+//        at its position; other survivors move.
+//     The host launches these in rounds sized by a lagging, asynchronous
+//     copy of the count (grids for an upper bound; blocks past the count
+//     exit; an iteration that belongs to the tail is a no-op). A CUDA graph
+//     with a conditional WHILE node would drop even that copy, but it
+//     cannot be checked without a device here; the fixed schedule runs the
+//     same kernels and its logic is replayed on the CPU.
+//     TAIL (at most kTailMaxClusters clusters): all remaining iterations in
+//     ONE block, the clusters in shared memory, __syncthreads between the
+//     neighbour, scan and compaction steps (the same steps, one window over
+//     all clusters, per-thread chunks scanned in cluster order).
+//     The final state comes back once: a fault (no progress) is an error.
 //  4. emission on the device (raw_tree_emit.cu): boxes, counts, SAH costs
 //     and leaf collapse bottom-up, the canonical layout, and the BVH back to
 //     the host; so the triangle boxes stay until then. A tree deeper than
@@ -32,8 +46,10 @@
 // and live in the scope of the stages that use them.
 #include <cuda_runtime.h>
 
+#include <algorithm>
 #include <chrono>
-#include <cub/device/device_scan.cuh>
+#include <cub/block/block_reduce.cuh>
+#include <cub/block/block_scan.cuh>
 #include <string>
 #include <utility>
 #include <vector>
@@ -42,9 +58,9 @@
 #include "accel/bvh/builders/ploc_steps.h"
 #include "backend/backends.h"
 #include "backend/cuda/build_context.h"
-#include "backend/cuda/cub_run.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/device_bvh_builders.h"
+#include "backend/cuda/lagged_rounds.h"
 #include "backend/cuda/launch.h"
 #include "backend/cuda/morton_sort.h"
 #include "backend/cuda/ploc_build.h"
@@ -56,6 +72,17 @@ namespace {
 
 // kBlockSize (launch.h) is also the clusters per neighbour window.
 constexpr uint32_t kMaxWindowRadius = 256;  // beyond this the window would not fit in shared memory
+constexpr uint32_t kScanThreads = 1024;     // the one block that scans the block sums
+constexpr uint32_t kTailThreads = 1024;     // the single-block tail's threads
+// The tail's clusters at most: 68 bytes each (key, both sides' box and
+// reference, neighbour), 204 KiB of the 227 KiB of shared memory an sm_90
+// block may opt into. Clusters fall geometrically per iteration, so the
+// grid phase runs about a dozen iterations for a million triangles and the
+// tail the remaining forty to fifty.
+constexpr uint32_t kTailMaxClusters = 3072;
+// Grid iterations launched between two looks at the count (one lagging,
+// asynchronous copy per round).
+constexpr uint32_t kIterationsPerRound = 3;
 
 size_t window_shared_bytes(uint32_t radius) {
     return kBlockSize * sizeof(uint64_t) + (kBlockSize + 2 * size_t{radius}) * sizeof(Box3f);
@@ -78,14 +105,39 @@ struct SharedMinimum {
     }
 };
 
+// The ping-pong cluster buffers; an iteration reads the side its parity picks.
+struct ClusterPair {
+    uint32_t* refs[2];
+    Box3f* boxes[2];
+};
+
+// Iteration `iterations`' clusters, the next iteration's and the tree.
+__device__ ploc::ClusterArrays iteration_arrays(const ClusterPair& c, uint32_t iterations, uint32_t* children,
+                                                Box3f* node_boxes) {
+    const uint32_t from = iterations & 1u;
+    return ploc::ClusterArrays{c.refs[from], c.boxes[from], c.refs[1 - from], c.boxes[1 - from], children, node_boxes};
+}
+
+// The grid-wide kernels of an iteration are launched before its cluster
+// count is known on the host (grids sized for an upper bound): each reads
+// the count from the loop state and its blocks past it, or every block when
+// the iteration belongs to the single-block tail, exit.
+__device__ bool grid_block_idle(const ploc::LoopState& s, uint32_t tail_capacity) {
+    return !ploc::grid_iteration_runs(s, tail_capacity) || blockIdx.x * kBlockSize >= s.count;
+}
+
 // Stage 3a, the paper's shared-memory window: one block per kBlockSize
 // clusters; dynamic shared memory holds their keys, then the window's boxes.
 __global__ void __launch_bounds__(kBlockSize)
-    window_neighbours_kernel(const Box3f* boxes, uint32_t count, uint32_t radius, uint32_t* neighbour) {
+    window_neighbours_kernel(ClusterPair clusters, const ploc::LoopState* state, uint32_t tail_capacity,
+                             uint32_t radius, uint32_t* neighbour) {
+    const ploc::LoopState s = *state;
+    if (grid_block_idle(s, tail_capacity)) return;
+    const Box3f* boxes = clusters.boxes[s.iterations & 1u];
     extern __shared__ uint64_t shared_words[];
     uint64_t* keys = shared_words;
     Box3f* window_boxes = reinterpret_cast<Box3f*>(keys + kBlockSize);
-    const ploc::Window w = ploc::block_window(blockIdx.x * kBlockSize, kBlockSize, count, radius);
+    const ploc::Window w = ploc::block_window(blockIdx.x * kBlockSize, kBlockSize, s.count, radius);
     keys[threadIdx.x] = ploc::kNoNeighbour;
     for (uint32_t p = w.begin + threadIdx.x; p < w.end; p += kBlockSize) window_boxes[p - w.begin] = boxes[p];
     __syncthreads();
@@ -99,25 +151,145 @@ __global__ void __launch_bounds__(kBlockSize)
 }
 
 // Stage 3a for large radii: one thread per cluster over global memory.
-__global__ void neighbours_kernel(const Box3f* boxes, uint32_t count, uint32_t radius, uint32_t* neighbour) {
+__global__ void neighbours_kernel(ClusterPair clusters, const ploc::LoopState* state, uint32_t tail_capacity,
+                                  uint32_t radius, uint32_t* neighbour) {
+    const ploc::LoopState s = *state;
+    if (grid_block_idle(s, tail_capacity)) return;
     const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
-    if (i >= count) return;
-    neighbour[i] = ploc::nearest_neighbour(boxes, count, radius, i);
+    if (i < s.count) neighbour[i] = ploc::nearest_neighbour(clusters.boxes[s.iterations & 1u], s.count, radius, i);
 }
 
-// Stage 3b: count + 1 flags, the last zero, so the scan's last element is the total.
-__global__ void flags_kernel(const uint32_t* neighbour, uint32_t count, uint64_t* flags) {
+// Stage 3b, first pass: each block's sum of its clusters' compaction flags.
+__global__ void __launch_bounds__(kBlockSize)
+    block_flag_sums_kernel(const uint32_t* neighbour, const ploc::LoopState* state, uint32_t tail_capacity,
+                           uint64_t* block_sums) {
+    using Reduce = cub::BlockReduce<uint64_t, kBlockSize>;
+    __shared__ typename Reduce::TempStorage storage;
+    const ploc::LoopState s = *state;
+    if (grid_block_idle(s, tail_capacity)) return;
     const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
-    if (i > count) return;
-    flags[i] = i < count ? ploc::compaction_flags(neighbour, i) : 0;
+    const uint64_t total = Reduce(storage).Sum(i < s.count ? ploc::compaction_flags(neighbour, i) : uint64_t{0});
+    if (threadIdx.x == 0) block_sums[blockIdx.x] = total;
 }
 
-// Stage 3c: one thread per cluster.
-__global__ void compact_kernel(ploc::ClusterArrays arrays, const uint32_t* neighbour, const uint64_t* prefix,
-                               uint32_t count, uint32_t next_node) {
+// Stage 3b, second pass, one block: the block sums become their exclusive
+// prefix sums (in place, contiguous chunks per thread), and the total
+// advances the loop state into `next` (the iteration's kernels read `state`,
+// so it is not overwritten under them). A tail iteration passes the state on.
+__global__ void __launch_bounds__(kScanThreads)
+    scan_block_sums_kernel(const ploc::LoopState* state, uint32_t tail_capacity, uint64_t* block_sums,
+                           uint32_t* iteration_nodes, ploc::LoopState* next) {
+    using Scan = cub::BlockScan<uint64_t, kScanThreads>;
+    __shared__ typename Scan::TempStorage storage;
+    const ploc::LoopState s = *state;
+    if (!ploc::grid_iteration_runs(s, tail_capacity)) {
+        if (threadIdx.x == 0) *next = s;
+        return;
+    }
+    const ploc::Chunk c = ploc::thread_chunk((s.count + kBlockSize - 1) / kBlockSize, kScanThreads, threadIdx.x);
+    uint64_t sum = 0;
+    for (uint32_t b = c.begin; b < c.end; ++b) sum += block_sums[b];
+    uint64_t offset, total;
+    Scan(storage).ExclusiveSum(sum, offset, total);
+    for (uint32_t b = c.begin; b < c.end; ++b) {
+        const uint64_t own = block_sums[b];
+        block_sums[b] = offset;
+        offset += own;
+    }
+    if (threadIdx.x == 0) *next = ploc::commit_iteration(s, total, iteration_nodes);
+}
+
+// Stage 3c: one thread per cluster; its prefix is its block's offset plus
+// the block's own exclusive scan of the flags.
+__global__ void __launch_bounds__(kBlockSize)
+    compact_kernel(ClusterPair clusters, const uint32_t* neighbour, const uint64_t* block_offsets,
+                   const ploc::LoopState* state, uint32_t tail_capacity, uint32_t* children, Box3f* node_boxes) {
+    using Scan = cub::BlockScan<uint64_t, kBlockSize>;
+    __shared__ typename Scan::TempStorage storage;
+    const ploc::LoopState s = *state;
+    if (grid_block_idle(s, tail_capacity)) return;
     const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
-    if (i >= count) return;
-    ploc::compact_cluster(arrays, neighbour, i, prefix[i], next_node);
+    uint64_t prefix;
+    Scan(storage).ExclusiveSum(i < s.count ? ploc::compaction_flags(neighbour, i) : uint64_t{0}, prefix);
+    if (i < s.count) {
+        ploc::compact_cluster(iteration_arrays(clusters, s.iterations, children, node_boxes), neighbour, i,
+                              block_offsets[blockIdx.x] + prefix, s.next_node);
+    }
+}
+
+// The single-block tail's shared memory for `capacity` clusters: the
+// neighbour keys, both sides of the clusters, the neighbours.
+struct TailShared {
+    uint64_t* keys;
+    Box3f* boxes[2];
+    uint32_t* refs[2];
+    uint32_t* neighbour;
+};
+
+constexpr size_t kTailBytesPerCluster = sizeof(uint64_t) + 2 * (sizeof(Box3f) + sizeof(uint32_t)) + sizeof(uint32_t);
+
+__device__ TailShared tail_layout(uint64_t* words, uint32_t capacity) {
+    TailShared t;
+    t.keys = words;
+    t.boxes[0] = reinterpret_cast<Box3f*>(words + capacity);
+    t.boxes[1] = t.boxes[0] + capacity;
+    t.refs[0] = reinterpret_cast<uint32_t*>(t.boxes[1] + capacity);
+    t.refs[1] = t.refs[0] + capacity;
+    t.neighbour = t.refs[1] + capacity;
+    return t;
+}
+
+// Stage 3, the last iterations (at most `capacity` clusters) in one block:
+// the clusters stay in shared memory, the whole cluster array is one window
+// (every pair within the radius evaluated once, any radius), and the
+// compaction scans per-thread chunks in cluster order; __syncthreads
+// separates the steps. The same steps and numbering as the grid iterations.
+__global__ void __launch_bounds__(kTailThreads)
+    tail_kernel(ClusterPair clusters, const ploc::LoopState* state, uint32_t capacity, uint32_t radius,
+                uint32_t* children, Box3f* node_boxes, uint32_t* iteration_nodes, ploc::LoopState* final_state) {
+    using Scan = cub::BlockScan<uint64_t, kTailThreads>;
+    __shared__ typename Scan::TempStorage storage;
+    extern __shared__ uint64_t shared_words[];
+    const TailShared t = tail_layout(shared_words, capacity);
+    ploc::LoopState s = ploc::tail_start(*state, capacity);
+    if (s.fault != 0) {
+        if (threadIdx.x == 0) *final_state = s;
+        return;
+    }
+    const uint32_t from = s.iterations & 1u;
+    for (uint32_t i = threadIdx.x; i < s.count; i += kTailThreads) {
+        t.refs[0][i] = clusters.refs[from][i];
+        t.boxes[0][i] = clusters.boxes[from][i];
+    }
+    __syncthreads();
+    for (uint32_t side = 0; s.count > 1; side ^= 1u) {
+        const uint32_t count = s.count;
+        for (uint32_t i = threadIdx.x; i < count; i += kTailThreads) t.keys[i] = ploc::kNoNeighbour;
+        __syncthreads();
+        const ploc::Window w = ploc::block_window(0, count, count, radius);
+        SharedMinimum record{t.keys};
+        for (uint32_t p = threadIdx.x; p < count; p += kTailThreads) {
+            ploc::window_pairs_from(t.boxes[side], w, radius, p, record);
+        }
+        __syncthreads();
+        for (uint32_t i = threadIdx.x; i < count; i += kTailThreads) t.neighbour[i] = ploc::neighbour_from_key(i, t.keys[i]);
+        __syncthreads();
+        const ploc::Chunk c = ploc::thread_chunk(count, kTailThreads, threadIdx.x);
+        uint64_t sum = 0;
+        for (uint32_t i = c.begin; i < c.end; ++i) sum += ploc::compaction_flags(t.neighbour, i);
+        uint64_t prefix, total;
+        Scan(storage).ExclusiveSum(sum, prefix, total);
+        const ploc::ClusterArrays arrays{t.refs[side], t.boxes[side], t.refs[1 - side], t.boxes[1 - side],
+                                         children,     node_boxes};
+        for (uint32_t i = c.begin; i < c.end; ++i) {
+            ploc::compact_cluster(arrays, t.neighbour, i, prefix, s.next_node);
+            prefix += ploc::compaction_flags(t.neighbour, i);
+        }
+        s = ploc::commit_iteration(s, total, threadIdx.x == 0 ? iteration_nodes : nullptr);  // the same in every thread
+        if (s.fault != 0) break;
+        __syncthreads();  // the next side is written; the scan's storage is free again
+    }
+    if (threadIdx.x == 0) *final_state = s;
 }
 
 double elapsed_ms(std::chrono::steady_clock::time_point start) {
@@ -132,8 +304,10 @@ struct ClusterBuffers {
 
 // What the clustering leaves: the nodes, in creation order.
 struct PlocNodes {
-    DeviceBuffer<uint32_t> children;  // 2 (n - 1)
-    DeviceBuffer<Box3f> boxes;        // raw trees only: n - 1, as the merges wrote them
+    DeviceBuffer<uint32_t> children;         // 2 (n - 1)
+    DeviceBuffer<Box3f> boxes;               // raw trees only: n - 1, as the merges wrote them
+    DeviceBuffer<uint32_t> iteration_nodes;  // nodes made per iteration (at most n - 1 iterations)
+    uint32_t iterations = 0;
 };
 
 // Stage 2: the sorted triangles as the first clusters.
@@ -149,82 +323,122 @@ ClusterBuffers first_clusters(const DeviceMortonOrder<uint64_t>& sorted, uint32_
     return clusters;
 }
 
-// What an iteration works in, sized for the first (n clusters).
-struct IterationArrays {
-    DeviceBuffer<uint32_t> neighbour;
-    DeviceBuffer<uint64_t> flags, prefix;  // count + 1: the last flag is zero, so the scan ends with the total
-    DeviceBuffer<uint8_t> scratch;         // the scan's
+// What the iterations work in, sized for the first (n clusters).
+struct LoopArrays {
+    DeviceBuffer<uint32_t> neighbour;       // per cluster
+    DeviceBuffer<uint64_t> block_sums;      // per block of clusters: flag sums, then their offsets
+    DeviceBuffer<ploc::LoopState> states;   // 2: an iteration reads one and advances it into the other
+    LaggedCopies<ploc::LoopState> copies;   // the host's lagging looks at the state
 };
 
-// One iteration over `count` clusters in clusters[current] (3a-c): the
-// merges, the survivors into the other buffers. Returns the total of the
-// flags: (survivors << 32) | merges.
-uint64_t merge_iteration(ClusterBuffers& clusters, int current, uint32_t count, uint32_t radius, uint32_t next_node,
-                         IterationArrays& work, PlocNodes& nodes) {
-    const Box3f* cluster_boxes = clusters.boxes[current].data();
-    uint32_t* neighbour = work.neighbour.data();
-    if (radius <= kMaxWindowRadius) {
-        launch_shaped(window_neighbours_kernel, {blocks_for(count), kBlockSize, window_shared_bytes(radius)},
-                      cluster_boxes, count, radius, neighbour);
-    } else {
-        launch(neighbours_kernel, count, cluster_boxes, count, radius, neighbour);
-    }
-    launch(flags_kernel, size_t{count} + 1, neighbour, count, work.flags.data());
-    cub_run(work.scratch, [&](void* temp, size_t& bytes) {
-        return cub::DeviceScan::ExclusiveSum(temp, bytes, work.flags.data(), work.prefix.data(), count + 1);
-    });
-    const ploc::ClusterArrays arrays{clusters.refs[current].data(),     cluster_boxes,
-                                     clusters.refs[1 - current].data(), clusters.boxes[1 - current].data(),
-                                     nodes.children.data(),             nodes.boxes.data()};
-    launch(compact_kernel, count, arrays, neighbour, work.prefix.data(), count, next_node);
-    return download_value(work.prefix.data() + count);
+// The clusters the single-block tail holds: kTailMaxClusters, or fewer
+// where the device's opt-in shared memory per block is smaller.
+uint32_t tail_capacity() {
+    int device = 0, optin = 0;
+    RF_CUDA_CHECK(cudaGetDevice(&device));
+    RF_CUDA_CHECK(cudaDeviceGetAttribute(&optin, cudaDevAttrMaxSharedMemoryPerBlockOptin, device));
+    cudaFuncAttributes attributes{};
+    RF_CUDA_CHECK(cudaFuncGetAttributes(&attributes, tail_kernel));
+    const size_t room = size_t(optin) > attributes.sharedSizeBytes ? size_t(optin) - attributes.sharedSizeBytes : 0;
+    const size_t fits = room / kTailBytesPerCluster;
+    if (fits < 2) throw Error("PLOC on the device: shared memory too small for the single-block tail");
+    return static_cast<uint32_t>(std::min<size_t>(fits, kTailMaxClusters));
 }
 
-// Stage 3: iterations until one cluster is left, timed as one; the nodes
-// made per iteration into `iteration_nodes`. The iterations' arrays are
-// freed on return.
-void merge_until_one(ClusterBuffers& clusters, uint32_t n, uint32_t radius, PlocNodes& nodes, BuildContext& build,
-                     std::vector<uint32_t>& iteration_nodes) {
-    IterationArrays work{DeviceBuffer<uint32_t>(build.meter, "PLOC: nearest neighbours", n),
-                         DeviceBuffer<uint64_t>(build.meter, "PLOC: compaction flags", size_t{n} + 1),
-                         DeviceBuffer<uint64_t>(build.meter, "PLOC: compaction prefix sums", size_t{n} + 1),
-                         DeviceBuffer<uint8_t>(build.meter, "PLOC: scan temporary storage")};
-    cub_reserve(work.scratch, [&](void* temp, size_t& bytes) {  // the largest scan, allocated outside the timing
-        return cub::DeviceScan::ExclusiveSum(temp, bytes, work.flags.data(), work.prefix.data(), n + 1);
-    });
-    uint32_t count = n, next_node = 0;
-    int current = 0;
-    iteration_nodes.clear();
-    build.timer.start();
-    while (count > 1) {
-        const uint64_t total = merge_iteration(clusters, current, count, radius, next_node, work, nodes);
-        const uint32_t survivors = static_cast<uint32_t>(total >> 32), merges = static_cast<uint32_t>(total);
-        // The closest pair is always mutual; anything else is a device fault, not a reason to spin.
-        if (merges == 0 || survivors != count - merges) {
-            throw Error("PLOC on the device: iteration " + std::to_string(iteration_nodes.size()) + " kept " +
-                        std::to_string(survivors) + " of " + std::to_string(count) + " clusters with " +
-                        std::to_string(merges) + " merges");
-        }
-        iteration_nodes.push_back(merges);
-        next_node += merges;
-        count = survivors;
-        current = 1 - current;
+// Launches iteration `launched` of the grid phase, its grids sized for at
+// most `bound` clusters; its kernels read the count from states[launched % 2].
+void launch_grid_iteration(const ClusterPair& clusters, uint32_t launched, uint32_t bound, uint32_t radius,
+                           uint32_t tail, LoopArrays& work, PlocNodes& nodes) {
+    const ploc::LoopState* state = work.states.data() + (launched & 1);
+    ploc::LoopState* next = work.states.data() + ((launched + 1) & 1);
+    uint32_t* neighbour = work.neighbour.data();
+    if (radius <= kMaxWindowRadius) {
+        launch_shaped(window_neighbours_kernel, {blocks_for(bound), kBlockSize, window_shared_bytes(radius)},
+                      clusters, state, tail, radius, neighbour);
+    } else {
+        launch(neighbours_kernel, bound, clusters, state, tail, radius, neighbour);
     }
+    launch(block_flag_sums_kernel, bound, neighbour, state, tail, work.block_sums.data());
+    launch_shaped(scan_block_sums_kernel, {1, kScanThreads}, state, tail, work.block_sums.data(),
+                  nodes.iteration_nodes.data(), next);
+    launch(compact_kernel, bound, clusters, neighbour, work.block_sums.data(), state, tail, nodes.children.data(),
+           nodes.boxes.data());
+}
+
+// Stage 3, the grid phase: rounds of kIterationsPerRound iterations
+// launched back to back (lagged_rounds.h), none waiting for the host; the
+// host stops once a lagging copy of the state shows at most `tail`
+// clusters (the iterations in flight then finish as no-ops), and sizes
+// later grids by the count it saw. Returns the iterations launched.
+uint32_t run_grid_phase(const ClusterPair& clusters, uint32_t n, uint32_t radius, uint32_t tail, LoopArrays& work,
+                        PlocNodes& nodes) {
+    return launch_in_lagged_rounds<ploc::LoopState>(
+        work.copies, kIterationsPerRound, n,  // every real iteration merges: fewer than n of them
+        [&](uint32_t launched, const ploc::LoopState* seen, uint32_t) {
+            launch_grid_iteration(clusters, launched, seen != nullptr ? seen->count : n, radius, tail, work, nodes);
+        },
+        [&](uint32_t launched) { return work.states.data() + (launched & 1); },
+        [&](const ploc::LoopState& s) { return !ploc::grid_iteration_runs(s, tail); });
+}
+
+// The iterations' fault as an error.
+[[noreturn]] void throw_loop_fault(const ploc::LoopState& s, uint32_t tail) {
+    if (s.fault == ploc::kFaultTailOverflow) {
+        throw Error("PLOC on the device: the single-block tail got " + std::to_string(s.fault_survivors) +
+                    " clusters, more than its " + std::to_string(tail));
+    }
+    throw Error("PLOC on the device: iteration " + std::to_string(s.iterations) + " kept " +
+                std::to_string(s.fault_survivors) + " of " + std::to_string(s.count) + " clusters with " +
+                std::to_string(s.fault_merges) + " merges");
+}
+
+// Stage 3: iterations until one cluster is left, timed as one, with no
+// host round trip per iteration: the grid phase while the clusters exceed
+// the single block's capacity, then the tail in one launch. The final
+// state comes back once; the iterations' arrays are freed on return.
+void merge_until_one(ClusterBuffers& buffers, uint32_t n, uint32_t radius, PlocNodes& nodes, BuildContext& build) {
+    LoopArrays work{DeviceBuffer<uint32_t>(build.meter, "PLOC: nearest neighbours", n),
+                    DeviceBuffer<uint64_t>(build.meter, "PLOC: block flag sums", blocks_for(n)),
+                    DeviceBuffer<ploc::LoopState>(build.meter, "PLOC: loop states", 2),
+                    {}};  // the pinned slots and events, made before the timed stage
+    const ClusterPair clusters{{buffers.refs[0].data(), buffers.refs[1].data()},
+                               {buffers.boxes[0].data(), buffers.boxes[1].data()}};
+    const uint32_t tail = tail_capacity();
+    const uint32_t tail_clusters = std::min(n, tail);
+    RF_CUDA_CHECK(cudaFuncSetAttribute(tail_kernel, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                       static_cast<int>(tail_clusters * kTailBytesPerCluster)));
+    const ploc::LoopState first = ploc::first_state(n);
+    RF_CUDA_CHECK(cudaMemcpy(work.states.data(), &first, sizeof first, cudaMemcpyHostToDevice));
+
+    build.timer.start();
+    const uint32_t launched = n > tail ? run_grid_phase(clusters, n, radius, tail, work, nodes) : 0;
+    ploc::LoopState* final_state = work.states.data() + ((launched + 1) & 1);
+    launch_shaped(tail_kernel, {1, kTailThreads, tail_clusters * kTailBytesPerCluster}, clusters,
+                  work.states.data() + (launched & 1), tail_clusters, radius, nodes.children.data(),
+                  nodes.boxes.data(), nodes.iteration_nodes.data(), final_state);
     build.stages.ploc_ms += build.timer.stop_ms();
-    build.stages.ploc_iterations = static_cast<uint32_t>(iteration_nodes.size());
+
+    const ploc::LoopState last = download_value(final_state);
+    if (last.fault != 0) throw_loop_fault(last, tail_clusters);
+    if (last.count != 1 || last.next_node != n - 1) {
+        throw Error("PLOC on the device: " + std::to_string(last.count) + " clusters and " +
+                    std::to_string(last.next_node) + " nodes left, not one root over " + std::to_string(n - 1));
+    }
+    nodes.iterations = last.iterations;
+    build.stages.ploc_iterations = last.iterations;
     build.stages.peak_device_bytes = build.meter.peak();
 }
 
 // Stages 2-3: the clustering of the sorted triangles; the clusters are
 // freed on return. Raw trees keep the node boxes instead of the triangle
 // boxes, which only the device emission reads after the first clusters.
-PlocNodes cluster(DeviceMortonOrder<uint64_t>& sorted, uint32_t n, uint32_t radius, bool raw, BuildContext& build,
-                  std::vector<uint32_t>& iteration_nodes) {
+PlocNodes cluster(DeviceMortonOrder<uint64_t>& sorted, uint32_t n, uint32_t radius, bool raw, BuildContext& build) {
     ClusterBuffers clusters = first_clusters(sorted, n, build);
     if (raw) sorted.boxes.release();
     PlocNodes nodes{DeviceBuffer<uint32_t>(build.meter, "PLOC: child references", 2 * size_t{n - 1}),
-                    DeviceBuffer<Box3f>(build.meter, "PLOC: node boxes", raw ? n - 1 : 0)};
-    merge_until_one(clusters, n, radius, nodes, build, iteration_nodes);
+                    DeviceBuffer<Box3f>(build.meter, "PLOC: node boxes", raw ? n - 1 : 0),
+                    DeviceBuffer<uint32_t>(build.meter, "PLOC: nodes per iteration", n - 1)};
+    merge_until_one(clusters, n, radius, nodes, build);
     return nodes;
 }
 
@@ -233,14 +447,16 @@ PlocNodes cluster(DeviceMortonOrder<uint64_t>& sorted, uint32_t n, uint32_t radi
 // the BVH into `bvh` and returns true; false when the tree was too deep, and
 // then the raw tree came back in `out`.
 bool build_on_device(std::span<const Triangle> triangles, uint32_t radius, DeviceBuildStages& stages,
-                     DevicePlocTree& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
+                     DevicePlocTree& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr,
+                     DeviceBvh* resident = nullptr) {
     const uint32_t n = static_cast<uint32_t>(triangles.size());
     BuildContext build(stages);
+    build.resident = resident;
     // 1. Boxes, centroid bounds, 63-bit Morton codes, the sort (morton_sort.cu).
     DeviceMortonOrder<uint64_t> sorted = sort_triangles_by_morton_codes<uint64_t>(triangles, "PLOC", build);
     sorted.keys.release();  // the order is all the clustering needs
     // 2-3. The clustering.
-    const PlocNodes nodes = cluster(sorted, n, radius, raw, build, out.iteration_nodes);
+    const PlocNodes nodes = cluster(sorted, n, radius, raw, build);
 
     // 4. Emission on the device.
     if (!raw) {
@@ -259,6 +475,7 @@ bool build_on_device(std::span<const Triangle> triangles, uint32_t radius, Devic
     build.timer.start();
     out.order = download_all(sorted.order, n);
     out.children = download_all(nodes.children, 2 * size_t{n - 1});
+    out.iteration_nodes = download_all(nodes.iteration_nodes, nodes.iterations);
     if (raw) out.node_boxes = download_all(nodes.boxes, n - 1);
     build.stages.download_ms += build.timer.stop_ms();
     return false;
@@ -266,7 +483,8 @@ bool build_on_device(std::span<const Triangle> triangles, uint32_t radius, Devic
 
 // Returns true when the device emitted the BVH into *bvh (config and bvh given).
 bool build_raw(std::span<const Triangle> triangles, int radius, DeviceBuildStages& stages, int device,
-               DevicePlocTree& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr) {
+               DevicePlocTree& out, bool raw, const BvhBuildConfig* config = nullptr, Bvh* bvh = nullptr,
+               DeviceBvh* resident = nullptr) {
     if (triangles.size() >= ploc::kLeafRef) throw Error("PLOC on the device: more than 2^31-1 triangles");
     const size_t n = triangles.size();
     if (n < 2) {  // no merges: nothing for the device to do
@@ -275,7 +493,7 @@ bool build_raw(std::span<const Triangle> triangles, int radius, DeviceBuildStage
     }
     require_device(device);
     RF_CUDA_CHECK(cudaSetDevice(device));
-    return build_on_device(triangles, ploc::clamp_radius(radius), stages, out, raw, config, bvh);
+    return build_on_device(triangles, ploc::clamp_radius(radius), stages, out, raw, config, bvh, resident);
 }
 
 }  // namespace
@@ -289,13 +507,14 @@ DevicePlocTree build_ploc_tree_on_device(std::span<const Triangle> triangles, in
 }
 
 Bvh build_ploc_on_device(std::span<const Triangle> triangles, const BvhBuildConfig& config,
-                         const PlocOptions& ploc_options, DeviceBuildStages* stages, int device) {
+                         const PlocOptions& ploc_options, DeviceBuildStages* stages, int device,
+                         DeviceBvh* resident) {
     DeviceBuildStages local;
     DeviceBuildStages& s = stages ? *stages : local;
     s = {};
     DevicePlocTree tree;
     Bvh bvh;
-    if (build_raw(triangles, ploc_options.radius, s, device, tree, false, &config, &bvh)) {
+    if (build_raw(triangles, ploc_options.radius, s, device, tree, false, &config, &bvh, resident)) {
         s.emitted_on_device = true;
         return bvh;
     }

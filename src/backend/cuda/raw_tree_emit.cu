@@ -1,10 +1,12 @@
 // Canonical emission of a Morton-family raw tree on the device: the steps of
 // accel/bvh/builders/raw_tree_emit_steps.h (parents, the bottom-up finalize
-// with arrival counters, then one launch per level top down), then the
-// nodes and primitive indices back to the host. Only the root's values
-// cross to the host in between: its output size sizes the node buffer, its
-// height says whether the depth limit sends the tree to the host's emitter,
-// and otherwise how many level launches follow, back to back.
+// with acquire-release arrival counters, then ONE launch in which every node
+// slot sums its depth-first position over its ancestors), then the nodes
+// and primitive indices back to the host. Only the root's values cross to
+// the host in between, in one copy: its output size sizes the node buffer,
+// its height says whether the depth limit sends the tree to the host's
+// emitter. (For sparse numberings the used-slot count also comes back, to
+// size the node values.)
 #include <cuda_runtime.h>
 
 #include <cub/device/device_scan.cuh>
@@ -15,6 +17,7 @@
 #include "accel/bvh/builders/raw_tree_emit_steps.h"
 #include "backend/cuda/cub_run.h"
 #include "backend/cuda/cuda_check.h"
+#include "backend/cuda/device_bvh.h"
 #include "backend/cuda/launch.h"
 #include "backend/cuda/raw_tree_emit.h"
 #include "rayforge/core/error.h"
@@ -37,20 +40,18 @@ __global__ void finalize_kernel(raw_emit::RawTreeView tree) {
     if (i < tree.primitives) raw_emit::finalize_from_leaf<karras::AtomicArrival>(tree, i);
 }
 
-struct AtomicCounter {
-    __device__ static uint32_t add(uint32_t* counter, uint32_t n) { return atomicAdd(counter, n); }
-};
+// Stage 3 in one launch: one thread per node slot finds its depth-first
+// position from the subtree sizes of its ancestors and writes its output
+// node and its leaf children's (raw_emit::emit_node).
+__global__ void emit_nodes_kernel(raw_emit::RawTreeView tree, BvhNode* nodes, uint32_t* prim_indices) {
+    const uint32_t i = blockIdx.x * kBlockSize + threadIdx.x;
+    if (i < tree.node_slots) raw_emit::emit_node(tree, i, nodes, prim_indices);
+}
 
-// One level of the top-down emission. The grid is fixed (launched before
-// the level's size is known, with no host round trip between levels), so
-// threads stride over the level's items.
-__global__ void emit_level_kernel(raw_emit::RawTreeView tree, const raw_emit::EmitItem* items, const uint32_t* count,
-                                  raw_emit::EmitItem* next, uint32_t* next_count, BvhNode* nodes,
-                                  uint32_t* prim_indices) {
-    const uint32_t items_in_level = *count;
-    for (uint32_t i = blockIdx.x * kBlockSize + threadIdx.x; i < items_in_level; i += gridDim.x * kBlockSize) {
-        raw_emit::emit_item<AtomicCounter>(tree, items[i], nodes, prim_indices, next, next_count);
-    }
+// The root's values where the host reads them in one copy (through the
+// dense numbering when there is one).
+__global__ void root_values_kernel(raw_emit::RawTreeView tree, raw_emit::NodeInfo* out) {
+    *out = raw_emit::node_info(tree, tree.root);
 }
 
 // The steps' view of `tree`; the emission's own arrays are set by its stages.
@@ -122,14 +123,16 @@ void finalize_nodes(raw_emit::RawTreeView view, uint32_t values, const std::stri
     build.stages.device_emit_ms += build.timer.stop_ms();
 }
 
-// The root's values, which decide the rest (n >= 2, so the root is a node).
+// The root's values, which decide the rest (n >= 2, so the root is a
+// node): one small kernel gathers them, one copy brings them over.
 raw_emit::NodeInfo root_values(const DeviceRawTree& tree, const raw_emit::RawTreeView& view,
-                               const std::string& label) {
+                               const std::string& label, BuildContext& build) {
     if (raw_emit::is_leaf_ref(tree.root) || tree.root >= tree.node_slots) {
         throw Error(label + " device emission: the root is not a node");
     }
-    const uint32_t root_value = view.dense != nullptr ? download_value(view.dense + tree.root) : tree.root;
-    const raw_emit::NodeInfo root = download_value(view.info + root_value);
+    DeviceBuffer<raw_emit::NodeInfo> gathered(build.meter, label + ": emission root values", 1);
+    launch_shaped(root_values_kernel, {1, 1}, view, gathered.data());
+    const raw_emit::NodeInfo root = download_value(gathered.data());
     if (root.count != tree.primitives) {
         throw Error(label + " device emission: the tree holds " + std::to_string(root.count) + " of " +
                     std::to_string(tree.primitives) + " primitives");
@@ -137,50 +140,29 @@ raw_emit::NodeInfo root_values(const DeviceRawTree& tree, const raw_emit::RawTre
     return root;
 }
 
-// The level launches' grid: as many blocks as the device keeps resident.
-uint32_t resident_blocks() {
-    int device = 0, processors = 1;
-    RF_CUDA_CHECK(cudaGetDevice(&device));
-    RF_CUDA_CHECK(cudaDeviceGetAttribute(&processors, cudaDevAttrMultiProcessorCount, device));
-    return static_cast<uint32_t>(processors) * 8u;
-}
-
-// Stage 3, timed: top down, one launch per level, back to back (a level
-// holds at most as many items as the emitted tree has leaves,
-// (out_size + 1) / 2); then the BVH back to the host.
-void emit_levels(const raw_emit::RawTreeView& view, const raw_emit::NodeInfo& root, const std::string& label,
-                 BuildContext& build, Bvh& out) {
-    const uint32_t n = view.primitives, levels = raw_emit::emit_levels(root);
-    const uint32_t widest = (root.out_size + 1) / 2;
-    DeviceBuffer<BvhNode> nodes(build.meter, label + ": BVH nodes", root.out_size);
-    DeviceBuffer<uint32_t> prims(build.meter, label + ": BVH primitive indices", n),
-        counts(build.meter, label + ": emission level sizes", size_t{levels} + 1);
-    DeviceBuffer<raw_emit::EmitItem> items[2] = {
-        DeviceBuffer<raw_emit::EmitItem>(build.meter, label + ": emission level A", widest),
-        DeviceBuffer<raw_emit::EmitItem>(build.meter, label + ": emission level B", widest)};
-    const uint32_t grid = strided_blocks_for(widest, resident_blocks());
-    const raw_emit::EmitItem first = raw_emit::root_item(view.root);
-    const uint32_t one = 1;
+// Stage 3, timed: the canonical layout in one launch (emit_nodes_kernel);
+// then the BVH back to the host, unless build.resident keeps it on the
+// device. The result's buffers are unmetered (a resident one outlives the
+// build): they count as live alongside the emission's peak.
+void emit_nodes(const raw_emit::RawTreeView& view, const raw_emit::NodeInfo& root, const std::string& label,
+                BuildContext& build, Bvh& out) {
+    const uint32_t n = view.primitives;
+    DeviceBvh local;
+    DeviceBvh& result = build.resident ? *build.resident : local;
+    result.nodes = DeviceBuffer<BvhNode>(label + ": BVH nodes", root.out_size);
+    result.prim_indices = DeviceBuffer<uint32_t>(label + ": BVH primitive indices", n);
     build.timer.start();
-    RF_CUDA_CHECK(cudaMemsetAsync(counts.data(), 0, counts.bytes()));
-    RF_CUDA_CHECK(cudaMemcpyAsync(counts.data(), &one, sizeof one, cudaMemcpyHostToDevice));
-    RF_CUDA_CHECK(cudaMemcpyAsync(items[0].data(), &first, sizeof first, cudaMemcpyHostToDevice));
-    for (uint32_t level = 0; level < levels; ++level) {
-        launch_shaped(emit_level_kernel, {grid}, view, items[level & 1].data(), counts.data() + level,
-                      items[(level + 1) & 1].data(), counts.data() + level + 1, nodes.data(), prims.data());
-    }
+    launch(emit_nodes_kernel, view.node_slots, view, result.nodes.data(), result.prim_indices.data());
     build.stages.device_emit_ms += build.timer.stop_ms();
-    // Items queued below the last level: none in a tree of that height.
-    if (download_value(counts.data() + levels) != 0) {
-        throw Error(label + " device emission: the tree is deeper than its root's height");
-    }
-    build.stages.peak_device_bytes = std::max(build.stages.peak_device_bytes, build.meter.peak());
+    build.stages.peak_device_bytes = std::max(build.stages.peak_device_bytes, build.meter.peak() +
+                                              result.nodes.bytes() + result.prim_indices.bytes());
+    if (build.resident) return;
 
     build.timer.start();
     out.nodes.resize(root.out_size);
     out.prim_indices.resize(n);
-    nodes.download(out.nodes);
-    prims.download(out.prim_indices);
+    result.nodes.download(out.nodes);
+    result.prim_indices.download(out.prim_indices);
     build.stages.download_ms += build.timer.stop_ms();
 }
 
@@ -210,9 +192,9 @@ bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BvhBuildConfig& co
     }
     if (own_parents) view.leaf_parent = nullptr;  // the top-down pass walks only node parents
 
-    const raw_emit::NodeInfo root = root_values(tree, view, label);
+    const raw_emit::NodeInfo root = root_values(tree, view, label, build);
     if (!raw_emit::fits_depth_limit(root)) return false;
-    emit_levels(view, root, label, build, out);
+    emit_nodes(view, root, label, build, out);
     return true;
 }
 

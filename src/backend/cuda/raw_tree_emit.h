@@ -45,6 +45,8 @@ struct DeviceRawTree {
 // rebuild this emitter does not do. Adds the device time to
 // build.stages.device_emit_ms and the download to download_ms; its buffers
 // (named after `label`) are counted by build.meter and freed on return.
+// With build.resident set, the BVH stays on the device there and `out` is
+// left empty (no download).
 bool emit_raw_tree_on_device(const DeviceRawTree& tree, const BvhBuildConfig& config, const std::string& label,
                              BuildContext& build, Bvh& out);
 

@@ -10,7 +10,9 @@
 // dissertation's work queues do. With sort_rays the active queue is sorted
 // by the ray key of Garanzha and Loop 2010 (render/ray_sort_key.h) with
 // CUB's radix sort before each extension, so neighbouring threads trace
-// similar rays.
+// similar rays. The extension and connection launches are timed with CUDA
+// events read after the pass (PassStats::trace_ms: the trace share of a
+// pass, apart from shading, compaction and sorting).
 //
 // Whitted, AO and normals run one thread per pixel (pixel_kernels.h) over
 // render/pixel_sample.h, the CPU's per-pixel function.
@@ -20,6 +22,7 @@
 
 #include <algorithm>
 #include <type_traits>
+#include <vector>
 
 #include "backend/backends.h"
 #include "backend/cuda/cub_run.h"
@@ -137,12 +140,54 @@ struct WavefrontBuffers {
     }
 };
 
+// The kernel time of a pass's trace launches (extension and shadow
+// connections; PassStats::trace_ms): an event recorded before and after each
+// on the default stream, read once the pass has finished, so no launch waits
+// for the host. Events are made as needed and kept for the next passes.
+class TraceLaunchTimer {
+public:
+    TraceLaunchTimer() = default;
+    TraceLaunchTimer(const TraceLaunchTimer&) = delete;
+    TraceLaunchTimer& operator=(const TraceLaunchTimer&) = delete;
+    ~TraceLaunchTimer() {
+        for (cudaEvent_t event : events_) cudaEventDestroy(event);
+    }
+
+    void begin_pass() { recorded_ = 0; }
+    void start() { record(); }
+    void stop() { record(); }
+    // The sum of every start-stop interval of the pass; after the pass's synchronisation.
+    [[nodiscard]] double total_ms() const {
+        double sum = 0.0;
+        for (size_t i = 0; i + 1 < recorded_; i += 2) {
+            float ms = 0.0f;
+            RF_CUDA_CHECK(cudaEventElapsedTime(&ms, events_[i], events_[i + 1]));
+            sum += double(ms);
+        }
+        return sum;
+    }
+
+private:
+    void record() {
+        if (recorded_ == events_.size()) {
+            cudaEvent_t event = nullptr;
+            RF_CUDA_CHECK(cudaEventCreate(&event));
+            events_.push_back(event);
+        }
+        RF_CUDA_CHECK(cudaEventRecord(events_[recorded_++]));
+    }
+
+    std::vector<cudaEvent_t> events_;
+    size_t recorded_ = 0;
+};
+
 // The device side of run_wavefront: each stage one launch over its items.
 class DeviceWavefront {
 public:
     DeviceWavefront(const DeviceTracer::Impl& tracer, const SceneView& view, const IntegratorSettings& settings,
-                    uint32_t sample, const Films& films, WavefrontBuffers& buffers)
-        : tracer_(tracer), view_(view), settings_(settings), sample_(sample), films_(films), b_(buffers) {}
+                    uint32_t sample, const Films& films, WavefrontBuffers& buffers, TraceLaunchTimer& trace_timer)
+        : tracer_(tracer), view_(view), settings_(settings), sample_(sample), films_(films), b_(buffers),
+          trace_timer_(trace_timer) {}
 
     void generate(uint32_t count) {
         launch_shaped(generate_kernel, render_shape(count), settings_, sample_, b_.queues(), count);
@@ -156,10 +201,12 @@ public:
         std::swap(b_.active, b_.next_active);
     }
     void extend(uint32_t active) {
+        trace_timer_.start();
         tracer_.with_tracer([&](const auto& t) {
             using Tracer = std::decay_t<decltype(t)>;
             launch_shaped(extend_kernel<Tracer>, render_shape(active), t, view_, b_.queues(), active);
         });
+        trace_timer_.stop();
         closest_rays += active;
     }
     void shade(uint32_t active) {
@@ -173,10 +220,12 @@ public:
         return {sizes[0], sizes[1]};
     }
     void connect(uint32_t shadows) {
+        trace_timer_.start();
         tracer_.with_tracer([&](const auto& t) {
             using Tracer = std::decay_t<decltype(t)>;
             launch_shaped(connect_kernel<Tracer>, render_shape(shadows), t, view_, b_.queues(), shadows);
         });
+        trace_timer_.stop();
         shadow_rays += shadows;
     }
     void swap_queues() { std::swap(b_.active, b_.next_active); }
@@ -193,6 +242,7 @@ private:
     uint32_t sample_;
     Films films_;
     WavefrontBuffers& b_;
+    TraceLaunchTimer& trace_timer_;
 };
 
 const DeviceTracer& device_tracer_of(const Accel& accel) {
@@ -228,16 +278,19 @@ private:
                   PassStats& stats) override {
         if (cancel && cancel->load(std::memory_order_relaxed)) return false;
         RF_CUDA_CHECK(cudaSetDevice(device().index));
-        if (options().integrator == IntegratorKind::Path) path_pass(stats);
+        const bool path = options().integrator == IntegratorKind::Path;
+        if (path) path_pass(stats);
         else pixel_pass(stats);
         RF_CUDA_CHECK(cudaDeviceSynchronize());
+        if (path) stats.trace_ms = trace_timer_.total_ms();
         return true;
     }
 
     void path_pass(PassStats& stats) {
         const uint32_t pixels = uint32_t(options().width) * uint32_t(options().height);
+        trace_timer_.begin_pass();
         DeviceWavefront wavefront(tracer_->impl(), scene_->view(), settings(), uint32_t(passes()), films(),
-                                  wavefront_);
+                                  wavefront_, trace_timer_);
         run_wavefront(wavefront, settings(), pixels, stats.waves);
         stats.closest_rays = wavefront.closest_rays;
         stats.shadow_rays = wavefront.shadow_rays;
@@ -289,6 +342,7 @@ private:
     std::unique_ptr<DeviceScene> scene_;
     DeviceBuffer<Vec3f> color_{"film"}, albedo_{"albedo film"}, normal_{"normal film"}, depth_{"depth film"};
     WavefrontBuffers wavefront_;
+    TraceLaunchTimer trace_timer_;
     DeviceBuffer<unsigned long long> ray_counts_{"ray counters"};
 };
 

@@ -1,6 +1,7 @@
 // The CPU's one entry point for every BVH builder: runs the builder named in
-// options.builder with its options group, then the optimizer when
-// options.reinsertion.enabled is set, all on at most options.threads
+// options.builder with its options group, then the optimizers when asked
+// (treelet restructuring for options.treelets.enabled, then reinsertion for
+// options.reinsertion.enabled), all on at most options.threads
 // threads. The public rf::build_bvh (rayforge/accel/accel.h) calls it for
 // the CPU.
 #pragma once

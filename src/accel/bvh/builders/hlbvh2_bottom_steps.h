@@ -1,25 +1,40 @@
-// The per-task steps of HLBVH2's bottom levels (Garanzha 2014, dissertation
+// The per-node steps of HLBVH2's bottom levels (Garanzha 2014, dissertation
 // ch. 5, "BVH construction with binary search and work queues"; Garanzha,
 // Pantaleoni and McAllister, HPG 2011), written once for both backends: the
-// CPU builder (hlbvh2.cpp) recurses over them, the CUDA builder
-// (backend/cuda/hlbvh2_build.cu) runs one task per thread, one tree level
-// per launch, with work queues.
+// CPU builder (hlbvh2.cpp) recurses with split_position(); the CUDA builder
+// (backend/cuda/hlbvh2_build.cu) builds every cluster's bottom tree in ONE
+// launch, one thread per split position, by the radix-tree rule of Karras
+// 2012 ("Maximizing Parallelism in the Construction of BVHs, Octrees, and
+// k-d Trees", HPG 2012, sec. 3-4: a node is found from its split, with no
+// top-down order), then boxes them in one bottom-up launch with arrival
+// counters (Karras sec. 4).
 //
 //  - split_position(): a node over sorted range [a, b) of 30-bit codes
 //    splits where the highest bit in which codes[a] and codes[b-1] differ
 //    turns from 0 to 1 (binary search for the first 1: the codes share every
 //    higher bit, so that bit is 0s then 1s); all codes equal: halve by position.
-//  - process_task(): one queue task. A range of at most `leaf_size`
-//    primitives is a leaf; otherwise the task becomes inner node mid - 1
-//    (each split position occurs once in the whole forest, so node indices
-//    are fixed by the input, not by scheduling), writes its leaf children's
-//    references at once and hands back its inner children as new tasks.
-//    Every task writes its own reference into its parent's slot.
+//    The inner node is numbered mid - 1: each split position occurs once in
+//    the whole forest, so node indices are fixed by the input.
+//  - node_of_split(): the range of inner node i, the one splitting at
+//    position i + 1, found from i alone. Codes i and i + 1 in one cluster
+//    differ first in some bit h: the node is every code sharing the bits
+//    above h with them (a maximal prefix range: HLBVH2's split of a range at
+//    its highest differing bit is the binary radix tree's, so its ranges are
+//    the radix tree's). Equal codes: i + 1 lies in a run of equal codes,
+//    itself a node of the radix tree, halved by position below it; the
+//    halvings are descended from the run to the one splitting at i + 1. A
+//    range of at most leaf_size primitives is a leaf, so the node exists iff
+//    its own range is larger (every ancestor's is larger still).
+//  - subtree_reference(): a child range's reference (a leaf run, or the
+//    inner node at its split), its leaf run size and its parent link.
+//  - boxes_from_leaf(): the bottom-up box pass: one thread per leaf walks up
+//    the parent links; an arrival counter per inner node lets only the
+//    second child's thread go on (both children final), which writes the
+//    node's box as union(left, right), the CPU refit's order; a walk that
+//    reaches its cluster's root writes the cluster's box.
 //  - enqueue_offset(): a lane's place among its warp's new tasks (a
 //    warp-local prefix sum of 0, 1 or 2 children from two ballots), so a
-//    warp enqueues with one atomicAdd.
-//  - node_box(): the box of an inner node from its children, for the
-//    bottom-up pass that runs level by level, deepest first.
+//    warp enqueues with one atomicAdd (the top level's task queues).
 //
 // References (as morton::RawTree's): an inner node index, or kLeafRef | the
 // sorted position of a leaf run's first primitive. Slots: the reference
@@ -29,22 +44,17 @@
 
 #include <cstdint>
 
+#include "accel/bvh/builders/karras_tree_steps.h"
 #include "rayforge/core/host_device.h"
 #include "rayforge/math/box.h"
 
 namespace rf::hlbvh2 {
 
 inline constexpr uint32_t kLeafRef = 0x80000000u;  // == morton::kLeafRef (hlbvh2.cpp checks)
-inline constexpr uint32_t kNoNode = 0xffffffffu;   // a level entry that made no inner node
+inline constexpr uint32_t kNoParent = 0xffffffffu;     // a position that starts no leaf; the top root's parent
+inline constexpr uint32_t kClusterRootOf = 0x80000000u;  // | c: the parent link of cluster c's root
 inline constexpr int kCodeBits = 30;
 inline constexpr int kClusterShift = 15;           // clusters: the top 15 of 30 bits
-
-// One queue entry: sorted range [first, end) and the slot its reference goes to.
-struct Task {
-    uint32_t first;
-    uint32_t end;
-    uint32_t slot;
-};
 
 RF_HDI int highest_bit(uint32_t x) {  // x != 0
 #if defined(__CUDA_ARCH__)
@@ -73,39 +83,6 @@ RF_HDI uint32_t split_position(const uint32_t* codes, uint32_t first, uint32_t e
         if ((codes[m] >> bit) & 1u) hi = m; else lo = m + 1;
     }
     return lo;
-}
-
-// Processes `task`: writes its reference to refs[task.slot] and, for an
-// inner node, its leaf children's references to refs[2 * node + side];
-// inner children go to inner_children[0 ..) and their number is returned
-// (0, 1 or 2). *node receives the inner node's index, or kNoNode for a leaf.
-// Each leaf's size goes to leaf_runs[first] when leaf_runs is not null.
-// 1 <= leaf_size <= 255.
-RF_HDI uint32_t process_task(const uint32_t* codes, const Task& task, uint32_t leaf_size, uint32_t* refs,
-                             uint8_t* leaf_runs, Task* inner_children, uint32_t* node) {
-    if (task.end - task.first <= leaf_size) {
-        refs[task.slot] = kLeafRef | task.first;
-        if (leaf_runs != nullptr) leaf_runs[task.first] = static_cast<uint8_t>(task.end - task.first);
-        *node = kNoNode;
-        return 0;
-    }
-    const uint32_t mid = split_position(codes, task.first, task.end);
-    const uint32_t index = mid - 1;
-    refs[task.slot] = index;
-    *node = index;
-    const Task halves[2] = {{task.first, mid, 2 * index}, {mid, task.end, 2 * index + 1}};
-    uint32_t inner = 0;
-    for (int side = 0; side < 2; ++side) {
-        if (halves[side].end - halves[side].first <= leaf_size) {
-            refs[halves[side].slot] = kLeafRef | halves[side].first;
-            if (leaf_runs != nullptr) {
-                leaf_runs[halves[side].first] = static_cast<uint8_t>(halves[side].end - halves[side].first);
-            }
-        } else {
-            inner_children[inner++] = halves[side];
-        }
-    }
-    return inner;
 }
 
 // A lane's offset among its warp's new tasks: `one_or_more` has the bits of
@@ -143,9 +120,129 @@ RF_HDI Box3f reference_box(const BoxView& v, uint32_t ref) {
     return box;
 }
 
-// Inner node `index`'s box from its children's (final: deeper level, or leaves).
-RF_HDI void node_box(const BoxView& v, uint32_t index) {
-    v.inner_boxes[index] = box_union(reference_box(v, v.refs[2 * index]), reference_box(v, v.refs[2 * index + 1]));
+// ---- The bottom trees in one launch ----
+
+// The first position p in [lo, hi) with codes[p] >> shift >= key (hi when
+// none); the codes are sorted.
+RF_HDI uint32_t first_at_least(const uint32_t* codes, uint32_t lo, uint32_t hi, uint32_t key, int shift) {
+    while (lo < hi) {
+        const uint32_t m = lo + (hi - lo) / 2;
+        if ((codes[m] >> shift) < key) lo = m + 1; else hi = m;
+    }
+    return lo;
+}
+
+// The sorted range [*first, *end) of inner node i (0 <= i < n - 1), the
+// node of the forest that splits at position i + 1; false when there is
+// none (i + 1 starts a cluster, or lies inside a leaf).
+RF_HDI bool node_of_split(const uint32_t* codes, uint32_t n, uint32_t i, uint32_t leaf_size, uint32_t* first,
+                          uint32_t* end) {
+    const uint32_t left = codes[i], right = codes[i + 1];
+    if ((left >> kClusterShift) != (right >> kClusterShift)) return false;  // i + 1 starts a cluster
+    // Every code sharing the bits above the highest one where left and right
+    // differ (a radix-tree node; <= 15 bits below the cluster's, so inside
+    // it), or all 30 when they are equal (their run).
+    const int shift = left == right ? 0 : highest_bit(left ^ right) + 1;
+    const uint32_t key = left >> shift;
+    uint32_t a = first_at_least(codes, 0, i, key, shift);
+    uint32_t b = first_at_least(codes, i + 1, n, key + 1, shift);
+    if (left != right) {
+        *first = a;
+        *end = b;
+        return b - a > leaf_size;
+    }
+    // The run's halvings by position, down to the one at i + 1.
+    const uint32_t mid = i + 1;
+    while (b - a > leaf_size) {
+        const uint32_t m = a + (b - a) / 2;
+        if (m == mid) {
+            *first = a;
+            *end = b;
+            return true;
+        }
+        if (mid < m) b = m; else a = m;
+    }
+    return false;
+}
+
+// What the bottom trees' launch writes: refs (slots as above), the leaf
+// runs' sizes at their first positions, and the parent links for the box
+// pass: inner_parent per inner node index, leaf_parent per leaf's first
+// position (kNoParent elsewhere: set before), a cluster root's parent
+// being kClusterRootOf | its cluster.
+struct BottomTrees {
+    uint32_t* refs;
+    uint8_t* leaf_runs;
+    uint32_t* inner_parent;  // n - 1
+    uint32_t* leaf_parent;   // n
+};
+
+// The reference of the subtree over sorted range [a, b) (a leaf run, or the
+// inner node at its split), recording its leaf run and `parent` as its parent.
+RF_HDI uint32_t subtree_reference(const uint32_t* codes, uint32_t a, uint32_t b, uint32_t leaf_size, uint32_t parent,
+                                  const BottomTrees& out) {
+    if (b - a <= leaf_size) {
+        out.leaf_runs[a] = static_cast<uint8_t>(b - a);
+        out.leaf_parent[a] = parent;
+        return kLeafRef | a;
+    }
+    const uint32_t index = split_position(codes, a, b) - 1;
+    out.inner_parent[index] = parent;
+    return index;
+}
+
+// One thread per split position i (0 <= i < n - 1): inner node i, if there
+// is one, writes its children's references. 1 <= leaf_size <= 255.
+RF_HDI void build_split_node(const uint32_t* codes, uint32_t n, uint32_t i, uint32_t leaf_size,
+                             const BottomTrees& out) {
+    uint32_t first = 0, end = 0;
+    if (!node_of_split(codes, n, i, leaf_size, &first, &end)) return;
+    out.refs[2 * i] = subtree_reference(codes, first, i + 1, leaf_size, i, out);
+    out.refs[2 * i + 1] = subtree_reference(codes, i + 1, end, leaf_size, i, out);
+}
+
+// One thread per cluster c over [first, end): its root's reference.
+RF_HDI void build_cluster_root(const uint32_t* codes, uint32_t n, uint32_t c, uint32_t first, uint32_t end,
+                               uint32_t leaf_size, const BottomTrees& out) {
+    out.refs[2 * (n - 1) + c] = subtree_reference(codes, first, end, leaf_size, kClusterRootOf | c, out);
+}
+
+// ---- The bottom trees' boxes in one launch ----
+
+struct BottomBoxPass {
+    BoxView boxes;                // inner_boxes written
+    const uint32_t* inner_parent;
+    const uint32_t* leaf_parent;
+    uint32_t* arrivals;           // n - 1, zero before the pass
+    Box3f* cluster_boxes;         // per cluster, written
+};
+
+// The box of a reference another thread may have just written (inner boxes
+// read past L1, karras::load_shared_box).
+RF_HDI Box3f final_reference_box(const BoxView& v, uint32_t ref) {
+    return (ref & kLeafRef) != 0 ? reference_box(v, ref) : karras::load_shared_box(&v.inner_boxes[ref]);
+}
+
+// The walk from the leaf at sorted position `position` (nothing when no leaf
+// starts there). `Arrival` provides arrive(uint32_t*), returning the count
+// before (karras::AtomicArrival; the tests inject others).
+template <class Arrival>
+RF_HDI void boxes_from_leaf(const BottomBoxPass& p, uint32_t position) {
+    uint32_t parent = p.leaf_parent[position];
+    if (parent == kNoParent) return;
+    uint32_t from = kLeafRef | position;
+    Box3f box = reference_box(p.boxes, from);
+    while ((parent & kClusterRootOf) == 0) {
+        if (Arrival::arrive(&p.arrivals[parent]) == 0) return;  // the sibling's walk goes on
+        const uint32_t left = p.boxes.refs[2 * parent], right = p.boxes.refs[2 * parent + 1];
+        const bool from_left = left == from;
+        const Box3f other = final_reference_box(p.boxes, from_left ? right : left);
+        box = from_left ? box_union(box, other) : box_union(other, box);
+        p.boxes.inner_boxes[parent] = box;
+        from = parent;
+        parent = p.inner_parent[parent];
+    }
+    p.cluster_boxes[parent & ~kClusterRootOf] = box;
 }
 
 }  // namespace rf::hlbvh2

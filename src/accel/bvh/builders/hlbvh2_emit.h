@@ -1,5 +1,5 @@
 // The canonical BVH of an HLBVH2 raw tree built elsewhere (the CUDA HLBVH2,
-// backend/cuda/hlbvh2_build.cu: bottom levels by work queues, the top level
+// backend/cuda/hlbvh2_build.cu: bottom trees in one launch, the top level
 // by task queues in hlbvh2_top_level.cu): the host half of the device build.
 // A forest without a top level gets the CPU builder's own (hlbvh2.cpp, the
 // grid SAH of hlbvh2_top_steps.h), so the result is build_hlbvh2's.
@@ -17,7 +17,7 @@
 
 namespace rf {
 
-// The bottom levels as hlbvh2_bottom_steps.h's process_task leaves them.
+// The bottom levels as the device leaves them (hlbvh2_bottom_steps.h build_split_node: the CPU's node numbers).
 struct Hlbvh2Forest {
     std::vector<uint32_t> order;           // sorted position -> triangle (the stable 30-bit Morton order)
     std::vector<uint32_t> refs;            // 2 (n - 1) child references per inner node index, then one root per cluster

@@ -15,7 +15,10 @@
 //    an axis spanning c >= 2 cells gets min(8, c) bins, cell x going to bin
 //    (x - lo) * bins / c; the candidate planes lie between bins.
 //  - bins: box, triangles and clusters per bin (bin_task: all bins of a task,
-//    sequentially; bin_task_lane: the bin a device lane owns, of each axis).
+//    sequentially; bin_task_lane: the bin a device lane owns, of each axis;
+//    strided_bins_lane + the scatter_* steps: for tasks of more than
+//    kTopStridedBinMin clusters, a lane bins every 8th cluster and a
+//    reduce-scatter by shuffles hands each lane its bin).
 //  - plane_cost(): area(L) * triangles(L) + area(R) * triangles(R) (half
 //    areas), rounded step by step with no fused multiply-add on either
 //    backend, so both evaluate the same costs bit for bit.
@@ -25,8 +28,8 @@
 //  - partition: clusters left of the plane keep their order before those
 //    right of it (a stable partition; the device ranks them by ballots).
 //  - child_tasks(): the children's ranges and node numbers.
-//  - top_node_box(): a top node's box from its children's, for the device's
-//    bottom-up pass (level by level, deepest first).
+//  - link_top_children(), top_boxes_from_node(): the device's bottom-up pass
+//    over the top nodes' boxes, one launch with arrival counters.
 //  - large tasks (more than kTopBlockTaskMin clusters) are run on the device
 //    by a whole thread block: every thread bins a strided share of the
 //    clusters into shared bins kept as integer keys (ordered_key: atomicMin /
@@ -282,6 +285,34 @@ RF_HDI void bin_task_lane(const TopCluster* clusters, uint32_t first, uint32_t e
     }
 }
 
+// ---- The 8-lane path's strided binning (tasks of more than
+// kTopStridedBinMin clusters) ----
+// Lane `lane` bins clusters first + lane, first + lane + kTopLanes, ...
+// into all its bins of every axis; a reduce-scatter over the task's 8
+// lanes by xor shuffles (d = 4, 2, 1) then leaves lane L with bin L of
+// each axis, summed over the lanes: at step d a lane keeps, of each pair of
+// its remaining bins (k, k | d), the one that agrees with it in bit d and
+// adds its partner's value of it. Each lane reads count / 8 clusters
+// instead of all of them. The box union is exact, so the bins are
+// bin_task's up to the sign of zero (as the block path's).
+inline constexpr uint32_t kTopStridedBinMin = 32;
+
+RF_HDI void strided_bins_lane(const TopCluster* clusters, uint32_t first, uint32_t end, const CellBounds& b,
+                              uint32_t lane, TopBin bins[3][kTopBins]) {
+    uint32_t count[3];
+    for (int axis = 0; axis < 3; ++axis) count[axis] = axis_bins(b, axis);
+    for (uint32_t i = first + lane; i < end; i += kTopLanes) {
+        for (int axis = 0; axis < 3; ++axis) {
+            if (count[axis] != 0) add(bins[axis][bin_index(clusters[i].cells, b, axis, count[axis])], clusters[i]);
+        }
+    }
+}
+// The j-th pair (k, k | d) at step d, j < d: k has bit d clear and the
+// bits above it of `lane` (which its partner lane ^ d shares).
+RF_HDI uint32_t scatter_pair(uint32_t lane, uint32_t d, uint32_t j) { return (lane & ~(2 * d - 1)) | j; }
+RF_HDI uint32_t scatter_kept(uint32_t lane, uint32_t d, uint32_t k) { return (lane & d) != 0 ? (k | d) : k; }
+RF_HDI uint32_t scatter_sent(uint32_t lane, uint32_t d, uint32_t k) { return (lane & d) != 0 ? k : (k | d); }
+
 // The best plane over all axes from the bins, sequentially (the CPU).
 // *left_clusters receives the clusters left of it.
 RF_HDI TopSplit choose_split(const TopBin bins[3][kTopBins], const CellBounds& b, uint32_t* left_clusters) {
@@ -323,13 +354,90 @@ struct TopBoxView {
     Box3f* top_boxes;           // per top node k
 };
 
-RF_HDI Box3f top_reference_box(const TopBoxView& v, uint32_t ref) {
-    if ((ref & kLeafRef) == 0 && ref >= v.top_base) return v.top_boxes[ref - v.top_base];
+RF_HDI bool is_top_reference(const TopBoxView& v, uint32_t ref) { return (ref & kLeafRef) == 0 && ref >= v.top_base; }
+
+// The box of a top node's child: a top node's (another thread may have just
+// written it: read past L1) or a cluster root's (final before the pass).
+RF_HDI Box3f top_child_box(const TopBoxView& v, uint32_t ref) {
+    if (is_top_reference(v, ref)) return karras::load_shared_box(&v.top_boxes[ref - v.top_base]);
     return reference_box(v.bottom, ref);
 }
-// Top node k's box from its children's (deeper levels are final).
-RF_HDI void top_node_box(const TopBoxView& v, uint32_t k) {
-    v.top_boxes[k] = box_union(top_reference_box(v, v.top_refs[2 * k]), top_reference_box(v, v.top_refs[2 * k + 1]));
+
+// The top nodes' parent links for the box pass, one thread per top node k:
+// k records itself as its top children's parent; the root's is kNoParent.
+RF_HDI void link_top_children(const TopBoxView& v, uint32_t k, uint32_t* top_parent) {
+    if (k == 0) top_parent[0] = kNoParent;
+    for (int side = 0; side < 2; ++side) {
+        const uint32_t ref = v.top_refs[2 * k + side];
+        if (is_top_reference(v, ref)) top_parent[ref - v.top_base] = k;
+    }
+}
+
+// The top boxes bottom-up in one launch, one thread per top node k: the
+// leaves of the top tree are the cluster roots, so a walk starts at each
+// node with a cluster child (Karras 2012 sec. 4 with arrival counters, as
+// the bottom trees' boxes_from_leaf); a node with two starts its own walk at
+// itself. The second arriving walk writes union(left, right), the CPU
+// refit's order. arrivals: clusters - 1, zero before the pass.
+template <class Arrival>
+RF_HDI void top_boxes_from_node(const TopBoxView& v, const uint32_t* top_parent, uint32_t* arrivals, uint32_t k) {
+    const uint32_t left = v.top_refs[2 * k], right = v.top_refs[2 * k + 1];
+    const bool top_left = is_top_reference(v, left), top_right = is_top_reference(v, right);
+    if (top_left && top_right) return;  // its children's walks reach it
+    uint32_t node = k, from;
+    Box3f box;
+    if (!top_left && !top_right) {
+        box = box_union(reference_box(v.bottom, left), reference_box(v.bottom, right));
+        v.top_boxes[k] = box;
+        from = v.top_base + k;
+        node = top_parent[k];
+    } else {
+        from = top_left ? right : left;
+        box = reference_box(v.bottom, from);
+    }
+    while (node != kNoParent) {
+        if (Arrival::arrive(&arrivals[node]) == 0) return;  // the sibling's walk goes on
+        const uint32_t l = v.top_refs[2 * node], r = v.top_refs[2 * node + 1];
+        const bool from_left = l == from;
+        const Box3f other = top_child_box(v, from_left ? r : l);
+        box = from_left ? box_union(box, other) : box_union(other, box);
+        v.top_boxes[node] = box;
+        from = v.top_base + node;
+        node = top_parent[node];
+    }
+}
+
+// One top level's record on the device (as QueueLevel for the bottom
+// levels), zero before the loop except level 0's root task. Level l's
+// launches read record l and count their children into record l + 1; the
+// large tasks' launch (always made, its blocks past `large` idle) opens
+// record l + 1. Level l's nodes go to the level-node list from `base`,
+// its large tasks' first.
+struct TopQueueLevel {
+    uint32_t small_head;  // the small queue's dequeue counter
+    uint32_t small;       // tasks of at most kTopBlockTaskMin clusters
+    uint32_t large;       // tasks of more
+    uint32_t base;
+    uint32_t fault;       // nonzero: this level or an earlier one overflowed
+};
+
+struct TopQueueCapacity {
+    uint32_t small, large;  // queue entries
+    uint32_t nodes;         // level-node list entries (the top nodes)
+};
+
+RF_HDI bool top_level_runs(const TopQueueLevel& l, const TopQueueCapacity& c) {
+    return l.fault == 0 && l.small <= c.small && l.large <= c.large &&
+           uint64_t{l.base} + l.small + l.large <= c.nodes;
+}
+
+// One thread of level l's large-task launch, before anything is enqueued.
+// Returns top_level_runs(l, c).
+RF_HDI bool open_next_top_level(const TopQueueLevel& l, TopQueueLevel* next, const TopQueueCapacity& c) {
+    const bool runs = top_level_runs(l, c);
+    next->base = runs ? l.base + l.small + l.large : l.base;
+    next->fault = runs ? 0u : 1u;
+    return runs;
 }
 
 }  // namespace rf::hlbvh2

@@ -23,6 +23,12 @@
 //    compaction of sec. 4.3 by one exclusive prefix sum over the clusters
 //    (survivors, merges): new positions and new node numbers both follow
 //    the cluster order, whatever blocks the sum is computed in.
+//  - LoopState, next_state(): the iteration loop's state kept on the device
+//    (count, nodes made, iterations, a fault), so no iteration's count has
+//    to reach the host: every kernel of an iteration reads it, one thread
+//    advances it from the iteration's flag total.
+//  - thread_chunk(): the contiguous clusters one thread of the single-block
+//    tail owns, so a block-wide scan of per-thread sums is in cluster order.
 // No std:: here: plain pointers and fixed-size values.
 #pragma once
 
@@ -201,6 +207,83 @@ RF_HDI void compact_cluster(const ClusterArrays& a, const uint32_t* neighbour, u
     if (a.node_boxes != nullptr) a.node_boxes[p.node] = box;
     a.next_refs[p.position] = p.node;
     a.next_boxes[p.position] = box;
+}
+
+// The clustering loop's state, on the device between the kernels.
+struct LoopState {
+    uint32_t count;       // clusters left
+    uint32_t next_node;   // nodes made so far (the next node's number)
+    uint32_t iterations;  // iterations done; their parity picks the cluster buffers
+    uint32_t fault;       // 0, kFaultNoProgress or kFaultTailOverflow
+    uint32_t fault_survivors, fault_merges;  // what the faulty iteration reported (the overflow: the count)
+};
+
+// Iteration `iterations` merged nothing or lost clusters.
+inline constexpr uint32_t kFaultNoProgress = 1;
+// The single-block tail was handed more clusters than it holds.
+inline constexpr uint32_t kFaultTailOverflow = 2;
+
+RF_HDI LoopState first_state(uint32_t n) { return LoopState{n, 0u, 0u, 0u, 0u, 0u}; }
+
+// The grid-wide kernels run an iteration only while the count is above the
+// single-block tail's capacity (and nothing faulted); otherwise the launch
+// is a no-op and the state passes through unchanged.
+RF_HDI bool grid_iteration_runs(const LoopState& s, uint32_t tail_capacity) {
+    return s.fault == 0 && s.count > tail_capacity;
+}
+
+// The state after an iteration over s.count clusters whose compaction flags
+// sum to `total` ((survivors << 32) | merges). The closest pair is always
+// mutual, so an iteration without merges, or with survivors that do not
+// add up, is a device fault: recorded, never looped on.
+RF_HDI LoopState next_state(const LoopState& s, uint64_t total) {
+    const uint32_t survivors = static_cast<uint32_t>(total >> 32), merges = static_cast<uint32_t>(total);
+    LoopState r = s;
+    if (merges == 0 || survivors != s.count - merges) {
+        r.fault = kFaultNoProgress;
+        r.fault_survivors = survivors;
+        r.fault_merges = merges;
+        return r;
+    }
+    r.count = survivors;
+    r.next_node += merges;
+    r.iterations += 1;
+    return r;
+}
+
+// next_state(), and the iteration's node count into iteration_nodes (when
+// given: one thread of the kernel that advances the state writes it).
+RF_HDI LoopState commit_iteration(const LoopState& s, uint64_t total, uint32_t* iteration_nodes) {
+    const LoopState r = next_state(s, total);
+    if (r.fault == 0 && iteration_nodes != nullptr) iteration_nodes[s.iterations] = r.next_node - s.next_node;
+    return r;
+}
+
+// The state the single-block tail starts from: s, or an overflow fault
+// when s holds more than `capacity` clusters.
+RF_HDI LoopState tail_start(const LoopState& s, uint32_t capacity) {
+    LoopState r = s;
+    if (r.fault == 0 && r.count > capacity) {
+        r.fault = kFaultTailOverflow;
+        r.fault_survivors = r.count;
+        r.fault_merges = 0;
+    }
+    return r;
+}
+
+// Clusters [begin, end) of thread t of `threads` over `count` clusters:
+// contiguous chunks in thread order (empty for the threads past the end).
+struct Chunk {
+    uint32_t begin, end;
+};
+
+RF_HDI Chunk thread_chunk(uint32_t count, uint32_t threads, uint32_t t) {
+    const uint32_t per = (count + threads - 1) / threads;
+    const uint64_t begin = uint64_t{per} * t, end = begin + per;
+    Chunk c;
+    c.begin = begin < count ? static_cast<uint32_t>(begin) : count;
+    c.end = end < count ? static_cast<uint32_t>(end) : count;
+    return c;
 }
 
 }  // namespace rf::ploc

@@ -17,7 +17,11 @@
 //     cost, emitted size and height and the leaf collapse with combine(),
 //     the function RawTree::finalize runs on the host (each product and sum
 //     rounded once, so both backends get the same bits).
-//  3. emit_item(): top down, one launch per level of the emitted tree (at
+//  3. emit_node(): ONE launch, one thread per node slot: locate_node() sums
+//     the node's depth-first position over its ancestors from the subtree
+//     sizes, then emit_item() writes it and its leaf children. emit_item()
+//     is also the per-level form (the CPU replay keeps it as the reference):
+//     top down, one launch per level of the emitted tree (at
 //     most kBvhMaxDepth + 1, known from the root's height), one thread per
 //     item of the level: the item writes its output node (depth first,
 //     siblings adjacent: a left child's children start 2 after its parent's,
@@ -309,5 +313,76 @@ RF_HDI void emit_item(const RawTreeView& t, const EmitItem& item, BvhNode* nodes
 // Levels of items step 3 runs (the root's level 0 included), from the root's
 // values; fits_depth_limit(root) holds.
 RF_HDI uint32_t emit_levels(const NodeInfo& root) { return info_collapsed(root) ? 1u : info_height(root) + 1u; }
+
+// ---- Step 3 in one launch (what the device runs) ----------------------------
+// emit_item's positions follow from subtree sizes alone: an edge to a left
+// child adds 0 to the output node and 2 to the child base over the
+// parent's child base, and nothing to the primitive slot; an edge to a
+// right child adds 1, 1 + its left sibling's emitted size, and the left
+// sibling's primitive count. So every node finds its item by summing the
+// edges over its ancestors (as aila_laine::position_of does), and all nodes
+// are emitted by one launch instead of one per level.
+struct EdgeOffsets {
+    uint32_t at;          // output node, over the parent's child base
+    uint32_t child_base;  // the child's own child base, over the parent's
+    uint32_t slot;        // first primitive slot, over the parent's
+};
+
+RF_HDI EdgeOffsets edge_offsets(const RawTreeView& t, uint32_t parent, uint32_t child) {
+    const uint32_t* pair = child_pair(t, parent);
+    const uint32_t left = pair[0];
+    if (left == child) return EdgeOffsets{0u, 2u, 0u};
+    if (is_leaf_ref(left)) return EdgeOffsets{1u, 2u, run_size(t, left & ~kLeafRef)};
+    const NodeInfo& sibling = node_info(t, left);
+    return EdgeOffsets{1u, 1u + sibling.out_size, sibling.count};
+}
+
+// Node slot `node`'s item, as the per-level emission would queue it. False
+// for an unused slot and for a node below a collapsed one (that ancestor
+// writes its primitives). Walks up to the root through node_parent.
+RF_HDI bool locate_node(const RawTreeView& t, uint32_t node, EmitItem* item) {
+    if (node == t.root) {
+        *item = root_item(t.root);
+        return true;
+    }
+    const uint32_t parent = t.node_parent[node];
+    if (parent == kNoParent) return false;
+    const EdgeOffsets own = edge_offsets(t, parent, node);
+    uint32_t parent_base = 1u, slot = own.slot;  // the root's child base is 1
+    for (uint32_t above = parent;; ) {
+        if (info_collapsed(node_info(t, above))) return false;
+        if (above == t.root) break;
+        const uint32_t up = t.node_parent[above];
+        const EdgeOffsets e = edge_offsets(t, up, above);
+        parent_base += e.child_base;
+        slot += e.slot;
+        above = up;
+    }
+    *item = EmitItem{node, parent_base + own.at, parent_base + own.child_base, slot};
+    return true;
+}
+
+// A thread's own two-item queue for emit_item.
+struct LocalCounter {
+    RF_HDI static uint32_t add(uint32_t* counter, uint32_t n) {
+        const uint32_t before = *counter;
+        *counter += n;
+        return before;
+    }
+};
+
+// Step 3 in one launch, for node slot `node` (the root's tree has a node
+// root): emit_item for its own output node and for its leaf children,
+// which have no thread of their own. Each output node is written once.
+RF_HDI void emit_node(const RawTreeView& t, uint32_t node, BvhNode* nodes, uint32_t* prim_indices) {
+    EmitItem item;
+    if (!locate_node(t, node, &item)) return;
+    EmitItem children[2];
+    uint32_t queued = 0;
+    emit_item<LocalCounter>(t, item, nodes, prim_indices, children, &queued);
+    for (uint32_t k = 0; k < queued; ++k) {
+        if (is_leaf_ref(children[k].ref)) emit_item<LocalCounter>(t, children[k], nodes, prim_indices, nullptr, nullptr);
+    }
+}
 
 }  // namespace rf::raw_emit
