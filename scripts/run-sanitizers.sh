@@ -26,7 +26,7 @@ case "$mode" in
     # Every test that runs TBB-parallel code (builders of every structure, flattening, rendering, batched
     # traversal, bench) and the viewer session's own threads; not the viewer's window tests, whose
     # OpenGL (Mesa) and X libraries are not instrumented.
-    ctest_args=(-R "Bvh|BinnedSah|Render|PathTracer|WavefrontPath|ShadingTriangles|EndToEnd|SceneGeometry|Builtin|Bench|KdTree|UniformGrid|ProximityGrid|Lbvh|Hlbvh2|Ploc|Sbvh|SweepSah|Reinsertion|AccelMatrix|Session|Paged|PageCache|ReaderPool|UringReader|PageCodec|SharedAttributes|Generate|World|MeshQueries" -E "ViewerGui" -LE "install|gpu")
+    ctest_args=(-R "Bvh|BinnedSah|Render|PathTracer|WavefrontPath|ShadingTriangles|EndToEnd|SceneGeometry|Builtin|Bench|KdTree|UniformGrid|ProximityGrid|Lbvh|Hlbvh2|Ploc|Hploc|Treelet|Sbvh|SweepSah|Reinsertion|AccelMatrix|Session|Paged|PageCache|ReaderPool|UringReader|PageCodec|SharedAttributes|Generate|World|MeshQueries" -E "ViewerGui" -LE "install|gpu")
     export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1"
     ;;
   *) echo "usage: $0 [address|thread]" >&2; exit 2 ;;

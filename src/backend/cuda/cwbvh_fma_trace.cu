@@ -14,6 +14,7 @@
 // memory (CwbvhSharedTopStack).
 #include "backend/cuda/cwbvh_fma_trace.h"
 
+#include "backend/cuda/kernel_resources.h"
 #include "backend/cuda/launch.h"
 #include "backend/cuda/persistent_fetch_steps.h"
 #include "trace/aila_laine_traversal.h"
@@ -87,6 +88,14 @@ int cwbvh_fma_blocks_per_sm(bool any_hit) {
         RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, cwbvh_fma_persistent_kernel<false>,
                                                                     kBlock, kSharedStackBytes));
     return blocks;
+}
+
+std::vector<GpuKernelResources> cwbvh_fma_kernel_resources(int device) {
+    const std::string name = to_string(GpuKernel::CwbvhFma);
+    return {kernel_resources_of(reinterpret_cast<const void*>(cwbvh_fma_persistent_kernel<false>),
+                                name + " closest (persistent)", int(kBlock), device, kSharedStackBytes),
+            kernel_resources_of(reinterpret_cast<const void*>(cwbvh_fma_persistent_kernel<true>),
+                                name + " any (persistent)", int(kBlock), device, kSharedStackBytes)};
 }
 
 }  // namespace rf::cuda

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <vector>
 
 #include "backend/cuda/device_tracer_impl.h"
 
@@ -13,5 +14,8 @@ void launch_cwbvh_fma_trace(const DeviceTracer::Impl& impl, bool any_hit, uint32
 
 // Resident blocks per multiprocessor of the persistent kernel at the trace block size.
 int cwbvh_fma_blocks_per_sm(bool any_hit);
+
+// The persistent kernels' registers, local and shared memory and occupancy (the bench's resource lines).
+std::vector<GpuKernelResources> cwbvh_fma_kernel_resources(int device);
 
 }  // namespace rf::cuda

@@ -673,7 +673,7 @@ std::vector<GpuKernelResources> trace_kernel_resources(GpuKernel kernel, int dev
             out.push_back(kernel_resources_of(reinterpret_cast<const void*>(aila_laine_persistent_kernel<true>),
                                               name + " any (persistent)", int(kTraceBlock), device));
             break;
-        case GpuKernel::CwbvhFma: break;  // its launches live in cwbvh_fma_trace.cu
+        case GpuKernel::CwbvhFma: out = cwbvh_fma_kernel_resources(device); break;
         case GpuKernel::Bvh2: add_grid_stride_resources<decltype(Impl::bvh2)>(out, name, device); break;
         case GpuKernel::AilaLaineFma:
             out.push_back(kernel_resources_of(
