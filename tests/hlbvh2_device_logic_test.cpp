@@ -46,7 +46,6 @@ namespace rf {
 namespace {
 
 using hlbvh2::kLeafRef;
-using hlbvh2::Task;
 
 constexpr uint32_t kUnset = 0xdeadbeefu;
 constexpr uint32_t kWarp = 32;
@@ -615,7 +614,7 @@ uint32_t emulate_top_task(const TopTask& task, const TopCluster* in, TopCluster*
     return inner;
 }
 
-// The block path (top_large_task_kernel) emulated: shared-memory atomics as
+// The block path (large_task_by_block) emulated: shared-memory atomics as
 // plain updates (they commute: any order gives the same words).
 constexpr uint32_t kTaskBlock = 256;  // hlbvh2_top_level.cu's kTopTaskBlock
 constexpr uint32_t kTaskBlockWarps = kTaskBlock / kWarp;
@@ -640,7 +639,7 @@ struct BlockPathStats {
     size_t zero_signs = 0;      // bins equal to bin_task's as values, not as bits
 };
 
-// top_large_task_kernel for one task, its threads in shuffled orders:
+// large_task_by_block for one task, its threads in shuffled orders:
 // strided cell bounds merged as the shared atomics would, strided binning
 // into the warps' key bins, the 8 lanes' merge and split, the partition by
 // an exclusive scan per chunk of kTaskBlock clusters. `stride`: the threads'
@@ -735,15 +734,15 @@ struct TopSchedule {
     uint32_t block_stride = kTaskBlock;
 };
 
-// The task-queue launches of hlbvh2_top_level.cu: per level, the large
-// tasks' blocks in a shuffled order (the first block opening the next level
-// record), then the small tasks' warps in a shuffled order; two queues
-// (small, large) ping-pong with the device's capacities; every level's
-// sizes and node-list base come from its record (hlbvh2::TopQueueLevel),
-// and `extra_levels` launches after the last must do nothing. (The device
-// runs the levels after the last large task in one block, level after
-// level with the same records; the order of its warps is what the
-// shuffles here stand for.)
+// The top level's one cooperative launch (hlbvh2_top_level.cu
+// top_level_kernel), level by level between grid syncs: a level's large
+// tasks (a block each; the first block opening the next level record) and
+// its small tasks' warps run concurrently, so they are emulated in ONE
+// shuffled order, each task's children counted into the next record at
+// once; two queues (small, large) ping-pong with the device's capacities;
+// every level's sizes and node-list base come from its record
+// (hlbvh2::TopQueueLevel), and `extra_levels` levels after the last must do
+// nothing (the device stops at the first empty one).
 QueueTop run_top_task_queues(std::vector<TopCluster> clusters, uint32_t top_base, uint32_t seed,
                              Consider consider = hlbvh2::consider, TopSchedule schedule = {},
                              uint32_t extra_levels = 3) {
@@ -774,20 +773,12 @@ QueueTop run_top_task_queues(std::vector<TopCluster> clusters, uint32_t top_base
             break;
         }
         if (self.small + self.large == 0) ++after_last;
-        // The one-block launch of the last levels relies on this: once a
-        // level has no large task, no later level has one.
-        if (level > 0 && records[level - 1].large == 0) {
-            EXPECT_EQ(self.large, 0u) << "a large task after a level without one";
-        }
         const std::vector<TopTask>& input = queue[side];
         const std::vector<TopTask>& large_input = large_queue[side];
         std::vector<TopTask>& output = queue[1 - side];
         std::vector<TopTask>& large_output = large_queue[1 - side];
         uint32_t* nodes = level_nodes.data() + self.base;  // large tasks' first
-        std::vector<uint32_t> blocks(self.large);
-        std::iota(blocks.begin(), blocks.end(), 0u);
-        std::shuffle(blocks.begin(), blocks.end(), rng);
-        for (uint32_t block : blocks) {
+        auto run_block = [&](uint32_t block) {
             TopTask children[2];
             const uint32_t inner = emulate_large_top_task(large_input[block], buffer[side].data(),
                                                           buffer[1 - side].data(), top_base, top.refs.data(),
@@ -800,11 +791,8 @@ QueueTop run_top_task_queues(std::vector<TopCluster> clusters, uint32_t top_base
                 if (tail < to.size()) to[tail] = children[k];
                 ++tail;
             }
-        }
-        std::vector<uint32_t> warps((self.small + kTasksPerWarp - 1) / kTasksPerWarp);
-        std::iota(warps.begin(), warps.end(), 0u);
-        std::shuffle(warps.begin(), warps.end(), rng);
-        for (uint32_t warp : warps) {
+        };
+        auto run_warp = [&](uint32_t warp) {
             TopTask children[kTasksPerWarp][2];
             uint32_t inner[kTasksPerWarp] = {};
             uint32_t one_or_more = 0, two = 0;  // ballots of the tasks' lane 0s
@@ -825,6 +813,18 @@ QueueTop run_top_task_queues(std::vector<TopCluster> clusters, uint32_t top_base
                 for (uint32_t k = 0; k < inner[group]; ++k) {
                     if (offset + k < output.size()) output[offset + k] = children[group][k];
                 }
+            }
+        };
+        // Work items: the large tasks' blocks, then the small tasks' warps, in one shuffled order.
+        const uint32_t warps = (self.small + kTasksPerWarp - 1) / kTasksPerWarp;
+        std::vector<uint32_t> items(self.large + warps);
+        std::iota(items.begin(), items.end(), 0u);
+        std::shuffle(items.begin(), items.end(), rng);
+        for (uint32_t item : items) {
+            if (item < self.large) {
+                run_block(item);
+            } else {
+                run_warp(item - self.large);
             }
         }
     }

@@ -46,15 +46,23 @@ struct DeviceLikeMemory {
     std::vector<uint32_t>* children;
     std::vector<Box3f>* node_boxes;
     Bug bug = Bug::None;
-    bool overflow = false;  // a node numbered past n - 2 (only a bug makes one)
+    mutable bool overflow = false;  // a node numbered past n - 2, or a ref past the arrays (only a bug makes one)
 
     uint32_t load_ref(uint32_t position) const { return (*clusters)[position]; }
     void store_ref(uint32_t position, uint32_t ref) const {
         if (bug == Bug::StaleSlots && ref == hploc::kNoCluster) return;
         (*clusters)[position] = ref;
     }
+    // An injected bug can hand out a ref past the arrays: counted as an
+    // overflow (the replay then fails) instead of read out of bounds.
     Box3f box(uint32_t ref) const {
-        return (ref & kLeafRef) != 0 ? (*triangle_boxes)[(*order)[ref & ~kLeafRef]] : (*node_boxes)[ref];
+        const bool leaf = (ref & kLeafRef) != 0;
+        const uint32_t index = ref & ~kLeafRef;
+        if (leaf ? index >= order->size() : index >= node_boxes->size()) {
+            overflow = true;
+            return Box3f{};
+        }
+        return leaf ? (*triangle_boxes)[(*order)[index]] : (*node_boxes)[index];
     }
     void write_node(uint32_t node, uint32_t left, uint32_t right, const Box3f& box) {
         if (node >= node_boxes->size()) {

@@ -8,7 +8,10 @@
 //    leaf refinement per canonical node, the section 3 DP bottom up with arrival
 //    counters, then the top-down emission level by level (wide-tree
 //    discovery, subtree totals, depth-first numbering, encoding); equal to
-//    build_cwbvh.
+//    build_cwbvh, with the levels' sizes read on the host per level or kept
+//    in records on the device (cwbvh_level_steps.h: one level-order scan
+//    over a bound the host knows, steps launched past the last level as the
+//    lagged rounds do).
 // On BVHs from several builders, a one-leaf BVH, a single triangle and the
 // empty BVH; a wrong
 // position or a wrong DP decision must fail.
@@ -29,6 +32,7 @@
 #include "accel/bvh/layout/cwbvh_collapse_steps.h"
 #include "accel/bvh/layout/cwbvh_emit_steps.h"
 #include "accel/bvh/layout/cwbvh_layout.h"
+#include "accel/bvh/layout/cwbvh_level_steps.h"
 #include "accel/bvh/layout/cwbvh_refine_steps.h"
 #include "accel_test_scenes.h"
 #include "rayforge/accel/accel.h"
@@ -169,8 +173,61 @@ struct FirstArrival {
 // The device conversion: refinement per canonical node, the DP by leaf
 // threads walking up, then the level-by-level passes of cwbvh_emit_steps.h, every pass's
 // threads in a shuffled order.
+struct Level {
+    uint32_t start, size;
+};
+
+// Pass 1 with each level's size on the host (one read per level).
+std::vector<Level> discover_levels_on_host(const cwbvh::EmitView& view, std::mt19937& rng) {
+    std::vector<Level> levels;
+    for (Level level{0, 1}; level.size != 0;) {
+        levels.push_back(level);
+        for (uint32_t k : shuffled(level.size, rng)) cwbvh::discover(view, level.start + k);
+        uint32_t sum = 0;  // the device's exclusive scan
+        for (uint32_t k = 0; k < level.size; ++k) {
+            view.first_child[level.start + k] = sum;
+            sum += view.inner_count[level.start + k];
+        }
+        const uint32_t next = level.start + level.size;
+        for (uint32_t k : shuffled(level.size, rng)) cwbvh::enqueue_children(view, level.start + k, next);
+        level = {next, sum};
+    }
+    return levels;
+}
+
+// Pass 1 as layout_convert.cu runs it: level records on the device, grids
+// and scans sized by the host's bounds, `overshoot` steps launched after the
+// last level (the lagged rounds' copies arrive late); the levels read once
+// at the end. `cap`: the wide nodes the arrays hold (inner_count zeroed).
+std::vector<Level> discover_levels_by_records(const cwbvh::EmitView& view, uint32_t cap, uint32_t overshoot,
+                                              std::mt19937& rng, uint32_t& error) {
+    std::vector<cwbvh::LevelRecord> records(kCwbvhMaxDepth + 1, cwbvh::LevelRecord{0, 0});
+    records[0] = {0, 1};
+    std::vector<uint32_t> prefix(cap);
+    uint32_t after_end = 0;
+    for (uint32_t step = 0; step < uint32_t(kCwbvhMaxDepth) && after_end <= overshoot; ++step) {
+        const uint32_t width = cwbvh::level_width_bound(step, cap);
+        for (uint32_t k : shuffled(width, rng)) cwbvh::discover_in_level(view, records.data(), step, k);
+        uint32_t sum = 0;  // the device's exclusive scan over the bound, not the level
+        for (uint32_t i = 0; i < cwbvh::nodes_through_level_bound(step, cap); ++i) {
+            prefix[i] = sum;
+            sum += view.inner_count[i];
+        }
+        cwbvh::next_level_record(prefix.data(), view.inner_count, records.data(), step, cap, &error);
+        for (uint32_t k : shuffled(width, rng)) cwbvh::enqueue_in_level(view, records.data(), step, prefix.data(), k);
+        if (records[step + 1].count == 0) ++after_end;
+    }
+    std::vector<Level> levels;
+    for (const cwbvh::LevelRecord& r : records) {
+        if (r.count == 0) break;
+        levels.push_back({r.start, r.count});
+    }
+    return levels;
+}
+
 template <class Arrival = SequentialArrival>
-CwbvhBvh emulate_cwbvh(const Bvh& bvh, const std::vector<Triangle>& triangles, uint32_t seed) {
+CwbvhBvh emulate_cwbvh(const Bvh& bvh, const std::vector<Triangle>& triangles, uint32_t seed,
+                       bool level_records = false) {
     CwbvhBvh out;
     if (bvh.nodes.empty()) return out;
     std::mt19937 rng(seed);
@@ -221,23 +278,10 @@ CwbvhBvh emulate_cwbvh(const Bvh& bvh, const std::vector<Triangle>& triangles, u
                                slots.data(),    own.data(),        inner_count.data(), first_child.data(),
                                subtree.data(),  wide_index.data(), before.data(),    out.nodes.data(),
                                out.triangles.data(), &leaf_slots,  &error};
-    struct Level {
-        uint32_t start, size;
-    };
-    std::vector<Level> levels;
     wide_refined[0] = 0;
-    for (Level level{0, 1}; level.size != 0;) {
-        levels.push_back(level);
-        for (uint32_t k : shuffled(level.size, rng)) cwbvh::discover(view, level.start + k);
-        uint32_t sum = 0;  // the device's exclusive scan
-        for (uint32_t k = 0; k < level.size; ++k) {
-            first_child[level.start + k] = sum;
-            sum += inner_count[level.start + k];
-        }
-        const uint32_t next = level.start + level.size;
-        for (uint32_t k : shuffled(level.size, rng)) cwbvh::enqueue_children(view, level.start + k, next);
-        level = {next, sum};
-    }
+    const auto cap = static_cast<uint32_t>(std::clamp<size_t>(triangle_refs, 1, n));  // wide nodes at most
+    const std::vector<Level> levels = level_records ? discover_levels_by_records(view, cap, seed % 3, rng, error)
+                                                    : discover_levels_on_host(view, rng);
     for (size_t l = levels.size(); l-- > 0;)
         for (uint32_t k : shuffled(levels[l].size, rng)) cwbvh::total(view, levels[l].start + k);
     wide_index[0] = 0;
@@ -259,13 +303,43 @@ bool same_cwbvh(const CwbvhBvh& a, const CwbvhBvh& b) {
 TEST(LayoutConvertDeviceLogic, CwbvhEqualsCpuBuild) {
     for (const NamedBvh& c : test_bvhs()) {
         const CwbvhBvh expected = build_cwbvh(c.bvh, c.triangles);
-        for (uint32_t seed : {1u, 2u}) {
-            const CwbvhBvh got = emulate_cwbvh(c.bvh, c.triangles, seed);
-            EXPECT_TRUE(same_cwbvh(expected, got))
-                << c.name << ", seed " << seed << ": " << expected.nodes.size() << " vs " << got.nodes.size()
-                << " nodes";
+        for (uint32_t seed : {1u, 2u, 3u}) {
+            for (const bool records : {false, true}) {
+                const CwbvhBvh got = emulate_cwbvh(c.bvh, c.triangles, seed, records);
+                EXPECT_TRUE(same_cwbvh(expected, got))
+                    << c.name << ", seed " << seed << (records ? ", level records" : ", host levels") << ": "
+                    << expected.nodes.size() << " vs " << got.nodes.size() << " nodes";
+            }
         }
     }
+}
+
+// The bounds the device's grids and scans use hold for every level.
+TEST(LayoutConvertDeviceLogic, LevelBoundsCoverTheLevels) {
+    EXPECT_EQ(cwbvh::level_width_bound(0, 100), 1u);
+    EXPECT_EQ(cwbvh::level_width_bound(2, 100), 64u);
+    EXPECT_EQ(cwbvh::level_width_bound(3, 100), 100u);
+    EXPECT_EQ(cwbvh::level_width_bound(40, 0xFFFFFFFFu), 0xFFFFFFFFu);  // no overflow
+    EXPECT_EQ(cwbvh::nodes_through_level_bound(0, 100), 1u);
+    EXPECT_EQ(cwbvh::nodes_through_level_bound(1, 100), 9u);
+    EXPECT_EQ(cwbvh::nodes_through_level_bound(2, 100), 73u);
+    EXPECT_EQ(cwbvh::nodes_through_level_bound(3, 100), 100u);
+    EXPECT_EQ(cwbvh::nodes_through_level_bound(40, 0xFFFFFFFFu), 0xFFFFFFFFu);
+}
+
+// A level past the arrays' capacity is an error, not a write past them.
+TEST(LayoutConvertDeviceLogic, LevelRecordPastCapacityFails) {
+    const uint32_t prefix[2] = {0, 5}, inner_count[2] = {5, 3};
+    cwbvh::LevelRecord records[3] = {{0, 1}, {1, 1}, {0, 0}};
+    uint32_t error = 0;
+    cwbvh::next_level_record(prefix, inner_count, records, 0, 8, &error);
+    EXPECT_EQ(error, 0u);
+    EXPECT_EQ(records[1].start, 1u);
+    EXPECT_EQ(records[1].count, 5u);
+    records[1] = {1, 1};
+    cwbvh::next_level_record(prefix, inner_count, records, 1, 8, &error);  // 5 + 3 + 1 = 9 nodes > 8
+    EXPECT_EQ(error, cwbvh::kErrorLevelOverflow);
+    EXPECT_EQ(records[2].count, 0u);
 }
 
 TEST(LayoutConvertDeviceLogic, CwbvhDpSolvedTooEarlyFails) {

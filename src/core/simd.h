@@ -238,7 +238,9 @@ RF_SIMD_INLINE void sort_distance_keys(vfloat<N> dist, unsigned mask, uint32_t* 
     for (int i = 0; i < N; ++i) {
         const uint32_t key = (mask >> i) & 1u ? distance_key(d[i], i) : kMissedKey;
         int j = i;
-        for (; j > 0 && keys[j - 1] > key; --j) keys[j] = keys[j - 1];
+        // Signed, as the AVX2 network's min/max: a negative distance (tmin < 0)
+        // then sorts before kMissedKey, never after it.
+        for (; j > 0 && int32_t(keys[j - 1]) > int32_t(key); --j) keys[j] = keys[j - 1];
         keys[j] = key;
     }
 }

@@ -429,7 +429,7 @@ RF_HDI void walk_wide_tree(const PageNode* nodes, const PageNodeTest& test, cons
         for (;;) {
             if (top == 0) return;
             const PendingNode p = stack[--top];
-            if (p.entry <= tmax * rf::detail::kSlabFarScale) {
+            if (p.entry <= rf::detail::widen_far(tmax)) {
                 ref = p.node;
                 break;
             }
@@ -657,7 +657,7 @@ struct CellVisit {
             for (;;) {
                 if (top == 0) return false;
                 const PendingNode p = stack[--top];
-                if (p.entry <= tmax * rf::detail::kSlabFarScale) {
+                if (p.entry <= rf::detail::widen_far(tmax)) {
                     node = p.node;
                     break;
                 }

@@ -70,6 +70,16 @@ struct SlabRay {
 
 // 1 + 2 * gamma(3), gamma(n) = n * u / (1 - n * u), u = 2^-24 (Ize 2013, pbrt).
 inline constexpr float kSlabFarScale = 1.0f + 2.0f * (3.0f * 0x1p-24f) / (1.0f - 3.0f * 0x1p-24f);
+// 1 - 2^-21 = 1 - 8u, exact: the scale of a negative far distance.
+inline constexpr float kSlabFarScaleNegative = 1.0f - 0x1p-21f;
+
+// A far distance widened by at least 2 gamma(3) of its magnitude, for either
+// sign (Ize's t * kSlabFarScale narrows a negative t, which only rays with
+// tmin < 0 meet). Positive t: exactly t * kSlabFarScale, as before. Negative
+// t: fl(t (1 - 8u)) >= t (1 - 8u)(1 + u) = t + |t| (7u + 8u^2), and
+// 7u + 8u^2 > 2 gamma(3) = 6u / (1 - 3u). Monotone in t, so it commutes with
+// min; NaN stays NaN, +-inf stay.
+RF_HDI float widen_far(float t) { return t * (t >= 0.0f ? kSlabFarScale : kSlabFarScaleNegative); }
 
 // True when the ray overlaps `box` within [tmin, tmax]; `entry` is where it enters.
 RF_HDI bool slab_test(const SlabRay& r, const Box3f& box, float tmin, float tmax, float& entry) {
@@ -81,7 +91,7 @@ RF_HDI bool slab_test(const SlabRay& r, const Box3f& box, float tmin, float tmax
     const float tz1 = ((r.neg_z ? box.lo.z : box.hi.z) - r.org.z) * r.inv_dir.z;
     const float t_near = max_keep(tz0, max_keep(ty0, max_keep(tx0, tmin)));
     const float slab_far = min_keep(tz1, min_keep(ty1, min_keep(tx1, kInfinity)));
-    const float t_far = min_keep(slab_far * kSlabFarScale, tmax * kSlabFarScale);
+    const float t_far = widen_far(min_keep(slab_far, tmax));  // widen_far is monotone: = min of the widened
     entry = t_near;
     return t_near <= t_far;
 }
@@ -229,7 +239,7 @@ RF_HDI Hit traverse(const BvhView& bvh, const Ray& ray, TraversalCounters* count
         for (;;) {
             if (stack_size == 0) return hit;
             const StackEntry next = stack[--stack_size];
-            if (next.entry <= tmax * kSlabFarScale) {
+            if (next.entry <= widen_far(tmax)) {
                 current = next.node;
                 break;
             }

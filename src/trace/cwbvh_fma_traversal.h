@@ -55,7 +55,7 @@
 // every ray), and the axis's float planes are made neutral (s = 0,
 // offsets -inf / +inf: t = -inf / +inf, never NaN). Overflow or NaN in A, B
 // resolves to "inside".
-// tmax gets the slab test's 1 + 2 gamma(3) (kSlabFarScale): a triangle lying
+// tmax gets the slab test's 1 + 2 gamma(3) (detail::widen_far): a triangle lying
 // in a box face must not be culled by its own box once a hit at (almost) its
 // distance shrank tmax. Triangles go through the same watertight test on the
 // same vertices, so hits are bit-exact with brute force and with the cwbvh
@@ -274,7 +274,7 @@ RF_HDI CwbvhFmaFrame cwbvh_fma_frame(const CwbvhNodeWords& n, const CwbvhFmaRay&
 RF_HDI uint32_t cwbvh_fma_child_hits(const CwbvhNodeWords& n, const CwbvhFmaRay& r, uint32_t oct_inv, float tmin,
                                      float tmax) {
     const CwbvhFmaFrame f = cwbvh_fma_frame(n, r);
-    const float far_bound = tmax * kSlabFarScale;
+    const float far_bound = widen_far(tmax);
     const uint32_t oct_inv4 = oct_inv * 0x01010101u;
     const bool neg_x = (r.octant & 1u) != 0, neg_y = (r.octant & 2u) != 0, neg_z = (r.octant & 4u) != 0;
     uint32_t hits = 0;

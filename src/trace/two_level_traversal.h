@@ -149,7 +149,7 @@ RF_HDI Hit two_level_traverse(const TwoLevelView<BlasView>& view, const Ray& ray
         for (;;) {
             if (stack_size == 0) return hit;
             const StackEntry next = stack[--stack_size];
-            if (next.entry <= tmax * kSlabFarScale) {
+            if (next.entry <= widen_far(tmax)) {
                 current = next.node;
                 break;
             }

@@ -1,11 +1,13 @@
-// The CUDA HLBVH2 (Garanzha 2014 ch. 5; backend/cuda/hlbvh2_build.cu, work
-// queues) against the CPU HLBVH2: the same BVH (nodes and primitive order) on
-// soups, spheres and degenerate inputs; the device's forest (order, clusters,
-// references) equal to the CPU's sort and shared task steps; the device's
-// level-wise cluster boxes equal to the unions of their triangles' boxes;
+// The CUDA HLBVH2 (Garanzha 2014 ch. 5; backend/cuda/hlbvh2_build.cu: the
+// bottom trees in one launch) against the CPU HLBVH2: the same BVH (nodes and
+// primitive order) on soups, spheres and degenerate inputs; the device's
+// forest (order, clusters, references) equal to the CPU's sort and shared
+// steps; the device's one-launch cluster boxes equal to the unions of their
+// triangles' boxes;
 // the device's top level (hlbvh2_top_level.cu, task queues) equal to the
-// CPU's (build_hlbvh2_top_level over the same clusters) with its boxes the
-// unions of their clusters'; the stage report filled. Skips with a message
+// CPU's (build_hlbvh2_top_level over the same clusters) with its boxes (one
+// launch with arrival counters) the level-wise unions of their children,
+// bit for bit; the stage report filled. Skips with a message
 // when no CUDA device is present.
 #include <gtest/gtest.h>
 
@@ -78,7 +80,6 @@ TEST(GpuHlbvh2Build, DeviceForestAndClusterBoxes) {
         }
         begin.push_back(n);
         ASSERT_EQ(dev.forest.cluster_begin, begin);
-        ASSERT_EQ(dev.level_sizes.front(), begin.size() - 1);
         size_t wrong = 0;
         for (size_t c = 0; c + 1 < begin.size(); ++c) {
             EXPECT_EQ(dev.forest.cluster_prefix[c], keys[begin[c]] >> 15);
@@ -146,7 +147,7 @@ TEST(GpuHlbvh2Build, StagesAreReported) {
     EXPECT_TRUE(stages.emitted_on_device);
     EXPECT_EQ(stages.emit_ms, 0.0);
     EXPECT_GT(stages.cluster_count, 1u);
-    EXPECT_GT(stages.bottom_levels, 1u);
+    EXPECT_EQ(stages.bottom_levels, 1u);  // every bottom tree in one launch
     EXPECT_GT(stages.top_levels, 1u);
     EXPECT_GT(stages.peak_device_bytes, 200000u * sizeof(Triangle));
 }

@@ -175,7 +175,9 @@ TEST(GpuLayoutConvert, ResidentChainEqualsHostChain) {
                 EXPECT_EQ(al_expected.root, al.root) << what;
                 EXPECT_EQ(al_expected.leaf_count, al.leaf_count) << what;
                 EXPECT_EQ(al_expected.triangle_refs, al.triangle_refs) << what;
-                if (!host.nodes.empty()) EXPECT_TRUE(gpu_build_test::same_box(al_expected.bounds, al.bounds)) << what;
+                if (!host.nodes.empty()) {
+                    EXPECT_TRUE(gpu_build_test::same_box(al_expected.bounds, al.bounds)) << what;
+                }
 
                 const CwbvhBvh cw_expected = cuda::build_cwbvh_on_device(host, tris);
                 const CwbvhBvh cw = cuda::resident_cwbvh_on_device(tris, options);

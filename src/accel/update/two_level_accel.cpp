@@ -208,7 +208,7 @@ Hit traverse_wide_top(const WideTop& top, const TwoLevelView<View>& view, const 
     const wide_detail::BoxRay<8> box_ray = wide_detail::BoxRay<8>::make(ray, top.coord_scale);
     const vfloat<8> tmin_v = set1<8>(ray.tmin);
     float tmax = ray.tmax;
-    float tmax_far = tmax * detail::kSlabFarScale;
+    float tmax_far = detail::widen_far(tmax);
     vfloat<8> tmax_far_v = set1<8>(tmax_far);
     wide_detail::StackItem stack[wide_detail::kStackSize<8>];
     int size = 0;
@@ -234,7 +234,7 @@ Hit traverse_wide_top(const WideTop& top, const TwoLevelView<View>& view, const 
         } else {
             if (detail::two_level_leaf<kAnyHit>(view, view.top_nodes[ref & ~kWideLeafFlag], ray, trace, tmax, hit))
                 return hit;
-            tmax_far = tmax * detail::kSlabFarScale;
+            tmax_far = detail::widen_far(tmax);
             tmax_far_v = set1<8>(tmax_far);
         }
         for (;;) {

@@ -35,6 +35,17 @@ inline bool rays_share_octant(const Ray* rays) {
     return true;
 }
 
+// True when the eight rays can be traced as one packet: a shared octant and
+// no ray reaching behind its origin (tmin >= 0). The packet's slab test
+// widens far distances relatively (kFarRcpScale), which is only safe ahead
+// of the origin; rays with tmin < 0 take the single-ray traversal, whose
+// BoxRay pads their far planes (far_plane_pad).
+inline bool rays_fit_packet(const Ray* rays) {
+    bool ahead = true;
+    for (int i = 0; i < kRayPacketSize; ++i) ahead &= rays[i].tmin >= 0.0f;  // no branch per ray
+    return ahead && rays_share_octant(rays);
+}
+
 namespace wide_detail {
 
 struct PacketStackItem {
@@ -68,7 +79,7 @@ inline void traverse_packet(const WideBvhView<N>& bvh, const Ray* rays, Hit* hit
         }
         tmin_a[i] = rays[i].tmin;
         tmax[i] = rays[i].tmax;
-        tmax_far[i] = rays[i].tmax * detail::kSlabFarScale;
+        tmax_far[i] = detail::widen_far(rays[i].tmax);
     }
     unsigned tri_rays_ready = 0;  // triangle-test setups are made at a ray's first leaf
     int near_row[3], far_row[3];
@@ -178,7 +189,7 @@ inline void traverse_packet(const WideBvhView<N>& bvh, const Ray* rays, Hit* hit
                         hits[i].v = v[best];
                         hits[i].prim = pack.prim[best];
                         tmax[i] = t[best];
-                        tmax_far[i] = t[best] * detail::kSlabFarScale;
+                        tmax_far[i] = detail::widen_far(t[best]);
                         shrunk = true;
                     }
                 }
@@ -208,13 +219,13 @@ inline void traverse_packet(const WideBvhView<N>& bvh, const Ray* rays, Hit* hit
 
 }  // namespace wide_detail
 
-// Closest hits of eight rays that share an octant (rays_share_octant).
+// Closest hits of eight rays that fit a packet (rays_fit_packet).
 template <int N>
 inline void wide_bvh_intersect_packet(const WideBvhView<N>& bvh, const Ray* rays, Hit* hits) {
     wide_detail::traverse_packet<N, false>(bvh, rays, hits, nullptr);
 }
 
-// Any hits of eight rays that share an octant; occluded[i] is 0 or 1.
+// Any hits of eight rays that fit a packet (rays_fit_packet); occluded[i] is 0 or 1.
 template <int N>
 inline void wide_bvh_occluded_packet(const WideBvhView<N>& bvh, const Ray* rays, uint8_t* occluded) {
     wide_detail::traverse_packet<N, true>(bvh, rays, nullptr, occluded);

@@ -27,11 +27,11 @@ struct WideBvhTracer {
             [&](TraversalCounters& t) { return wide_bvh_occluded_counted(bvh, ray, t); });
     }
 
-    // hits[lo, hi) of rays[lo, hi): packets where eight rays share an octant.
+    // hits[lo, hi) of rays[lo, hi): packets where eight rays fit one (rays_fit_packet).
     void intersect_batch(const Ray* rays, Hit* hits, size_t lo, size_t hi) const {
         size_t i = lo;
         for (; i + kRayPacketSize <= hi; i += kRayPacketSize) {
-            if (rays_share_octant(&rays[i])) {
+            if (rays_fit_packet(&rays[i])) {
                 wide_bvh_intersect_packet(bvh, &rays[i], &hits[i]);
             } else {
                 for (size_t k = i; k < i + kRayPacketSize; ++k) hits[k] = wide_bvh_intersect(bvh, rays[k]);
@@ -42,7 +42,7 @@ struct WideBvhTracer {
     void occluded_batch(const Ray* rays, uint8_t* occluded, size_t lo, size_t hi) const {
         size_t i = lo;
         for (; i + kRayPacketSize <= hi; i += kRayPacketSize) {
-            if (rays_share_octant(&rays[i])) {
+            if (rays_fit_packet(&rays[i])) {
                 wide_bvh_occluded_packet(bvh, &rays[i], &occluded[i]);
             } else {
                 for (size_t k = i; k < i + kRayPacketSize; ++k) occluded[k] = wide_bvh_occluded(bvh, rays[k]) ? 1 : 0;

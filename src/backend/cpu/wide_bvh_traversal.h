@@ -45,6 +45,18 @@ inline constexpr bool kPrefetch = true;
 // itself (1 + 2 gamma(4); Ize 2013 uses 1 + 2 gamma(3) for three roundings).
 inline constexpr float kFarRcpScale = 1.0f + 2.0f * (4.0f * 0x1p-24f) / (1.0f - 4.0f * 0x1p-24f);
 
+// That relative scaling narrows a negative far distance (a box behind the
+// origin, met only with tmin < 0). A far plane below tmin misses the box
+// anyway, so the planes that matter have |t| <= T = -tmin: their deficit is
+// below (8u + 4u) T (the scale, four roundings; u = 2^-24), the near
+// planes' rounding adds 3u T. An absolute pad of 32u T on the far planes
+// (at least FLT_MIN, for subnormal results) covers that and its own
+// rounding. Zero for tmin >= 0: those rays trace exactly as before.
+inline float far_plane_pad(float tmin) {
+    const float pad = -tmin * 0x1p-19f;
+    return tmin < 0.0f ? (pad > 0x1p-126f ? pad : 0x1p-126f) : 0.0f;
+}
+
 // The stack holds at most N - 1 entries per level of the wide tree.
 template <int N>
 inline constexpr int kStackSize = kBvhMaxDepth * (N - 1) + N;
@@ -67,6 +79,7 @@ struct BoxRay {
     simd::vfloat<N> neg_org_far[3];   // -(origin * rcp_far) + margin
 #else
     simd::vfloat<N> org[3];
+    simd::vfloat<N> far_pad = simd::set1<N>(0.0f);  // far_plane_pad(tmin), added to t_far per node
 #endif
     simd::vfloat<N> rcp_near[3];
     simd::vfloat<N> rcp_far[3];
@@ -103,6 +116,14 @@ struct BoxRay {
             r.near_row[axis] = 2 * axis + negative;
             r.far_row[axis] = 2 * axis + 1 - negative;
         }
+        if (ray.tmin < 0.0f) {
+            const simd::vfloat<N> pad = simd::set1<N>(far_plane_pad(ray.tmin));
+#if defined(__FMA__)
+            for (int axis = 0; axis < 3; ++axis) r.neg_org_far[axis] = simd::add(r.neg_org_far[axis], pad);  // no cost per node
+#else
+            r.far_pad = pad;
+#endif
+        }
         return r;
     }
 };
@@ -132,7 +153,11 @@ RF_SIMD_INLINE unsigned box_hits(const float (&bounds)[6][N], const BoxRay<N>& r
     // Operand order matters: a NaN slab distance (origin on the plane of a
     // zero direction component, without FMA) must leave the bound unchanged.
     t_near = max(z0, max(y0, max(x0, tmin)));
+#if defined(__FMA__)
     const vfloat<N> t_far = min(z1, min(y1, min(x1, tmax_far)));
+#else
+    const vfloat<N> t_far = add(min(z1, min(y1, min(x1, tmax_far))), r.far_pad);
+#endif
     return bits(cmp_le(t_near, t_far));
 }
 
@@ -292,9 +317,20 @@ struct StackItem {
     float dist;  // where the ray enters the child's box
 };
 
-// Closest hit (kAnyHit = false) or first hit (kAnyHit = true).
-template <int N, bool kAnyHit, bool kCount>
-inline Hit traverse(const WideBvhView<N>& bvh, const Ray& ray, TraversalCounters* counters) {
+// tmax widened for the box tests: with tmin >= 0 (!kBehind) tmax is >= 0
+// (or the interval empty), where widen_far is the plain product.
+template <bool kBehind>
+RF_SIMD_INLINE float widen_tmax(float t) {
+    if constexpr (kBehind) return detail::widen_far(t);
+    else return t * detail::kSlabFarScale;
+}
+
+// Closest hit (kAnyHit = false) or first hit (kAnyHit = true). kBehind:
+// the ray has tmin < 0, so entry distances may be negative, whose bits do
+// not order as the sort's unsigned keys (simd::distance_key); such rays
+// order three or more hit children by a float insertion sort instead.
+template <int N, bool kAnyHit, bool kCount, bool kBehind>
+inline Hit traverse_ray(const WideBvhView<N>& bvh, const Ray& ray, TraversalCounters* counters) {
     using namespace simd;
     Hit hit;
     if (bvh.node_count == 0) return hit;
@@ -306,7 +342,7 @@ inline Hit traverse(const WideBvhView<N>& bvh, const Ray& ray, TraversalCounters
     const float tmin = ray.tmin;
     float tmax = ray.tmax;
     const vfloat<N> tmin_v = set1<N>(tmin);
-    float tmax_far = tmax * detail::kSlabFarScale;
+    float tmax_far = widen_tmax<kBehind>(tmax);
     vfloat<N> tmax_far_v = set1<N>(tmax_far);
 
     StackItem stack[kStackSize<N>];
@@ -361,6 +397,22 @@ inline Hit traverse(const WideBvhView<N>& bvh, const Ray& ray, TraversalCounters
             }
             // Three or more: sort by entry distance, push all but the nearest far
             // to near (so the nearest waiting one is popped first), take the nearest.
+            if constexpr (kBehind) {
+                int order[N];
+                int count = 0;
+                for (unsigned m = hit_mask; m; m &= m - 1) {
+                    const int c = first_bit(m);
+                    int at = count++;
+                    for (; at > 0 && near[order[at - 1]] > near[c]; --at) order[at] = order[at - 1];
+                    order[at] = c;
+                }
+                for (int i = count - 1; i > 0; --i) {
+                    stack[size++] = {node.child[order[i]], near[order[i]]};
+                    if constexpr (kPrefetch) prefetch_ref(bvh, stack[size - 1].ref);
+                }
+                ref = node.child[order[0]];
+                continue;
+            }
             alignas(32) uint32_t keys[N];
             sort_distance_keys<N>(near_v, hit_mask, keys);
             for (int i = bit_count(hit_mask) - 1; i > 0; --i) {
@@ -394,7 +446,7 @@ inline Hit traverse(const WideBvhView<N>& bvh, const Ray& ray, TraversalCounters
                 if constexpr (kAnyHit) return hit;
                 tmax = hit.t;  // later boxes and triangles must beat it
             }
-            tmax_far = tmax * detail::kSlabFarScale;
+            tmax_far = widen_tmax<kBehind>(tmax);
             tmax_far_v = set1<N>(tmax_far);
         }
         // Pop the next node the ray still reaches before the closest hit.
@@ -407,6 +459,12 @@ inline Hit traverse(const WideBvhView<N>& bvh, const Ray& ray, TraversalCounters
             }
         }
     }
+}
+
+template <int N, bool kAnyHit, bool kCount>
+inline Hit traverse(const WideBvhView<N>& bvh, const Ray& ray, TraversalCounters* counters) {
+    if (ray.tmin < 0.0f) return traverse_ray<N, kAnyHit, kCount, true>(bvh, ray, counters);
+    return traverse_ray<N, kAnyHit, kCount, false>(bvh, ray, counters);
 }
 
 }  // namespace wide_detail

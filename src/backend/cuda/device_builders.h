@@ -37,8 +37,8 @@ struct DeviceBuildStages {
     double bottom_ms = 0.0;       // bottom levels by work queues, one launch per level (boxes_ms: their boxes)
     double top_ms = 0.0;          // top level over the cluster boxes by task queues (its boxes: boxes_ms)
     uint32_t cluster_count = 0;   // clusters (bottom trees)
-    uint32_t bottom_levels = 0;   // work-queue launches of the bottom levels
-    uint32_t top_levels = 0;      // HLBVH2: task-queue launches of the device top level
+    uint32_t bottom_levels = 0;   // HLBVH2: launches of the bottom trees (1: every split position at once)
+    uint32_t top_levels = 0;      // HLBVH2: task-queue levels of the device top level (all in one launch)
     // PLOC only:
     double ploc_ms = 0.0;         // all iterations: nearest neighbours, merges, compaction
     uint32_t ploc_iterations = 0; // iterations until one cluster is left

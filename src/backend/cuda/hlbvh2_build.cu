@@ -40,7 +40,6 @@
 #include <cuda_runtime.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cub/device/device_select.cuh>
 #include <string>
 #include <thrust/iterator/counting_iterator.h>

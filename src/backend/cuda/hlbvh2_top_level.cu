@@ -2,14 +2,15 @@
 // tree over the clusters by the grid-based SAH of ch. 4, §4.3, with the top
 // grid only), building the CPU's tree (hlbvh2.cpp build_hlbvh2_top_level)
 // from the shared steps of accel/bvh/builders/hlbvh2_top_steps.h:
-//  1. one thread per cluster: its cell in the 32^3 grid, triangle count,
-//     box and root, in cluster order; the root task (all clusters, node 0).
-//  2. task queues, one launch per level (two with large tasks), each
-//     reading its sizes from a level record on the device
-//     (hlbvh2::TopQueueLevel, zeroed once; no memset or host read per
-//     level: the host stops on a lagging copy, lagged_rounds.h, and the
-//     large tasks' grid is the large queue's capacity, idle blocks
-//     returning): each warp takes 4 tasks with one
+// Steps 1 and 2 are ONE cooperative launch (top_level_kernel: every block
+// resident, a cooperative_groups grid sync after step 1 and after each
+// level; no host look at any level):
+//  1. grid-strided over the clusters: each one's cell in the 32^3 grid,
+//     triangle count, box and root, in cluster order; the root task (all
+//     clusters, node 0) in level 0's record.
+//  2. task queues, level after level, each level reading its sizes from its
+//     record on the device (hlbvh2::TopQueueLevel, zeroed once), block 0
+//     opening the next record: each warp takes 4 small tasks with one
 //     atomicAdd on the input queue's head (lane 0, broadcast by shuffle);
 //     each task is processed by 8 lanes, as in ch. 4 (one lane per bin):
 //     the cell bounds (strided over the clusters, a min/max reduction by
@@ -29,16 +30,15 @@
 //     queues ping-pong; no global scan.
 //     Large tasks (more than kTopBlockTaskMin clusters: the first levels,
 //     where the 8 lanes' binning is serial in the cluster count) have their
-//     own queue and, per level, their own launch: one thread block per task,
-//     its threads binning strided clusters into shared bins by integer
-//     atomics on order-preserving float keys, 8 lanes choosing the split as
-//     above, a block-wide scan (cub::BlockScan) ranking the stable
-//     partition. The tree is the same: only who computes each step changes.
-//     Once no large task is left (the host sees it on its lagging copy),
-//     every remaining level runs in ONE launch of one block of 1024 threads
-//     (top_small_levels_kernel): its warps take the small tasks level after
-//     level from the device-side queues, one thread opening each next
-//     record, __syncthreads between levels, until a level is empty.
+//     own queue: block b takes the level's large tasks b, b + gridDim.x, ...
+//     (before its warps turn to the small queue), its threads binning
+//     strided clusters into shared bins by integer atomics on
+//     order-preserving float keys, 8 lanes choosing the split as above, a
+//     block-wide scan (cub::BlockScan) ranking the stable partition. Large
+//     and small tasks of a level run concurrently: they read the level's
+//     cluster buffer and write disjoint ranges of the other. The tree is the
+//     same: only who computes each step changes. The grid is as wide as the
+//     widest level needs, capped at the blocks that can be resident.
 //  3. the top nodes' boxes bottom-up in one launch (after one that links
 //     each top node to its parent): one thread per top node, the walks
 //     starting at the nodes with a cluster child, an arrival counter per
@@ -47,6 +47,7 @@
 //     pass's, union(left, right) at every node.
 #include <cuda_runtime.h>
 
+#include <cooperative_groups.h>
 #include <cub/block/block_scan.cuh>
 
 #include <algorithm>
@@ -55,13 +56,13 @@
 
 #include "accel/bvh/builders/hlbvh2_top_steps.h"
 #include "backend/cuda/hlbvh2_top_level.h"
-#include "backend/cuda/lagged_rounds.h"
 #include "backend/cuda/launch.h"
 #include "rayforge/core/error.h"
 
 namespace rf::cuda {
 namespace {
 
+namespace cg = cooperative_groups;
 using hlbvh2::TopBin;
 using hlbvh2::TopCluster;
 using hlbvh2::TopTask;
@@ -70,27 +71,11 @@ constexpr uint32_t kWarp = 32;  // kBlockSize (launch.h) is a multiple: full-mas
 constexpr uint32_t kFullMask = 0xffffffffu;
 constexpr uint32_t kLanes = hlbvh2::kTopLanes;     // threads per task
 constexpr uint32_t kTasksPerWarp = kWarp / kLanes;
-constexpr uint32_t kMaxQueueBlocks = 1024;         // warps loop over the queue beyond this
 constexpr uint32_t kTopTaskBlock = 256;            // threads per large task (the block path)
 constexpr uint32_t kTaskBlockWarps = kTopTaskBlock / kWarp;
-constexpr uint32_t kSmallLevelsThreads = 1024;     // the one block of the last, small-only levels
+constexpr uint32_t kTasksPerBlock = kTaskBlockWarps * kTasksPerWarp;  // small tasks per block and dequeue round
 static_assert(kTopTaskBlock % kWarp == 0, "the block path's warps are full");
 static_assert(kWarp % kLanes == 0, "tasks do not straddle warps");
-
-// Stage 1: the clusters as top-level primitives, the root task and level
-// 0's record (the records zeroed before).
-__global__ void top_clusters_kernel(DeviceTopLevelInput in, TopCluster* clusters, TopTask* root_task,
-                                    hlbvh2::TopQueueLevel* levels, bool root_is_large) {
-    const uint32_t c = blockIdx.x * kBlockSize + threadIdx.x;
-    if (c == 0) {
-        *root_task = TopTask{0, in.clusters, 0};
-        (root_is_large ? levels[0].large : levels[0].small) = 1;
-    }
-    if (c >= in.clusters) return;
-    const uint32_t end = c + 1 < in.clusters ? in.cluster_begin[c + 1] : in.n;
-    clusters[c] = TopCluster{in.cluster_boxes[c], hlbvh2::pack_cells(in.cluster_prefix[c]), end - in.cluster_begin[c],
-                             in.cluster_roots[c]};
-}
 
 // Shuffles of a bin within a task's lanes (width kLanes).
 __device__ TopBin shuffle_bin_up(uint32_t mask, const TopBin& b, uint32_t delta) {
@@ -289,48 +274,11 @@ __device__ void small_tasks_of_level(const TopCluster* in, TopCluster* out, cons
     }
 }
 
-__global__ void top_level_kernel(const TopCluster* in, TopCluster* out, const TopTask* input, TopTask* output,
-                                 hlbvh2::TopQueueLevel* levels, uint32_t level, hlbvh2::TopQueueCapacity capacity,
-                                 uint32_t top_base, uint32_t* top_refs, uint32_t* all_level_nodes) {
-    const hlbvh2::TopQueueLevel self = levels[level];
-    if (!hlbvh2::top_level_runs(self, capacity)) return;
-    small_tasks_of_level(in, out, input, output, self, &levels[level].small_head, &levels[level + 1].small, capacity,
-                         top_base, top_refs, all_level_nodes);
-}
-
-// A level record another thread of the block wrote or counted into (L1
-// bypassed: the counts are atomics at L2).
+// A level record other threads wrote or counted into (L1 bypassed: the
+// counts are atomics at L2).
 __device__ hlbvh2::TopQueueLevel load_record(const hlbvh2::TopQueueLevel* p) {
     const uint32_t* w = reinterpret_cast<const uint32_t*>(p);
     return hlbvh2::TopQueueLevel{__ldcg(w + 0), __ldcg(w + 1), __ldcg(w + 2), __ldcg(w + 3), __ldcg(w + 4)};
-}
-
-// Stage 2c: once no large task is left (small tasks only have small
-// children), every remaining level in ONE launch of one block: its warps
-// run level after level over the device-side queues, the first thread
-// opening each next record, __syncthreads between levels; it stops at the
-// first empty level (or a fault). Level `first` is the first not launched.
-__global__ void __launch_bounds__(kSmallLevelsThreads)
-    top_small_levels_kernel(TopCluster* cluster_side0, TopCluster* cluster_side1, TopTask* small_side0,
-                            TopTask* small_side1, hlbvh2::TopQueueLevel* levels, uint32_t first, uint32_t last,
-                            hlbvh2::TopQueueCapacity capacity, uint32_t top_base, uint32_t* top_refs,
-                            uint32_t* all_level_nodes) {
-    TopCluster* const clusters[2] = {cluster_side0, cluster_side1};
-    TopTask* const small[2] = {small_side0, small_side1};
-    for (uint32_t level = first; level < last; ++level) {
-        const hlbvh2::TopQueueLevel self = load_record(levels + level);
-        const bool runs = hlbvh2::top_level_runs(self, capacity) && self.large == 0;
-        if (threadIdx.x == 0) {
-            hlbvh2::open_next_top_level(self, levels + level + 1, capacity);
-            if (runs == false && self.fault == 0) levels[level + 1].fault = 1;  // a large task here: a host error
-        }
-        if (!runs || self.small == 0) return;  // uniform: every thread read the same record
-        const uint32_t side = level & 1;
-        small_tasks_of_level(clusters[side], clusters[1 - side], small[side], small[1 - side], self,
-                             &levels[level].small_head, &levels[level + 1].small, capacity, top_base, top_refs,
-                             all_level_nodes);
-        __syncthreads();  // the level's children, clusters and counts are final for the block
-    }
 }
 
 // The block path's shared-memory atomics for strided_bin_keys.
@@ -340,22 +288,21 @@ struct SharedAtomics {
     __device__ void add(uint32_t* word, uint32_t value) const { atomicAdd(word, value); }
 };
 
-// Stage 2b: the level's large tasks (more than kTopBlockTaskMin clusters),
-// one thread block each (large_input[blockIdx.x]). Every thread bins a
-// strided share of the clusters into its warp's shared bins (integer-key
-// atomics: exact, so any order gives bin_task's bins up to zero signs; a
-// bin set per warp spreads the contention), the 8 lanes of warp 0 merge the
-// warps' bins and choose the split as the small path does, then the block
-// partitions stably, kTopTaskBlock clusters at a time, each cluster's slot
-// from a block-wide exclusive scan of the left flags. Children of more than
-// kTopBlockTaskMin clusters go to the next level's large queue, the others
-// to its small queue: one atomicAdd on each tail used.
-// The grid is the large queue's capacity (blocks past the level's large
-// tasks idle); its first thread opens levels[level + 1].
-__global__ void __launch_bounds__(kTopTaskBlock) top_large_task_kernel(
-    const TopCluster* in, TopCluster* out, const TopTask* large_input, TopTask* small_output, TopTask* large_output,
-    hlbvh2::TopQueueLevel* levels, uint32_t level, hlbvh2::TopQueueCapacity capacity, uint32_t top_base,
-    uint32_t* top_refs, uint32_t* all_level_nodes) {
+// Stage 2b: one large task (more than kTopBlockTaskMin clusters) by the
+// whole thread block (`slot`: its place in its level's large queue). Every
+// thread bins a strided share of the clusters into its warp's shared bins
+// (integer-key atomics: exact, so any order gives bin_task's bins up to
+// zero signs; a bin set per warp spreads the contention), the 8 lanes of
+// warp 0 merge the warps' bins and choose the split as the small path does,
+// then the block partitions stably, kTopTaskBlock clusters at a time, each
+// cluster's slot from a block-wide exclusive scan of the left flags.
+// Children of more than kTopBlockTaskMin clusters go to the next level's
+// large queue, the others to its small queue: one atomicAdd on each tail
+// used. Every thread of the block calls it (it has barriers).
+__device__ void large_task_by_block(const TopCluster* in, TopCluster* out, const TopTask& task, uint32_t slot,
+                                    TopTask* small_output, TopTask* large_output, hlbvh2::TopQueueLevel* next,
+                                    const hlbvh2::TopQueueCapacity& capacity, uint32_t top_base, uint32_t* top_refs,
+                                    uint32_t* level_nodes) {
     using BlockScan = cub::BlockScan<uint32_t, kTopTaskBlock>;
     __shared__ hlbvh2::TopBinKeys warp_bins[kTaskBlockWarps][3][hlbvh2::kTopBins];
     __shared__ uint32_t cell_lo[3], cell_hi[3];
@@ -364,12 +311,6 @@ __global__ void __launch_bounds__(kTopTaskBlock) top_large_task_kernel(
     __shared__ typename BlockScan::TempStorage scan_storage;
 
     const uint32_t tid = threadIdx.x, warp = tid / kWarp, warp_lane = tid % kWarp;
-    const hlbvh2::TopQueueLevel self = levels[level];
-    hlbvh2::TopQueueLevel* next = levels + level + 1;
-    if (blockIdx.x == 0 && tid == 0) hlbvh2::open_next_top_level(self, next, capacity);
-    if (!hlbvh2::top_level_runs(self, capacity) || blockIdx.x >= self.large) return;  // uniform over the block
-    uint32_t* level_nodes = all_level_nodes + self.base;
-    const TopTask task = large_input[blockIdx.x];
     const uint32_t count = task.end - task.first;
     hlbvh2::TopBinKeys* flat_bins = &warp_bins[0][0][0];
     for (uint32_t b = tid; b < kTaskBlockWarps * 3 * hlbvh2::kTopBins; b += kTopTaskBlock) {
@@ -444,7 +385,7 @@ __global__ void __launch_bounds__(kTopTaskBlock) top_large_task_kernel(
         __syncthreads();  // the scan's storage is reused by the next chunk
     }
     if (tid == 0) {
-        level_nodes[blockIdx.x] = task.node;
+        level_nodes[slot] = task.node;
         TopTask halves[2];
         hlbvh2::child_tasks(task, left_count, halves);
         bool large[2] = {false, false}, inner[2] = {false, false};
@@ -473,6 +414,62 @@ __global__ void __launch_bounds__(kTopTaskBlock) top_large_task_kernel(
                 ++small_at;
             }
         }
+    }
+}
+
+// The device arrays of the top level's one launch: the ping-pong buffers
+// (side s holds a level's input, 1 - s its output) and the levels' records.
+struct TopLevelArrays {
+    TopCluster* clusters[2];
+    TopTask* small[2];
+    TopTask* large[2];
+    hlbvh2::TopQueueLevel* levels;  // max_levels + 1, zeroed
+    uint32_t max_levels;
+    hlbvh2::TopQueueCapacity capacity;
+    uint32_t top_base;
+    uint32_t* top_refs;
+    uint32_t* level_nodes;
+};
+
+// Stages 1-2: the whole top level in ONE cooperative launch (every block
+// resident; cooperative_groups grid syncs between the steps). First the
+// clusters as top-level primitives (grid-strided) and the root task in
+// level 0's record; then level after level: each block takes the level's
+// large tasks blockIdx.x, + gridDim.x, ... (a whole block each), every
+// warp of the grid takes small tasks from the level's small queue (4 per
+// dequeue), the children counted into the next record, which block 0's
+// first thread opens; a grid sync ends the level. All blocks read the same
+// record after the sync, so all stop at the same level: the first empty
+// one, or a fault.
+__global__ void __launch_bounds__(kTopTaskBlock) top_level_kernel(DeviceTopLevelInput in, TopLevelArrays a,
+                                                                  bool root_is_large) {
+    cg::grid_group grid = cg::this_grid();
+    for (uint64_t c = grid.thread_rank(); c < in.clusters; c += grid.size()) {
+        const uint32_t i = static_cast<uint32_t>(c);
+        const uint32_t end = i + 1 < in.clusters ? in.cluster_begin[i + 1] : in.n;
+        a.clusters[0][i] = TopCluster{in.cluster_boxes[i], hlbvh2::pack_cells(in.cluster_prefix[i]),
+                                      end - in.cluster_begin[i], in.cluster_roots[i]};
+    }
+    if (grid.thread_rank() == 0) {
+        (root_is_large ? a.large[0] : a.small[0])[0] = TopTask{0, in.clusters, 0};
+        (root_is_large ? a.levels[0].large : a.levels[0].small) = 1;
+    }
+    grid.sync();
+    for (uint32_t level = 0; level < a.max_levels; ++level) {
+        const hlbvh2::TopQueueLevel self = load_record(a.levels + level);
+        hlbvh2::TopQueueLevel* next = a.levels + level + 1;
+        if (blockIdx.x == 0 && threadIdx.x == 0) hlbvh2::open_next_top_level(self, next, a.capacity);
+        if (!hlbvh2::top_level_runs(self, a.capacity) || self.small + self.large == 0) return;  // grid-uniform
+        const uint32_t side = level & 1;
+        uint32_t* level_nodes = a.level_nodes + self.base;  // the level's large tasks first
+        for (uint32_t t = blockIdx.x; t < self.large; t += gridDim.x) {  // uniform over the block
+            large_task_by_block(a.clusters[side], a.clusters[1 - side], a.large[side][t], t, a.small[1 - side],
+                                a.large[1 - side], next, a.capacity, a.top_base, a.top_refs, level_nodes);
+        }
+        small_tasks_of_level(a.clusters[side], a.clusters[1 - side], a.small[side], a.small[1 - side], self,
+                             &a.levels[level].small_head, &next->small, a.capacity, a.top_base, a.top_refs,
+                             a.level_nodes);
+        grid.sync();  // the level's children, clusters and counts are final for every block
     }
 }
 
@@ -523,58 +520,48 @@ TopQueues make_top_queues(uint32_t clusters, MemoryMeter& meter) {
     return q;
 }
 
-// Top levels launched between two looks at the next level's size.
-constexpr uint32_t kTopLevelsPerRound = 4;
-
-// Level `level` from side level % 2: its large tasks' launch (which opens
-// the next record), then its small tasks' (warps looping over the queue;
-// the grid sized for `small_bound`).
-void launch_top_level(TopQueues& q, uint32_t level, uint64_t small_bound, uint32_t top_base, uint32_t* top_refs,
-                      uint32_t* level_nodes) {
-    const uint32_t side = level & 1, next = 1 - side;
-    launch_shaped(top_large_task_kernel, {q.capacity.large, kTopTaskBlock}, q.clusters[side].data(),
-                  q.clusters[next].data(), q.large[side].data(), q.small[next].data(), q.large[next].data(),
-                  q.levels.data(), level, q.capacity, top_base, top_refs, level_nodes);
-    const uint64_t warps = (std::min<uint64_t>(small_bound, q.capacity.small) + kTasksPerWarp - 1) / kTasksPerWarp;
-    launch_shaped(top_level_kernel, {strided_blocks_for(std::max<uint64_t>(warps, 1) * kWarp, kMaxQueueBlocks)},
-                  q.clusters[side].data(), q.clusters[next].data(), q.small[side].data(), q.small[next].data(),
-                  q.levels.data(), level, q.capacity, top_base, top_refs, level_nodes);
+// The cooperative launch's grid: enough blocks for the widest level (its
+// large tasks a block each, its small tasks 4 per warp), at most as many as
+// can be resident at once (a grid sync needs every block resident).
+uint32_t top_level_grid(const hlbvh2::TopQueueCapacity& capacity) {
+    int device = 0, cooperative = 0, multiprocessors = 0, per_multiprocessor = 0;
+    RF_CUDA_CHECK(cudaGetDevice(&device));
+    RF_CUDA_CHECK(cudaDeviceGetAttribute(&cooperative, cudaDevAttrCooperativeLaunch, device));
+    if (cooperative == 0) throw Error("HLBVH2 device top level: the device has no cooperative launches");
+    RF_CUDA_CHECK(cudaDeviceGetAttribute(&multiprocessors, cudaDevAttrMultiProcessorCount, device));
+    RF_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&per_multiprocessor, top_level_kernel,
+                                                                static_cast<int>(kTopTaskBlock), 0));
+    const uint64_t resident = uint64_t(std::max(per_multiprocessor, 1)) * uint64_t(std::max(multiprocessors, 1));
+    const uint64_t small_blocks = (uint64_t{capacity.small} + kTasksPerBlock - 1) / kTasksPerBlock;
+    const uint64_t wanted = std::max<uint64_t>({uint64_t{capacity.large}, small_blocks, 1});
+    return static_cast<uint32_t>(std::min(wanted, resident));
 }
 
-// Stages 1-2, timed as top_ms: the clusters as top-level primitives, then
-// the task-queue levels, their sizes on the device (the host stops on a
-// lagging copy, lagged_rounds.h), their nodes into `level_nodes`. The
-// records come back once: out.level_sizes. The queues are freed on return.
+// Stages 1-2, timed as top_ms: the clusters as top-level primitives and
+// every task-queue level in one cooperative launch, their nodes into
+// `level_nodes`. The records come back once: out.level_sizes. The queues
+// are freed on return.
 void split_top_levels(const DeviceTopLevelInput& in, uint32_t* level_nodes, BuildContext& build, DeviceTopLevel& out) {
-    const uint32_t top_nodes = in.clusters - 1, top_base = in.n - 1;
+    const uint32_t top_nodes = in.clusters - 1;
     TopQueues q = make_top_queues(in.clusters, build.meter);
-    const bool root_is_large = in.clusters > hlbvh2::kTopBlockTaskMin;
-    LaggedCopies<hlbvh2::TopQueueLevel> copies;
+    TopLevelArrays arrays{{q.clusters[0].data(), q.clusters[1].data()},
+                          {q.small[0].data(), q.small[1].data()},
+                          {q.large[0].data(), q.large[1].data()},
+                          q.levels.data(),
+                          q.max_levels,
+                          q.capacity,
+                          in.n - 1,
+                          out.top_refs.data(),
+                          level_nodes};
+    DeviceTopLevelInput input = in;
+    bool root_is_large = in.clusters > hlbvh2::kTopBlockTaskMin;
+    void* args[] = {&input, &arrays, &root_is_large};
+    const uint32_t grid = top_level_grid(q.capacity);
     build.timer.start();
-    launch(top_clusters_kernel, in.clusters, in, q.clusters[0].data(),
-           root_is_large ? q.large[0].data() : q.small[0].data(), q.levels.data(), root_is_large);
-    // Multi-block levels while large tasks are about (a block each); the
-    // rest in one launch of one block.
-    const uint32_t grid_levels = launch_in_lagged_rounds<hlbvh2::TopQueueLevel>(
-        copies, kTopLevelsPerRound, q.max_levels,
-        [&](uint32_t level, const hlbvh2::TopQueueLevel* seen, uint32_t seen_level) {
-            // A level's tasks at most double (a large task may leave two small ones).
-            const uint32_t doublings = std::min(level - seen_level, 16u);
-            const uint64_t bound = seen != nullptr ? (uint64_t{seen->small} + 2 * uint64_t{seen->large}) << doublings
-                                                   : uint64_t{1} << std::min(level, 16u);
-            launch_top_level(q, level, bound, top_base, out.top_refs.data(), level_nodes);
-        },
-        [&](uint32_t level) { return q.levels.data() + level; },
-        [](const hlbvh2::TopQueueLevel& next) { return next.large == 0 || next.fault != 0; });
-    if (grid_levels < q.max_levels) {
-        launch_shaped(top_small_levels_kernel, {1, kSmallLevelsThreads}, q.clusters[0].data(), q.clusters[1].data(),
-                      q.small[0].data(), q.small[1].data(), q.levels.data(), grid_levels, q.max_levels, q.capacity,
-                      top_base, out.top_refs.data(), level_nodes);
-    }
+    RF_CUDA_CHECK(cudaLaunchCooperativeKernel(reinterpret_cast<const void*>(top_level_kernel), dim3(grid),
+                                              dim3(kTopTaskBlock), args, 0, cudaStream_t{}));
     build.stages.top_ms = build.timer.stop_ms();
-    const uint32_t launched = q.max_levels;  // the records past the last level are empty
-
-    std::vector<hlbvh2::TopQueueLevel> records(size_t{launched} + 1);
+    std::vector<hlbvh2::TopQueueLevel> records(size_t{q.max_levels} + 1);  // those past the last level stay empty
     q.levels.download(records);
     std::vector<uint32_t> level_base;
     out.level_sizes.clear();

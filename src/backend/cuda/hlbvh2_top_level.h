@@ -32,14 +32,17 @@ struct DeviceTopLevel {
     std::vector<uint32_t> level_sizes;  // tasks (= top nodes) per task-queue level, level 0 = the root
 };
 
-// Builds the top level: per level, one launch for its large tasks (a thread
-// block each) and one for the others (kTopLanes threads per task), the
-// levels' sizes kept on the device (no host read per level),
+// Builds the top level: the clusters as primitives and every task-queue
+// level in ONE cooperative launch (per level, the large tasks a thread
+// block each, the others kTopLanes threads per task, a grid sync between
+// levels; the levels' sizes kept on the device, no host read per level),
 // the same tree as the CPU's (build_hlbvh2_top_level), then the top nodes'
-// boxes bottom-up, one launch per level, deepest first. Sets stages.top_ms
-// (the task-queue levels) and stages.top_levels, and adds the top boxes'
+// boxes bottom-up in one launch with arrival counters (after one that links
+// the parents). Sets stages.top_ms (the task-queue levels) and
+// stages.top_levels (the levels, not launches), and adds the top boxes'
 // time to stages.boxes_ms. Buffers are counted by build.meter; the queues
-// are freed on return.
+// are freed on return. Throws rf::Error on a device without cooperative
+// launches.
 DeviceTopLevel build_top_level_on_device(const DeviceTopLevelInput& in, BuildContext& build);
 
 }  // namespace rf::cuda

@@ -23,14 +23,19 @@
 //  3. discover: level by level from the root, one thread per wide node: its
 //               slots from the DP's decisions, the section 4.2 auction, its
 //               own counts; cub::DeviceScan::ExclusiveSum of the inner counts
-//               places the children, in slot order, in the next level;
+//               in level order places the children, in slot order, in the
+//               next level (cwbvh_level_steps.h): each level's start and
+//               size stay in a record on the device, grids and scans are
+//               sized by bounds the host knows, and the host stops on a
+//               lagging asynchronous copy (lagged_rounds.h), no blocking
+//               read per level;
 //  4. totals:   level by level bottom up, subtree counts;
 //  5. emit:     level by level top down: each wide node's depth-first
 //               numbers from its parent (the CPU's numbering, see
 //               cwbvh_emit_steps.h), the section 4.1 quantisation, meta
 //               bytes and leaf triangles written in place.
 // device_ms: the kernels (CUDA events, from the first kernel to the last,
-// the 8-byte queue-size reads between CWBVH levels included); uploads,
+// the lagging level-record copies and the final one included); uploads,
 // downloads and the host's validation of the canonical BVH are not in it.
 //
 // Two entries per layout: from a host Bvh (validated on the host, uploaded,
@@ -53,12 +58,14 @@
 #include "accel/bvh/layout/cwbvh_collapse_steps.h"
 #include "accel/bvh/layout/cwbvh_emit_steps.h"
 #include "accel/bvh/layout/cwbvh_layout.h"
+#include "accel/bvh/layout/cwbvh_level_steps.h"
 #include "accel/bvh/layout/cwbvh_refine_steps.h"
 #include "backend/backends.h"
 #include "backend/cuda/cub_run.h"
 #include "backend/cuda/device_buffer.h"
 #include "backend/cuda/device_builders.h"
 #include "backend/cuda/event_timer.h"
+#include "backend/cuda/lagged_rounds.h"
 #include "backend/cuda/launch.h"
 #include "backend/cuda/layout_convert.h"
 #include "rayforge/core/error.h"
@@ -168,15 +175,26 @@ __global__ void cwbvh_dp_kernel(cwbvh::RefinedNode* nodes, uint32_t n, const uin
     cwbvh::count_and_solve_from_leaf<karras::AtomicArrival>(nodes, parent, i, bias, cost, choices, arrivals);
 }
 
-__global__ void cwbvh_discover_kernel(cwbvh::EmitView view, uint32_t start, uint32_t count) {
+// Pass 1 of level `level`, its start and size read from its record; grids
+// sized by the level's bound (cwbvh_level_steps.h).
+__global__ void cwbvh_discover_kernel(cwbvh::EmitView view, const cwbvh::LevelRecord* records, uint32_t level,
+                                      uint32_t width) {
     const uint32_t k = blockIdx.x * kBlockSize + threadIdx.x;
-    if (k < count) cwbvh::discover(view, start + k);
+    if (k < width) cwbvh::discover_in_level(view, records, level, k);
 }
 
-__global__ void cwbvh_enqueue_kernel(cwbvh::EmitView view, uint32_t start, uint32_t count) {
-    const uint32_t k = blockIdx.x * kBlockSize + threadIdx.x;
-    if (k < count) cwbvh::enqueue_children(view, start + k, start + count);
+__global__ void cwbvh_next_level_kernel(const uint32_t* prefix, const uint32_t* inner_count,
+                                        cwbvh::LevelRecord* records, uint32_t level, uint32_t cap, uint32_t* error) {
+    cwbvh::next_level_record(prefix, inner_count, records, level, cap, error);
 }
+
+__global__ void cwbvh_enqueue_kernel(cwbvh::EmitView view, const cwbvh::LevelRecord* records, uint32_t level,
+                                     const uint32_t* prefix, uint32_t width) {
+    const uint32_t k = blockIdx.x * kBlockSize + threadIdx.x;
+    if (k < width) cwbvh::enqueue_in_level(view, records, level, prefix, k);
+}
+
+__global__ void cwbvh_first_level_kernel(cwbvh::LevelRecord* records) { records[0] = {0u, 1u}; }
 
 __global__ void cwbvh_totals_kernel(cwbvh::EmitView view, uint32_t start, uint32_t count) {
     const uint32_t k = blockIdx.x * kBlockSize + threadIdx.x;
@@ -186,13 +204,6 @@ __global__ void cwbvh_totals_kernel(cwbvh::EmitView view, uint32_t start, uint32
 __global__ void cwbvh_emit_kernel(cwbvh::EmitView view, uint32_t start, uint32_t count) {
     const uint32_t k = blockIdx.x * kBlockSize + threadIdx.x;
     if (k < count) cwbvh::emit(view, start + k);
-}
-
-// The next wide level's size: the last node's first child plus its inner
-// children, so one value crosses to the host per level.
-__global__ void cwbvh_next_level_size_kernel(const uint32_t* first_child, const uint32_t* inner_count, uint32_t last,
-                                             uint32_t* size) {
-    *size = first_child[last] + inner_count[last];
 }
 
 // The canonical BVH and its triangles uploaded, each buffer counted by `meter`.
@@ -224,7 +235,8 @@ struct CwbvhArrays {
     DeviceBuffer<uint32_t> parent, arrivals;
     DeviceBuffer<float> cost;
     DeviceBuffer<cwbvh::Choice> choices;
-    DeviceBuffer<uint32_t> wide_refined, slots, inner_count, first_child, wide_index, counters, level_size;
+    DeviceBuffer<uint32_t> wide_refined, slots, inner_count, first_child, level_prefix, wide_index, counters;
+    DeviceBuffer<cwbvh::LevelRecord> level_records;
     DeviceBuffer<cwbvh::OwnCounts> own, subtree, before;
     DeviceBuffer<CwbvhNode> out_nodes;
     DeviceBuffer<CwbvhTriangle> out_tris;
@@ -244,9 +256,10 @@ struct CwbvhArrays {
           slots(m, "CWBVH: slot children", size_t{n} * cwbvh::kWidth),
           inner_count(m, "CWBVH: inner-child counts", n),
           first_child(m, "CWBVH: first children", n),
+          level_prefix(m, "CWBVH: level-order prefix of the inner counts", n),
           wide_index(m, "CWBVH: wide-node indices", n),
           counters(m, "CWBVH: leaf-slot and error counters", 2),
-          level_size(m, "CWBVH: next level size", 1),
+          level_records(m, "CWBVH: level records", size_t{kCwbvhMaxDepth} + 1),
           own(m, "CWBVH: own counts", n),
           subtree(m, "CWBVH: subtree counts", n),
           before(m, "CWBVH: depth-first prefixes", n),
@@ -255,7 +268,7 @@ struct CwbvhArrays {
           scan_scratch(m, "CWBVH: scan temporary storage") {
         // Room for the largest scan, allocated outside the timed kernels.
         cub_reserve(scan_scratch, [&](void* temp, size_t& bytes) {
-            return cub::DeviceScan::ExclusiveSum(temp, bytes, inner_count.data(), first_child.data(), n);
+            return cub::DeviceScan::ExclusiveSum(temp, bytes, inner_count.data(), level_prefix.data(), n);
         });
         cub_reserve(scan_scratch, [&](void* temp, size_t& bytes) {
             return cub::DeviceScan::ExclusiveSum(temp, bytes, extra.data(), extra_base.data(), canonical);
@@ -311,27 +324,43 @@ void solve_collapse(CwbvhArrays& a, uint32_t n) {
            a.arrivals.data());
 }
 
-// CWBVH 3: the wide tree level by level from the root; a scan of the inner
-// counts places the next level's nodes, whose number comes back in one copy
-// per level (the scan needs it on the host; formerly two).
-std::vector<WideLevel> discover_levels(CwbvhArrays& a, const cwbvh::EmitView& view) {
-    std::vector<WideLevel> levels;
-    for (WideLevel level{0, 1}; level.count != 0;) {
-        if (levels.size() == size_t{kCwbvhMaxDepth})
-            throw Error("build_cwbvh: wide BVH deeper than " + std::to_string(kCwbvhMaxDepth) + " levels");
-        levels.push_back(level);
-        launch(cwbvh_discover_kernel, level.count, view, level.start, level.count);
+// Level-record steps launched per round of the lagged loop: the levels
+// past the last one are launched before the host knows (their kernels find
+// a size of 0 and their scans redo the last prefix).
+constexpr uint32_t kLevelsPerRound = 2;
+
+// CWBVH 3: the wide tree level by level from the root (cwbvh_level_steps.h):
+// each step discovers a level, scans the inner counts in level order over
+// the level's bound, writes the next level's record and enqueues; the host
+// waits only for the lagging copy of a record (launch_in_lagged_rounds),
+// then reads the records once. cap: the wide nodes the arrays hold.
+std::vector<WideLevel> discover_levels(CwbvhArrays& a, const cwbvh::EmitView& view, uint32_t cap,
+                                       LaggedCopies<cwbvh::LevelRecord>& copies) {
+    RF_CUDA_CHECK(cudaMemsetAsync(a.inner_count.data(), 0, size_t{cap} * sizeof(uint32_t)));  // zeros past the levels
+    RF_CUDA_CHECK(cudaMemsetAsync(a.level_records.data(), 0, a.level_records.bytes()));
+    launch_shaped(cwbvh_first_level_kernel, {1, 1}, a.level_records.data());
+    const auto step = [&](uint32_t level, const cwbvh::LevelRecord*, uint32_t) {
+        const uint32_t width = cwbvh::level_width_bound(level, cap);
+        launch(cwbvh_discover_kernel, width, view, a.level_records.data(), level, width);
         cub_run(a.scan_scratch, [&](void* temp, size_t& bytes) {
-            return cub::DeviceScan::ExclusiveSum(temp, bytes, a.inner_count.data() + level.start,
-                                                 a.first_child.data() + level.start, level.count);
+            return cub::DeviceScan::ExclusiveSum(temp, bytes, a.inner_count.data(), a.level_prefix.data(),
+                                                 cwbvh::nodes_through_level_bound(level, cap));
         });
-        launch_shaped(cwbvh_next_level_size_kernel, {1, 1}, a.first_child.data(), a.inner_count.data(),
-                      level.start + level.count - 1, a.level_size.data());
-        const uint32_t next_count = download_value(a.level_size.data());  // one copy per level
-        launch(cwbvh_enqueue_kernel, level.count, view, level.start, level.count);
-        level = {level.start + level.count, next_count};
+        launch_shaped(cwbvh_next_level_kernel, {1, 1}, a.level_prefix.data(), a.inner_count.data(),
+                      a.level_records.data(), level, cap, a.counters.data() + 1);
+        launch(cwbvh_enqueue_kernel, width, view, a.level_records.data(), level, a.level_prefix.data(), width);
+    };
+    const uint32_t launched = launch_in_lagged_rounds(
+        copies, kLevelsPerRound, uint32_t(kCwbvhMaxDepth), step,
+        [&](uint32_t steps) { return a.level_records.data() + steps; },
+        [](const cwbvh::LevelRecord& next) { return next.count == 0; });
+    const std::vector<cwbvh::LevelRecord> records = download_all(a.level_records, size_t{launched} + 1);
+    std::vector<WideLevel> levels;
+    for (const cwbvh::LevelRecord& r : records) {
+        if (r.count == 0) return levels;
+        levels.push_back({r.start, r.count});
     }
-    return levels;
+    throw Error("build_cwbvh: wide BVH deeper than " + std::to_string(kCwbvhMaxDepth) + " levels");
 }
 
 // CWBVH 4-5: subtree counts bottom up, then the emission top down.
@@ -341,15 +370,20 @@ void total_and_emit(const std::vector<WideLevel>& levels, const cwbvh::EmitView&
     for (const WideLevel& level : levels) launch(cwbvh_emit_kernel, level.count, view, level.start, level.count);
 }
 
-// CWBVH 0-5 over `input` (the arrays sized for it), the kernels timed into
-// device_ms; returns the number of wide levels.
-size_t run_cwbvh(const DeviceCanonicalView& input, uint32_t n, CwbvhArrays& a, double* device_ms) {
+// CWBVH 0-5 over `input` (the arrays sized for it: n refined nodes, one
+// refined leaf per reference), the kernels timed into device_ms; returns
+// the number of wide levels.
+size_t run_cwbvh(const DeviceCanonicalView& input, uint32_t n, size_t references, CwbvhArrays& a,
+                 double* device_ms) {
     EventTimer timer;
+    LaggedCopies<cwbvh::LevelRecord> copies;  // pinned: allocated before the timed kernels
     const cwbvh::EmitView view = a.view(input.triangles);
+    // Wide nodes at most: one per refined inner node (the root alone when it is a leaf).
+    const auto cap = static_cast<uint32_t>(std::clamp<size_t>(references, 1, n));
     timer.start();
     refine_leaves(input, a);
     solve_collapse(a, n);
-    const std::vector<WideLevel> levels = discover_levels(a, view);
+    const std::vector<WideLevel> levels = discover_levels(a, view, cap, copies);
     total_and_emit(levels, view);
     const double ms = timer.stop_ms();
     if (device_ms) *device_ms = ms;
@@ -367,7 +401,7 @@ CwbvhSize checked_cwbvh_size(const CwbvhArrays& a, uint32_t n, size_t references
     const std::vector<uint32_t> counts = download_all(a.counters, 2);
     if (counts[1] & cwbvh::kErrorQuantize)
         throw Error("build_cwbvh: a box cannot be quantised (coordinates too large)");
-    if (total.triangles != references || total.inner + 1u > n)
+    if ((counts[1] & cwbvh::kErrorLevelOverflow) || total.triangles != references || total.inner + 1u > n)
         throw Error("build_cwbvh_on_device: inconsistent wide tree (device error)");
     return {total.inner + 1u, counts[0]};
 }
@@ -458,7 +492,7 @@ CwbvhBvh build_cwbvh_on_device(const Bvh& bvh, std::span<const Triangle> triangl
     MemoryMeter meter;
     const CanonicalOnDevice input(bvh, triangles, meter, "CWBVH");
     CwbvhArrays arrays(meter, canonical_count, n, checked.refined_extra, references);
-    const size_t depth = run_cwbvh(input.view(), n, arrays, device_ms);
+    const size_t depth = run_cwbvh(input.view(), n, references, arrays, device_ms);
     return download_cwbvh(arrays, n, references, depth);
 }
 
@@ -508,7 +542,7 @@ ResidentCwbvh build_cwbvh_resident(const DeviceCanonicalView& in, DeviceBuffer<C
         throw Error("build_cwbvh: too many nodes after leaf refinement");
     const auto n = static_cast<uint32_t>(in.node_count + refined_extra);
     CwbvhArrays arrays(meter, in.node_count, n, refined_extra, in.prim_count);
-    const size_t depth = run_cwbvh(in, n, arrays, device_ms);
+    const size_t depth = run_cwbvh(in, n, in.prim_count, arrays, device_ms);
     const CwbvhSize size = checked_cwbvh_size(arrays, n, in.prim_count);
     // Device to device into the caller's exact-size buffers (the arrays are
     // sized by upper bounds and freed on return).

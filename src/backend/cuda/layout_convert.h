@@ -47,8 +47,9 @@ ResidentAilaLaine convert_to_aila_laine_resident(const DeviceCanonicalView& in, 
 
 // The CWBVH of `in` into `nodes` and `triangles` (exact sizes): build_cwbvh's
 // arrays for the same tree. Counts crossing to the host: the refined node
-// total (one copy before the passes), one per wide level (discover_levels),
-// the totals and counters at the end (consistency, node count).
+// total (one copy before the passes), the wide levels' records (lagging
+// asynchronous copies, then one read), the totals and counters at the end
+// (consistency, node count).
 ResidentCwbvh build_cwbvh_resident(const DeviceCanonicalView& in, DeviceBuffer<CwbvhNode>& nodes,
                                    DeviceBuffer<CwbvhTriangle>& triangles, double* device_ms, int device);
 

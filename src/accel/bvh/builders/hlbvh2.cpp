@@ -12,9 +12,10 @@
 //     from 0 to 1, found by binary search (O(log n) code reads; geometrically
 //     a midpoint split of the node's Morton cell). A range of at most
 //     numLeafTri (= config.max_leaf_size) triangles is a leaf. Ranges whose
-//     codes are all equal are halved by position (hlbvh2_bottom_steps.h, shared
-//     with the CUDA builder's work queues). The GPU work queues (one
-//     node per thread, one level per launch) become TBB tasks: clusters in
+//     codes are all equal are halved by position (hlbvh2_bottom_steps.h,
+//     shared with the CUDA builder, which finds each node from its split
+//     position). The GPU work queues (one node per thread, one level per
+//     launch) become TBB tasks: clusters in
 //     parallel, and large ranges split into parallel subtasks. Boxes are
 //     computed bottom-up as the recursion returns.
 //  5. Top level over the clusters, each an indivisible primitive with its

@@ -2,8 +2,9 @@
 // ch. 5, which builds the tree over the clusters with the grid-based SAH of
 // ch. 4, §4.3, using the top grid only), written once for both backends: the
 // CPU builder (hlbvh2.cpp) recurses over them, the CUDA builder
-// (backend/cuda/hlbvh2_top_level.cu) runs them by task queues, one launch
-// per level, kTopLanes threads per task (ch. 4: 8 threads, one per bin).
+// (backend/cuda/hlbvh2_top_level.cu) runs them by task queues, every level
+// in one cooperative launch, kTopLanes threads per task (ch. 4: 8 threads,
+// one per bin).
 //
 // A cluster is an indivisible primitive: its cell in the 32^3 grid of the
 // 15-bit Morton prefixes, its triangle count, box and bottom-tree root. A
@@ -407,12 +408,11 @@ RF_HDI void top_boxes_from_node(const TopBoxView& v, const uint32_t* top_parent,
     }
 }
 
-// One top level's record on the device (as QueueLevel for the bottom
-// levels), zero before the loop except level 0's root task. Level l's
-// launches read record l and count their children into record l + 1; the
-// large tasks' launch (always made, its blocks past `large` idle) opens
-// record l + 1. Level l's nodes go to the level-node list from `base`,
-// its large tasks' first.
+// One top level's record on the device, zero before the launch except
+// level 0's root task. Level l's threads read record l (after a grid
+// sync) and count their children into record l + 1, which one thread
+// opens. Level l's nodes go to the level-node list from `base`, its large
+// tasks' first.
 struct TopQueueLevel {
     uint32_t small_head;  // the small queue's dequeue counter
     uint32_t small;       // tasks of at most kTopBlockTaskMin clusters
@@ -431,7 +431,7 @@ RF_HDI bool top_level_runs(const TopQueueLevel& l, const TopQueueCapacity& c) {
            uint64_t{l.base} + l.small + l.large <= c.nodes;
 }
 
-// One thread of level l's large-task launch, before anything is enqueued.
+// One thread of level l (block 0's first), before anything is enqueued.
 // Returns top_level_runs(l, c).
 RF_HDI bool open_next_top_level(const TopQueueLevel& l, TopQueueLevel* next, const TopQueueCapacity& c) {
     const bool runs = top_level_runs(l, c);
